@@ -1,0 +1,144 @@
+//! The thin hardware port of the MMU logic.
+//!
+//! The unit logic is stepped with sensor samples and answers with [`MotorCommand`]s; this crate
+//! holds that shared vocabulary and the few traits a board implements to carry it out: a DC motor
+//! channel, an analog input, a status LED and a button. Where `embedded-hal` 1.0 has a standard
+//! trait, an adapter over it is provided (the TB6612FNG driver in [`tb6612`]), so a new board is
+//! mostly wiring.
+
+#![no_std]
+#![warn(missing_docs)]
+
+pub mod tb6612;
+
+/// Largest raw analog sample: every board scales its ADC readings to 12 bits.
+pub const ADC_MAX: u16 = 4095;
+
+/// Which way a slot motor turns the filament.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Direction {
+    /// Towards the hub and the printer.
+    Forward,
+    /// Back towards the spool.
+    Reverse,
+}
+
+/// A PWM duty cycle in per mille (0 = off, 1000 = always on).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Duty(u16);
+
+impl Duty {
+    /// Full scale.
+    pub const MAX: Duty = Duty(1000);
+    /// Off.
+    pub const ZERO: Duty = Duty(0);
+
+    /// A duty cycle of `permille`, saturated at [`Duty::MAX`].
+    pub const fn from_permille(permille: u16) -> Self {
+        if permille > Self::MAX.0 {
+            Self::MAX
+        } else {
+            Duty(permille)
+        }
+    }
+
+    /// The duty cycle in per mille, `0..=1000`.
+    pub const fn permille(self) -> u16 {
+        self.0
+    }
+}
+
+/// What one slot motor is told to do.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum MotorCommand {
+    /// Outputs open: the motor spins freely (the extruder may pull the filament through).
+    #[default]
+    Coast,
+    /// Outputs shorted: the motor holds against being turned.
+    Brake,
+    /// Driven in `direction` at `duty`.
+    Drive {
+        /// Which way.
+        direction: Direction,
+        /// How hard.
+        duty: Duty,
+    },
+}
+
+impl MotorCommand {
+    /// Drive forward (towards the printer) at `duty`.
+    pub const fn forward(duty: Duty) -> Self {
+        MotorCommand::Drive {
+            direction: Direction::Forward,
+            duty,
+        }
+    }
+
+    /// Drive in reverse (towards the spool) at `duty`.
+    pub const fn reverse(duty: Duty) -> Self {
+        MotorCommand::Drive {
+            direction: Direction::Reverse,
+            duty,
+        }
+    }
+
+    /// True when the motor is powered to turn (a non-zero drive duty).
+    pub const fn is_driving(self) -> bool {
+        matches!(self, MotorCommand::Drive { duty, .. } if duty.0 > 0)
+    }
+}
+
+/// One DC motor channel.
+pub trait MotorChannel {
+    /// The driver's error (a pin or PWM error).
+    type Error;
+
+    /// Carry out `command`.
+    fn apply(&mut self, command: MotorCommand) -> Result<(), Self::Error>;
+}
+
+/// One analog input, read as a raw 12-bit sample (`0..=ADC_MAX`).
+pub trait AnalogInput {
+    /// The converter's error.
+    type Error;
+
+    /// Take one raw sample.
+    fn read_raw(&mut self) -> Result<u16, Self::Error>;
+}
+
+/// The unit's status LED.
+pub trait StatusLed {
+    /// The pin's error.
+    type Error;
+
+    /// Turn the LED on or off.
+    fn set_lit(&mut self, lit: bool) -> Result<(), Self::Error>;
+}
+
+impl<P: embedded_hal::digital::OutputPin> StatusLed for P {
+    type Error = P::Error;
+
+    fn set_lit(&mut self, lit: bool) -> Result<(), Self::Error> {
+        self.set_state(lit.into())
+    }
+}
+
+/// A push button on the unit, active low (pressed pulls the pin to ground).
+pub trait Button {
+    /// The pin's error.
+    type Error;
+
+    /// True while the button is held down.
+    fn is_pressed(&mut self) -> Result<bool, Self::Error>;
+}
+
+impl<P: embedded_hal::digital::InputPin> Button for P {
+    type Error = P::Error;
+
+    fn is_pressed(&mut self) -> Result<bool, Self::Error> {
+        self.is_low()
+    }
+}

@@ -1,0 +1,1 @@
+//! TB6612FNG dual H-bridge driver (placeholder, filled in next).

@@ -1,0 +1,31 @@
+//! The Prusa MMU2S/MMU3 serial protocol, as an unmodified Prusa printer speaks it.
+//!
+//! Both directions, `no_std`, no allocation:
+//! - unit side: [`RequestDecoder`] (fed one byte at a time) and [`Response::encode`];
+//! - printer side: [`Request::encode`] and [`ResponseDecoder`].
+//!
+//! Frames are byte-exact with Prusa's codec: lowercase hex without leading zeros, an unpadded
+//! CRC-8 (polynomial 0x07) over the binary form ([`crc`]), one `\n` at the end. The decoders
+//! accept everything Prusa's accepts (leading zeros, an empty value) and are more forgiving where
+//! that cannot hurt: they resynchronise at the next newline after any error, ignore blank lines and
+//! let a new frame interrupt a broken one, so stray bytes (such as the MK4's bootloader probe) do
+//! not cost the frame that follows. A rejected frame is reported as a [`DecodeError`], never
+//! answered.
+//!
+//! The code tables ([`ErrorCode`], [`ProgressCode`], ...) keep unknown numeric values: a value
+//! only this library does not know still round-trips.
+
+#![cfg_attr(not(test), no_std)]
+#![warn(missing_docs)]
+
+pub mod codes;
+pub mod crc;
+mod decoder;
+mod frame;
+mod hex;
+mod message;
+
+pub use codes::{ButtonCode, ErrorCode, ParamCode, ProgressCode, RequestCode, ResultCode};
+pub use decoder::{DecodeError, RequestDecoder, ResponseDecoder};
+pub use frame::{Frame, MAX_FRAME_LEN};
+pub use message::{Request, Response};

@@ -1,0 +1,2 @@
+//! The unit logic (placeholder).
+#![no_std]

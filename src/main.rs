@@ -1,0 +1,3 @@
+//! MCU entry point (placeholder until the board module lands).
+#![no_std]
+#![no_main]
