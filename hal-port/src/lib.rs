@@ -142,3 +142,42 @@ impl<P: embedded_hal::digital::InputPin> Button for P {
         self.is_low()
     }
 }
+
+/// Raw samples of one slot's two analog Hall sensors.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct SlotSamples {
+    /// The motor Hall sensor: a sine-like wave, one period per motor revolution.
+    pub motor_hall: u16,
+    /// The slot filament sensor at the slot entry: higher with filament present.
+    pub filament: u16,
+}
+
+/// Raw samples of the Filament Hub's three analog Hall sensors.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct HubSamples {
+    /// Filament present in the hub (the unit's FINDA): higher with filament present.
+    pub filament: u16,
+    /// Bowden tube buffer: mid-scale at rest, higher when the filament is pulled taut, lower
+    /// when it is pushed into compression.
+    pub tension: u16,
+    /// Reserved for a future blade: read and reported only.
+    pub cutter: u16,
+}
+
+/// One sampling round of every analog sensor of a unit with `N` slots.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Samples<const N: usize> {
+    /// Per slot, in slot order.
+    pub slots: [SlotSamples; N],
+    /// The hub.
+    pub hub: HubSamples,
+}
+
+impl<const N: usize> Default for Samples<N> {
+    fn default() -> Self {
+        Samples { slots: [SlotSamples::default(); N], hub: HubSamples::default() }
+    }
+}
