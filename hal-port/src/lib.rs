@@ -178,6 +178,9 @@ pub struct Samples<const N: usize> {
 
 impl<const N: usize> Default for Samples<N> {
     fn default() -> Self {
-        Samples { slots: [SlotSamples::default(); N], hub: HubSamples::default() }
+        Samples {
+            slots: [SlotSamples::default(); N],
+            hub: HubSamples::default(),
+        }
     }
 }
