@@ -1,12 +1,31 @@
-//! The App: one stepped state machine for the whole unit (stub: API only, logic follows).
+//! The App: the whole unit as one stepped state machine.
+//!
+//! Each [`App::step`] takes the current time, a round of raw sensor samples and the bytes the
+//! printer sent since the last step. It answers every complete request in the same step (queries
+//! also while a command runs), advances the running command, and returns what the motors must do,
+//! the bytes to send and any board action. Requests are handled exactly as MMU 3.0.3 does
+//! (`prusa-mmu-protocol.md` §3.3): commands are answered `A` or `R`, `Q0` reports the current
+//! command's progress, error or result, bad frames and `F` get silence, `X` resets the board.
 
 use heapless::Vec;
-use mmu_hal_port::{MotorCommand, Samples};
+use mmu_hal_port::{Duty, MotorCommand, Samples};
+use mmu_protocol::{
+    ButtonCode, ErrorCode, ParamCode, Request, RequestCode, RequestDecoder, Response, ResultCode,
+};
 
+use crate::config::Config;
+use crate::ops::{self, Operation, Status, follow_duty};
 use crate::time::Instant;
+use crate::unit::{Lane, Unit};
 
 /// Room for the bytes one step may send (several complete responses).
 pub const TX_CAPACITY: usize = 96;
+
+/// `X` value that erases persisted data before the reset.
+const ERASE_AND_RESET: u8 = 42;
+
+/// Blink period of the status LED in an error state, ms.
+const ERROR_BLINK_MS: u64 = 250;
 
 /// Something only the board can do.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -31,29 +50,227 @@ pub struct Outputs<const N: usize> {
     pub status_led: bool,
 }
 
-/// The unit logic for `N` slots.
+/// Counters behind the diagnostic registers.
+#[derive(Debug, Clone)]
+pub(crate) struct Counters<const N: usize> {
+    /// Errors raised (register 0x04).
+    pub drive_errors: u16,
+    /// Completed tool changes per slot.
+    pub tool_changes: [u16; N],
+    /// Errors raised while driving each slot.
+    pub failures: [u16; N],
+    /// Responses that did not fit a step's transmit buffer.
+    pub dropped_responses: u16,
+}
+
+impl<const N: usize> Default for Counters<N> {
+    fn default() -> Self {
+        Counters { drive_errors: 0, tool_changes: [0; N], failures: [0; N], dropped_responses: 0 }
+    }
+}
+
+/// The unit logic for `N` slots (1 to 5).
 pub struct App<const N: usize> {
-    _private: (),
+    pub(crate) config: Config,
+    pub(crate) unit: Unit<N>,
+    pub(crate) operation: Operation,
+    pub(crate) counters: Counters<N>,
+    decoder: RequestDecoder,
+    /// A physical button press waiting for the printer to collect it with `Q0` (during `T`, the
+    /// printer is in charge of buttons and sends them back).
+    pending_button: Option<ButtonCode>,
 }
 
 impl<const N: usize> App<N> {
-    /// A freshly started unit.
-    pub fn new() -> Self {
-        App { _private: () }
+    const SLOTS_OK: () = assert!(N >= 1 && N <= crate::MAX_SLOTS, "a unit has 1 to 5 slots");
+
+    /// A freshly started unit: it checks its sensors (`X0` is the current command) before it
+    /// reports `X0 F0`.
+    pub fn new(config: Config) -> Self {
+        let () = Self::SLOTS_OK;
+        App {
+            config,
+            unit: Unit::default(),
+            operation: Operation::new((RequestCode::Reset, 0), &[ops::Phase::CheckSensors]),
+            counters: Counters::default(),
+            decoder: RequestDecoder::new(),
+            pending_button: None,
+        }
+    }
+
+    /// The settings in force.
+    pub fn config(&self) -> &Config {
+        &self.config
+    }
+
+    /// What the unit knows about its hardware.
+    pub fn unit(&self) -> &Unit<N> {
+        &self.unit
+    }
+
+    /// The command being carried out (or the last one).
+    pub fn operation(&self) -> &Operation {
+        &self.operation
     }
 
     /// Advance the unit to `now` with the latest sensor samples and the bytes received since the
     /// last step.
-    pub fn step(&mut self, _now: Instant, _samples: &Samples<N>, _rx: &[u8]) -> Outputs<N> {
-        Outputs { motors: [MotorCommand::Coast; N], tx: Vec::new(), action: None, status_led: false }
+    pub fn step(&mut self, now: Instant, samples: &Samples<N>, rx: &[u8]) -> Outputs<N> {
+        let mut out = Outputs { motors: [MotorCommand::Coast; N], tx: Vec::new(), action: None, status_led: false };
+        self.unit.sense(samples, now, &self.config);
+        for &byte in rx {
+            if let Some(Ok(request)) = self.decoder.feed(byte) {
+                self.handle(&request, &mut out);
+                if out.action.is_some() {
+                    // The board resets: motors stay off and nothing after `X` is answered.
+                    return out;
+                }
+            }
+        }
+        let before = self.operation.status();
+        self.operation.step(&mut self.unit, now, &self.config);
+        self.count_transition(before);
+        self.drive_motors(now, &mut out);
+        out.status_led = match self.operation.status() {
+            Status::Running(_) => true,
+            Status::Failed(_) => (now.as_millis() / ERROR_BLINK_MS) % 2 == 0,
+            Status::Finished => false,
+        };
+        out
     }
 
-    /// A physical button on the unit was pressed.
-    pub fn press_button(&mut self, _button: mmu_protocol::ButtonCode) {}
+    /// A physical button on the unit was pressed. In an error state it is Retry / Continue; during
+    /// a tool change the printer is in charge, so the press is reported to it instead (`B1` in
+    /// the next `Q0` answer) and acted on when the printer sends it back.
+    pub fn press_button(&mut self, button: ButtonCode) {
+        if !matches!(self.operation.status(), Status::Failed(_)) {
+            return;
+        }
+        if self.operation.request.0 == RequestCode::Tool {
+            self.pending_button = Some(button);
+        } else if button == ButtonCode::MIDDLE {
+            self.operation.retry(&self.config);
+        }
+    }
+
+    fn handle(&mut self, request: &Request, out: &mut Outputs<N>) {
+        let response = match request.code {
+            RequestCode::Query => Some(self.query_answer()),
+            code if code.is_command() => Some(self.start_command(request)),
+            RequestCode::Reset => {
+                out.action = Some(if request.value == ERASE_AND_RESET {
+                    BoardAction::EraseAndReset
+                } else {
+                    BoardAction::Reset
+                });
+                None
+            }
+            RequestCode::Finda => Some(Response::read(request, self.unit.hub_present().unwrap_or(false).into())),
+            RequestCode::Version | RequestCode::Read => Some(match self.read_register(request.value) {
+                Some(value) => Response::read(request, value),
+                None => Response::rejected(request),
+            }),
+            RequestCode::Write => Some(if self.write_register(request.value, request.value2) {
+                Response::accepted(request)
+            } else {
+                Response::rejected(request)
+            }),
+            RequestCode::Button => {
+                if request.value == ButtonCode::MIDDLE.0 {
+                    self.operation.retry(&self.config);
+                }
+                Some(Response::accepted(request))
+            }
+            RequestCode::FilamentSensor => {
+                self.unit.fsensor = request.value;
+                Some(Response::accepted(request))
+            }
+            // MMU 3.0.3 answers neither the filament type nor the motor mode.
+            _ => None,
+        };
+        if let Some(response) = response {
+            let frame = response.encode();
+            if out.tx.extend_from_slice(frame.as_bytes()).is_err() {
+                self.counters.dropped_responses = self.counters.dropped_responses.saturating_add(1);
+            }
+        }
+    }
+
+    fn query_answer(&mut self) -> Response {
+        let (code, value) = self.operation.request;
+        if let Some(button) = self.pending_button.take() {
+            return Response::button(code, value, button);
+        }
+        match self.operation.status() {
+            Status::Running(progress) => Response::progress(code, value, progress),
+            Status::Failed(error) => Response::error(code, value, error),
+            Status::Finished => Response::finished(code, value, ResultCode::OK),
+        }
+    }
+
+    fn start_command(&mut self, request: &Request) -> Response {
+        if self.operation.is_busy() {
+            return Response::rejected(request);
+        }
+        let key = (request.code, request.value);
+        self.pending_button = None;
+        if usize::from(request.value) < N && request.code != RequestCode::Unload && request.code != RequestCode::Home {
+            self.unit.selected = Some(request.value.into());
+        }
+        self.operation = match ops::plan(request.code, request.value, &self.unit, &self.config) {
+            Ok(plan) => Operation::new(key, &plan),
+            Err(error) => Operation::failed(key, error),
+        };
+        Response::bare(request.code, request.value, ParamCode::Accepted)
+    }
+
+    fn count_transition(&mut self, before: Status) {
+        let after = self.operation.status();
+        if after == before {
+            return;
+        }
+        match after {
+            Status::Failed(error) if error != ErrorCode::FILAMENT_EJECTED => {
+                self.counters.drive_errors = self.counters.drive_errors.saturating_add(1);
+                if let Some(count) =
+                    self.operation.phase().and_then(ops::Phase::slot).and_then(|s| self.counters.failures.get_mut(s))
+                {
+                    *count = count.saturating_add(1);
+                }
+            }
+            Status::Finished if self.operation.request.0 == RequestCode::Tool => {
+                if let Some(count) = self.counters.tool_changes.get_mut(usize::from(self.operation.request.1)) {
+                    *count = count.saturating_add(1);
+                }
+            }
+            _ => {}
+        }
+    }
+
+    /// The running phase drives its slot; a loaded slot follows the extruder through the tension
+    /// sensor; every other motor coasts.
+    fn drive_motors(&mut self, now: Instant, out: &mut Outputs<N>) {
+        let driving = self.operation.driving_slot();
+        let tension = self.unit.hub.tension.reading();
+        for (slot, (feeder, motor)) in self.unit.feeders.iter_mut().zip(out.motors.iter_mut()).enumerate() {
+            if Some(slot) != driving {
+                let duty = match self.unit.lanes.get(slot) {
+                    Some(Lane::Loaded) => follow_duty(0, tension, &self.config),
+                    _ => Duty::ZERO,
+                };
+                if duty == Duty::ZERO {
+                    feeder.coast(now, &self.config);
+                } else {
+                    feeder.push(duty, now, &self.config);
+                }
+            }
+            *motor = feeder.command();
+        }
+    }
 }
 
 impl<const N: usize> Default for App<N> {
     fn default() -> Self {
-        Self::new()
+        Self::new(Config::default())
     }
 }

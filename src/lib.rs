@@ -9,9 +9,16 @@
 #![warn(missing_docs)]
 
 pub mod app;
+pub mod config;
+pub mod feeder;
+pub mod ops;
+pub mod registers;
+pub mod sensor;
+pub mod unit;
 pub mod time;
 
 pub use app::{App, BoardAction, Outputs, TX_CAPACITY};
+pub use config::Config;
 pub use mmu_hal_port::{Direction, Duty, HubSamples, MotorCommand, Samples, SlotSamples};
 pub use time::Instant;
 

@@ -1,0 +1,364 @@
+//! Analog Hall sensors: one filter pipeline for all of them, thresholds with hysteresis, rail
+//! detection and the motor revolution counter.
+//!
+//! The sensors are noisy (thesis §6.2): every raw sample goes through a sliding median (kills
+//! spikes), a moving average and exponential smoothing, and presence decisions use two thresholds
+//! so a reading near one of them cannot flicker. A reading stuck at a supply rail means a
+//! disconnected or shorted sensor: it is never fed to the filter, and after a short time the
+//! sensor is reported faulty instead of being believed.
+
+use crate::time::Instant;
+
+/// The longest median or average window.
+pub const MAX_WINDOW: usize = 9;
+
+/// Window sizes and smoothing of one filter pipeline.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FilterConfig {
+    /// Sliding median window, samples (1 = off), clamped to `1..=MAX_WINDOW`.
+    pub median: u8,
+    /// Moving average window, samples (1 = off), clamped to `1..=MAX_WINDOW`.
+    pub average: u8,
+    /// Weight of the newest value in the exponential smoothing, per mille (1000 = off).
+    pub smoothing_permille: u16,
+}
+
+/// A pair of thresholds with hysteresis: a reading turns a sensor on at or above `on` and off at
+/// or below `off`, and keeps its state in between.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Thresholds {
+    /// The level that turns the sensor on.
+    pub on: u16,
+    /// The level that turns the sensor off; below `on`.
+    pub off: u16,
+}
+
+impl Thresholds {
+    /// True when `off < on` and both are inside the ADC range.
+    pub const fn is_valid(self) -> bool {
+        self.off < self.on && self.on <= mmu_hal_port::ADC_MAX
+    }
+
+    /// The new state of a sensor that was `was_on` and now reads `value`.
+    pub const fn decide(self, was_on: bool, value: u16) -> bool {
+        if was_on { value > self.off } else { value >= self.on }
+    }
+}
+
+/// A fixed-capacity ring of the last samples.
+#[derive(Debug, Clone, Copy)]
+struct Window {
+    values: [u16; MAX_WINDOW],
+    len: usize,
+    next: usize,
+}
+
+impl Window {
+    const fn new() -> Self {
+        Window { values: [0; MAX_WINDOW], len: 0, next: 0 }
+    }
+
+    fn push(&mut self, value: u16, capacity: usize) {
+        let capacity = capacity.clamp(1, MAX_WINDOW);
+        if self.next >= capacity {
+            self.next = 0;
+        }
+        if let Some(slot) = self.values.get_mut(self.next) {
+            *slot = value;
+        }
+        self.next += 1;
+        self.len = (self.len + 1).min(capacity);
+    }
+
+    fn filled(&self) -> &[u16] {
+        self.values.get(..self.len).unwrap_or(&[])
+    }
+
+    fn median(&self) -> u16 {
+        let mut sorted = [0u16; MAX_WINDOW];
+        let values = self.filled();
+        let sorted = &mut sorted[..values.len()];
+        sorted.copy_from_slice(values);
+        sorted.sort_unstable();
+        sorted.get(sorted.len() / 2).copied().unwrap_or(0)
+    }
+
+    fn mean(&self) -> u16 {
+        let values = self.filled();
+        let sum: u32 = values.iter().map(|&v| u32::from(v)).sum();
+        (sum / values.len().max(1) as u32) as u16
+    }
+}
+
+/// Sliding median, then moving average, then exponential smoothing.
+#[derive(Debug, Clone, Copy)]
+pub struct Filter {
+    medians: Window,
+    averages: Window,
+    /// The smoothed value in 1/1000 counts.
+    smoothed_milli: Option<u32>,
+}
+
+impl Default for Filter {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Filter {
+    /// An empty filter.
+    pub const fn new() -> Self {
+        Filter { medians: Window::new(), averages: Window::new(), smoothed_milli: None }
+    }
+
+    /// Feed one raw sample; returns the filtered value.
+    pub fn push(&mut self, raw: u16, config: &FilterConfig) -> u16 {
+        self.medians.push(raw, config.median.into());
+        self.averages.push(self.medians.median(), config.average.into());
+        let averaged = u32::from(self.averages.mean()) * 1000;
+        let weight = u32::from(config.smoothing_permille.clamp(1, 1000));
+        let smoothed = match self.smoothed_milli {
+            None => averaged,
+            Some(previous) => (previous * (1000 - weight) + averaged * weight) / 1000,
+        };
+        self.smoothed_milli = Some(smoothed);
+        self.value()
+    }
+
+    /// The current filtered value (0 before the first sample).
+    pub fn value(&self) -> u16 {
+        self.smoothed_milli.map_or(0, |milli| ((milli + 500) / 1000) as u16)
+    }
+
+    /// Forget every sample.
+    pub fn clear(&mut self) {
+        *self = Self::new();
+    }
+}
+
+/// Which rail a faulty sensor is stuck at.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Rail {
+    /// Ground: typically a disconnected signal or supply.
+    Low,
+    /// Supply: typically a short or a disconnected ground.
+    High,
+}
+
+/// Rail limits shared by every sensor.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RailLimits {
+    /// At or below: low rail.
+    pub low: u16,
+    /// At or above: high rail.
+    pub high: u16,
+    /// How long before the sensor is called faulty, ms.
+    pub timeout_ms: u16,
+}
+
+/// One analog sensor: its latest raw sample, its filtered value and its health.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct AnalogSensor {
+    filter: Filter,
+    raw: u16,
+    samples: u16,
+    at_rail_since: Option<(Rail, Instant)>,
+    fault: Option<Rail>,
+}
+
+/// Samples a filter needs before its output means anything.
+const WARM_UP_SAMPLES: u16 = MAX_WINDOW as u16 * 2;
+
+impl AnalogSensor {
+    /// Take a new raw sample at `now`.
+    pub fn update(&mut self, raw: u16, now: Instant, filter: &FilterConfig, rails: &RailLimits) {
+        self.raw = raw;
+        let rail = if raw <= rails.low {
+            Some(Rail::Low)
+        } else if raw >= rails.high {
+            Some(Rail::High)
+        } else {
+            None
+        };
+        match (rail, self.at_rail_since) {
+            (Some(rail), Some((seen, since))) if rail == seen => {
+                if now.millis_since(since) >= u64::from(rails.timeout_ms) {
+                    self.fault = Some(rail);
+                }
+            }
+            (Some(rail), _) => self.at_rail_since = Some((rail, now)),
+            (None, _) => {
+                self.at_rail_since = None;
+                if self.fault.take().is_some() {
+                    // Back from a fault: old samples say nothing about the reconnected sensor.
+                    self.filter.clear();
+                    self.samples = 0;
+                }
+                self.filter.push(raw, filter);
+                self.samples = self.samples.saturating_add(1);
+            }
+        }
+    }
+
+    /// The latest raw sample, whatever it was.
+    pub fn raw(&self) -> u16 {
+        self.raw
+    }
+
+    /// The filtered value (held while the raw reading sits at a rail).
+    pub fn filtered(&self) -> u16 {
+        self.filter.value()
+    }
+
+    /// The rail the sensor is stuck at, if it is faulty.
+    pub fn fault(&self) -> Option<Rail> {
+        self.fault
+    }
+
+    /// The filtered value, if the sensor is healthy and has seen enough samples to mean it.
+    pub fn reading(&self) -> Option<u16> {
+        (self.fault.is_none() && self.samples >= WARM_UP_SAMPLES).then(|| self.filter.value())
+    }
+}
+
+/// A filament presence sensor: an analog sensor with a hysteresis decision.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct PresenceSensor {
+    /// The analog part.
+    pub analog: AnalogSensor,
+    present: bool,
+}
+
+impl PresenceSensor {
+    /// Take a new raw sample at `now` and decide presence.
+    pub fn update(&mut self, raw: u16, now: Instant, filter: &FilterConfig, rails: &RailLimits, thresholds: Thresholds) {
+        self.analog.update(raw, now, filter, rails);
+        if let Some(value) = self.analog.reading() {
+            self.present = thresholds.decide(self.present, value);
+        }
+    }
+
+    /// Filament present, or `None` while the sensor is faulty or warming up.
+    pub fn present(&self) -> Option<bool> {
+        self.analog.reading().map(|_| self.present)
+    }
+}
+
+/// Counts motor revolutions from the filtered Hall sine: one rising edge through both thresholds
+/// is one revolution, so noise between the thresholds cannot add counts.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct RevolutionCounter {
+    /// The analog part.
+    pub analog: AnalogSensor,
+    high: bool,
+    revolutions: u32,
+    last_revolution: Instant,
+}
+
+impl RevolutionCounter {
+    /// Take a new raw sample at `now`; returns true when it completed a revolution.
+    pub fn update(&mut self, raw: u16, now: Instant, filter: &FilterConfig, rails: &RailLimits, edges: Thresholds) -> bool {
+        self.analog.update(raw, now, filter, rails);
+        let Some(value) = self.analog.reading() else { return false };
+        let was_high = self.high;
+        self.high = edges.decide(was_high, value);
+        if self.high && !was_high {
+            self.revolutions = self.revolutions.wrapping_add(1);
+            self.last_revolution = now;
+            true
+        } else {
+            false
+        }
+    }
+
+    /// Revolutions counted since start (wraps).
+    pub fn revolutions(&self) -> u32 {
+        self.revolutions
+    }
+
+    /// When the last revolution completed.
+    pub fn last_revolution(&self) -> Instant {
+        self.last_revolution
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const PRESENCE: FilterConfig = FilterConfig { median: 5, average: 4, smoothing_permille: 500 };
+    const RAILS: RailLimits = RailLimits { low: 40, high: 4055, timeout_ms: 50 };
+    const THRESHOLDS: Thresholds = Thresholds { on: 2600, off: 2400 };
+
+    #[test]
+    fn median_removes_a_single_spike() {
+        let mut filter = Filter::new();
+        let config = FilterConfig { median: 5, average: 1, smoothing_permille: 1000 };
+        for _ in 0..5 {
+            filter.push(2000, &config);
+        }
+        assert_eq!(filter.push(4000, &config), 2000);
+        assert_eq!(filter.push(2000, &config), 2000);
+    }
+
+    #[test]
+    fn smoothing_converges_to_a_step() {
+        let mut filter = Filter::new();
+        let config = FilterConfig { median: 1, average: 1, smoothing_permille: 500 };
+        filter.push(1000, &config);
+        assert_eq!(filter.push(3000, &config), 2000);
+        for _ in 0..20 {
+            filter.push(3000, &config);
+        }
+        assert_eq!(filter.value(), 3000);
+    }
+
+    #[test]
+    fn hysteresis_holds_between_thresholds() {
+        assert!(!THRESHOLDS.decide(false, 2500));
+        assert!(THRESHOLDS.decide(false, 2600));
+        assert!(THRESHOLDS.decide(true, 2500));
+        assert!(!THRESHOLDS.decide(true, 2400));
+    }
+
+    #[test]
+    fn a_sensor_at_a_rail_is_faulty_and_never_believed() {
+        let mut sensor = PresenceSensor::default();
+        let mut now = Instant::ZERO;
+        for _ in 0..30 {
+            sensor.update(2048, now, &PRESENCE, &RAILS, THRESHOLDS);
+            now = now + 1;
+        }
+        assert_eq!(sensor.present(), Some(false));
+        for _ in 0..49 {
+            sensor.update(4095, now, &PRESENCE, &RAILS, THRESHOLDS);
+            now = now + 1;
+            assert_eq!(sensor.present(), Some(false), "the rail value is never taken as presence");
+        }
+        sensor.update(4095, now, &PRESENCE, &RAILS, THRESHOLDS);
+        assert_eq!(sensor.analog.fault(), Some(Rail::High));
+        assert_eq!(sensor.present(), None);
+    }
+
+    #[test]
+    fn revolutions_count_full_periods_only() {
+        let config = FilterConfig { median: 1, average: 1, smoothing_permille: 1000 };
+        let edges = Thresholds { on: 2300, off: 1800 };
+        let mut counter = RevolutionCounter::default();
+        let mut now = Instant::ZERO;
+        // Warm up at rest, then wobble between the thresholds: no revolution.
+        for i in 0..100u32 {
+            counter.update(if i % 2 == 0 { 2100 } else { 2250 }, now, &config, &RAILS, edges);
+            now = now + 1;
+        }
+        assert_eq!(counter.revolutions(), 0);
+        for _ in 0..3 {
+            for value in [2400, 2500, 2000, 1700, 1600, 2000] {
+                counter.update(value, now, &config, &RAILS, edges);
+                now = now + 1;
+            }
+        }
+        assert_eq!(counter.revolutions(), 3);
+    }
+}

@@ -1,0 +1,182 @@
+//! The unit's hardware state as the logic knows it: every feeding system, the Filament Hub's
+//! sensors, the printer's filament sensor as last reported, and where each slot's filament is.
+
+use mmu_hal_port::Samples;
+
+use crate::config::Config;
+use crate::feeder::Feeder;
+use crate::sensor::{AnalogSensor, PresenceSensor, RailLimits};
+use crate::time::Instant;
+
+/// Where one slot's filament is, as far as the unit knows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Lane {
+    /// Not known (after start, or after the user fixed an error by hand).
+    #[default]
+    Unknown,
+    /// No filament at the slot sensor.
+    Empty,
+    /// The tip rests at the park position before the hub.
+    Parked,
+    /// The tip is past the park position, in the hub or the Bowden tube.
+    InHub,
+    /// The tip reached the printer's filament sensor.
+    AtFsensor,
+    /// Loaded into the printer's extruder.
+    Loaded,
+}
+
+impl Lane {
+    /// True when this slot's filament occupies the hub path (at most one slot may).
+    pub const fn owns_hub(self) -> bool {
+        matches!(self, Lane::InHub | Lane::AtFsensor | Lane::Loaded)
+    }
+
+    /// The MMU3 `FilamentLoadState` (register 0x07) for a slot in this state.
+    pub const fn mmu3_state(self) -> u16 {
+        match self {
+            Lane::Unknown | Lane::Empty => 0,
+            Lane::Parked => 1,
+            Lane::InHub => 2,
+            Lane::AtFsensor => 4,
+            Lane::Loaded => 8,
+        }
+    }
+}
+
+/// One of the unit's analog sensors.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum SensorId {
+    /// Hub filament presence (the unit's FINDA).
+    HubFilament,
+    /// Hub Bowden tension.
+    HubTension,
+    /// Hub cutter (reserved).
+    HubCutter,
+    /// A slot's filament sensor.
+    SlotFilament(usize),
+    /// A slot's motor Hall sensor.
+    MotorHall(usize),
+}
+
+impl SensorId {
+    /// The sensor's index in the diagnostic registers: hub sensors 0-2, then per slot k the
+    /// filament sensor at 3 + 2k and the motor Hall at 4 + 2k.
+    pub const fn index(self) -> usize {
+        match self {
+            SensorId::HubFilament => 0,
+            SensorId::HubTension => 1,
+            SensorId::HubCutter => 2,
+            SensorId::SlotFilament(slot) => 3 + 2 * slot,
+            SensorId::MotorHall(slot) => 4 + 2 * slot,
+        }
+    }
+
+    /// The sensor at a diagnostic index.
+    pub const fn from_index(index: usize) -> Self {
+        match index {
+            0 => SensorId::HubFilament,
+            1 => SensorId::HubTension,
+            2 => SensorId::HubCutter,
+            i if i % 2 == 1 => SensorId::SlotFilament((i - 3) / 2),
+            i => SensorId::MotorHall((i - 4) / 2),
+        }
+    }
+}
+
+/// The Filament Hub's sensors.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Hub {
+    /// Filament present in the hub.
+    pub filament: PresenceSensor,
+    /// Bowden tension.
+    pub tension: AnalogSensor,
+    /// Reserved cutter sensor.
+    pub cutter: AnalogSensor,
+}
+
+/// Everything the logic knows about the hardware.
+#[derive(Debug, Clone)]
+pub struct Unit<const N: usize> {
+    /// Per slot feeding systems.
+    pub feeders: [Feeder; N],
+    /// The hub.
+    pub hub: Hub,
+    /// Where each slot's filament is.
+    pub lanes: [Lane; N],
+    /// The printer's filament sensor as last reported by `f` or register 9: 0 no filament,
+    /// 1 at the sensor, 2 in the nozzle, 3 sensor unavailable (taken as triggered, as MMU3 does).
+    pub fsensor: u8,
+    /// The slot last asked for (MMU3 "selector slot").
+    pub selected: Option<usize>,
+}
+
+impl<const N: usize> Default for Unit<N> {
+    fn default() -> Self {
+        Unit { feeders: [Feeder::default(); N], hub: Hub::default(), lanes: [Lane::Unknown; N], fsensor: 0, selected: None }
+    }
+}
+
+impl<const N: usize> Unit<N> {
+    /// Take a round of raw samples at `now`.
+    pub fn sense(&mut self, samples: &Samples<N>, now: Instant, config: &Config) {
+        let rails = RailLimits { low: config.rail_low, high: config.rail_high, timeout_ms: config.rail_timeout_ms };
+        for (slot, (feeder, sample)) in self.feeders.iter_mut().zip(samples.slots.iter()).enumerate() {
+            feeder.sense(slot, *sample, now, config, &rails);
+        }
+        let hub = &samples.hub;
+        self.hub.filament.update(hub.filament, now, &config.presence_filter, &rails, config.hub_thresholds);
+        self.hub.tension.update(hub.tension, now, &config.presence_filter, &rails);
+        self.hub.cutter.update(hub.cutter, now, &config.presence_filter, &rails);
+    }
+
+    /// Filament in the hub, `None` while the hub sensor is faulty or warming up.
+    pub fn hub_present(&self) -> Option<bool> {
+        self.hub.filament.present()
+    }
+
+    /// The printer reports filament at (or past) its sensor.
+    pub fn fsensor_triggered(&self) -> bool {
+        self.fsensor != 0
+    }
+
+    /// The slot whose filament occupies the hub path.
+    pub fn active(&self) -> Option<usize> {
+        self.lanes.iter().position(|lane| lane.owns_hub())
+    }
+
+    /// The lane of `slot` (`Unknown` for a slot the unit does not have).
+    pub fn lane(&self, slot: usize) -> Lane {
+        self.lanes.get(slot).copied().unwrap_or_default()
+    }
+
+    /// Record where `slot`'s filament is.
+    pub fn set_lane(&mut self, slot: usize, lane: Lane) {
+        if let Some(entry) = self.lanes.get_mut(slot) {
+            *entry = lane;
+        }
+    }
+
+    /// One analog sensor.
+    pub fn sensor(&self, id: SensorId) -> Option<&AnalogSensor> {
+        match id {
+            SensorId::HubFilament => Some(&self.hub.filament.analog),
+            SensorId::HubTension => Some(&self.hub.tension),
+            SensorId::HubCutter => Some(&self.hub.cutter),
+            SensorId::SlotFilament(slot) => self.feeders.get(slot).map(|f| &f.filament.analog),
+            SensorId::MotorHall(slot) => self.feeders.get(slot).map(|f| &f.hall.analog),
+        }
+    }
+
+    /// The number of analog sensors: three in the hub, two per slot.
+    pub const SENSOR_COUNT: usize = 3 + 2 * N;
+
+    /// The first faulty sensor, if any.
+    pub fn first_fault(&self) -> Option<SensorId> {
+        (0..Self::SENSOR_COUNT)
+            .map(SensorId::from_index)
+            .find(|&id| self.sensor(id).is_some_and(|s| s.fault().is_some()))
+    }
+}
