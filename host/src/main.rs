@@ -1,1 +1,51 @@
-fn main() {}
+//! `mmu`: the host-side tool of the MMU firmware.
+//!
+//! Subcommands live in sibling modules; this file only parses the command line and dispatches:
+//! - `mmu encode request|response ...`: print a frame exactly as on the wire ([`codec_cli`]);
+//! - `mmu decode [--json]`: explain frames or printer log lines read from stdin ([`codec_cli`]).
+
+mod codec_cli;
+mod explain;
+
+use std::error::Error;
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+/// The command line.
+#[derive(Debug, Parser)]
+#[command(
+    name = "mmu",
+    version,
+    about = "Host tool for the MMU firmware: Prusa MMU3 protocol encoder and decoder"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+/// The subcommands.
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Print a frame exactly as on the wire, without the newline. Numbers are decimal or 0x hex.
+    #[command(subcommand)]
+    Encode(codec_cli::EncodeCommand),
+    /// Explain frames read from stdin, one output line per input line. A line is a bare frame
+    /// (`T0*a4`) or a printer log line (`MMU2:>T0*a4.` request, `MMU2:<T0 E8003*13.` response).
+    Decode(codec_cli::DecodeArgs),
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result: Result<(), Box<dyn Error>> = match &cli.command {
+        Command::Encode(command) => codec_cli::encode(command),
+        Command::Decode(args) => codec_cli::decode(args),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(err) => {
+            eprintln!("mmu: error: {err}");
+            ExitCode::FAILURE
+        }
+    }
+}

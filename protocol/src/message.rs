@@ -35,9 +35,11 @@ impl Request {
         }
     }
 
-    /// The CRC this request carries on the wire.
+    /// The CRC this request carries on the wire (`value2` counts only for `W`, the one code
+    /// that prints it).
     pub fn crc(&self) -> u8 {
-        request_crc(self.code.as_byte(), self.value, self.value2)
+        let value2 = if self.code == RequestCode::Write { self.value2 } else { 0 };
+        request_crc(self.code.as_byte(), self.value, value2)
     }
 
     /// The frame exactly as the printer sends it.

@@ -1,0 +1,620 @@
+//! `mmu encode` and `mmu decode`: build frames exactly as on the wire, and explain frames or
+//! printer log lines.
+//!
+//! `decode` reads stdin line by line and prints one line per input line, so it can sit at the end
+//! of a pipe (`tail -f serial.log | mmu decode`). A line holds either a bare frame (`T0*a4`) or a
+//! printer log line with a direction marker (`MMU2:>T0*a4.` for a request, `MMU2:<T0 E8003*13.`
+//! for a response; the trailing `.` is the log's newline marker). Without a marker both decoders
+//! are tried.
+
+use std::error::Error;
+use std::fmt;
+use std::io::{self, BufRead, Write};
+
+use clap::{Args, Subcommand};
+use mmu_protocol::{DecodeError, ParamCode, Request, RequestCode, RequestDecoder, Response, ResponseDecoder};
+use serde::Serialize;
+
+use crate::explain::{request_meaning, response_meaning};
+
+/// `mmu encode <request|response> ...`.
+#[derive(Debug, Subcommand)]
+pub enum EncodeCommand {
+    /// A request (printer → unit), e.g. `mmu encode request T 1` → `T1*cf`,
+    /// `mmu encode request W 0xb 5` → `Wb 5*33`.
+    Request {
+        /// The request letter: Q T L M U X P S B E W K F f H R (case-sensitive).
+        #[arg(value_name = "CODE", value_parser = parse_request_code)]
+        code: RequestCode,
+        /// The value (slot, register address, ...): 0-255, decimal or 0x hex.
+        #[arg(value_name = "VALUE", value_parser = parse_u8)]
+        value: u8,
+        /// The written value, for `W` only: 0-65535, decimal or 0x hex.
+        #[arg(value_name = "VALUE2", value_parser = parse_u16)]
+        value2: Option<u16>,
+    },
+    /// A response (unit → printer), e.g. `mmu encode response T 0 E 0x8003` → `T0 E8003*13`.
+    Response {
+        /// The echoed request letter: Q T L M U X P S B E W K F f H R.
+        #[arg(value_name = "REQ_CODE", value_parser = parse_request_code)]
+        code: RequestCode,
+        /// The echoed request value: 0-255, decimal or 0x hex.
+        #[arg(value_name = "REQ_VALUE", value_parser = parse_u8)]
+        value: u8,
+        /// The parameter letter: A (accepted), R (rejected), P (progress), E (error),
+        /// F (finished), B (button).
+        #[arg(value_name = "PARAM", value_parser = parse_param_code)]
+        param: ParamCode,
+        /// The parameter value, if the frame prints one: 0-65535, decimal or 0x hex.
+        #[arg(value_name = "PARAM_VALUE", value_parser = parse_u16)]
+        param_value: Option<u16>,
+    },
+}
+
+/// Options of `mmu decode`.
+#[derive(Debug, Args)]
+pub struct DecodeArgs {
+    /// Print one JSON object per line instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// A usage error found after clap's parsing.
+#[derive(Debug)]
+pub struct UsageError(String);
+
+impl fmt::Display for UsageError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl Error for UsageError {}
+
+/// The message built by `mmu encode`, or a usage error (`VALUE2` given to, or missing from, `W`).
+pub fn build_frame(command: &EncodeCommand) -> Result<String, UsageError> {
+    match *command {
+        EncodeCommand::Request { code, value, value2 } => {
+            let request = match (code, value2) {
+                (RequestCode::Write, Some(value2)) => Request::write(value, value2),
+                (RequestCode::Write, None) => {
+                    return Err(UsageError(
+                        "a write request needs VALUE2, the value to write (e.g. `mmu encode request W 0xb 5`)"
+                            .to_string(),
+                    ));
+                }
+                (_, None) => Request::new(code, value),
+                (_, Some(_)) => {
+                    return Err(UsageError(format!(
+                        "only a write request (W) takes VALUE2, not {code}"
+                    )));
+                }
+            };
+            Ok(request.encode().as_str().to_string())
+        }
+        EncodeCommand::Response {
+            code,
+            value,
+            param,
+            param_value,
+        } => {
+            let response = Response {
+                code,
+                value,
+                param,
+                param_value,
+            };
+            Ok(response.encode().as_str().to_string())
+        }
+    }
+}
+
+/// Runs `mmu encode`: prints the frame without its newline.
+pub fn encode(command: &EncodeCommand) -> Result<(), Box<dyn Error>> {
+    let frame = build_frame(command)?;
+    println!("{frame}");
+    Ok(())
+}
+
+/// Runs `mmu decode`: explains every stdin line on stdout.
+pub fn decode(args: &DecodeArgs) -> Result<(), Box<dyn Error>> {
+    let stdin = io::stdin();
+    let stdout = io::stdout();
+    match decode_stream(stdin.lock(), stdout.lock(), args.json) {
+        // A closed pipe (`mmu decode | head`) is the reader's choice, not an error.
+        Err(err) if err.kind() == io::ErrorKind::BrokenPipe => Ok(()),
+        other => Ok(other?),
+    }
+}
+
+/// Explains every line of `input` on `output`, one line each.
+pub fn decode_stream(mut input: impl BufRead, mut output: impl Write, json: bool) -> io::Result<()> {
+    let mut line = Vec::new();
+    loop {
+        line.clear();
+        if input.read_until(b'\n', &mut line)? == 0 {
+            return output.flush();
+        }
+        // Logs are ASCII; anything else is kept visible rather than refused.
+        let text = String::from_utf8_lossy(&line);
+        let decoded = decode_line(&text);
+        if json {
+            let object = serde_json::to_string(&decoded.to_json()).map_err(io::Error::other)?;
+            writeln!(output, "{object}")?;
+        } else {
+            writeln!(output, "{}", decoded.to_human())?;
+        }
+        output.flush()?;
+    }
+}
+
+/// Which side sent a frame, as a log line's marker says.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Direction {
+    /// Printer → unit (`>`).
+    Request,
+    /// Unit → printer (`<`).
+    Response,
+    /// No marker: try both decoders.
+    Unknown,
+}
+
+/// The frame text in a line, and the direction its marker gives; `None` when there is no text.
+fn extract_frame(line: &str) -> Option<(Direction, &str)> {
+    let line = line.trim();
+    let marker = ["MMU2:>", "MMU2:<"]
+        .iter()
+        .filter_map(|m| line.find(m).map(|at| (at, m)))
+        .min_by_key(|(at, _)| *at);
+    let (direction, rest) = if let Some((at, m)) = marker {
+        let direction = if m.ends_with('>') {
+            Direction::Request
+        } else {
+            Direction::Response
+        };
+        (direction, &line[at + m.len()..])
+    } else if let Some(rest) = line.strip_prefix('>') {
+        (Direction::Request, rest)
+    } else if let Some(rest) = line.strip_prefix('<') {
+        (Direction::Response, rest)
+    } else {
+        (Direction::Unknown, line)
+    };
+    // The log marks the frame's newline with a `.`; a frame never contains one.
+    let frame = rest.split('.').next().unwrap_or("").trim();
+    (!frame.is_empty()).then_some((direction, frame))
+}
+
+/// One decoder's verdict on a frame text.
+#[derive(Debug)]
+enum Verdict<T> {
+    /// The frame parsed; `crc_ok` says whether its CRC matched. `clean` is false when bytes were
+    /// rejected before it (a request letter interrupting a broken frame).
+    Frame {
+        frame: T,
+        received_crc: u8,
+        computed_crc: u8,
+        clean: bool,
+    },
+    /// No frame: why.
+    Rejected(String),
+}
+
+impl<T> Verdict<T> {
+    /// How good this reading is: a clean, matching frame is best; a rejection worst.
+    fn score(&self) -> u8 {
+        match self {
+            Verdict::Frame {
+                received_crc,
+                computed_crc,
+                clean,
+                ..
+            } => 1 + 2 * u8::from(received_crc == computed_crc) + u8::from(*clean),
+            Verdict::Rejected(_) => 0,
+        }
+    }
+}
+
+/// Feeds `text` and a newline to a decoder and keeps what the newline produced.
+fn run_decoder<T: Copy>(
+    text: &str,
+    crc_of: impl Fn(&T) -> u8,
+    mut feed: impl FnMut(u8) -> Option<Result<T, DecodeError<T>>>,
+) -> Verdict<T> {
+    let results: Vec<_> = text.bytes().chain([b'\n']).filter_map(&mut feed).collect();
+    let clean = results.len() == 1;
+    match results.last() {
+        Some(Ok(frame)) => Verdict::Frame {
+            frame: *frame,
+            received_crc: crc_of(frame),
+            computed_crc: crc_of(frame),
+            clean,
+        },
+        Some(Err(DecodeError::BadCrc {
+            frame,
+            computed,
+            received,
+        })) => Verdict::Frame {
+            frame: *frame,
+            received_crc: *received,
+            computed_crc: *computed,
+            clean,
+        },
+        Some(Err(err)) => Verdict::Rejected(err.to_string()),
+        None => Verdict::Rejected("no frame".to_string()),
+    }
+}
+
+/// A decoded line.
+#[derive(Debug)]
+enum Decoded {
+    Request {
+        request: Request,
+        received_crc: u8,
+        computed_crc: u8,
+    },
+    Response {
+        response: Response,
+        received_crc: u8,
+        computed_crc: u8,
+    },
+    Invalid {
+        input: String,
+        reason: String,
+    },
+}
+
+/// Decodes one input line.
+fn decode_line(line: &str) -> Decoded {
+    let input = line.trim_end_matches(['\r', '\n']).to_string();
+    let Some((direction, text)) = extract_frame(line) else {
+        let reason = if line.trim().is_empty() {
+            "empty line"
+        } else {
+            "no frame in the line"
+        };
+        return Decoded::Invalid {
+            input,
+            reason: reason.to_string(),
+        };
+    };
+
+    let request = || {
+        let mut decoder = RequestDecoder::new();
+        run_decoder(text, Request::crc, |b| decoder.feed(b))
+    };
+    let response = || {
+        let mut decoder = ResponseDecoder::new();
+        run_decoder(text, Response::crc, |b| decoder.feed(b))
+    };
+
+    let from_request = |verdict: Verdict<Request>| match verdict {
+        Verdict::Frame {
+            frame,
+            received_crc,
+            computed_crc,
+            ..
+        } => Ok(Decoded::Request {
+            request: frame,
+            received_crc,
+            computed_crc,
+        }),
+        Verdict::Rejected(reason) => Err(reason),
+    };
+    let from_response = |verdict: Verdict<Response>| match verdict {
+        Verdict::Frame {
+            frame,
+            received_crc,
+            computed_crc,
+            ..
+        } => Ok(Decoded::Response {
+            response: frame,
+            received_crc,
+            computed_crc,
+        }),
+        Verdict::Rejected(reason) => Err(reason),
+    };
+
+    if direction == Direction::Unknown && text.contains("MMU2:") {
+        // A printer log line without a `>`/`<` marker is a log message, not a frame.
+        return Decoded::Invalid {
+            input,
+            reason: "no frame in the line (a log line without a MMU2:> or MMU2:< marker)".to_string(),
+        };
+    }
+
+    let result = match direction {
+        Direction::Request => from_request(request()).map_err(|r| format!("not a valid request: {r}")),
+        Direction::Response => from_response(response()).map_err(|r| format!("not a valid response: {r}")),
+        Direction::Unknown => {
+            let (req, rsp) = (request(), response());
+            if req.score() == 0 && rsp.score() == 0 {
+                match (req, rsp) {
+                    (Verdict::Rejected(a), Verdict::Rejected(b)) => {
+                        Err(format!("not a request ({a}) nor a response ({b})"))
+                    }
+                    _ => Err("no frame".to_string()),
+                }
+            } else if rsp.score() > req.score() {
+                from_response(rsp)
+            } else {
+                from_request(req)
+            }
+        }
+    };
+    result.unwrap_or_else(|reason| Decoded::Invalid { input, reason })
+}
+
+/// One line of `mmu decode --json`. Absent fields are left out.
+#[derive(Debug, Serialize)]
+struct JsonLine {
+    /// `request`, `response` or `invalid`.
+    kind: &'static str,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    code: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    value: Option<u8>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    value2: Option<u16>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    param: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    param_value: Option<u16>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    crc: Option<u8>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    crc_expected: Option<u8>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    crc_ok: Option<bool>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    meaning: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    reason: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    input: Option<String>,
+}
+
+impl JsonLine {
+    fn empty(kind: &'static str) -> Self {
+        JsonLine {
+            kind,
+            code: None,
+            value: None,
+            value2: None,
+            param: None,
+            param_value: None,
+            crc: None,
+            crc_expected: None,
+            crc_ok: None,
+            meaning: None,
+            reason: None,
+            input: None,
+        }
+    }
+
+    fn with_crc(mut self, received: u8, computed: u8) -> Self {
+        self.crc = Some(received);
+        self.crc_ok = Some(received == computed);
+        self.crc_expected = (received != computed).then_some(computed);
+        self
+    }
+}
+
+/// The frame as the encoder writes it, without `*<crc>`: `T0 E8003`, `Wb 5`.
+fn summary(frame: &str) -> &str {
+    frame.split('*').next().unwrap_or(frame)
+}
+
+/// `CRC ok`, or `CRC BAD (carries 00, expected cf)`.
+fn crc_text(received: u8, computed: u8) -> String {
+    if received == computed {
+        "CRC ok".to_string()
+    } else {
+        format!("CRC BAD (carries {received:x}, expected {computed:x})")
+    }
+}
+
+impl Decoded {
+    fn to_human(&self) -> String {
+        match self {
+            Decoded::Request {
+                request,
+                received_crc,
+                computed_crc,
+            } => format!(
+                "request {} {}, {}",
+                summary(request.encode().as_str()),
+                request_meaning(request),
+                crc_text(*received_crc, *computed_crc)
+            ),
+            Decoded::Response {
+                response,
+                received_crc,
+                computed_crc,
+            } => format!(
+                "response {} {}, {}",
+                summary(response.encode().as_str()),
+                response_meaning(response),
+                crc_text(*received_crc, *computed_crc)
+            ),
+            Decoded::Invalid { reason, .. } => format!("invalid: {reason}"),
+        }
+    }
+
+    fn to_json(&self) -> JsonLine {
+        match self {
+            Decoded::Request {
+                request,
+                received_crc,
+                computed_crc,
+            } => JsonLine {
+                code: Some(request.code.to_string()),
+                value: Some(request.value),
+                value2: (request.code == RequestCode::Write).then_some(request.value2),
+                meaning: Some(request_meaning(request)),
+                ..JsonLine::empty("request")
+            }
+            .with_crc(*received_crc, *computed_crc),
+            Decoded::Response {
+                response,
+                received_crc,
+                computed_crc,
+            } => JsonLine {
+                code: Some(response.code.to_string()),
+                value: Some(response.value),
+                param: Some(response.param.to_string()),
+                param_value: response.param_value,
+                meaning: Some(response_meaning(response)),
+                ..JsonLine::empty("response")
+            }
+            .with_crc(*received_crc, *computed_crc),
+            Decoded::Invalid { input, reason } => JsonLine {
+                reason: Some(reason.clone()),
+                input: Some(input.clone()),
+                ..JsonLine::empty("invalid")
+            },
+        }
+    }
+}
+
+// --- argument parsers -----------------------------------------------------------------------
+
+const REQUEST_LETTERS: &str = "Q T L M U X P S B E W K F f H R";
+const PARAM_LETTERS: &str = "A R P E F B";
+
+/// One letter, as a `u8`.
+fn single_letter(text: &str) -> Option<u8> {
+    match text.as_bytes() {
+        [byte] => Some(*byte),
+        _ => None,
+    }
+}
+
+/// A request letter (case-sensitive: `f` is the filament sensor, `F` the filament type).
+fn parse_request_code(text: &str) -> Result<RequestCode, String> {
+    single_letter(text)
+        .and_then(RequestCode::from_byte)
+        .ok_or_else(|| format!("unknown request code {text:?}; expected one of: {REQUEST_LETTERS}"))
+}
+
+/// A response parameter letter.
+fn parse_param_code(text: &str) -> Result<ParamCode, String> {
+    single_letter(text)
+        .and_then(ParamCode::from_byte)
+        .ok_or_else(|| format!("unknown parameter code {text:?}; expected one of: {PARAM_LETTERS}"))
+}
+
+/// A number, decimal or `0x` hex, up to `max`.
+fn parse_number(text: &str, max: u16) -> Result<u16, String> {
+    let (digits, radix) = match text.strip_prefix("0x").or_else(|| text.strip_prefix("0X")) {
+        Some(hex) => (hex, 16),
+        None => (text, 10),
+    };
+    let not_a_number = || format!("{text:?} is not a number (decimal, or hex with 0x)");
+    if digits.is_empty() || !digits.chars().all(|c| c.is_digit(radix)) {
+        return Err(not_a_number());
+    }
+    // Only digits are left, so the one failure is an overflow.
+    let value = u32::from_str_radix(digits, radix).unwrap_or(u32::MAX);
+    u16::try_from(value)
+        .ok()
+        .filter(|&v| v <= max)
+        .ok_or_else(|| format!("{text} is too large (at most {max})"))
+}
+
+fn parse_u8(text: &str) -> Result<u8, String> {
+    parse_number(text, u8::MAX.into()).and_then(|v| u8::try_from(v).map_err(|e| e.to_string()))
+}
+
+fn parse_u16(text: &str) -> Result<u16, String> {
+    parse_number(text, u16::MAX)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn numbers() {
+        assert_eq!(parse_u8("0"), Ok(0));
+        assert_eq!(parse_u8("255"), Ok(255));
+        assert_eq!(parse_u8("0x1b"), Ok(0x1b));
+        assert_eq!(parse_u8("0XFF"), Ok(0xff));
+        assert!(parse_u8("256").is_err());
+        assert!(parse_u8("0x100").is_err());
+        assert!(parse_u8("-1").is_err());
+        assert!(parse_u8("").is_err());
+        assert!(parse_u8("0x").is_err());
+        assert!(parse_u8("+1").is_err());
+        assert!(parse_u8("0x+1").is_err());
+        assert_eq!(parse_u16("0x8003"), Ok(0x8003));
+        assert_eq!(parse_u16("65535"), Ok(65535));
+        assert!(parse_u16("65536").is_err());
+        assert!(parse_u16("99999999999").is_err());
+    }
+
+    #[test]
+    fn letters() {
+        assert_eq!(parse_request_code("f"), Ok(RequestCode::FilamentSensor));
+        assert_eq!(parse_request_code("F"), Ok(RequestCode::FilamentType));
+        assert!(parse_request_code("Z").is_err());
+        assert!(parse_request_code("TT").is_err());
+        assert!(parse_request_code("").is_err());
+        assert_eq!(parse_param_code("E"), Ok(ParamCode::Error));
+        assert!(parse_param_code("e").is_err());
+    }
+
+    #[test]
+    fn frames_in_lines() {
+        assert_eq!(extract_frame("T0*a4"), Some((Direction::Unknown, "T0*a4")));
+        assert_eq!(
+            extract_frame("12:00:01 MMU2:>T0*a4.\r\n"),
+            Some((Direction::Request, "T0*a4"))
+        );
+        assert_eq!(
+            extract_frame("MMU2:<T0 E8003*13."),
+            Some((Direction::Response, "T0 E8003*13"))
+        );
+        assert_eq!(extract_frame(">S0*c6."), Some((Direction::Request, "S0*c6")));
+        assert_eq!(extract_frame("MMU2:>."), None);
+        assert_eq!(extract_frame("   "), None);
+    }
+
+    #[test]
+    fn direction_is_guessed_without_a_marker() {
+        assert!(matches!(decode_line("Wb 5*33"), Decoded::Request { .. }));
+        assert!(matches!(decode_line("Wb A*5c"), Decoded::Response { .. }));
+        assert!(matches!(decode_line("Wb R*63"), Decoded::Response { .. }));
+        assert!(matches!(decode_line("T1*cf"), Decoded::Request { .. }));
+        assert!(matches!(decode_line("T1 A*27"), Decoded::Response { .. }));
+        assert!(matches!(decode_line("hello"), Decoded::Invalid { .. }));
+        assert!(matches!(
+            decode_line("MMU2:Command rejected"),
+            Decoded::Invalid { .. }
+        ));
+    }
+
+    #[test]
+    fn a_marker_forces_the_direction() {
+        assert!(matches!(decode_line("MMU2:<T1*cf."), Decoded::Invalid { .. }));
+        assert!(matches!(decode_line("MMU2:>T1 A*27."), Decoded::Invalid { .. }));
+    }
+
+    #[test]
+    fn stream_gives_one_line_per_line() {
+        let input = b"T1*cf\n\nnonsense\nMMU2:<T0 E8003*13.\n";
+        let mut out = Vec::new();
+        decode_stream(&input[..], &mut out, false).expect("in-memory io");
+        let text = String::from_utf8(out).expect("ascii");
+        let lines: Vec<_> = text.lines().collect();
+        assert_eq!(
+            lines,
+            [
+                "request T1 tool change slot 1, CRC ok",
+                "invalid: empty line",
+                "invalid: not a request (unknown code 'n') nor a response (unknown code 'n')",
+                "response T0 E8003 FSENSOR_DIDNT_SWITCH_ON (printer screen 04103), CRC ok",
+            ]
+        );
+    }
+}

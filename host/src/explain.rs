@@ -1,0 +1,245 @@
+//! Human descriptions of requests and responses: code names, register names, progress and error
+//! names with the printer's error screen. Used by `mmu decode`; meant to be shared by the other
+//! host tools (simulator, printer emulator) for their logs.
+
+use mmu_protocol::{
+    ButtonCode, ErrorCode, ParamCode, ProgressCode, Request, RequestCode, Response, ResultCode,
+};
+
+/// Register names of the MMU3 register map (spec §4), indexed by address 0x00..=0x23.
+const REGISTER_NAMES: [&str; 36] = [
+    "Project_Major",
+    "Project_Minor",
+    "Project_Revision",
+    "Project_Build_Number",
+    "MMU_Errors",
+    "Current_Progress_Code",
+    "Current_Error_Code",
+    "Filament_State",
+    "FINDA_State",
+    "FSensor_State",
+    "Motor_Mode",
+    "Extra_Load_Distance",
+    "FSensor_Unload_Check_Distance",
+    "Pulley_Unload_Feedrate",
+    "Pulley_Acceleration",
+    "Selector_Acceleration",
+    "Idler_Acceleration",
+    "Pulley_Load_Feedrate",
+    "Selector_Nominal_Feedrate",
+    "Idler_Nominal_Feedrate",
+    "Pulley_Slow_Feedrate",
+    "Selector_Homing_Feedrate",
+    "Idler_Homing_Feedrate",
+    "Pulley_sg_thrs",
+    "Selector_sg_thrs",
+    "Idler_sg_thrs",
+    "Get_Pulley_Position",
+    "Selector_Slot",
+    "Idler_Slot",
+    "Selector_Cut_iRun",
+    "Pulley_iRun",
+    "Selector_iRun",
+    "Idler_iRun",
+    "Reserved_VCC",
+    "Bowden_Length",
+    "Cut_Length",
+];
+
+/// The name of register `address` in the MMU3 register map, if it exists.
+pub fn register_name(address: u8) -> Option<&'static str> {
+    REGISTER_NAMES.get(usize::from(address)).copied()
+}
+
+/// `register 0x08 FINDA_State`, or `register 0x99 (no such register)`.
+fn register_label(address: u8) -> String {
+    match register_name(address) {
+        Some(name) => format!("register 0x{address:02x} {name}"),
+        None => format!("register 0x{address:02x} (no such register)"),
+    }
+}
+
+/// A note on a register value where the number alone says little.
+fn register_value_note(address: u8, value: u16) -> Option<String> {
+    match address {
+        0x05 => u8::try_from(value).ok().map(|v| ProgressCode(v).to_string()),
+        0x06 => Some(ErrorCode(value).to_string()),
+        0x07 => Some(
+            match value {
+                0 => "NotLoaded",
+                1 => "AtPulley",
+                2 => "InSelector",
+                4 => "InFSensor",
+                8 => "InNozzle",
+                _ => "unknown state",
+            }
+            .to_string(),
+        ),
+        0x08 => Some(finda_note(value).to_string()),
+        0x0a => Some(if value == 0 { "normal" } else { "stealth" }.to_string()),
+        _ => None,
+    }
+}
+
+fn finda_note(value: u16) -> &'static str {
+    if value == 0 {
+        "no filament"
+    } else {
+        "filament present"
+    }
+}
+
+/// The version part a `S<n>` request reads.
+fn version_part(index: u8) -> Option<&'static str> {
+    match index {
+        0 => Some("major"),
+        1 => Some("minor"),
+        2 => Some("revision"),
+        3 => Some("build"),
+        _ => None,
+    }
+}
+
+/// What `S<n>` reads: `version major`, or the register for n ≥ 4.
+fn version_label(index: u8) -> String {
+    match version_part(index) {
+        Some(part) => format!("version {part}"),
+        None => format!("version read of {}", register_label(index)),
+    }
+}
+
+/// `button 1 Middle`.
+fn button_label(value: u16) -> String {
+    let name = u8::try_from(value)
+        .ok()
+        .and_then(|v| ButtonCode(v).name())
+        .unwrap_or("unknown");
+    format!("button {value} {name}")
+}
+
+/// The printer's `FilamentState` carried by `f<n>`.
+fn filament_sensor_state(value: u8) -> &'static str {
+    match value {
+        0 => "not present",
+        1 => "at fsensor",
+        2 => "in nozzle",
+        3 => "unavailable",
+        _ => "unknown",
+    }
+}
+
+/// What a request asks for, e.g. `tool change slot 1` or `write register 0x0b Extra_Load_Distance = 5`.
+pub fn request_meaning(request: &Request) -> String {
+    let v = request.value;
+    match request.code {
+        RequestCode::Query if v == 0 => "query".to_string(),
+        RequestCode::Query => format!("query (value {v})"),
+        RequestCode::Tool => format!("tool change slot {v}"),
+        RequestCode::Load => format!("preload slot {v}"),
+        RequestCode::Mode => match v {
+            0 => "motor mode normal".to_string(),
+            1 => "motor mode stealth".to_string(),
+            _ => format!("motor mode {v}"),
+        },
+        RequestCode::Unload => "unload".to_string(),
+        RequestCode::Reset => match v {
+            0 => "reset".to_string(),
+            42 => "erase EEPROM and reset".to_string(),
+            _ => format!("reset (value {v}: soft reset)"),
+        },
+        RequestCode::Finda => "FINDA query".to_string(),
+        RequestCode::Version => version_label(v),
+        RequestCode::Button => format!("{} from the printer", button_label(v.into())),
+        RequestCode::Eject => format!("eject slot {v}"),
+        RequestCode::Write => format!("write {} = {}", register_label(v), request.value2),
+        RequestCode::Cut => format!("cut slot {v}"),
+        RequestCode::FilamentType => format!("filament type slot {v}"),
+        RequestCode::FilamentSensor => {
+            format!("filament sensor state {v} ({})", filament_sensor_state(v))
+        }
+        RequestCode::Home => "home".to_string(),
+        RequestCode::Read => format!("read {}", register_label(v)),
+    }
+}
+
+/// What a response says, e.g. `FSENSOR_DIDNT_SWITCH_ON (printer screen 04103)`,
+/// `FeedingToFSensor` or `register 0x08 FINDA_State = 1 (filament present)`.
+pub fn response_meaning(response: &Response) -> String {
+    let pv = response.param_value;
+    match (response.param, pv) {
+        (ParamCode::Processing, Some(p)) => match u8::try_from(p) {
+            Ok(p) => ProgressCode(p).to_string(),
+            Err(_) => format!("UnknownProgress{p:x}"),
+        },
+        (ParamCode::Processing, None) => "processing (no progress code)".to_string(),
+        (ParamCode::Error, Some(e)) => {
+            let code = ErrorCode(e);
+            format!("{code} (printer screen {:05})", code.printer_screen())
+        }
+        (ParamCode::Error, None) => "error (no error code)".to_string(),
+        (ParamCode::Finished, Some(r)) => match ResultCode(r).name() {
+            Some(name) => format!("finished {name}"),
+            None => format!("finished, result {r}"),
+        },
+        (ParamCode::Finished, None) => "finished (no result printed)".to_string(),
+        (ParamCode::Accepted, Some(value)) => accepted_value(response, value),
+        (ParamCode::Accepted, None) => "accepted".to_string(),
+        (ParamCode::Rejected, _) => "rejected".to_string(),
+        (ParamCode::Button, Some(b)) => format!("{} pressed on the unit", button_label(b)),
+        (ParamCode::Button, None) => "button (no number)".to_string(),
+    }
+}
+
+/// An `A<value>`: the answer to a read.
+fn accepted_value(response: &Response, value: u16) -> String {
+    let address = response.value;
+    match response.code {
+        RequestCode::Version if version_part(address).is_some() => {
+            format!("{} = {value}", version_label(address))
+        }
+        RequestCode::Version | RequestCode::Read => {
+            let mut text = format!("{} = {value}", register_label(address));
+            if let Some(note) = register_value_note(address, value) {
+                text.push_str(&format!(" ({note})"));
+            }
+            text
+        }
+        RequestCode::Finda => format!("FINDA = {value} ({})", finda_note(value)),
+        _ => format!("accepted, value {value}"),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn register_map_has_36_entries() {
+        assert_eq!(register_name(0x08), Some("FINDA_State"));
+        assert_eq!(register_name(0x22), Some("Bowden_Length"));
+        assert_eq!(register_name(0x23), Some("Cut_Length"));
+        assert_eq!(register_name(0x24), None);
+    }
+
+    #[test]
+    fn meanings() {
+        let t1 = Request::new(RequestCode::Tool, 1);
+        assert_eq!(request_meaning(&t1), "tool change slot 1");
+        assert_eq!(
+            request_meaning(&Request::write(0x0b, 5)),
+            "write register 0x0b Extra_Load_Distance = 5"
+        );
+        let e = Response::error(RequestCode::Tool, 0, ErrorCode(0x8003));
+        assert_eq!(
+            response_meaning(&e),
+            "FSENSOR_DIDNT_SWITCH_ON (printer screen 04103)"
+        );
+        let r8 = Response::read(&Request::new(RequestCode::Read, 8), 1);
+        assert_eq!(
+            response_meaning(&r8),
+            "register 0x08 FINDA_State = 1 (filament present)"
+        );
+        let s3 = Response::read(&Request::new(RequestCode::Version, 3), 896);
+        assert_eq!(response_meaning(&s3), "version build = 896");
+    }
+}
