@@ -65,7 +65,12 @@ pub(crate) struct Counters<const N: usize> {
 
 impl<const N: usize> Default for Counters<N> {
     fn default() -> Self {
-        Counters { drive_errors: 0, tool_changes: [0; N], failures: [0; N], dropped_responses: 0 }
+        Counters {
+            drive_errors: 0,
+            tool_changes: [0; N],
+            failures: [0; N],
+            dropped_responses: 0,
+        }
     }
 }
 
@@ -116,7 +121,12 @@ impl<const N: usize> App<N> {
     /// Advance the unit to `now` with the latest sensor samples and the bytes received since the
     /// last step.
     pub fn step(&mut self, now: Instant, samples: &Samples<N>, rx: &[u8]) -> Outputs<N> {
-        let mut out = Outputs { motors: [MotorCommand::Coast; N], tx: Vec::new(), action: None, status_led: false };
+        let mut out = Outputs {
+            motors: [MotorCommand::Coast; N],
+            tx: Vec::new(),
+            action: None,
+            status_led: false,
+        };
         self.unit.sense(samples, now, &self.config);
         for &byte in rx {
             if let Some(Ok(request)) = self.decoder.feed(byte) {
@@ -165,7 +175,10 @@ impl<const N: usize> App<N> {
                 });
                 None
             }
-            RequestCode::Finda => Some(Response::read(request, self.unit.hub_present().unwrap_or(false).into())),
+            RequestCode::Finda => Some(Response::read(
+                request,
+                self.unit.hub_present().unwrap_or(false).into(),
+            )),
             RequestCode::Version | RequestCode::Read => Some(match self.read_register(request.value) {
                 Some(value) => Response::read(request, value),
                 None => Response::rejected(request),
@@ -214,7 +227,10 @@ impl<const N: usize> App<N> {
         }
         let key = (request.code, request.value);
         self.pending_button = None;
-        if usize::from(request.value) < N && request.code != RequestCode::Unload && request.code != RequestCode::Home {
+        if usize::from(request.value) < N
+            && request.code != RequestCode::Unload
+            && request.code != RequestCode::Home
+        {
             self.unit.selected = Some(request.value.into());
         }
         self.operation = match ops::plan(request.code, request.value, &self.unit, &self.config) {
@@ -232,14 +248,21 @@ impl<const N: usize> App<N> {
         match after {
             Status::Failed(error) if error != ErrorCode::FILAMENT_EJECTED => {
                 self.counters.drive_errors = self.counters.drive_errors.saturating_add(1);
-                if let Some(count) =
-                    self.operation.phase().and_then(ops::Phase::slot).and_then(|s| self.counters.failures.get_mut(s))
+                if let Some(count) = self
+                    .operation
+                    .phase()
+                    .and_then(ops::Phase::slot)
+                    .and_then(|s| self.counters.failures.get_mut(s))
                 {
                     *count = count.saturating_add(1);
                 }
             }
             Status::Finished if self.operation.request.0 == RequestCode::Tool => {
-                if let Some(count) = self.counters.tool_changes.get_mut(usize::from(self.operation.request.1)) {
+                if let Some(count) = self
+                    .counters
+                    .tool_changes
+                    .get_mut(usize::from(self.operation.request.1))
+                {
                     *count = count.saturating_add(1);
                 }
             }
@@ -252,14 +275,20 @@ impl<const N: usize> App<N> {
     fn drive_motors(&mut self, now: Instant, out: &mut Outputs<N>) {
         let driving = self.operation.driving_slot();
         let tension = self.unit.hub.tension.reading();
-        for (slot, (feeder, motor)) in self.unit.feeders.iter_mut().zip(out.motors.iter_mut()).enumerate() {
+        for (slot, (feeder, motor)) in self
+            .unit
+            .feeders
+            .iter_mut()
+            .zip(out.motors.iter_mut())
+            .enumerate()
+        {
             if Some(slot) != driving {
                 let duty = match self.unit.lanes.get(slot) {
                     Some(Lane::Loaded) => follow_duty(0, tension, &self.config),
                     _ => Duty::ZERO,
                 };
                 if duty == Duty::ZERO {
-                    feeder.coast(now, &self.config);
+                    feeder.release(now, &self.config);
                 } else {
                     feeder.push(duty, now, &self.config);
                 }

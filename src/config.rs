@@ -93,7 +93,12 @@ pub struct Config {
 impl Default for Config {
     fn default() -> Self {
         Config {
-            version: Version { major: 3, minor: 0, revision: 3, build: 1 },
+            version: Version {
+                major: 3,
+                minor: 0,
+                revision: 3,
+                build: 1,
+            },
             extra_load_mm: 30,
             unload_check_mm: 40,
             unload_speed: 95,
@@ -105,7 +110,7 @@ impl Default for Config {
             fsensor_search_mm: 90,
             preload_max_mm: 150,
             hub_search_mm: 45,
-            eject_max_mm: 60,
+            eject_max_mm: 150,
             mm_per_rev_centi: 200,
             full_duty_speed: 150,
             max_duty: 1000,
@@ -116,8 +121,16 @@ impl Default for Config {
             tension_deadband: 60,
             tension_gain: 2,
             tension_max_duty: 600,
-            presence_filter: FilterConfig { median: 5, average: 4, smoothing_permille: 500 },
-            motor_filter: FilterConfig { median: 3, average: 1, smoothing_permille: 1000 },
+            presence_filter: FilterConfig {
+                median: 5,
+                average: 4,
+                smoothing_permille: 500,
+            },
+            motor_filter: FilterConfig {
+                median: 3,
+                average: 1,
+                smoothing_permille: 1000,
+            },
             hub_thresholds: Thresholds { on: 2600, off: 2400 },
             slot_thresholds: [Thresholds { on: 2600, off: 2400 }; MAX_SLOTS],
             motor_thresholds: [Thresholds { on: 2300, off: 1800 }; MAX_SLOTS],

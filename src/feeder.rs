@@ -11,11 +11,18 @@ use crate::config::Config;
 use crate::sensor::{PresenceSensor, RailLimits, RevolutionCounter, Thresholds};
 use crate::time::Instant;
 
+/// How long a braked motor stays braked before it may coast, ms: long enough to stop it, so a
+/// parked tip does not drift on the motor's momentum.
+const BRAKE_HOLD_MS: u64 = 200;
+
 /// Duty added per millimetre the filament lags behind its schedule, per mille.
 const CATCH_UP_GAIN: i32 = 25;
 
 /// Thresholds no reading reaches, for a slot beyond the configured ones.
-const DISABLED: Thresholds = Thresholds { on: u16::MAX, off: u16::MAX - 1 };
+const DISABLED: Thresholds = Thresholds {
+    on: u16::MAX,
+    off: u16::MAX - 1,
+};
 
 /// A speed-controlled move in progress.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -41,15 +48,27 @@ pub struct Feeder {
     hard_drive_since: Option<Instant>,
     /// The direction revolutions are counted in (the extruder pulls forward while coasting).
     counting: Option<Direction>,
+    /// When the motor was last braked.
+    braked_at: Instant,
 }
 
 impl Feeder {
     /// Take the slot's raw samples at `now`.
-    pub fn sense(&mut self, slot: usize, sample: SlotSamples, now: Instant, config: &Config, rails: &RailLimits) {
+    pub fn sense(
+        &mut self,
+        slot: usize,
+        sample: SlotSamples,
+        now: Instant,
+        config: &Config,
+        rails: &RailLimits,
+    ) {
         let presence = config.slot_thresholds.get(slot).copied().unwrap_or(DISABLED);
         let edges = config.motor_thresholds.get(slot).copied().unwrap_or(DISABLED);
-        self.filament.update(sample.filament, now, &config.presence_filter, rails, presence);
-        let revolution = self.hall.update(sample.motor_hall, now, &config.motor_filter, rails, edges);
+        self.filament
+            .update(sample.filament, now, &config.presence_filter, rails, presence);
+        let revolution = self
+            .hall
+            .update(sample.motor_hall, now, &config.motor_filter, rails, edges);
         if revolution {
             let step = i32::from(config.mm_per_rev_centi);
             self.odometry_centi = match self.counting.unwrap_or(Direction::Forward) {
@@ -63,7 +82,12 @@ impl Feeder {
     pub fn drive(&mut self, direction: Direction, speed: u16, now: Instant, config: &Config) {
         let drive = match self.drive {
             Some(drive) if drive.direction == direction && drive.speed == speed => drive,
-            _ => Drive { direction, speed, since: now, from_centi: self.odometry_centi },
+            _ => Drive {
+                direction,
+                speed,
+                since: now,
+                from_centi: self.odometry_centi,
+            },
         };
         self.drive = Some(drive);
         let elapsed_ms = i64::try_from(now.millis_since(drive.since)).unwrap_or(i64::MAX / 1000);
@@ -75,7 +99,14 @@ impl Feeder {
         let lag_mm = ((scheduled_centi - moved_centi) / 100).clamp(-1000, 1000) as i32;
         let open_loop = i32::from(speed) * 1000 / i32::from(config.full_duty_speed.max(1));
         let duty = (open_loop + CATCH_UP_GAIN * lag_mm).clamp(0, i32::from(config.max_duty.min(1000)));
-        self.set(MotorCommand::Drive { direction, duty: Duty::from_permille(duty as u16) }, now, config);
+        self.set(
+            MotorCommand::Drive {
+                direction,
+                duty: Duty::from_permille(duty as u16),
+            },
+            now,
+            config,
+        );
     }
 
     /// Drive at a fixed duty (the tension follower's assist).
@@ -93,7 +124,18 @@ impl Feeder {
     /// Hold the motor (short brake).
     pub fn brake(&mut self, now: Instant, config: &Config) {
         self.drive = None;
+        if self.command != MotorCommand::Brake {
+            self.braked_at = now;
+        }
         self.set(MotorCommand::Brake, now, config);
+    }
+
+    /// Let the motor go: coast, once a brake has had time to stop it.
+    pub fn release(&mut self, now: Instant, config: &Config) {
+        if self.command == MotorCommand::Brake && now.millis_since(self.braked_at) < BRAKE_HOLD_MS {
+            return;
+        }
+        self.coast(now, config);
     }
 
     fn set(&mut self, command: MotorCommand, now: Instant, config: &Config) {
@@ -133,7 +175,9 @@ impl Feeder {
 
     /// True when the motor is driven hard enough to turn but has not turned for the stall timeout.
     pub fn stalled(&self, now: Instant, config: &Config) -> bool {
-        let Some(since) = self.hard_drive_since else { return false };
+        let Some(since) = self.hard_drive_since else {
+            return false;
+        };
         let last_sign_of_life = since.max(self.hall.last_revolution());
         now.millis_since(last_sign_of_life) > u64::from(config.stall_timeout_ms)
     }

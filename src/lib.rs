@@ -14,8 +14,8 @@ pub mod feeder;
 pub mod ops;
 pub mod registers;
 pub mod sensor;
-pub mod unit;
 pub mod time;
+pub mod unit;
 
 pub use app::{App, BoardAction, Outputs, TX_CAPACITY};
 pub use config::Config;

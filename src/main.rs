@@ -1,3 +1,271 @@
-//! MCU entry point (placeholder until the board module lands).
+//! MCU entry point of the reference board (NUCLEO-G071RB): the unit logic ([`mmu_firmware::App`])
+//! stepped every millisecond, with the same code the host tests and the simulator step.
+//!
+//! Tasks (one thread-mode Embassy executor):
+//! - `sample_task`: a DMA scan of all nine Hall sensors every millisecond (Ticker), published
+//!   to the control task through [`LATEST`];
+//! - `control_task`: every millisecond (Ticker) it drains the bytes the printer sent, debounces
+//!   the button, steps the App, applies the motor commands, queues the response bytes, drives the
+//!   status LED, carries out resets, and feeds the watchdog when it stepped on time with fresh
+//!   samples.
+//!
+//! The printer UART's receive path needs no task: the USART interrupt moves every byte into a
+//! 256-byte ring as it arrives (the CPU is never blocked longer than a byte time), and the
+//! control task empties the ring every step.
+//!
+//! Safety: [`board::emergency_stop`] runs first thing at boot, in the panic handler and in the
+//! HardFault handler, and before every reset; the independent watchdog resets the MCU (bridges
+//! off) when the control loop stops stepping on time. Only `board` touches Embassy HAL types.
+
 #![no_std]
 #![no_main]
+
+mod board;
+
+use core::cell::Cell;
+use core::panic::PanicInfo;
+use core::sync::atomic::{AtomicBool, Ordering};
+
+use cortex_m_rt::{ExceptionFrame, entry, exception};
+use defmt::{error, info, unwrap, warn};
+use defmt_rtt as _;
+use embassy_executor::Executor;
+use embassy_sync::blocking_mutex::Mutex;
+use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+use embassy_time::{Duration, Instant as Clock, Ticker};
+use mmu_firmware::{App, BoardAction, Config, HubSamples, Instant, MotorCommand, Samples, SlotSamples};
+use mmu_protocol::ButtonCode;
+use static_cell::StaticCell;
+
+use board::SLOTS;
+
+/// Period of the control step.
+const CONTROL_PERIOD: Duration = Duration::from_millis(1);
+/// Period of the sensor scan.
+const SAMPLE_PERIOD: Duration = Duration::from_millis(1);
+/// A step that starts later than this after its tick does not feed the watchdog.
+const ON_TIME: Duration = Duration::from_millis(2);
+/// Samples older than this do not feed the watchdog (the sampler stalled).
+const MAX_SAMPLE_AGE: Duration = Duration::from_millis(5);
+/// Most bytes handed to one step: 5x what 115200 Bd delivers per millisecond.
+const RX_CHUNK: usize = 64;
+/// The button must read the same for this long to count.
+const DEBOUNCE: Duration = Duration::from_millis(20);
+/// The longest a reset waits for the last response to leave the UART.
+const FLUSH_BEFORE_RESET: Duration = Duration::from_millis(20);
+/// Interval of the statistics log line.
+const STATS_PERIOD: Duration = Duration::from_secs(60);
+
+/// The latest sensor scan and when it was taken (`None` before the first one).
+static LATEST: Mutex<CriticalSectionRawMutex, Cell<Option<(Clock, Samples<SLOTS>)>>> =
+    Mutex::new(Cell::new(None));
+
+/// All zeros: every sensor reads as stuck at the low rail until the first scan lands.
+const NO_SAMPLES: Samples<SLOTS> = Samples {
+    slots: [SlotSamples {
+        motor_hall: 0,
+        filament: 0,
+    }; SLOTS],
+    hub: HubSamples {
+        filament: 0,
+        tension: 0,
+        cutter: 0,
+    },
+};
+
+#[entry]
+fn main() -> ! {
+    // Before anything else: every bridge off, whatever state a reset left the pins in.
+    board::emergency_stop();
+    info!(
+        "mmu-firmware {} starting, reset cause: {}",
+        env!("CARGO_PKG_VERSION"),
+        board::reset_cause()
+    );
+
+    static EXECUTOR: StaticCell<Executor> = StaticCell::new();
+    EXECUTOR.init(Executor::new()).run(|spawner| {
+        let (control, sampler) = board::init();
+        spawner.spawn(unwrap!(sample_task(sampler)));
+        spawner.spawn(unwrap!(control_task(control)));
+    })
+}
+
+#[embassy_executor::task]
+async fn sample_task(mut sampler: board::Sampler) {
+    let mut ticker = Ticker::every(SAMPLE_PERIOD);
+    loop {
+        let samples = sampler.sample().await;
+        let taken = Clock::now();
+        LATEST.lock(|latest| latest.set(Some((taken, samples))));
+        ticker.next().await;
+    }
+}
+
+#[embassy_executor::task]
+async fn control_task(mut board: board::Control) {
+    let mut app = App::<SLOTS>::new(Config::default());
+    let mut ticker = Ticker::every(CONTROL_PERIOD);
+    let mut deadline = Clock::now() + CONTROL_PERIOD;
+    let mut button = Debounce::new(Clock::now());
+    let mut stats = Stats::new(Clock::now());
+    let mut rx = [0u8; RX_CHUNK];
+    loop {
+        ticker.next().await;
+        let now = Clock::now();
+        let lateness = now.saturating_duration_since(deadline);
+        deadline += CONTROL_PERIOD;
+
+        let (taken, samples) = LATEST
+            .lock(Cell::get)
+            .unwrap_or((Clock::from_ticks(0), NO_SAMPLES));
+        let fresh = now.saturating_duration_since(taken) <= MAX_SAMPLE_AGE;
+        let received = board.receive(&mut rx);
+        if button.pressed(board.button_down(), now) {
+            info!("button: Middle");
+            app.press_button(ButtonCode::MIDDLE);
+        }
+
+        let out = app.step(Instant::from_millis(now.as_millis()), &samples, &rx[..received]);
+
+        board.apply(&out.motors);
+        board.set_status_led(out.status_led);
+        if !out.tx.is_empty() && !board.send(&out.tx) {
+            stats.tx_dropped += 1;
+        }
+        if let Some(action) = out.action {
+            perform(action, &mut board).await;
+        }
+        if lateness <= ON_TIME && fresh {
+            board.feed_watchdog();
+        } else {
+            stats.unfed += 1;
+        }
+        stats.step(now, lateness, fresh);
+    }
+}
+
+/// Carries out a reset request after its response has been sent.
+async fn perform(action: BoardAction, board: &mut board::Control) -> ! {
+    info!("board action: {}", action);
+    board.apply(&[MotorCommand::Coast; SLOTS]);
+    board.flush(FLUSH_BEFORE_RESET).await;
+    if action == BoardAction::EraseAndReset {
+        board::erase_persisted();
+    }
+    board::reset()
+}
+
+/// Turns the raw button level into one event per press.
+struct Debounce {
+    /// The level last read and since when.
+    raw: bool,
+    since: Clock,
+    /// The debounced level.
+    stable: bool,
+}
+
+impl Debounce {
+    fn new(now: Clock) -> Self {
+        Debounce {
+            raw: false,
+            since: now,
+            stable: false,
+        }
+    }
+
+    /// Feeds the current level; true once per press, when it has held for [`DEBOUNCE`].
+    fn pressed(&mut self, down: bool, now: Clock) -> bool {
+        if down != self.raw {
+            self.raw = down;
+            self.since = now;
+        }
+        if self.raw != self.stable && now.saturating_duration_since(self.since) >= DEBOUNCE {
+            self.stable = self.raw;
+            return self.stable;
+        }
+        false
+    }
+}
+
+/// What the control loop counts, logged every [`STATS_PERIOD`].
+struct Stats {
+    since: Clock,
+    steps: u32,
+    late: u32,
+    max_lateness: Duration,
+    stale: u32,
+    unfed: u32,
+    tx_dropped: u32,
+}
+
+impl Stats {
+    fn new(now: Clock) -> Self {
+        Stats {
+            since: now,
+            steps: 0,
+            late: 0,
+            max_lateness: Duration::MIN,
+            stale: 0,
+            unfed: 0,
+            tx_dropped: 0,
+        }
+    }
+
+    fn step(&mut self, now: Clock, lateness: Duration, fresh: bool) {
+        self.steps += 1;
+        if lateness > ON_TIME {
+            self.late += 1;
+        }
+        self.max_lateness = self.max_lateness.max(lateness);
+        if !fresh {
+            self.stale += 1;
+        }
+        if now.saturating_duration_since(self.since) < STATS_PERIOD {
+            return;
+        }
+        if self.late + self.stale + self.tx_dropped > 0 {
+            warn!(
+                "control: {} steps, {} late (max {} us), {} with stale samples, {} watchdog feeds skipped, {} responses dropped",
+                self.steps,
+                self.late,
+                self.max_lateness.as_micros(),
+                self.stale,
+                self.unfed,
+                self.tx_dropped
+            );
+        } else {
+            info!(
+                "control: {} steps on time, max lateness {} us",
+                self.steps,
+                self.max_lateness.as_micros()
+            );
+        }
+        *self = Stats::new(now);
+    }
+}
+
+/// Stops every motor, reports the panic over RTT once, then faults: with a probe attached,
+/// `probe-rs run` prints a backtrace and exits; without one, the HardFault handler waits for the
+/// watchdog to reset the MCU.
+#[panic_handler]
+fn panic(info: &PanicInfo) -> ! {
+    static PANICKED: AtomicBool = AtomicBool::new(false);
+    cortex_m::interrupt::disable();
+    board::emergency_stop();
+    // thumbv6m has no atomic swap; interrupts are off, so load + store cannot be torn apart.
+    if !PANICKED.load(Ordering::Relaxed) {
+        PANICKED.store(true, Ordering::Relaxed);
+        error!("panic: {}", defmt::Display2Format(info));
+    }
+    cortex_m::asm::udf()
+}
+
+/// A fault (or a panic's `udf`): every motor off, then wait for the watchdog reset.
+#[exception]
+unsafe fn HardFault(_frame: &ExceptionFrame) -> ! {
+    board::emergency_stop();
+    loop {
+        cortex_m::asm::nop();
+    }
+}

@@ -119,10 +119,26 @@ impl Bounds {
 }
 
 fn bounds(phase: Phase, config: &Config) -> Option<Bounds> {
-    let forward = |speed, max_mm, error| Some(Bounds { direction: Direction::Forward, speed, max_mm, error });
-    let reverse = |speed, max_mm, error| Some(Bounds { direction: Direction::Reverse, speed, max_mm, error });
+    let forward = |speed, max_mm, error| {
+        Some(Bounds {
+            direction: Direction::Forward,
+            speed,
+            max_mm,
+            error,
+        })
+    };
+    let reverse = |speed, max_mm, error| {
+        Some(Bounds {
+            direction: Direction::Reverse,
+            speed,
+            max_mm,
+            error,
+        })
+    };
     match phase {
-        Phase::FeedToHub { max_mm, .. } => forward(config.load_speed, max_mm, ErrorCode::FINDA_DIDNT_SWITCH_ON),
+        Phase::FeedToHub { max_mm, .. } => {
+            forward(config.load_speed, max_mm, ErrorCode::FINDA_DIDNT_SWITCH_ON)
+        }
         Phase::RetractToPark { .. } => reverse(
             config.load_speed,
             config.hub_search_mm.saturating_add(config.park_mm),
@@ -138,15 +154,24 @@ fn bounds(phase: Phase, config: &Config) -> Option<Bounds> {
             config.bowden_slowdown_mm.saturating_add(config.fsensor_search_mm),
             ErrorCode::FSENSOR_DIDNT_SWITCH_ON,
         ),
-        Phase::FeedToNozzle { .. } => {
-            forward(config.slow_speed, config.extra_load_mm.saturating_mul(2), ErrorCode::MOVE_PULLEY_FAILED)
-        }
+        Phase::FeedToNozzle { .. } => forward(
+            config.slow_speed,
+            config.extra_load_mm.saturating_mul(2),
+            ErrorCode::MOVE_PULLEY_FAILED,
+        ),
         Phase::UnloadToHub { .. } => reverse(
             config.unload_speed,
-            config.bowden_mm.saturating_add(config.fsensor_search_mm).saturating_add(config.hub_search_mm),
+            config
+                .bowden_mm
+                .saturating_add(config.fsensor_search_mm)
+                .saturating_add(config.hub_search_mm),
             ErrorCode::FINDA_DIDNT_SWITCH_OFF,
         ),
-        Phase::EjectFromSlot { .. } => reverse(config.load_speed, config.eject_max_mm, ErrorCode::MOVE_PULLEY_FAILED),
+        Phase::EjectFromSlot { .. } => reverse(
+            config.load_speed,
+            config.eject_max_mm,
+            ErrorCode::MOVE_PULLEY_FAILED,
+        ),
         Phase::CheckSensors | Phase::AwaitContinue => None,
     }
 }
@@ -192,6 +217,9 @@ pub struct Operation {
     status: Status,
     /// Set by Retry: the user has looked, trust what the sensors say now over the known lanes.
     trust_sensors: bool,
+    /// Odometry of a slot when the hub sensor last saw its tip leave, so parking that follows an
+    /// unload measures from the hub and not from where the unload stopped.
+    hub_cleared: Option<(usize, i32)>,
 }
 
 impl Operation {
@@ -203,7 +231,15 @@ impl Operation {
             Some(phase) => Status::Running(phase.progress()),
             None => Status::Finished,
         };
-        Operation { request, plan: phases, index: 0, run: None, status, trust_sensors: false }
+        Operation {
+            request,
+            plan: phases,
+            index: 0,
+            run: None,
+            status,
+            trust_sensors: false,
+            hub_cleared: None,
+        }
     }
 
     /// An operation that failed before it moved anything.
@@ -243,7 +279,9 @@ impl Operation {
 
     /// The Middle button (Retry / Continue).
     pub fn retry(&mut self, config: &Config) {
-        let Status::Failed(error) = self.status else { return };
+        let Status::Failed(error) = self.status else {
+            return;
+        };
         if error == ErrorCode::INVALID_TOOL {
             return;
         }
@@ -260,11 +298,16 @@ impl Operation {
             let mut plan = Plan::new();
             extend(&mut plan, &unload(slot));
             extend(&mut plan, &load_to_nozzle(slot, config.hub_search_mm));
-            *self = Operation { trust_sensors: true, ..Operation::new(self.request, &plan) };
+            *self = Operation {
+                trust_sensors: true,
+                ..Operation::new(self.request, &plan)
+            };
             return;
         }
         self.run = None;
-        self.status = self.phase().map_or(Status::Finished, |phase| Status::Running(phase.progress()));
+        self.status = self
+            .phase()
+            .map_or(Status::Finished, |phase| Status::Running(phase.progress()));
     }
 
     fn advance(&mut self) {
@@ -310,29 +353,49 @@ impl Operation {
         }
     }
 
-    fn step_phase<const N: usize>(&mut self, phase: Phase, unit: &mut Unit<N>, now: Instant, config: &Config) -> Outcome {
+    fn step_phase<const N: usize>(
+        &mut self,
+        phase: Phase,
+        unit: &mut Unit<N>,
+        now: Instant,
+        config: &Config,
+    ) -> Outcome {
         let Some(slot) = phase.slot() else {
             return match phase {
                 Phase::AwaitContinue => Outcome::Fail(ErrorCode::FILAMENT_EJECTED),
                 _ => self.check_sensors(unit, now),
             };
         };
-        let Some(bounds) = bounds(phase, config) else { return Outcome::Fail(ErrorCode::INTERNAL) };
-        let Some(feeder) = unit.feeders.get(slot) else { return Outcome::Fail(ErrorCode::INVALID_TOOL) };
+        let Some(bounds) = bounds(phase, config) else {
+            return Outcome::Fail(ErrorCode::INTERNAL);
+        };
+        let Some(feeder) = unit.feeders.get(slot) else {
+            return Outcome::Fail(ErrorCode::INVALID_TOOL);
+        };
         let odometry = feeder.odometry_centi();
-        let run = *self.run.get_or_insert(PhaseRun { started: now, from_centi: odometry, mark_centi: None });
+        let run = *self.run.get_or_insert(PhaseRun {
+            started: now,
+            from_centi: odometry,
+            mark_centi: None,
+        });
         let moved_mm = match bounds.direction {
             Direction::Forward => (odometry - run.from_centi) / 100,
             Direction::Reverse => (run.from_centi - odometry) / 100,
         };
 
-        if let Some(fault) = [SensorId::MotorHall(slot), SensorId::HubFilament, SensorId::SlotFilament(slot)]
-            .into_iter()
-            .find(|&id| unit.sensor(id).is_some_and(|s| s.fault().is_some()))
+        if let Some(fault) = [
+            SensorId::MotorHall(slot),
+            SensorId::HubFilament,
+            SensorId::SlotFilament(slot),
+        ]
+        .into_iter()
+        .find(|&id| unit.sensor(id).is_some_and(|s| s.fault().is_some()))
         {
             return Outcome::Fail(sensor_fault_error(fault));
         }
-        let Some(hub) = unit.hub_present() else { return Outcome::Continue };
+        let Some(hub) = unit.hub_present() else {
+            return Outcome::Continue;
+        };
         let Some(slot_sees) = unit.feeders.get(slot).and_then(|f| f.filament.present()) else {
             return Outcome::Continue;
         };
@@ -348,7 +411,7 @@ impl Operation {
                     Goal::Drive
                 }
             }
-            Phase::RetractToPark { .. } => match (hub, run.mark_centi) {
+            Phase::RetractToPark { .. } => match (hub, run.mark_centi.or(self.hub_mark(slot))) {
                 (true, _) => Goal::Drive,
                 (false, None) => {
                     self.mark(odometry);
@@ -361,7 +424,11 @@ impl Operation {
                 if unit.fsensor_triggered() {
                     return Outcome::Fail(ErrorCode::FSENSOR_TOO_EARLY);
                 }
-                if moved_mm >= i32::from(bounds.max_mm) { Goal::Reached } else { Goal::Drive }
+                if moved_mm >= i32::from(bounds.max_mm) {
+                    Goal::Reached
+                } else {
+                    Goal::Drive
+                }
             }
             Phase::FeedToFsensor { .. } => {
                 if unit.fsensor_triggered() {
@@ -381,7 +448,12 @@ impl Operation {
                 if unit.fsensor_triggered() && moved_mm >= i32::from(config.unload_check_mm) {
                     return Outcome::Fail(ErrorCode::FSENSOR_DIDNT_SWITCH_OFF);
                 }
-                if !hub && !unit.fsensor_triggered() { Goal::Reached } else { Goal::Drive }
+                if !hub && !unit.fsensor_triggered() {
+                    self.hub_cleared = Some((slot, odometry));
+                    Goal::Reached
+                } else {
+                    Goal::Drive
+                }
             }
             Phase::EjectFromSlot { .. } => {
                 if slot_sees {
@@ -393,7 +465,9 @@ impl Operation {
             Phase::CheckSensors | Phase::AwaitContinue => Goal::Reached,
         };
 
-        let Some(feeder) = unit.feeders.get_mut(slot) else { return Outcome::Fail(ErrorCode::INTERNAL) };
+        let Some(feeder) = unit.feeders.get_mut(slot) else {
+            return Outcome::Fail(ErrorCode::INTERNAL);
+        };
         match goal {
             Goal::Reached => {
                 feeder.brake(now, config);
@@ -407,7 +481,9 @@ impl Operation {
                 }
             }
         }
-        let Some(feeder) = unit.feeders.get(slot) else { return Outcome::Fail(ErrorCode::INTERNAL) };
+        let Some(feeder) = unit.feeders.get(slot) else {
+            return Outcome::Fail(ErrorCode::INTERNAL);
+        };
         if feeder.stalled(now, config) {
             return Outcome::Fail(ErrorCode::STALLED_PULLEY);
         }
@@ -415,6 +491,12 @@ impl Operation {
             return Outcome::Fail(bounds.error);
         }
         Outcome::Continue
+    }
+
+    fn hub_mark(&self, slot: usize) -> Option<i32> {
+        self.hub_cleared
+            .filter(|&(cleared, _)| cleared == slot)
+            .map(|(_, odometry)| odometry)
     }
 
     fn mark(&mut self, odometry: i32) {
@@ -428,7 +510,14 @@ impl Operation {
             return Outcome::Fail(sensor_fault_error(fault));
         }
         let Some(hub) = unit.hub_present() else {
-            let started = self.run.get_or_insert(PhaseRun { started: now, from_centi: 0, mark_centi: None }).started;
+            let started = self
+                .run
+                .get_or_insert(PhaseRun {
+                    started: now,
+                    from_centi: 0,
+                    mark_centi: None,
+                })
+                .started;
             if now.millis_since(started) > SENSOR_SETTLE_MS {
                 return Outcome::Fail(ErrorCode::FINDA_FLICKERS);
             }
@@ -517,7 +606,10 @@ pub const fn unload(slot: usize) -> [Phase; 2] {
 /// Feed a slot's filament from before the hub into the printer's extruder.
 pub const fn load_to_nozzle(slot: usize, hub_search_mm: u16) -> [Phase; 4] {
     [
-        Phase::FeedToHub { slot, max_mm: hub_search_mm },
+        Phase::FeedToHub {
+            slot,
+            max_mm: hub_search_mm,
+        },
         Phase::FeedThroughBowden { slot },
         Phase::FeedToFsensor { slot },
         Phase::FeedToNozzle { slot },
@@ -526,9 +618,17 @@ pub const fn load_to_nozzle(slot: usize, hub_search_mm: u16) -> [Phase; 4] {
 
 /// The plan for a printer command with argument `value` (a slot for `T L E K`), or the error it
 /// fails with before anything moves. An empty plan finishes at once.
-pub fn plan<const N: usize>(code: RequestCode, value: u8, unit: &Unit<N>, config: &Config) -> Result<Plan, ErrorCode> {
+pub fn plan<const N: usize>(
+    code: RequestCode,
+    value: u8,
+    unit: &Unit<N>,
+    config: &Config,
+) -> Result<Plan, ErrorCode> {
     let slot = usize::from(value);
-    let needs_slot = matches!(code, RequestCode::Tool | RequestCode::Load | RequestCode::Eject | RequestCode::Cut);
+    let needs_slot = matches!(
+        code,
+        RequestCode::Tool | RequestCode::Load | RequestCode::Eject | RequestCode::Cut
+    );
     if needs_slot && slot >= N {
         return Err(ErrorCode::INVALID_TOOL);
     }
@@ -562,7 +662,16 @@ pub fn plan<const N: usize>(code: RequestCode, value: u8, unit: &Unit<N>, config
                 return Err(ErrorCode::FILAMENT_ALREADY_LOADED);
             }
             clear_hub(&mut plan)?;
-            extend(&mut plan, &[Phase::FeedToHub { slot, max_mm: config.preload_max_mm }, Phase::RetractToPark { slot }]);
+            extend(
+                &mut plan,
+                &[
+                    Phase::FeedToHub {
+                        slot,
+                        max_mm: config.preload_max_mm,
+                    },
+                    Phase::RetractToPark { slot },
+                ],
+            );
         }
         RequestCode::Unload => clear_hub(&mut plan)?,
         RequestCode::Eject => {
@@ -573,7 +682,16 @@ pub fn plan<const N: usize>(code: RequestCode, value: u8, unit: &Unit<N>, config
         }
         RequestCode::Cut => {
             clear_hub(&mut plan)?;
-            extend(&mut plan, &[Phase::FeedToHub { slot, max_mm: hub_search(slot) }, Phase::RetractToPark { slot }]);
+            extend(
+                &mut plan,
+                &[
+                    Phase::FeedToHub {
+                        slot,
+                        max_mm: hub_search(slot),
+                    },
+                    Phase::RetractToPark { slot },
+                ],
+            );
         }
         RequestCode::Home => extend(&mut plan, &[Phase::CheckSensors]),
         _ => return Err(ErrorCode::INTERNAL),

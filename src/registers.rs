@@ -52,7 +52,13 @@ struct Setting {
 
 macro_rules! setting {
     ($address:literal, $min:literal..=$max:literal, $field:ident) => {
-        Setting { address: $address, min: $min, max: $max, get: |c| c.$field, set: |c, v| c.$field = v }
+        Setting {
+            address: $address,
+            min: $min,
+            max: $max,
+            get: |c| c.$field,
+            set: |c, v| c.$field = v,
+        }
     };
 }
 
@@ -142,7 +148,10 @@ impl<const N: usize> App<N> {
                 Status::Running(_) => ErrorCode::RUNNING.0,
                 Status::Finished => ErrorCode::OK.0,
             },
-            0x07 => unit.active().or(unit.selected).map_or(0, |slot| unit.lane(slot).mmu3_state()),
+            0x07 => unit
+                .active()
+                .or(unit.selected)
+                .map_or(0, |slot| unit.lane(slot).mmu3_state()),
             0x08 => unit.hub_present().unwrap_or(false).into(),
             0x09 => unit.fsensor_triggered().into(),
             0x0a => 0,
@@ -155,11 +164,16 @@ impl<const N: usize> App<N> {
             0x1c => self.operation.driving_slot().map_or(5, |slot| slot as u16),
             SLOT_COUNT => N as u16,
             SENSOR_FAULTS => (0..Unit::<N>::SENSOR_COUNT)
-                .filter(|&i| unit.sensor(SensorId::from_index(i)).is_some_and(|s| s.fault().is_some()))
+                .filter(|&i| {
+                    unit.sensor(SensorId::from_index(i))
+                        .is_some_and(|s| s.fault().is_some())
+                })
                 .fold(0u16, |mask, i| mask | (1 << i)),
             DROPPED_RESPONSES => self.counters.dropped_responses,
             a if sensor_at::<N>(a, RAW).is_some() => unit.sensor(sensor_at::<N>(a, RAW)?)?.raw(),
-            a if sensor_at::<N>(a, FILTERED).is_some() => unit.sensor(sensor_at::<N>(a, FILTERED)?)?.filtered(),
+            a if sensor_at::<N>(a, FILTERED).is_some() => {
+                unit.sensor(sensor_at::<N>(a, FILTERED)?)?.filtered()
+            }
             a if sensor_at::<N>(a, THRESHOLD_ON).is_some() => {
                 thresholds(config, sensor_at::<N>(a, THRESHOLD_ON)?)?.on
             }
@@ -173,7 +187,9 @@ impl<const N: usize> App<N> {
             a if slot_at::<N>(a, TOOL_CHANGES).is_some() => {
                 *self.counters.tool_changes.get(slot_at::<N>(a, TOOL_CHANGES)?)?
             }
-            a if slot_at::<N>(a, FAILURES).is_some() => *self.counters.failures.get(slot_at::<N>(a, FAILURES)?)?,
+            a if slot_at::<N>(a, FAILURES).is_some() => {
+                *self.counters.failures.get(slot_at::<N>(a, FAILURES)?)?
+            }
             _ => return None,
         };
         Some(value)
@@ -199,13 +215,28 @@ impl<const N: usize> App<N> {
                 Err(_) => false,
             };
         }
-        let (sensor, on) = match (sensor_at::<N>(address, THRESHOLD_ON), sensor_at::<N>(address, THRESHOLD_OFF)) {
+        let (sensor, on) = match (
+            sensor_at::<N>(address, THRESHOLD_ON),
+            sensor_at::<N>(address, THRESHOLD_OFF),
+        ) {
             (Some(sensor), _) => (sensor, true),
             (None, Some(sensor)) => (sensor, false),
             (None, None) => return false,
         };
-        let Some(thresholds) = thresholds_mut(&mut self.config, sensor) else { return false };
-        let updated = if on { Thresholds { on: value, ..*thresholds } } else { Thresholds { off: value, ..*thresholds } };
+        let Some(thresholds) = thresholds_mut(&mut self.config, sensor) else {
+            return false;
+        };
+        let updated = if on {
+            Thresholds {
+                on: value,
+                ..*thresholds
+            }
+        } else {
+            Thresholds {
+                off: value,
+                ..*thresholds
+            }
+        };
         if !updated.is_valid() {
             return false;
         }

@@ -41,7 +41,11 @@ impl Thresholds {
 
     /// The new state of a sensor that was `was_on` and now reads `value`.
     pub const fn decide(self, was_on: bool, value: u16) -> bool {
-        if was_on { value > self.off } else { value >= self.on }
+        if was_on {
+            value > self.off
+        } else {
+            value >= self.on
+        }
     }
 }
 
@@ -55,7 +59,11 @@ struct Window {
 
 impl Window {
     const fn new() -> Self {
-        Window { values: [0; MAX_WINDOW], len: 0, next: 0 }
+        Window {
+            values: [0; MAX_WINDOW],
+            len: 0,
+            next: 0,
+        }
     }
 
     fn push(&mut self, value: u16, capacity: usize) {
@@ -108,7 +116,11 @@ impl Default for Filter {
 impl Filter {
     /// An empty filter.
     pub const fn new() -> Self {
-        Filter { medians: Window::new(), averages: Window::new(), smoothed_milli: None }
+        Filter {
+            medians: Window::new(),
+            averages: Window::new(),
+            smoothed_milli: None,
+        }
     }
 
     /// Feed one raw sample; returns the filtered value.
@@ -127,7 +139,8 @@ impl Filter {
 
     /// The current filtered value (0 before the first sample).
     pub fn value(&self) -> u16 {
-        self.smoothed_milli.map_or(0, |milli| ((milli + 500) / 1000) as u16)
+        self.smoothed_milli
+            .map_or(0, |milli| ((milli + 500) / 1000) as u16)
     }
 
     /// Forget every sample.
@@ -232,7 +245,14 @@ pub struct PresenceSensor {
 
 impl PresenceSensor {
     /// Take a new raw sample at `now` and decide presence.
-    pub fn update(&mut self, raw: u16, now: Instant, filter: &FilterConfig, rails: &RailLimits, thresholds: Thresholds) {
+    pub fn update(
+        &mut self,
+        raw: u16,
+        now: Instant,
+        filter: &FilterConfig,
+        rails: &RailLimits,
+        thresholds: Thresholds,
+    ) {
         self.analog.update(raw, now, filter, rails);
         if let Some(value) = self.analog.reading() {
             self.present = thresholds.decide(self.present, value);
@@ -258,9 +278,18 @@ pub struct RevolutionCounter {
 
 impl RevolutionCounter {
     /// Take a new raw sample at `now`; returns true when it completed a revolution.
-    pub fn update(&mut self, raw: u16, now: Instant, filter: &FilterConfig, rails: &RailLimits, edges: Thresholds) -> bool {
+    pub fn update(
+        &mut self,
+        raw: u16,
+        now: Instant,
+        filter: &FilterConfig,
+        rails: &RailLimits,
+        edges: Thresholds,
+    ) -> bool {
         self.analog.update(raw, now, filter, rails);
-        let Some(value) = self.analog.reading() else { return false };
+        let Some(value) = self.analog.reading() else {
+            return false;
+        };
         let was_high = self.high;
         self.high = edges.decide(was_high, value);
         if self.high && !was_high {
@@ -287,14 +316,26 @@ impl RevolutionCounter {
 mod tests {
     use super::*;
 
-    const PRESENCE: FilterConfig = FilterConfig { median: 5, average: 4, smoothing_permille: 500 };
-    const RAILS: RailLimits = RailLimits { low: 40, high: 4055, timeout_ms: 50 };
+    const PRESENCE: FilterConfig = FilterConfig {
+        median: 5,
+        average: 4,
+        smoothing_permille: 500,
+    };
+    const RAILS: RailLimits = RailLimits {
+        low: 40,
+        high: 4055,
+        timeout_ms: 50,
+    };
     const THRESHOLDS: Thresholds = Thresholds { on: 2600, off: 2400 };
 
     #[test]
     fn median_removes_a_single_spike() {
         let mut filter = Filter::new();
-        let config = FilterConfig { median: 5, average: 1, smoothing_permille: 1000 };
+        let config = FilterConfig {
+            median: 5,
+            average: 1,
+            smoothing_permille: 1000,
+        };
         for _ in 0..5 {
             filter.push(2000, &config);
         }
@@ -305,7 +346,11 @@ mod tests {
     #[test]
     fn smoothing_converges_to_a_step() {
         let mut filter = Filter::new();
-        let config = FilterConfig { median: 1, average: 1, smoothing_permille: 500 };
+        let config = FilterConfig {
+            median: 1,
+            average: 1,
+            smoothing_permille: 500,
+        };
         filter.push(1000, &config);
         assert_eq!(filter.push(3000, &config), 2000);
         for _ in 0..20 {
@@ -334,7 +379,11 @@ mod tests {
         for _ in 0..49 {
             sensor.update(4095, now, &PRESENCE, &RAILS, THRESHOLDS);
             now = now + 1;
-            assert_eq!(sensor.present(), Some(false), "the rail value is never taken as presence");
+            assert_eq!(
+                sensor.present(),
+                Some(false),
+                "the rail value is never taken as presence"
+            );
         }
         sensor.update(4095, now, &PRESENCE, &RAILS, THRESHOLDS);
         assert_eq!(sensor.analog.fault(), Some(Rail::High));
@@ -343,7 +392,11 @@ mod tests {
 
     #[test]
     fn revolutions_count_full_periods_only() {
-        let config = FilterConfig { median: 1, average: 1, smoothing_permille: 1000 };
+        let config = FilterConfig {
+            median: 1,
+            average: 1,
+            smoothing_permille: 1000,
+        };
         let edges = Thresholds { on: 2300, off: 1800 };
         let mut counter = RevolutionCounter::default();
         let mut now = Instant::ZERO;

@@ -115,21 +115,41 @@ pub struct Unit<const N: usize> {
 
 impl<const N: usize> Default for Unit<N> {
     fn default() -> Self {
-        Unit { feeders: [Feeder::default(); N], hub: Hub::default(), lanes: [Lane::Unknown; N], fsensor: 0, selected: None }
+        Unit {
+            feeders: [Feeder::default(); N],
+            hub: Hub::default(),
+            lanes: [Lane::Unknown; N],
+            fsensor: 0,
+            selected: None,
+        }
     }
 }
 
 impl<const N: usize> Unit<N> {
     /// Take a round of raw samples at `now`.
     pub fn sense(&mut self, samples: &Samples<N>, now: Instant, config: &Config) {
-        let rails = RailLimits { low: config.rail_low, high: config.rail_high, timeout_ms: config.rail_timeout_ms };
+        let rails = RailLimits {
+            low: config.rail_low,
+            high: config.rail_high,
+            timeout_ms: config.rail_timeout_ms,
+        };
         for (slot, (feeder, sample)) in self.feeders.iter_mut().zip(samples.slots.iter()).enumerate() {
             feeder.sense(slot, *sample, now, config, &rails);
         }
         let hub = &samples.hub;
-        self.hub.filament.update(hub.filament, now, &config.presence_filter, &rails, config.hub_thresholds);
-        self.hub.tension.update(hub.tension, now, &config.presence_filter, &rails);
-        self.hub.cutter.update(hub.cutter, now, &config.presence_filter, &rails);
+        self.hub.filament.update(
+            hub.filament,
+            now,
+            &config.presence_filter,
+            &rails,
+            config.hub_thresholds,
+        );
+        self.hub
+            .tension
+            .update(hub.tension, now, &config.presence_filter, &rails);
+        self.hub
+            .cutter
+            .update(hub.cutter, now, &config.presence_filter, &rails);
     }
 
     /// Filament in the hub, `None` while the hub sensor is faulty or warming up.

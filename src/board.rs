@@ -1,0 +1,510 @@
+//! The reference board: a NUCLEO-G071RB (STM32G071RB, Cortex-M0+, 64 MHz, 3.3 V) driving two
+//! TB6612FNG dual H-bridges and nine analog Hall sensors, wired to a Prusa printer's MMU port.
+//!
+//! This is the only module that touches Embassy HAL types. [`PIN_MAP`](pin_map) below is the single
+//! source of truth for pins, timers, ADC channels and the UART: the README wiring table mirrors
+//! it (`scripts/check-pinmap.sh` compares the two), the emergency stop derives its pins from it,
+//! and the sensor scan order is computed from the channels it names.
+//!
+//! What the rest of the firmware gets:
+//! - [`emergency_stop`]: every bridge off through raw register writes, usable at any time (boot,
+//!   panic, fault, reset) without the HAL;
+//! - [`init`]: clocks and peripherals, returning the [`Control`] half (motors, printer UART, LED,
+//!   button, watchdog) and the [`Sampler`] half (ADC);
+//! - [`reset_cause`], [`reset`], [`erase_persisted`].
+
+use core::convert::Infallible;
+use core::task::Poll;
+
+use embassy_stm32::adc::{self, Adc, AdcChannel as _, AdcConfig, AnyAdcChannel, Averaging, SampleTime};
+use embassy_stm32::gpio::{AnyPin, Input, Level, Output, OutputType, Pin, Pull, Speed};
+use embassy_stm32::pac;
+use embassy_stm32::peripherals::{self, ADC1, TIM3};
+use embassy_stm32::rcc::{self, Pll, PllMul, PllPreDiv, PllRDiv, PllSource, Sysclk};
+use embassy_stm32::time::khz;
+use embassy_stm32::timer::low_level::CountingMode;
+use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm, SimplePwmChannel};
+use embassy_stm32::usart::{self, BufferedUart, BufferedUartRx, BufferedUartTx};
+use embassy_stm32::wdg::IndependentWatchdog;
+use embassy_stm32::{Peri, bind_interrupts, dma};
+use embassy_time::{Duration, with_timeout};
+use embedded_io_async::{Read as _, ReadReady as _, Write as _};
+use mmu_hal_port::tb6612::{Channel, Tb6612};
+use mmu_hal_port::{Button as _, MotorCommand, Samples, StatusLed as _};
+use static_cell::ConstStaticCell;
+
+/// Filament slots on this board.
+pub const SLOTS: usize = 3;
+
+/// PWM carrier of the motor bridges: above hearing, well below the TB6612FNG's 100 kHz limit.
+const PWM_KHZ: u32 = 20;
+/// Independent watchdog timeout. The control loop feeds it every on-time step (1 ms); ~100 steps
+/// missed in a row and the MCU resets, which leaves every bridge off (see [`emergency_stop`]).
+pub const WATCHDOG_TIMEOUT_US: u32 = 100_000;
+/// ADC sample time per conversion (ADC clock 32 MHz): 2.5 µs, plenty for a Hall sensor output.
+const SAMPLE_TIME: SampleTime = SampleTime::CYCLES79_5;
+/// Printer UART ring buffers. RX holds 22 ms of back-to-back bytes at 115200 Bd, TX more than two
+/// steps' worth of responses (`mmu_firmware::TX_CAPACITY` = 96).
+const RX_RING: usize = 256;
+const TX_RING: usize = 256;
+
+bind_interrupts!(struct Irqs {
+    USART3_4_LPUART1 => usart::BufferedInterruptHandler<peripherals::USART3>;
+    DMA1_CHANNEL1 => dma::InterruptHandler<peripherals::DMA1_CH1>;
+});
+
+/// Declares the board's pin map once and derives from it: the [`Parts`] struct that takes every
+/// used singleton out of the HAL's `Peripherals`, and [`emergency_stop_pins`], which drives the
+/// rows marked `stby` low, then the rows marked `off`.
+///
+/// Row layout: `field: PIN, "function", "NUCLEO header", "wired to", safe-state;`
+/// where safe-state is `stby` (standby pins, forced low first), `off` (PWM and IN pins, forced low
+/// next) or `-` (not touched by the emergency stop).
+macro_rules! pin_map {
+    (
+        peripherals { $( $pfield:ident : $periph:ident, $pdoc:literal; )* }
+        pins { $( $field:ident : $pin:ident, $func:literal, $header:literal, $to:literal, $safe:tt; )* }
+    ) => {
+        /// Every singleton this board uses, named by role.
+        struct Parts {
+            $( #[doc = $pdoc] $pfield: Peri<'static, peripherals::$periph>, )*
+            $( #[doc = concat!(stringify!($pin), " (", $func, ", ", $header, "): ", $to)]
+               $field: Peri<'static, peripherals::$pin>, )*
+        }
+
+        impl Parts {
+            fn take(p: embassy_stm32::Peripherals) -> Self {
+                Parts { $( $pfield: p.$periph, )* $( $field: p.$pin, )* }
+            }
+        }
+
+        /// Forces the motor pins low: STBY first, then PWM and IN (see [`emergency_stop`]).
+        fn emergency_stop_pins() {
+            $( pin_map!(@stop stby $safe $pin); )*
+            $( pin_map!(@stop off $safe $pin); )*
+        }
+    };
+    (@stop stby stby $pin:ident) => { force_low(unsafe { peripherals::$pin::steal() }) };
+    (@stop off off $pin:ident) => { force_low(unsafe { peripherals::$pin::steal() }) };
+    (@stop $pass:ident $safe:tt $pin:ident) => {};
+}
+
+// ================================ PIN MAP (single source of truth) ================================
+//
+// TB6612 #1 drives slots 0 (bridge A) and 1 (bridge B); TB6612 #2 drives slot 2 (bridge A, bridge
+// B unused). Arduino names are the NUCLEO-G071RB's (UM2324); every pin is also on the ST morpho
+// headers CN7/CN10. Pins the NUCLEO itself uses are avoided: PA2/PA3 (ST-LINK VCP, USART2),
+// PA13/PA14 (SWD), PC14/PC15 (32 kHz crystal), PF0-PF2 (HSE/NRST); and so are the USB-C PD pins
+// (PA8, PA9, PA10, PB15, PD0-PD3), whose dead-battery pull-downs are active until the HAL starts.
+//
+// Logic levels: the STM32G0 runs at 3.3 V. The printer RX line (PC11) has no analog function, so
+// it is a 5 V tolerant (FT) pin: an MK3S Einsy drives it with 5 V. ADC pins are NOT 5 V tolerant
+// (analog pins of the G0 are 3.6 V tolerant): power the Hall sensors from 3.3 V.
+pin_map! {
+    peripherals {
+        pwm_timer: TIM3, "Motor PWM, 20 kHz, channels 1-3 (TIM15 is the Embassy time driver)";
+        adc: ADC1, "All nine Hall sensors, one DMA scan per millisecond";
+        adc_dma: DMA1_CH1, "ADC scan results";
+        printer_uart: USART3, "Printer MMU port, 115200 8N1 (USART2 stays on the ST-LINK VCP)";
+        watchdog: IWDG, "Independent watchdog, fed by the control loop";
+    }
+    pins {
+        // field         pin    function      NUCLEO header   wired to                                   safe
+        stby1:           PC2,  "GPIO out",   "CN7",          "TB6612 #1 STBY (10k pull-down to GND)",   stby;
+        stby2:           PC3,  "GPIO out",   "CN7",          "TB6612 #2 STBY (10k pull-down to GND)",   stby;
+        slot0_pwm:       PC6,  "TIM3_CH1",   "CN10",         "TB6612 #1 PWMA (10k pull-down to GND)",   off;
+        slot0_in1:       PB3,  "GPIO out",   "Arduino D3",   "TB6612 #1 AIN1",                          off;
+        slot0_in2:       PB5,  "GPIO out",   "Arduino D4",   "TB6612 #1 AIN2",                          off;
+        slot1_pwm:       PC7,  "TIM3_CH2",   "Arduino D9",   "TB6612 #1 PWMB (10k pull-down to GND)",   off;
+        slot1_in1:       PB4,  "GPIO out",   "Arduino D5",   "TB6612 #1 BIN1",                          off;
+        slot1_in2:       PB14, "GPIO out",   "Arduino D6",   "TB6612 #1 BIN2",                          off;
+        slot2_pwm:       PC8,  "TIM3_CH3",   "CN10",         "TB6612 #2 PWMA (10k pull-down to GND)",   off;
+        slot2_in1:       PC0,  "GPIO out",   "CN7",          "TB6612 #2 AIN1",                          off;
+        slot2_in2:       PC1,  "GPIO out",   "CN7",          "TB6612 #2 AIN2",                          off;
+        slot0_hall:      PA0,  "ADC1_IN0",   "Arduino A0",   "slot 0 motor Hall sensor output",         -;
+        slot0_filament:  PA1,  "ADC1_IN1",   "Arduino A1",   "slot 0 filament sensor output",           -;
+        slot1_hall:      PA4,  "ADC1_IN4",   "Arduino A2",   "slot 1 motor Hall sensor output",         -;
+        slot1_filament:  PB1,  "ADC1_IN9",   "Arduino A3",   "slot 1 filament sensor output",           -;
+        slot2_hall:      PB11, "ADC1_IN15",  "Arduino A4",   "slot 2 motor Hall sensor output",         -;
+        slot2_filament:  PB12, "ADC1_IN16",  "Arduino A5",   "slot 2 filament sensor output",           -;
+        hub_filament:    PA6,  "ADC1_IN6",   "Arduino D12",  "hub filament sensor output",              -;
+        hub_tension:     PA7,  "ADC1_IN7",   "Arduino D11",  "hub tension sensor output",               -;
+        hub_cutter:      PB0,  "ADC1_IN8",   "Arduino D10",  "hub cutter sensor output",                -;
+        printer_tx:      PC10, "USART3_TX",  "CN7",          "printer MMU port RX (3.3 V push-pull)",   -;
+        printer_rx:      PC11, "USART3_RX",  "CN7",          "printer MMU port TX (FT pin: 5 V ok)",    -;
+        status_led:      PA5,  "GPIO out",   "LD4 (on board)", "green user LED",                        -;
+        button:          PC13, "GPIO in",    "B1 (on board)", "blue user button, active low: Middle",   -;
+    }
+}
+// ==================================================================================================
+
+/// Drives one pin low as a push-pull output through raw register writes: its port clock on, the
+/// output latch low (BSRR), then output mode. Works before and after the HAL starts.
+fn force_low(pin: Peri<'static, impl Pin>) {
+    let pin: Peri<'static, AnyPin> = pin.into();
+    let (gpio, n) = (pin.block(), usize::from(pin.pin()));
+    pac::RCC.gpioenr().modify(|w| w.0 |= 1 << pin.port());
+    gpio.bsrr().write(|w| w.set_br(n, true));
+    gpio.moder()
+        .modify(|w| w.set_moder(n, pac::gpio::vals::Moder::OUTPUT));
+}
+
+/// Turns every motor bridge off at once, without the HAL and without allocation: both TB6612 STBY
+/// pins low (outputs high impedance), then every PWM and IN pin low (duty 0, coast).
+///
+/// Called first thing at boot, from the panic handler and the HardFault handler, and before any
+/// reset. The pins float while the MCU is held in reset (STM32G0 pins reset to analog mode), so
+/// STBY and PWM need external pull-downs to keep the bridges off then.
+///
+/// It does not take ownership: the HAL drivers that own these pins must not be used afterwards
+/// (every caller resets or halts).
+pub fn emergency_stop() {
+    emergency_stop_pins();
+}
+
+/// Why the MCU last started.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, defmt::Format)]
+pub enum ResetCause {
+    /// The independent watchdog expired: the control loop stalled.
+    Watchdog,
+    /// The window watchdog (unused).
+    WindowWatchdog,
+    /// `SCB::sys_reset`: an `X0`/`X42` request.
+    Software,
+    /// Illegal low-power mode entry.
+    LowPower,
+    /// Option bytes reloaded.
+    OptionBytes,
+    /// Power-on or brown-out.
+    PowerOn,
+    /// The NRST pin (reset button, ST-LINK, or the printer's reset line).
+    Pin,
+    /// No flag set.
+    Unknown,
+}
+
+/// Reads and clears the reset flags (RCC_CSR). Call once at boot.
+pub fn reset_cause() -> ResetCause {
+    let csr = pac::RCC.csr().read();
+    // Every internal reset also pulses NRST, so PINRSTF is checked last.
+    let cause = if csr.iwdgrstf() {
+        ResetCause::Watchdog
+    } else if csr.wwdgrstf() {
+        ResetCause::WindowWatchdog
+    } else if csr.sftrstf() {
+        ResetCause::Software
+    } else if csr.lpwrrstf() {
+        ResetCause::LowPower
+    } else if csr.oblrstf() {
+        ResetCause::OptionBytes
+    } else if csr.pwrrstf() {
+        ResetCause::PowerOn
+    } else if csr.pinrstf() {
+        ResetCause::Pin
+    } else {
+        ResetCause::Unknown
+    };
+    pac::RCC.csr().modify(|w| w.set_rmvf(true));
+    cause
+}
+
+/// Erases persisted data (`X42`). The unit persists nothing yet, so there is nothing to erase.
+pub fn erase_persisted() {
+    defmt::info!("erase: no persisted data on this board yet");
+}
+
+/// Stops every motor and restarts the MCU.
+pub fn reset() -> ! {
+    emergency_stop();
+    cortex_m::peripheral::SCB::sys_reset()
+}
+
+/// What one ADC channel measures.
+#[derive(Debug, Clone, Copy)]
+enum Sensor {
+    MotorHall(usize),
+    SlotFilament(usize),
+    HubFilament,
+    HubTension,
+    HubCutter,
+}
+
+impl Sensor {
+    fn store(self, samples: &mut Samples<SLOTS>, raw: u16) {
+        match self {
+            Sensor::MotorHall(slot) => samples.slots[slot].motor_hall = raw,
+            Sensor::SlotFilament(slot) => samples.slots[slot].filament = raw,
+            Sensor::HubFilament => samples.hub.filament = raw,
+            Sensor::HubTension => samples.hub.tension = raw,
+            Sensor::HubCutter => samples.hub.cutter = raw,
+        }
+    }
+}
+
+/// Analog inputs: two per slot and three on the hub.
+const ANALOG_INPUTS: usize = 2 * SLOTS + 3;
+
+/// The ADC half of the board: one DMA scan of all nine Hall sensors per call.
+pub struct Sampler {
+    adc: Adc<'static, ADC1>,
+    dma: Peri<'static, peripherals::DMA1_CH1>,
+    /// The channels in scan order. The G0 ADC converts the selected channels (CHSELR) in
+    /// ascending channel number whatever order they are listed in, so they are kept sorted.
+    inputs: [(Sensor, AnyAdcChannel<'static, ADC1>); ANALOG_INPUTS],
+}
+
+impl Sampler {
+    /// One scan of every sensor, about 210 µs (9 channels x 8 oversampled conversions of
+    /// 2.9 µs), the CPU free meanwhile.
+    pub async fn sample(&mut self) -> Samples<SLOTS> {
+        let mut raw = [0u16; ANALOG_INPUTS];
+        self.adc
+            .read(
+                self.dma.reborrow(),
+                Irqs,
+                self.inputs.iter_mut().map(|(_, channel)| (channel, SAMPLE_TIME)),
+                &mut raw,
+            )
+            .await;
+        let mut samples = Samples::default();
+        for ((sensor, _), value) in self.inputs.iter().zip(raw) {
+            sensor.store(&mut samples, value);
+        }
+        samples
+    }
+}
+
+/// The PWM input of one bridge.
+type Pwm = SimplePwmChannel<'static, TIM3>;
+/// TB6612 #1: slot 0 on bridge A, slot 1 on bridge B.
+type Chip1 =
+    Tb6612<Pwm, Output<'static>, Output<'static>, Pwm, Output<'static>, Output<'static>, Output<'static>>;
+/// TB6612 #2: slot 2 on bridge A; bridge B is not connected (TIM3 channel 4 has no pin).
+type Chip2 = Tb6612<Pwm, Output<'static>, Output<'static>, Pwm, NotConnected, NotConnected, Output<'static>>;
+
+/// An IN input of the unused bridge: not wired to the MCU.
+pub struct NotConnected;
+
+impl embedded_hal::digital::ErrorType for NotConnected {
+    type Error = Infallible;
+}
+
+impl embedded_hal::digital::OutputPin for NotConnected {
+    fn set_low(&mut self) -> Result<(), Infallible> {
+        Ok(())
+    }
+
+    fn set_high(&mut self) -> Result<(), Infallible> {
+        Ok(())
+    }
+}
+
+/// Every error of these drivers is `Infallible`.
+fn infallible<T>(result: Result<T, mmu_hal_port::tb6612::Error<Infallible, Infallible>>) -> T {
+    match result {
+        Ok(value) => value,
+        Err(mmu_hal_port::tb6612::Error::Pwm(never) | mmu_hal_port::tb6612::Error::Pin(never)) => {
+            match never {}
+        }
+    }
+}
+
+/// The control half of the board: motors, printer UART, status LED, button and watchdog.
+pub struct Control {
+    chip1: Chip1,
+    chip2: Chip2,
+    /// Whether each chip is in standby (STBY low): while none of its motors is driven or braked.
+    chip_standby: [bool; 2],
+    rx: BufferedUartRx<'static>,
+    tx: BufferedUartTx<'static>,
+    led: Output<'static>,
+    button: Input<'static>,
+    watchdog: IndependentWatchdog<'static, peripherals::IWDG>,
+}
+
+impl Control {
+    /// Carries out one step's motor commands. A chip whose motors all coast is put in standby
+    /// (STBY low), so a bridge is only powered while the logic drives or brakes it.
+    pub fn apply(&mut self, motors: &[MotorCommand; SLOTS]) {
+        let coast = MotorCommand::Coast;
+        if motors[0] == coast && motors[1] == coast {
+            if !self.chip_standby[0] {
+                infallible(self.chip1.standby());
+                self.chip_standby[0] = true;
+            }
+        } else {
+            infallible(self.chip1.apply(Channel::A, motors[0]));
+            infallible(self.chip1.apply(Channel::B, motors[1]));
+            self.chip_standby[0] = false;
+        }
+        if motors[2] == coast {
+            if !self.chip_standby[1] {
+                infallible(self.chip2.standby());
+                self.chip_standby[1] = true;
+            }
+        } else {
+            infallible(self.chip2.apply(Channel::A, motors[2]));
+            self.chip_standby[1] = false;
+        }
+    }
+
+    /// Moves the bytes received from the printer since the last call into `buf`, without
+    /// waiting; returns how many. The USART interrupt fills a 256-byte ring in the background.
+    pub fn receive(&mut self, buf: &mut [u8]) -> usize {
+        if !matches!(self.rx.read_ready(), Ok(true)) {
+            return 0;
+        }
+        match embassy_futures::poll_once(self.rx.read(buf)) {
+            Poll::Ready(Ok(n)) => n,
+            Poll::Ready(Err(_)) | Poll::Pending => 0,
+        }
+    }
+
+    /// Queues `bytes` for the printer without waiting. Returns false (nothing queued) when the
+    /// transmit ring has no room for all of them, so a response is never sent in part.
+    pub fn send(&mut self, bytes: &[u8]) -> bool {
+        matches!(embassy_futures::poll_once(self.tx.write(bytes)), Poll::Ready(Ok(n)) if n == bytes.len())
+    }
+
+    /// Waits until every queued byte has left the UART, at most `timeout`.
+    pub async fn flush(&mut self, timeout: Duration) {
+        let _ = with_timeout(timeout, self.tx.flush()).await;
+    }
+
+    /// Lights or clears LD4.
+    pub fn set_status_led(&mut self, lit: bool) {
+        let Ok(()) = self.led.set_lit(lit);
+    }
+
+    /// True while B1 is held down.
+    pub fn button_down(&mut self) -> bool {
+        let Ok(down) = self.button.is_pressed();
+        down
+    }
+
+    /// Reloads the independent watchdog.
+    pub fn feed_watchdog(&mut self) {
+        self.watchdog.pet();
+    }
+}
+
+/// A GPIO output, low from the start.
+fn low(pin: Peri<'static, impl Pin>) -> Output<'static> {
+    Output::new(pin, Level::Low, Speed::Low)
+}
+
+/// Starts the clocks and every peripheral of the board. The bridges come up in standby with both
+/// inputs low and duty 0; the watchdog is running when this returns.
+pub fn init() -> (Control, Sampler) {
+    let mut config = embassy_stm32::Config::default();
+    // 64 MHz from the internal 16 MHz oscillator: VCO 16 x 8 = 128 MHz, R / 2.
+    config.rcc.pll = Some(Pll {
+        source: PllSource::HSI,
+        prediv: PllPreDiv::DIV1,
+        mul: PllMul::MUL8,
+        divp: None,
+        divq: None,
+        divr: Some(PllRDiv::DIV2),
+    });
+    config.rcc.sys = Sysclk::PLL1_R;
+    config.rcc.mux.adcsel = rcc::mux::Adcsel::SYS;
+    let parts = Parts::take(embassy_stm32::init(config));
+
+    // The watchdog first: from here on a stalled init resets the MCU too.
+    let mut watchdog = IndependentWatchdog::new(parts.watchdog, WATCHDOG_TIMEOUT_US);
+    watchdog.unleash();
+
+    // Motors: duty 0 on every channel before the pins switch to the timer, STBY and IN low.
+    let pwm = SimplePwm::new(
+        parts.pwm_timer,
+        Some(PwmPin::new(parts.slot0_pwm, OutputType::PushPull)),
+        Some(PwmPin::new(parts.slot1_pwm, OutputType::PushPull)),
+        Some(PwmPin::new(parts.slot2_pwm, OutputType::PushPull)),
+        None,
+        khz(PWM_KHZ),
+        CountingMode::EdgeAlignedUp,
+    );
+    let mut pwm = pwm.split();
+    for channel in [&mut pwm.ch1, &mut pwm.ch2, &mut pwm.ch3] {
+        channel.set_duty_cycle_fully_off();
+        channel.enable();
+    }
+    let chip1 = infallible(Tb6612::new(
+        pwm.ch1,
+        low(parts.slot0_in1),
+        low(parts.slot0_in2),
+        pwm.ch2,
+        low(parts.slot1_in1),
+        low(parts.slot1_in2),
+        low(parts.stby1),
+    ));
+    let chip2 = infallible(Tb6612::new(
+        pwm.ch3,
+        low(parts.slot2_in1),
+        low(parts.slot2_in2),
+        pwm.ch4,
+        NotConnected,
+        NotConnected,
+        low(parts.stby2),
+    ));
+
+    // Printer UART: 115200 8N1, interrupt-driven rings. No pull on RX: the line is driven by
+    // the printer, possibly at 5 V.
+    static RX_BUF: ConstStaticCell<[u8; RX_RING]> = ConstStaticCell::new([0; RX_RING]);
+    static TX_BUF: ConstStaticCell<[u8; TX_RING]> = ConstStaticCell::new([0; TX_RING]);
+    let mut uart_config = usart::Config::default();
+    uart_config.baudrate = 115_200;
+    uart_config.data_bits = usart::DataBits::DataBits8;
+    uart_config.parity = usart::Parity::ParityNone;
+    uart_config.stop_bits = usart::StopBits::STOP1;
+    uart_config.rx_pull = Pull::None;
+    let uart = defmt::unwrap!(BufferedUart::new(
+        parts.printer_uart,
+        parts.printer_rx,
+        parts.printer_tx,
+        TX_BUF.take(),
+        RX_BUF.take(),
+        Irqs,
+        uart_config,
+    ));
+    let (tx, rx) = uart.split();
+
+    // ADC: 64 MHz system clock / 2 = 32 MHz (the G0 allows 35), 8x hardware oversampling.
+    let adc_config = AdcConfig {
+        clock: Some(adc::Clock::Async {
+            div: adc::Presc::DIV2,
+        }),
+        averaging: Some(Averaging::Samples8),
+        ..AdcConfig::default()
+    };
+    let adc = Adc::new_with_config(parts.adc, adc_config);
+    let mut inputs = [
+        (Sensor::MotorHall(0), parts.slot0_hall.degrade_adc()),
+        (Sensor::SlotFilament(0), parts.slot0_filament.degrade_adc()),
+        (Sensor::MotorHall(1), parts.slot1_hall.degrade_adc()),
+        (Sensor::SlotFilament(1), parts.slot1_filament.degrade_adc()),
+        (Sensor::MotorHall(2), parts.slot2_hall.degrade_adc()),
+        (Sensor::SlotFilament(2), parts.slot2_filament.degrade_adc()),
+        (Sensor::HubFilament, parts.hub_filament.degrade_adc()),
+        (Sensor::HubTension, parts.hub_tension.degrade_adc()),
+        (Sensor::HubCutter, parts.hub_cutter.degrade_adc()),
+    ];
+    inputs.sort_unstable_by_key(|(_, channel)| channel.get_hw_channel());
+
+    let control = Control {
+        chip1,
+        chip2,
+        chip_standby: [true; 2],
+        rx,
+        tx,
+        led: Output::new(parts.status_led, Level::Low, Speed::Low),
+        button: Input::new(parts.button, Pull::Up),
+        watchdog,
+    };
+    let sampler = Sampler {
+        adc,
+        dma: parts.adc_dma,
+        inputs,
+    };
+    (control, sampler)
+}

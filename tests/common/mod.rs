@@ -1,0 +1,238 @@
+//! A test rig: the App stepped against the physical model in virtual time, with the printer's
+//! side played the way Prusa's firmware plays it (filament sensor reports, co-feeding on `P1c`).
+
+#![allow(dead_code)] // each test file uses a different part of the rig
+
+use mmu_firmware::{App, Config, Instant, MotorCommand};
+use mmu_model::{Fault, Model, ModelConfig};
+use mmu_protocol::{ParamCode, ProgressCode, Request, RequestCode, Response, ResponseDecoder};
+
+/// One step of the rig, ms.
+pub const STEP_MS: u64 = 1;
+/// The printer's heartbeat while a command runs, ms.
+pub const POLL_MS: u64 = 100;
+
+/// How the printer reports its filament sensor.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FsensorReports {
+    /// As the model's sensor reads, at once (the printer's `CheckAndReportAsyncEvents`).
+    Truthful,
+    /// Always this state (a broken or misplaced printer sensor).
+    Stuck(u8),
+}
+
+/// What a command run looked like from the printer's side.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Run {
+    /// Every distinct progress code reported by `Q0`, in order.
+    pub progress: Vec<ProgressCode>,
+    /// The `Q0` answer that ended the run (`F` or `E`).
+    pub last: Response,
+}
+
+pub struct Rig<const N: usize> {
+    pub app: App<N>,
+    pub model: Model,
+    pub now: u64,
+    pub fsensor: FsensorReports,
+    decoder: ResponseDecoder,
+    reported_fsensor: u8,
+    /// Every motor command the App gave, per step.
+    pub motor_log: Vec<[MotorCommand; N]>,
+    cofeeding: bool,
+}
+
+impl<const N: usize> Rig<N> {
+    pub fn new() -> Self {
+        Self::with(Config::default(), ModelConfig::default())
+    }
+
+    pub fn with(config: Config, model: ModelConfig) -> Self {
+        Rig {
+            app: App::new(config),
+            model: Model::new(model, N, 7),
+            now: 0,
+            fsensor: FsensorReports::Truthful,
+            decoder: ResponseDecoder::new(),
+            reported_fsensor: 0,
+            motor_log: Vec::new(),
+            cofeeding: false,
+        }
+    }
+
+    /// One step: sample the model, step the App with `rx`, apply its motors to the model.
+    /// Returns the responses the unit sent in this step.
+    pub fn step_with(&mut self, rx: &[u8]) -> Vec<Response> {
+        let samples = self.model.samples::<N>();
+        let out = self.app.step(Instant::from_millis(self.now), &samples, rx);
+        self.model.step(STEP_MS as u32, &out.motors);
+        self.motor_log.push(out.motors);
+        self.now += STEP_MS;
+        let mut responses = Vec::new();
+        for &byte in out.tx.iter() {
+            match self.decoder.feed(byte) {
+                Some(Ok(response)) => responses.push(response),
+                Some(Err(error)) => panic!("the unit sent a bad frame: {error}"),
+                None => {}
+            }
+        }
+        responses
+    }
+
+    pub fn idle(&mut self, ms: u64) {
+        for _ in 0..ms / STEP_MS {
+            self.step_with(&[]);
+        }
+    }
+
+    /// Send one request; its answer comes in the same step (or nothing, for `X` and bad frames).
+    pub fn send(&mut self, request: Request) -> Option<Response> {
+        self.send_bytes(request.encode().as_bytes())
+    }
+
+    pub fn send_bytes(&mut self, bytes: &[u8]) -> Option<Response> {
+        let mut responses = self.step_with(bytes);
+        assert!(responses.len() <= 1, "one request, one answer: {responses:?}");
+        responses.pop()
+    }
+
+    pub fn query(&mut self) -> Response {
+        self.send(Request::new(RequestCode::Query, 0))
+            .expect("Q0 is always answered")
+    }
+
+    /// Let the unit finish its start-up check, then play the printer's handshake; returns the
+    /// first `Q0` answer.
+    pub fn boot(&mut self) -> Response {
+        self.idle(200);
+        let first = self.query();
+        self.handshake();
+        first
+    }
+
+    /// The printer's handshake: versions, the two register writes, the filament sensor.
+    pub fn handshake(&mut self) -> Vec<Response> {
+        let mut answers = Vec::new();
+        for part in 0..4 {
+            answers.extend(self.send(Request::new(RequestCode::Version, part)));
+        }
+        answers.extend(self.send(Request::write(0x0b, 5)));
+        answers.extend(self.send(Request::write(0x14, 20)));
+        answers.extend(self.send(Request::new(
+            RequestCode::FilamentSensor,
+            self.model.fsensor_state(),
+        )));
+        answers
+    }
+
+    fn printer_fsensor(&self) -> u8 {
+        match self.fsensor {
+            FsensorReports::Truthful => self.model.fsensor_state(),
+            FsensorReports::Stuck(state) => state,
+        }
+    }
+
+    /// Issue a command and play the printer until it finishes or fails: `Q0` every
+    /// [`POLL_MS`], filament sensor changes reported at once, co-feeding during `P1c`.
+    pub fn command(&mut self, request: Request) -> Run {
+        let same_tool =
+            request.code == RequestCode::Tool && self.model.loaded_slot() == Some(request.value.into());
+        if matches!(
+            request.code,
+            RequestCode::Unload | RequestCode::Tool | RequestCode::Eject | RequestCode::Cut
+        ) && !same_tool
+        {
+            self.unload_extruder();
+        }
+        let answer = self.send(request).expect("a command is answered");
+        assert_eq!(
+            answer.param,
+            ParamCode::Accepted,
+            "{request:?} was not accepted: {answer:?}"
+        );
+        self.follow(request, 600_000)
+    }
+
+    /// What the printer does before it asks for an unload or another tool: ram and pull the
+    /// filament out of its extruder gears.
+    pub fn unload_extruder(&mut self) {
+        if self.model.fsensor_state() == 0 {
+            return;
+        }
+        self.model.extruder_move(-40.0, 40.0);
+        while self.model.extruder_busy() {
+            self.printer_step(None);
+        }
+    }
+
+    /// Keep playing the printer for the command in progress.
+    pub fn follow(&mut self, request: Request, timeout_ms: u64) -> Run {
+        let mut progress: Vec<ProgressCode> = Vec::new();
+        let start = self.now;
+        loop {
+            assert!(
+                self.now - start < timeout_ms,
+                "{request:?} did not end; progress {progress:?}"
+            );
+            for _ in 0..POLL_MS / STEP_MS {
+                self.printer_step(progress.last().copied());
+            }
+            let answer = self.query();
+            assert_eq!(
+                (answer.code, answer.value),
+                (request.code, request.value),
+                "Q0 echoes the command"
+            );
+            match answer.param {
+                ParamCode::Processing => {
+                    let code = ProgressCode(answer.param_value.unwrap_or(0) as u8);
+                    if progress.last() != Some(&code) {
+                        progress.push(code);
+                    }
+                }
+                ParamCode::Finished | ParamCode::Error => {
+                    return Run {
+                        progress,
+                        last: answer,
+                    };
+                }
+                other => panic!("unexpected Q0 answer {other:?}"),
+            }
+        }
+    }
+
+    /// One step of the printer's side: report the sensor when it changed, co-feed on `P1c`.
+    pub fn printer_step(&mut self, progress: Option<ProgressCode>) {
+        let state = self.printer_fsensor();
+        if state != self.reported_fsensor {
+            let answer = self.send(Request::new(RequestCode::FilamentSensor, state));
+            assert_eq!(answer.map(|a| a.param), Some(ParamCode::Accepted));
+            self.reported_fsensor = state;
+            if self.cofeeding && state != 0 {
+                // The printer aborts its search and pushes the extra load distance + 2 mm.
+                let extra = f32::from(self.app.config().extra_load_mm) + 2.0;
+                self.model
+                    .extruder_move(extra, f32::from(self.app.config().slow_speed));
+                self.cofeeding = false;
+            }
+            return;
+        }
+        if progress == Some(ProgressCode::FEEDING_TO_FSENSOR) && !self.cofeeding && state == 0 {
+            self.model
+                .extruder_move(189.9, f32::from(self.app.config().slow_speed));
+            self.cofeeding = true;
+        }
+        self.step_with(&[]);
+    }
+
+    pub fn inject(&mut self, fault: Fault) {
+        assert!(self.model.inject(fault));
+    }
+
+    /// True when no motor was driven in the last `steps` steps.
+    pub fn motors_stopped(&self) -> bool {
+        self.motor_log
+            .last()
+            .is_some_and(|motors| motors.iter().all(|m| !m.is_driving()))
+    }
+}
