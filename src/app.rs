@@ -143,7 +143,7 @@ impl<const N: usize> App<N> {
         self.drive_motors(now, &mut out);
         out.status_led = match self.operation.status() {
             Status::Running(_) => true,
-            Status::Failed(_) => (now.as_millis() / ERROR_BLINK_MS) % 2 == 0,
+            Status::Failed(_) => (now.as_millis() / ERROR_BLINK_MS).is_multiple_of(2),
             Status::Finished => false,
         };
         out

@@ -17,7 +17,11 @@ const LONGEST_PHASE_MS: u64 = 120 * 2000 / 20 + 1000;
 fn request() -> impl Strategy<Value = Request> {
     (0..RequestCode::ALL.len(), 0u8..8, any::<u16>()).prop_map(|(code, value, value2)| {
         let code = RequestCode::ALL[code];
-        if code == RequestCode::Write { Request::write(value.wrapping_mul(9), value2) } else { Request::new(code, value) }
+        if code == RequestCode::Write {
+            Request::write(value.wrapping_mul(9), value2)
+        } else {
+            Request::new(code, value)
+        }
     })
 }
 
@@ -38,12 +42,18 @@ fn input() -> impl Strategy<Value = Input> {
 }
 
 fn samples() -> impl Strategy<Value = Samples<3>> {
-    (proptest::array::uniform3((0u16..4096, 0u16..4096)), (0u16..4096, 0u16..4096, 0u16..4096)).prop_map(
-        |(slots, (filament, tension, cutter))| Samples {
-            slots: slots.map(|(motor_hall, filament)| SlotSamples { motor_hall, filament }),
-            hub: HubSamples { filament, tension, cutter },
-        },
+    (
+        proptest::array::uniform3((0u16..4096, 0u16..4096)),
+        (0u16..4096, 0u16..4096, 0u16..4096),
     )
+        .prop_map(|(slots, (filament, tension, cutter))| Samples {
+            slots: slots.map(|(motor_hall, filament)| SlotSamples { motor_hall, filament }),
+            hub: HubSamples {
+                filament,
+                tension,
+                cutter,
+            },
+        })
 }
 
 /// Follows the App's motor commands and checks the bounds every step.
@@ -66,7 +76,11 @@ impl Watch {
             let entry = &mut self.driven_since[slot];
             match (by_phase, entry.as_ref()) {
                 (true, Some((since, running))) if *running == phase => {
-                    prop_assert!(now - since <= LONGEST_PHASE_MS, "slot {slot} driven {} ms in {phase}", now - since);
+                    prop_assert!(
+                        now - since <= LONGEST_PHASE_MS,
+                        "slot {slot} driven {} ms in {phase}",
+                        now - since
+                    );
                 }
                 (true, _) => *entry = Some((now, phase.clone())),
                 (false, _) => *entry = None,

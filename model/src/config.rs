@@ -4,7 +4,7 @@
 ///
 /// Positions are filament-tip positions in mm along the filament path, relative to the hub
 /// filament sensor (0); negative is towards the spool. The geometry is expected to increase
-/// along the path (`slot_sensor_mm < drive_gear_mm < merge_mm < 0 < bowden_jam_mm <
+/// along the path (`drive_gear_mm < slot_sensor_mm < merge_mm < 0 < bowden_jam_mm <
 /// bowden_length_mm < extruder_gears_mm < nozzle_mm`); other values never panic, they just
 /// make little physical sense. Non-finite or negative times, speeds and levels are replaced
 /// by their defaults when the model is built.

@@ -130,20 +130,47 @@ fn brake_stops_quickly_coast_runs_on() {
 
 #[test]
 fn reverse_retracts_and_a_full_eject_loses_the_grip() {
+    let c = ModelConfig::default();
+    // The slot sensor sits just after the drive gear, so a reverse drive pulls the tip past it
+    // while the gear still grips the filament.
+    assert!(c.drive_gear_mm < c.slot_sensor_mm);
     let mut m = model();
-    m.step(1000, &only_slot0(reverse(1000)));
+    let mut ms = 0;
+    while m.slot_filament_present(0) == Some(true) {
+        assert!(ms < 1000, "the slot sensor never cleared");
+        m.step(1, &only_slot0(reverse(1000)));
+        ms += 1;
+    }
+    let cleared = tip(&m, 0);
+    assert!(
+        cleared < c.slot_sensor_mm && cleared > c.slot_sensor_mm - 0.5,
+        "clears as the tip passes the slot sensor: {cleared}"
+    );
+    assert!(cleared > c.drive_gear_mm, "still in the gear: {cleared}");
+    // Still gripped: the motor keeps pulling the filament back at full speed.
+    m.step(1, &only_slot0(reverse(1000)));
+    ms += 1;
+    assert!(tip(&m, 0) < cleared - 0.1, "still pulled back: {}", tip(&m, 0));
+    let v = m.motor_speed_mm_s(0).unwrap();
+    assert!((v + 150.0).abs() < 3.0, "full reverse speed {v}");
+    // Then the tip leaves the gear and the grip is lost just behind it.
+    m.step(1000 - ms, &only_slot0(reverse(1000)));
     let t = tip(&m, 0);
-    assert!(t < -100.0 && t > -101.0, "stops just behind the drive gear: {t}");
-    assert_eq!(m.slot_filament_present(0), Some(true), "still at the slot sensor");
+    assert!(
+        t < c.drive_gear_mm && t > c.drive_gear_mm - 1.0,
+        "stops just behind the drive gear: {t}"
+    );
+    assert_eq!(m.slot_filament_present(0), Some(false), "past the slot sensor");
     // The motor spins but can no longer move the filament in either direction.
     let revs = m.motor_revolutions(0).unwrap();
     m.step(500, &only_slot0(forward(1000)));
     assert_eq!(tip(&m, 0), t);
     assert!(m.motor_revolutions(0).unwrap() - revs > 30.0);
-    // Re-inserted to the gear, it is gripped again.
-    assert!(m.insert_filament(0, -99.0));
+    // Re-inserted to the gear, it is gripped again and fed back past the slot sensor.
+    assert!(m.insert_filament(0, c.drive_gear_mm + 1.0));
     m.step(300, &only_slot0(forward(1000)));
-    assert!(tip(&m, 0) > -70.0);
+    assert!(tip(&m, 0) > c.drive_gear_mm + 30.0, "tip {}", tip(&m, 0));
+    assert_eq!(m.slot_filament_present(0), Some(true));
 }
 
 #[test]
@@ -300,8 +327,12 @@ fn disconnected_sensors_read_at_the_rail() {
 
 #[test]
 fn extruder_pulls_a_gripped_filament_and_back_drives_a_coasting_motor() {
+    let c = ModelConfig::default();
+    // Inside the extruder gears, far enough from the nozzle for the whole 20 mm move.
+    let start = c.extruder_gears_mm + 16.0;
+    assert!(start + 20.0 < c.nozzle_mm);
     let mut m = model();
-    assert!(m.insert_filament(0, 400.0));
+    assert!(m.insert_filament(0, start));
     assert_eq!(m.fsensor_state(), 1);
     m.extruder_move(20.0, 10.0);
     assert!(m.extruder_busy());
@@ -311,18 +342,22 @@ fn extruder_pulls_a_gripped_filament_and_back_drives_a_coasting_motor() {
         max_tension = max_tension.max(m.tension_mm().abs());
     }
     assert!(!m.extruder_busy());
-    assert!((tip(&m, 0) - 420.0).abs() < 0.01, "tip {}", tip(&m, 0));
+    assert!((tip(&m, 0) - (start + 20.0)).abs() < 0.01, "tip {}", tip(&m, 0));
     let revs = m.motor_revolutions(0).unwrap();
     assert!((revs - 10.0).abs() < 0.2, "back-driven revolutions {revs}");
     assert!(max_tension < 0.5, "coasting motor follows: {max_tension}");
 
     // A braked motor holds: the extruder pulls the buffer taut, then its gears slip.
     let mut m = model();
-    m.insert_filament(0, 400.0);
+    m.insert_filament(0, start);
     m.extruder_move(20.0, 10.0);
     m.step(2500, &only_slot0(MotorCommand::Brake));
-    assert!((tip(&m, 0) - 406.0).abs() < 0.01, "tip {}", tip(&m, 0));
-    assert!((m.tension_mm() - 6.0).abs() < 1e-3);
+    assert!(
+        (tip(&m, 0) - (start + c.buffer_limit_mm)).abs() < 0.01,
+        "tip {}",
+        tip(&m, 0)
+    );
+    assert!((m.tension_mm() - c.buffer_limit_mm).abs() < 1e-3);
     assert_eq!(m.motor_revolutions(0), Some(0.0));
     let tension = m.sample_hub().tension;
     assert!(tension > 2048 + 800, "taut reads high: {tension}");
@@ -331,32 +366,43 @@ fn extruder_pulls_a_gripped_filament_and_back_drives_a_coasting_motor() {
 
 #[test]
 fn extruder_on_a_tip_before_its_gears_turns_on_air() {
+    let c = ModelConfig::default();
     let mut m = model();
     m.extruder_move(50.0, 20.0);
     m.step(3000, &only_slot0(MotorCommand::Coast));
-    assert_eq!(tip(&m, 0), -15.0);
+    assert_eq!(tip(&m, 0), c.start_tip_mm);
     assert!(!m.extruder_busy());
     assert_eq!(m.extruder_position_mm(), 50.0);
 
-    // Also in the Bowden, just before the gears.
+    // Also in the Bowden, past the printer's filament sensor, just before the gears.
+    let before_gears = c.extruder_gears_mm - 2.0;
+    assert!(before_gears > c.bowden_length_mm);
     let mut m = model();
-    m.insert_filament(0, 370.0);
+    m.insert_filament(0, before_gears);
+    assert_eq!(m.fsensor_state(), 1);
     m.set_printing(Some(5.0));
     m.extruder_move(-30.0, 20.0);
     m.step(3000, &only_slot0(MotorCommand::Brake));
-    assert_eq!(tip(&m, 0), 370.0);
+    assert_eq!(tip(&m, 0), before_gears);
     assert_eq!(m.tension_mm(), 0.0);
 }
 
 #[test]
 fn load_to_nozzle_print_and_unload() {
+    let c = ModelConfig::default();
+    // An extruder move from the gears that reaches 10 mm past the nozzle.
+    let past_nozzle = c.nozzle_mm - c.extruder_gears_mm + 10.0;
     let mut m = model();
     // The slot motor pushes the tip to the idle extruder gears: it stops there, compresses the
     // buffer and stalls.
     m.step(4000, &only_slot0(forward(1000)));
-    assert!((tip(&m, 0) - 380.0).abs() < 1e-3, "tip {}", tip(&m, 0));
     assert!(
-        (m.tension_mm() + 6.0).abs() < 1e-3,
+        (tip(&m, 0) - c.extruder_gears_mm).abs() < 1e-3,
+        "tip {}",
+        tip(&m, 0)
+    );
+    assert!(
+        (m.tension_mm() + c.buffer_limit_mm).abs() < 1e-3,
         "compressed {}",
         m.tension_mm()
     );
@@ -366,9 +412,10 @@ fn load_to_nozzle_print_and_unload() {
     assert!(tension < 2048 - 800, "compressed reads low: {tension}");
 
     // The extruder takes it to the nozzle while the motor coasts and the buffer relaxes.
-    m.extruder_move(70.0, 20.0);
+    m.extruder_move(past_nozzle, 20.0);
     m.step(4000, &only_slot0(MotorCommand::Coast));
-    assert_eq!(tip(&m, 0), 440.0);
+    assert!(!m.extruder_busy());
+    assert_eq!(tip(&m, 0), c.nozzle_mm);
     assert_eq!(m.fsensor_state(), 2);
     assert!(m.tension_mm().abs() < 0.1);
 
@@ -376,19 +423,28 @@ fn load_to_nozzle_print_and_unload() {
     let tail = m.tail_mm(0).unwrap();
     m.set_printing(Some(5.0));
     m.step(10_000, &only_slot0(MotorCommand::Coast));
-    assert_eq!(tip(&m, 0), 440.0);
+    assert_eq!(tip(&m, 0), c.nozzle_mm);
     assert!((m.tail_mm(0).unwrap() - tail - 50.0).abs() < 0.5);
     m.set_printing(None);
 
     // Unload: the extruder retracts the tip out of its gears (the rest of its move turns on
     // air), then the motor pulls back to park.
-    m.extruder_move(-70.0, 40.0);
+    m.extruder_move(-past_nozzle, 40.0);
     m.step(2000, &only_slot0(MotorCommand::Coast));
-    assert!((tip(&m, 0) - 380.0).abs() < 1e-3, "tip {}", tip(&m, 0));
+    assert!(!m.extruder_busy());
+    assert!(
+        (tip(&m, 0) - c.extruder_gears_mm).abs() < 1e-3,
+        "tip {}",
+        tip(&m, 0)
+    );
     assert_eq!(m.fsensor_state(), 1);
     m.step(2800, &only_slot0(reverse(1000)));
     let parked = tip(&m, 0);
-    assert!(parked < -15.0 && parked > -100.0, "tip {parked}");
+    assert!(
+        parked < c.start_tip_mm && parked > c.slot_sensor_mm,
+        "tip {parked}"
+    );
+    assert_eq!(m.slot_filament_present(0), Some(true), "not ejected");
     assert_eq!(m.fsensor_state(), 0);
     assert_eq!(m.loaded_slot(), None);
 }
@@ -425,6 +481,7 @@ fn only_one_filament_passes_the_merge() {
 
 #[test]
 fn spool_runout_clears_the_slot_sensor() {
+    let c = ModelConfig::default();
     let mut m = model();
     let before = m.sample_slot(0).unwrap().filament;
     assert!(before > 2600, "filament present reads high: {before}");
@@ -437,10 +494,41 @@ fn spool_runout_clears_the_slot_sensor() {
     let mut sorted = window.clone();
     sorted.sort_unstable();
     assert!(sorted[50] < 2200, "median {}", sorted[50]);
-    // The rest of the filament can be pushed until its tail leaves the drive gear.
+    // The slot sensor sits just after the drive gear, so the tail left just past the sensor
+    // has already left the gear: there is nothing to push, the motor spins on air.
+    assert!(c.slot_sensor_mm > c.drive_gear_mm);
+    let revs = m.motor_revolutions(0).unwrap();
+    m.step(1000, &only_slot0(forward(1000)));
+    assert_eq!(tip(&m, 0), c.start_tip_mm, "nothing left to push");
+    assert!(
+        m.motor_revolutions(0).unwrap() > revs + 60.0,
+        "motor spins on air"
+    );
+    assert_eq!(m.slot_filament_present(0), Some(false));
+    // A refilled spool is gripped again.
+    assert!(m.clear(Fault::SpoolRunout { slot: 0 }));
+    assert_eq!(m.slot_filament_present(0), Some(true));
+    m.step(300, &only_slot0(forward(1000)));
+    assert!(tip(&m, 0) > c.start_tip_mm + 10.0, "tip {}", tip(&m, 0));
+}
+
+#[test]
+fn spool_runout_with_the_sensor_behind_the_gear_pushes_the_rest() {
+    // A slot sensor 20 mm behind the drive gear: the runout leaves the tail 0.1 mm past the
+    // sensor, still behind the gear, so the motor can push the rest of the filament until its
+    // tail leaves the gear.
+    let d = ModelConfig::default();
+    let c = ModelConfig {
+        slot_sensor_mm: d.drive_gear_mm - 20.0,
+        ..d
+    };
+    let mut m = Model::new(c.clone(), SLOTS, 1);
+    assert_eq!(m.slot_filament_present(0), Some(true));
+    assert!(m.inject(Fault::SpoolRunout { slot: 0 }));
+    assert_eq!(m.slot_filament_present(0), Some(false));
     m.step(1000, &only_slot0(forward(1000)));
     let t = tip(&m, 0);
-    assert!((t - (-15.0 + 19.9)).abs() < 0.2, "tip {t}");
+    assert!((t - (c.start_tip_mm + 20.0 - 0.1)).abs() < 0.2, "tip {t}");
     let revs = m.motor_revolutions(0).unwrap();
     m.step(500, &only_slot0(forward(1000)));
     assert_eq!(tip(&m, 0), t, "nothing left to push");
@@ -448,6 +536,7 @@ fn spool_runout_clears_the_slot_sensor() {
         m.motor_revolutions(0).unwrap() > revs + 30.0,
         "motor spins on air"
     );
+    assert_eq!(m.slot_filament_present(0), Some(false));
     // A refilled spool is gripped again.
     assert!(m.clear(Fault::SpoolRunout { slot: 0 }));
     assert_eq!(m.slot_filament_present(0), Some(true));
@@ -491,6 +580,7 @@ fn same_seed_same_samples() {
 
 #[test]
 fn out_of_range_and_garbage_inputs_never_panic() {
+    let c = ModelConfig::default();
     let mut m = Model::new(ModelConfig::default(), SLOTS, 9);
     assert_eq!(m.tip_mm(SLOTS), None);
     assert_eq!(m.motor_revolutions(99), None);
@@ -574,10 +664,10 @@ fn out_of_range_and_garbage_inputs_never_panic() {
         assert!(m.fsensor_state() <= 2);
         for i in 0..SLOTS {
             if let Some(t) = m.tip_mm(i) {
-                assert!(t.is_finite() && t <= 440.0, "tip {t}");
+                assert!(t.is_finite() && t <= c.nozzle_mm, "tip {t}");
             }
         }
-        assert!(m.tension_mm().abs() <= 6.0 + 1e-3);
+        assert!(m.tension_mm().abs() <= c.buffer_limit_mm + 1e-3);
     }
 
     // A hostile configuration is sanitized.

@@ -38,7 +38,11 @@ impl Request {
     /// The CRC this request carries on the wire (`value2` counts only for `W`, the one code
     /// that prints it).
     pub fn crc(&self) -> u8 {
-        let value2 = if self.code == RequestCode::Write { self.value2 } else { 0 };
+        let value2 = if self.code == RequestCode::Write {
+            self.value2
+        } else {
+            0
+        };
         request_crc(self.code.as_byte(), self.value, value2)
     }
 
