@@ -376,7 +376,8 @@ mod tests {
             now = now + 1;
         }
         assert_eq!(sensor.present(), Some(false));
-        for _ in 0..49 {
+        // 50 ms at the rail: suspicious, held, not yet called faulty.
+        for _ in 0..50 {
             sensor.update(4095, now, &PRESENCE, &RAILS, THRESHOLDS);
             now = now + 1;
             assert_eq!(
