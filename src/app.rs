@@ -81,6 +81,8 @@ pub struct App<const N: usize> {
     pub(crate) operation: Operation,
     pub(crate) counters: Counters<N>,
     decoder: RequestDecoder,
+    /// The time of the current step.
+    pub(crate) now: Instant,
     /// A physical button press waiting for the printer to collect it with `Q0` (during `T`, the
     /// printer is in charge of buttons and sends them back).
     pending_button: Option<ButtonCode>,
@@ -99,6 +101,7 @@ impl<const N: usize> App<N> {
             operation: Operation::new((RequestCode::Reset, 0), &[ops::Phase::CheckSensors]),
             counters: Counters::default(),
             decoder: RequestDecoder::new(),
+            now: Instant::ZERO,
             pending_button: None,
         }
     }

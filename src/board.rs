@@ -78,15 +78,18 @@ macro_rules! pin_map {
             }
         }
 
-        /// Forces the motor pins low: STBY first, then PWM and IN (see [`emergency_stop`]).
-        fn emergency_stop_pins() {
-            $( pin_map!(@stop stby $safe $pin); )*
-            $( pin_map!(@stop off $safe $pin); )*
+        /// The motor pins in the order the emergency stop forces them low: STBY first, then PWM
+        /// and IN (see [`emergency_stop`]).
+        fn emergency_stop_pins() -> impl Iterator<Item = Peri<'static, AnyPin>> {
+            // SAFETY: only used to force pins low on the way to a reset or a halt.
+            let stby = [$( pin_map!(@stop stby $safe $pin) ),*];
+            let off = [$( pin_map!(@stop off $safe $pin) ),*];
+            stby.into_iter().chain(off).flatten()
         }
     };
-    (@stop stby stby $pin:ident) => { force_low(unsafe { peripherals::$pin::steal() }) };
-    (@stop off off $pin:ident) => { force_low(unsafe { peripherals::$pin::steal() }) };
-    (@stop $pass:ident $safe:tt $pin:ident) => {};
+    (@stop stby stby $pin:ident) => { Some(unsafe { peripherals::$pin::steal() }.into()) };
+    (@stop off off $pin:ident) => { Some(unsafe { peripherals::$pin::steal() }.into()) };
+    (@stop $pass:ident $safe:tt $pin:ident) => { None };
 }
 
 // ================================ PIN MAP (single source of truth) ================================
@@ -140,8 +143,8 @@ pin_map! {
 
 /// Drives one pin low as a push-pull output through raw register writes: its port clock on, the
 /// output latch low (BSRR), then output mode. Works before and after the HAL starts.
-fn force_low(pin: Peri<'static, impl Pin>) {
-    let pin: Peri<'static, AnyPin> = pin.into();
+#[inline(never)]
+fn force_low(pin: Peri<'static, AnyPin>) {
     let (gpio, n) = (pin.block(), usize::from(pin.pin()));
     pac::RCC.gpioenr().modify(|w| w.0 |= 1 << pin.port());
     gpio.bsrr().write(|w| w.set_br(n, true));
@@ -159,7 +162,7 @@ fn force_low(pin: Peri<'static, impl Pin>) {
 /// It does not take ownership: the HAL drivers that own these pins must not be used afterwards
 /// (every caller resets or halts).
 pub fn emergency_stop() {
-    emergency_stop_pins();
+    emergency_stop_pins().for_each(force_low);
 }
 
 /// Why the MCU last started.

@@ -168,6 +168,12 @@ impl Feeder {
         self.odometry_centi / 100
     }
 
+    /// Filament speed from the motor's last revolution period, mm/s (0 when it stands still).
+    pub fn speed_mm_s(&self, now: Instant, config: &Config) -> u16 {
+        let speed = u64::from(self.hall.rpm(now)) * u64::from(config.mm_per_rev_centi) / 6000;
+        speed.min(u64::from(u16::MAX)) as u16
+    }
+
     /// The odometry in 1/100 mm.
     pub fn odometry_centi(&self) -> i32 {
         self.odometry_centi

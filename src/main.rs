@@ -256,7 +256,12 @@ fn panic(info: &PanicInfo) -> ! {
     // thumbv6m has no atomic swap; interrupts are off, so load + store cannot be torn apart.
     if !PANICKED.load(Ordering::Relaxed) {
         PANICKED.store(true, Ordering::Relaxed);
-        error!("panic: {}", defmt::Display2Format(info));
+        // The location only: formatting the message would link `core::fmt` (about 2 KiB of
+        // flash). Panics raised through defmt (`unwrap!`, `panic!`) have logged their message.
+        match info.location() {
+            Some(at) => error!("panic at {=str}:{=u32}", at.file(), at.line()),
+            None => error!("panic"),
+        }
     }
     cortex_m::asm::udf()
 }

@@ -36,6 +36,9 @@ pub const TOOL_CHANGES: u8 = 0xc0;
 /// Extension: errors raised while driving slot `k` at `FAILURES + k` (read only).
 pub const FAILURES: u8 = 0xc8;
 
+/// Extension: filament speed of slot `k` from its motor Hall sensor, mm/s, at `SPEED + k` (read only).
+pub const SPEED: u8 = 0xd0;
+
 /// Sensor diagnostic blocks hold up to 16 sensors (3 hub + 2 per slot, at most 13).
 const SENSOR_BLOCK: u8 = 16;
 /// Per-slot blocks hold up to 8 slots.
@@ -187,6 +190,10 @@ impl<const N: usize> App<N> {
             a if slot_at::<N>(a, TOOL_CHANGES).is_some() => {
                 *self.counters.tool_changes.get(slot_at::<N>(a, TOOL_CHANGES)?)?
             }
+            a if slot_at::<N>(a, SPEED).is_some() => unit
+                .feeders
+                .get(slot_at::<N>(a, SPEED)?)?
+                .speed_mm_s(self.now, config),
             a if slot_at::<N>(a, FAILURES).is_some() => {
                 *self.counters.failures.get(slot_at::<N>(a, FAILURES)?)?
             }

@@ -274,6 +274,8 @@ pub struct RevolutionCounter {
     high: bool,
     revolutions: u32,
     last_revolution: Instant,
+    /// Time between the last two revolutions, ms.
+    period_ms: Option<u64>,
 }
 
 impl RevolutionCounter {
@@ -293,6 +295,7 @@ impl RevolutionCounter {
         let was_high = self.high;
         self.high = edges.decide(was_high, value);
         if self.high && !was_high {
+            self.period_ms = (self.revolutions > 0).then(|| now.millis_since(self.last_revolution));
             self.revolutions = self.revolutions.wrapping_add(1);
             self.last_revolution = now;
             true
@@ -309,6 +312,19 @@ impl RevolutionCounter {
     /// When the last revolution completed.
     pub fn last_revolution(&self) -> Instant {
         self.last_revolution
+    }
+
+    /// Revolutions per minute from the last full period; 0 when the motor has not turned for
+    /// longer than that period (or has turned less than twice).
+    pub fn rpm(&self, now: Instant) -> u32 {
+        match self.period_ms {
+            Some(period)
+                if period > 0 && now.millis_since(self.last_revolution) <= period.saturating_mul(2) =>
+            {
+                (60_000 / period) as u32
+            }
+            _ => 0,
+        }
     }
 }
 
@@ -414,5 +430,8 @@ mod tests {
             }
         }
         assert_eq!(counter.revolutions(), 3);
+        // One revolution every 6 ms is 10 000 rpm; long after the last one the motor is still.
+        assert_eq!(counter.rpm(now), 10_000);
+        assert_eq!(counter.rpm(now + 100), 0);
     }
 }

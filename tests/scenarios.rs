@@ -380,6 +380,13 @@ fn queries_are_answered_in_the_same_step_while_a_command_runs() {
     rig.boot();
     assert_eq!(rig.send(t(0)).unwrap().param, ParamCode::Accepted);
     rig.idle(300);
+    // Feeding to the hub at the load speed (95 mm/s): the motor Hall sensor measures it.
+    let speed = rig
+        .send(Request::new(RequestCode::Read, 0xd0))
+        .unwrap()
+        .param_value
+        .unwrap();
+    assert!((80..=110).contains(&speed), "slot 0 feeds at {speed} mm/s");
     for request in [
         Request::new(RequestCode::Query, 0),
         Request::new(RequestCode::Read, 8),
