@@ -1,10 +1,10 @@
 //! The reference board: a NUCLEO-G071RB (STM32G071RB, Cortex-M0+, 64 MHz, 3.3 V) driving two
 //! TB6612FNG dual H-bridges and nine analog Hall sensors, wired to a Prusa printer's MMU port.
 //!
-//! This is the only module that touches Embassy HAL types. [`PIN_MAP`](pin_map) below is the single
-//! source of truth for pins, timers, ADC channels and the UART: the README wiring table mirrors
-//! it (`scripts/check-pinmap.sh` compares the two), the emergency stop derives its pins from it,
-//! and the sensor scan order is computed from the channels it names.
+//! This is the only module that touches Embassy HAL types. The `pin_map!` table below is the
+//! single source of truth for pins, timers, ADC channels and the UART: the README wiring table
+//! mirrors it (`scripts/check-pinmap.sh` compares the two), the emergency stop derives its pins
+//! from it, and the sensor scan order is computed from the channels it names.
 //!
 //! What the rest of the firmware gets:
 //! - [`emergency_stop`]: every bridge off through raw register writes, usable at any time (boot,
@@ -54,8 +54,8 @@ bind_interrupts!(struct Irqs {
 });
 
 /// Declares the board's pin map once and derives from it: the [`Parts`] struct that takes every
-/// used singleton out of the HAL's `Peripherals`, and [`emergency_stop_pins`], which drives the
-/// rows marked `stby` low, then the rows marked `off`.
+/// used singleton out of the HAL's `Peripherals`, and [`emergency_stop_pins`], which lists the
+/// rows marked `stby`, then the rows marked `off`, for [`emergency_stop`] to drive low.
 ///
 /// Row layout: `field: PIN, "function", "NUCLEO header", "wired to", safe-state;`
 /// where safe-state is `stby` (standby pins, forced low first), `off` (PWM and IN pins, forced low
@@ -100,9 +100,9 @@ macro_rules! pin_map {
 // PA13/PA14 (SWD), PC14/PC15 (32 kHz crystal), PF0-PF2 (HSE/NRST); and so are the USB-C PD pins
 // (PA8, PA9, PA10, PB15, PD0-PD3), whose dead-battery pull-downs are active until the HAL starts.
 //
-// Logic levels: the STM32G0 runs at 3.3 V. The printer RX line (PC11) has no analog function, so
-// it is a 5 V tolerant (FT) pin: an MK3S Einsy drives it with 5 V. ADC pins are NOT 5 V tolerant
-// (analog pins of the G0 are 3.6 V tolerant): power the Hall sensors from 3.3 V.
+// Logic levels: the STM32G0 runs at 3.3 V. The unit's receive pin PC11 (the printer's TX) has no
+// analog function, so it is a 5 V tolerant (FT) pin: an MK3S Einsy drives it with 5 V. ADC pins
+// are NOT 5 V tolerant (analog pins of the G0 are 3.6 V tolerant): power the Hall sensors from 3.3 V.
 pin_map! {
     peripherals {
         pwm_timer: TIM3, "Motor PWM, 20 kHz, channels 1-3 (TIM15 is the Embassy time driver)";
@@ -113,17 +113,17 @@ pin_map! {
     }
     pins {
         // field         pin    function      NUCLEO header   wired to                                   safe
-        stby1:           PC2,  "GPIO out",   "CN7",          "TB6612 #1 STBY (10k pull-down to GND)",   stby;
-        stby2:           PC3,  "GPIO out",   "CN7",          "TB6612 #2 STBY (10k pull-down to GND)",   stby;
-        slot0_pwm:       PC6,  "TIM3_CH1",   "CN10",         "TB6612 #1 PWMA (10k pull-down to GND)",   off;
+        stby1:           PC2,  "GPIO out",   "morpho",       "TB6612 #1 STBY (10k pull-down to GND)",   stby;
+        stby2:           PC3,  "GPIO out",   "morpho",       "TB6612 #2 STBY (10k pull-down to GND)",   stby;
+        slot0_pwm:       PC6,  "TIM3_CH1",   "morpho",       "TB6612 #1 PWMA (10k pull-down to GND)",   off;
         slot0_in1:       PB3,  "GPIO out",   "Arduino D3",   "TB6612 #1 AIN1",                          off;
         slot0_in2:       PB5,  "GPIO out",   "Arduino D4",   "TB6612 #1 AIN2",                          off;
         slot1_pwm:       PC7,  "TIM3_CH2",   "Arduino D9",   "TB6612 #1 PWMB (10k pull-down to GND)",   off;
         slot1_in1:       PB4,  "GPIO out",   "Arduino D5",   "TB6612 #1 BIN1",                          off;
         slot1_in2:       PB14, "GPIO out",   "Arduino D6",   "TB6612 #1 BIN2",                          off;
-        slot2_pwm:       PC8,  "TIM3_CH3",   "CN10",         "TB6612 #2 PWMA (10k pull-down to GND)",   off;
-        slot2_in1:       PC0,  "GPIO out",   "CN7",          "TB6612 #2 AIN1",                          off;
-        slot2_in2:       PC1,  "GPIO out",   "CN7",          "TB6612 #2 AIN2",                          off;
+        slot2_pwm:       PC8,  "TIM3_CH3",   "morpho",       "TB6612 #2 PWMA (10k pull-down to GND)",   off;
+        slot2_in1:       PC0,  "GPIO out",   "morpho",       "TB6612 #2 AIN1",                          off;
+        slot2_in2:       PC1,  "GPIO out",   "morpho",       "TB6612 #2 AIN2",                          off;
         slot0_hall:      PA0,  "ADC1_IN0",   "Arduino A0",   "slot 0 motor Hall sensor output",         -;
         slot0_filament:  PA1,  "ADC1_IN1",   "Arduino A1",   "slot 0 filament sensor output",           -;
         slot1_hall:      PA4,  "ADC1_IN4",   "Arduino A2",   "slot 1 motor Hall sensor output",         -;
@@ -133,8 +133,8 @@ pin_map! {
         hub_filament:    PA6,  "ADC1_IN6",   "Arduino D12",  "hub filament sensor output",              -;
         hub_tension:     PA7,  "ADC1_IN7",   "Arduino D11",  "hub tension sensor output",               -;
         hub_cutter:      PB0,  "ADC1_IN8",   "Arduino D10",  "hub cutter sensor output",                -;
-        printer_tx:      PC10, "USART3_TX",  "CN7",          "printer MMU port RX (3.3 V push-pull)",   -;
-        printer_rx:      PC11, "USART3_RX",  "CN7",          "printer MMU port TX (FT pin: 5 V ok)",    -;
+        printer_tx:      PC10, "USART3_TX",  "morpho",       "printer MMU port RX (3.3 V push-pull)",   -;
+        printer_rx:      PC11, "USART3_RX",  "morpho",       "printer MMU port TX (FT pin: 5 V ok)",    -;
         status_led:      PA5,  "GPIO out",   "LD4 (on board)", "green user LED",                        -;
         button:          PC13, "GPIO in",    "B1 (on board)", "blue user button, active low: Middle",   -;
     }

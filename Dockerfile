@@ -1,0 +1,43 @@
+# Reproducible firmware build for the reference board (NUCLEO-G071RB), and a flashing image.
+#
+#   docker build -t mmu-firmware .
+#       builds the firmware and an image with probe-rs (compiled once: ~10 min on 2 cores)
+#   docker run --rm -it --privileged -v /dev/bus/usb:/dev/bus/usb mmu-firmware
+#       flashes the NUCLEO over its ST-LINK (USB passthrough), runs the firmware and prints its
+#       defmt log until Ctrl-C; extra arguments replace the ELF path, e.g. to flash another build
+#   docker build --target firmware --output dist .
+#       only the firmware: writes dist/mmu-firmware.elf (BuildKit)
+#
+# The build steps are not written here but in scripts/build-firmware.sh, which CI (.ci/run) runs
+# too: what this image builds is what CI checks.
+
+# Pinned: the same Rust release as the CI machines (rust-toolchain.toml asks for "stable";
+# RUSTUP_TOOLCHAIN below keeps rustup on this image's toolchain instead of fetching a newer one).
+ARG RUST_IMAGE=rust:1.95.0-bookworm
+ARG PROBE_RS_VERSION=0.32.0
+
+# ---- build: the firmware ELF ----
+FROM ${RUST_IMAGE} AS build
+ENV RUSTUP_TOOLCHAIN=1.95.0 \
+    CARGO_TERM_COLOR=never \
+    DEFMT_LOG=info
+WORKDIR /src
+COPY . .
+RUN bash scripts/build-firmware.sh /out
+
+# ---- firmware: just the ELF, for `docker build --target firmware --output dist .` ----
+FROM scratch AS firmware
+COPY --from=build /out/mmu-firmware.elf /mmu-firmware.elf
+
+# ---- flash (default): probe-rs and the firmware ----
+FROM ${RUST_IMAGE} AS flash
+ARG PROBE_RS_VERSION
+# The probe.rs install guide lists these for Debian; the USB access itself needs none of them.
+RUN apt-get update \
+    && apt-get install -y --no-install-recommends pkg-config libudev-dev \
+    && rm -rf /var/lib/apt/lists/*
+RUN cargo install probe-rs-tools --version "${PROBE_RS_VERSION}" --locked \
+    && rm -rf /usr/local/cargo/registry /usr/local/cargo/git
+COPY --from=build /out/mmu-firmware.elf /firmware/mmu-firmware.elf
+ENTRYPOINT ["probe-rs", "run", "--chip", "STM32G071RBTx"]
+CMD ["/firmware/mmu-firmware.elf"]

@@ -1,0 +1,95 @@
+#!/usr/bin/env bash
+# Builds the firmware (release, DEFMT_LOG=info) and checks its footprint against the budget of the
+# design brief: at most 32 KiB of flash and 8 KiB of static RAM on the STM32G071RB.
+#
+#   scripts/firmware-size.sh          # build, report, fail (exit 1) above budget
+#   TOP=30 scripts/firmware-size.sh   # list more of the largest symbols
+#
+# flash      = .vector_table + .text + .rodata + .data (its initial values are stored in flash)
+# static RAM = .data + .bss + .uninit (the 1 KiB defmt RTT buffer is in .uninit); the stack comes
+#              on top, from the rest of the 36 KiB.
+# Sizes come from `llvm-size -A` (or GNU `size -A`), the largest symbols from `llvm-nm`/`nm`.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+FLASH_BUDGET="${FLASH_BUDGET:-32768}"
+RAM_BUDGET="${RAM_BUDGET:-8192}"
+TOP="${TOP:-15}"
+
+pick() {
+    for tool in "$@"; do
+        if command -v "$tool" >/dev/null 2>&1; then
+            echo "$tool"
+            return
+        fi
+    done
+    echo "firmware-size: none of $* found" >&2
+    exit 1
+}
+size_tool="$(pick llvm-size size arm-none-eabi-size)"
+nm_tool="$(pick llvm-nm nm arm-none-eabi-nm)"
+
+elf="$(DEFMT_LOG=info bash scripts/build-firmware.sh | tail -n 1)"
+
+# Section sizes, as "name size" lines.
+sections="$("$size_tool" -A "$elf" | awk 'NF >= 2 && $1 ~ /^\./ { print $1, $2 }')"
+section() { awk -v name="$1" '$1 == name { print $2; found = 1 } END { if (!found) print 0 }' <<<"$sections"; }
+
+vector_table="$(section .vector_table)"
+text="$(section .text)"
+rodata="$(section .rodata)"
+data="$(section .data)"
+bss="$(section .bss)"
+uninit="$(section .uninit)"
+flash=$((vector_table + text + rodata + data))
+ram=$((data + bss + uninit))
+
+kib() { awk -v b="$1" 'BEGIN { printf "%.1f KiB", b / 1024 }'; }
+percent() { awk -v a="$1" -v b="$2" 'BEGIN { printf "%.0f %%", 100 * a / b }'; }
+
+echo
+echo "firmware: $elf (release, DEFMT_LOG=info)"
+printf '  %-14s %8s\n' .vector_table "$vector_table" .text "$text" .rodata "$rodata" .data "$data" \
+    .bss "$bss" .uninit "$uninit"
+printf '  flash      %6d B  (%s, %s of the %d B budget)\n' "$flash" "$(kib "$flash")" \
+    "$(percent "$flash" "$FLASH_BUDGET")" "$FLASH_BUDGET"
+printf '  static RAM %6d B  (%s, %s of the %d B budget)\n' "$ram" "$(kib "$ram")" \
+    "$(percent "$ram" "$RAM_BUDGET")" "$RAM_BUDGET"
+
+# The largest contributors: symbols by size, flash (code, read-only data) and RAM separately.
+symbols="$("$nm_tool" --size-sort -S -C "$elf")"
+top() {
+    awk -v types="$1" '
+        NF >= 4 && index(types, $3) {
+            name = $4; for (i = 5; i <= NF; i++) name = name " " $i
+            if (length(name) > 100) name = substr(name, 1, 97) "..."
+            printf "%8d  %s\n", ("0x" $2) + 0, name
+        }' <<<"$symbols" | sort -n -r | head -n "$TOP"
+}
+hex_awk_ok="$(awk 'BEGIN { print ("0x10" + 0) }')"
+if [ "$hex_awk_ok" != 16 ]; then
+    # mawk and busybox awk do not read hex: convert with printf instead.
+    top() {
+        while read -r _ size type name; do
+            case "$1" in *"$type"*) printf '%8d  %.100s\n' "$((16#$size))" "$name" ;; esac
+        done <<<"$symbols" | sort -n -r | head -n "$TOP"
+    }
+fi
+echo
+echo "largest flash symbols (code and read-only data):"
+top tTrR
+echo
+echo "largest RAM symbols (.data, .bss):"
+top dDbB
+
+status=0
+if [ "$flash" -gt "$FLASH_BUDGET" ]; then
+    echo "firmware-size: FAIL: flash $flash B is over the $FLASH_BUDGET B budget" >&2
+    status=1
+fi
+if [ "$ram" -gt "$RAM_BUDGET" ]; then
+    echo "firmware-size: FAIL: static RAM $ram B is over the $RAM_BUDGET B budget" >&2
+    status=1
+fi
+[ "$status" -eq 0 ] && echo && echo "firmware-size: OK (flash $flash B <= $FLASH_BUDGET B, static RAM $ram B <= $RAM_BUDGET B)"
+exit "$status"
