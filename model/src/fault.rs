@@ -88,8 +88,9 @@ pub enum Fault {
         rail: Rail,
     },
     /// The spool of `slot` has run out: the filament's tail is just past the slot sensor,
-    /// which reads empty. The motor can push the rest of the filament until its tail leaves
-    /// the drive gear; after that nothing moves it (except an extruder that holds its tip).
+    /// which reads empty. The motor can push the rest of the filament only while its tail is
+    /// still in the drive gear: with the default layout (sensor just after the gear) the tail has
+    /// already left it, so nothing moves the filament but an extruder that holds its tip.
     /// Clearing it refills the spool behind the filament.
     SpoolRunout {
         /// The slot.
