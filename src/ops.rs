@@ -465,6 +465,7 @@ impl Operation {
             Phase::CheckSensors | Phase::AwaitContinue => Goal::Reached,
         };
 
+        let tension = unit.hub.tension.reading();
         let Some(feeder) = unit.feeders.get_mut(slot) else {
             return Outcome::Fail(ErrorCode::INTERNAL);
         };
@@ -474,16 +475,8 @@ impl Operation {
                 return Outcome::Done;
             }
             Goal::Drive => feeder.drive(bounds.direction, bounds.speed, now, config),
-            Goal::Follow => {
-                let duty = follow_duty(config.slow_speed, unit.hub.tension.reading(), config);
-                if let Some(feeder) = unit.feeders.get_mut(slot) {
-                    feeder.push(duty, now, config);
-                }
-            }
+            Goal::Follow => feeder.push(follow_duty(config.slow_speed, tension, config), now, config),
         }
-        let Some(feeder) = unit.feeders.get(slot) else {
-            return Outcome::Fail(ErrorCode::INTERNAL);
-        };
         if feeder.stalled(now, config) {
             return Outcome::Fail(ErrorCode::STALLED_PULLEY);
         }
