@@ -68,9 +68,9 @@ mod rng;
 pub use config::ModelConfig;
 pub use fault::{Fault, FaultKind, Rail, SensorId};
 pub use mmu_hal_port::{Direction, Duty, HubSamples, MotorCommand, Samples, SlotSamples};
+pub use rng::Rng;
 
 use mmu_hal_port::ADC_MAX;
-use rng::Rng;
 
 /// Most slots a model has; [`Model::new`] clamps larger counts to this.
 pub const MAX_SLOTS: usize = 32;

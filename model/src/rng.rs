@@ -1,4 +1,4 @@
-//! A small deterministic random source: xoshiro256++ seeded through SplitMix64, with
+//! A small deterministic random source (also used by the simulator for UART faults and soak runs): xoshiro256++ seeded through SplitMix64, with
 //! Box-Muller for Gaussian draws.
 //!
 //! Kept in-crate (rather than `rand`) so the noise sequence of a seed can never change under a
@@ -6,14 +6,14 @@
 
 /// xoshiro256++ state plus the spare value of the last Box-Muller pair.
 #[derive(Debug, Clone)]
-pub(crate) struct Rng {
+pub struct Rng {
     state: [u64; 4],
     spare_normal: Option<f64>,
 }
 
 impl Rng {
     /// A generator whose whole sequence is fixed by `seed` (any value, including 0).
-    pub(crate) fn new(seed: u64) -> Self {
+    pub fn new(seed: u64) -> Self {
         let mut sm = seed;
         let mut state = [0u64; 4];
         for word in &mut state {
@@ -26,7 +26,7 @@ impl Rng {
     }
 
     /// The next 64 random bits.
-    pub(crate) fn next_u64(&mut self) -> u64 {
+    pub fn next_u64(&mut self) -> u64 {
         let s = &mut self.state;
         let result = s[0].wrapping_add(s[3]).rotate_left(23).wrapping_add(s[0]);
         let t = s[1] << 17;
@@ -40,12 +40,12 @@ impl Rng {
     }
 
     /// Uniform in `[0, 1)` with 53 bits of resolution.
-    pub(crate) fn uniform(&mut self) -> f64 {
+    pub fn uniform(&mut self) -> f64 {
         (self.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
     }
 
     /// Standard normal (mean 0, σ 1).
-    pub(crate) fn normal(&mut self) -> f64 {
+    pub fn normal(&mut self) -> f64 {
         if let Some(spare) = self.spare_normal.take() {
             return spare;
         }

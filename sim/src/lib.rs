@@ -1,0 +1,22 @@
+//! The whole unit in virtual time, and the printer that drives it.
+//!
+//! - [`Sim`]: the unchanged unit logic (the `App` the firmware steps) on the physical model
+//!   (`mmu-model`), with the printer's mechanics and the harness faults (UART, power loss).
+//!   Bytes in, bytes out, one millisecond per step: `mmu sim` serves it on stdio or a pty.
+//! - [`printer`]: the printer's side of the protocol over any [`Link`]; [`SimLink`] is the
+//!   in-process one (`mmu printer --sim`).
+//! - [`soak`]: long runs of tool changes with random faults, and the figures they give.
+
+pub mod event;
+pub mod fault;
+pub mod link;
+pub mod logic;
+pub mod printer;
+pub mod sim;
+pub mod soak;
+
+pub use event::{Event, EventKind};
+pub use fault::{FAULT_HELP, ScheduledFault, SimFault, SimFaultKind};
+pub use link::SimLink;
+pub use printer::{Decision, Link, Operator, Outcome, Printer, PrinterError, PrinterEvent, PrinterOptions};
+pub use sim::{CommandRecord, Sim, SimOptions};

@@ -1,0 +1,590 @@
+//! The printer's side of the protocol, as Prusa's firmware plays it (spec §5): the handshake with
+//! its exact version check, `Q0` about every second after the last activity, `f` reports the
+//! moment the printer's filament sensor changes, the register poll, automatic Retry (`B1`) up to
+//! three times per command, a 2 s link timeout followed by a new handshake, and the mmu2 layer's
+//! "unload, then again" when the unit restarted under a command.
+//!
+//! It talks through a [`Link`] (the in-process simulator, or a serial port in `mmu`), and a
+//! person at the printer (an [`Operator`]) sees what happens and decides on errors.
+
+use std::io;
+
+use mmu_protocol::{
+    ButtonCode, ErrorCode, ParamCode, ProgressCode, Request, RequestCode, Response, ResponseDecoder,
+    ResultCode,
+};
+
+/// Max silence while waiting for an answer, ms (`linkLayerTimeout`).
+pub const LINK_TIMEOUT_MS: u64 = 2000;
+/// `Q0` comes this long after the last activity, ms (`heartBeatPeriod`).
+pub const HEARTBEAT_MS: u64 = 1000;
+/// Consecutive link faults before the printer reports MMU_NOT_RESPONDING (`DropOutFilter`).
+pub const MAX_DROPOUTS: u8 = 10;
+/// Version answers that may be wrong during one handshake (`maxRetries`).
+pub const VERSION_RETRIES: u8 = 6;
+/// Automatic Retry presses per command (`MAX_RETRIES`).
+pub const AUTO_RETRIES: u8 = 3;
+/// The registers the printer reads after every `Q0` (FINDA, pulley position, selector slot,
+/// error count, idler slot).
+pub const POLLED_REGISTERS: [u8; 5] = [0x08, 0x1b, 0x1c, 0x04, 0x1a];
+/// How often the printer sends a rejected command again before this tool gives up (the printer
+/// itself never gives up).
+const MAX_REJECTS: u8 = 3;
+/// Answers with the wrong code while a version is asked for, before the link counts as garbled.
+const MAX_WRONG_ANSWERS: u8 = 10;
+/// The link is looked at this often while waiting, ms.
+const POLL_STEP_MS: u64 = 5;
+/// The mmu2 layer repeats a command interrupted by a unit restart this many times.
+const MAX_INTERRUPTS: u8 = 3;
+
+/// The wire to the unit, with the printer's clock and filament sensor.
+pub trait Link {
+    /// Send bytes to the unit.
+    fn send(&mut self, bytes: &[u8]) -> io::Result<()>;
+    /// Wait up to `max_ms` for bytes from the unit, append them to `into`, and return as soon as
+    /// some arrived.
+    fn receive(&mut self, max_ms: u64, into: &mut Vec<u8>) -> io::Result<()>;
+    /// The printer's clock, ms (virtual for the simulator, wall time for a serial port).
+    fn now_ms(&self) -> u64;
+    /// The printer's filament sensor as `f` reports it: 0 none, 1 at the sensor, 2 in the nozzle.
+    fn fsensor(&mut self) -> u8;
+}
+
+/// What the printer's firmware is set up with.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct PrinterOptions {
+    /// The unit version it supports: S0..S2 must answer exactly this (3.0.3 on Buddy firmware).
+    pub version: (u8, u8, u8),
+    /// Written to register 0x0b at every start (Buddy firmware writes 5).
+    pub extra_load_mm: u16,
+    /// Written to register 0x14 at every start.
+    pub slow_feed_mm_s: u16,
+    /// A command still running after this long counts as stuck, ms.
+    pub command_timeout_ms: u64,
+}
+
+impl Default for PrinterOptions {
+    fn default() -> Self {
+        PrinterOptions {
+            version: (3, 0, 3),
+            extra_load_mm: 5,
+            slow_feed_mm_s: 20,
+            command_timeout_ms: 10 * 60 * 1000,
+        }
+    }
+}
+
+/// Something the person at the printer could see.
+#[derive(Debug, Clone, PartialEq)]
+pub enum PrinterEvent {
+    /// A request went out.
+    Sent(Request),
+    /// An answer came in.
+    Received(Response),
+    /// The handshake passed.
+    Connected {
+        /// S0..S2.
+        version: (u8, u8, u8),
+        /// S3.
+        build: u16,
+    },
+    /// The command in progress reached a new phase.
+    Progress(Request, ProgressCode),
+    /// The command stopped on an error.
+    Error(Request, ErrorCode),
+    /// The printer pressed Retry itself; `left` automatic presses remain.
+    AutoRetry(ErrorCode, u8),
+    /// A button went to the unit.
+    Button(ButtonCode),
+    /// The command finished.
+    Finished(Request, ResultCode),
+    /// No valid answer: `timeout` or `garbled`; the printer re-handshakes.
+    LinkLost(&'static str),
+    /// The unit restarted under the command; the printer repeats it.
+    Interrupted(Request),
+    /// One `Q0` cycle of a command passed.
+    Heartbeat(Request),
+}
+
+/// What the person at the printer does about an error the printer did not retry away.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Decision {
+    /// Press this button on the error screen.
+    Press(ButtonCode),
+    /// Look again at the next heartbeat.
+    Wait,
+    /// Stop: the command ends unrecovered.
+    GiveUp,
+}
+
+/// The person at the printer. The link is passed in so that a simulated person can act on the
+/// simulated unit (pull out filament, clear a fault).
+pub trait Operator<L> {
+    /// Something happened.
+    fn event(&mut self, link: &mut L, event: &PrinterEvent);
+    /// The unit is stopped on `error` for `request` and the printer will not retry by itself.
+    fn decide(&mut self, link: &mut L, request: Request, error: ErrorCode) -> Decision;
+}
+
+/// How a command ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Outcome {
+    /// `F` with this result.
+    Finished(ResultCode),
+    /// The unit answered `R` every time.
+    Rejected,
+    /// The operator gave up on this error.
+    GaveUp(ErrorCode),
+}
+
+/// Why the printer could not go on.
+#[derive(Debug)]
+pub enum PrinterError {
+    /// The link itself failed (a serial port error).
+    Io(io::Error),
+    /// The unit's version is not the one the printer supports (screen 04504).
+    VersionMismatch {
+        /// The version request that failed, 0..=2.
+        part: u8,
+        /// What the unit answered.
+        got: Option<u16>,
+    },
+    /// Ten link faults in a row (screen 04401).
+    NotResponding,
+    /// A command did not end in time.
+    Stuck(Request),
+}
+
+impl std::fmt::Display for PrinterError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            PrinterError::Io(error) => write!(f, "link error: {error}"),
+            PrinterError::VersionMismatch { part, got } => write!(
+                f,
+                "MMU FW UPDATE NEEDED (printer screen 04504): S{part} answered {got:?}"
+            ),
+            PrinterError::NotResponding => {
+                f.write_str("MMU_NOT_RESPONDING (printer screen 04401): no valid answer 10 times in a row")
+            }
+            PrinterError::Stuck(request) => write!(
+                f,
+                "{} did not finish in time: the unit is stuck",
+                request.encode().as_str().trim_end()
+            ),
+        }
+    }
+}
+
+impl std::error::Error for PrinterError {}
+
+impl From<io::Error> for PrinterError {
+    fn from(error: io::Error) -> Self {
+        PrinterError::Io(error)
+    }
+}
+
+/// Why one step of the dialogue failed.
+#[derive(Debug)]
+enum Fault {
+    /// The link is lost (`timeout`, `garbled`): re-handshake.
+    Link(&'static str),
+    /// Nothing to recover.
+    Fatal(PrinterError),
+}
+
+impl From<io::Error> for Fault {
+    fn from(error: io::Error) -> Self {
+        Fault::Fatal(PrinterError::Io(error))
+    }
+}
+
+/// Whether the error screen of `error` has a Retry button (the printer presses it by itself).
+pub fn has_retry(error: ErrorCode) -> bool {
+    matches!(
+        error,
+        ErrorCode::FINDA_DIDNT_SWITCH_ON
+            | ErrorCode::FINDA_DIDNT_SWITCH_OFF
+            | ErrorCode::FSENSOR_DIDNT_SWITCH_ON
+            | ErrorCode::FSENSOR_DIDNT_SWITCH_OFF
+            | ErrorCode::FINDA_VS_EEPROM_DISREPANCY
+            | ErrorCode::FSENSOR_TOO_EARLY
+            | ErrorCode::FINDA_FLICKERS
+            | ErrorCode::STALLED_PULLEY
+            | ErrorCode::MOVE_PULLEY_FAILED
+            | ErrorCode::HOMING_SELECTOR_FAILED
+            | ErrorCode::HOMING_IDLER_FAILED
+            | ErrorCode::MOVE_SELECTOR_FAILED
+            | ErrorCode::MOVE_IDLER_FAILED
+    )
+}
+
+/// The printer's protocol logic over `L`.
+pub struct Printer<L> {
+    link: L,
+    options: PrinterOptions,
+    decoder: ResponseDecoder,
+    inbox: Vec<u8>,
+    last_activity_ms: u64,
+    reported_fsensor: Option<u8>,
+    dropouts: u8,
+    /// The last values of [`POLLED_REGISTERS`].
+    registers: [Option<u16>; POLLED_REGISTERS.len()],
+}
+
+impl<L: Link> Printer<L> {
+    /// A printer on `link`, not yet connected.
+    pub fn new(link: L, options: PrinterOptions) -> Self {
+        let now = link.now_ms();
+        Printer {
+            link,
+            options,
+            decoder: ResponseDecoder::new(),
+            inbox: Vec::new(),
+            last_activity_ms: now,
+            reported_fsensor: None,
+            dropouts: 0,
+            registers: [None; POLLED_REGISTERS.len()],
+        }
+    }
+
+    /// The link.
+    pub fn link(&self) -> &L {
+        &self.link
+    }
+
+    /// The link, mutably.
+    pub fn link_mut(&mut self) -> &mut L {
+        &mut self.link
+    }
+
+    /// The last polled value of register `address`, if it is one of [`POLLED_REGISTERS`].
+    pub fn polled(&self, address: u8) -> Option<u16> {
+        POLLED_REGISTERS
+            .iter()
+            .position(|&a| a == address)
+            .and_then(|i| self.registers[i])
+    }
+
+    /// Handshake until the unit answers as the printer expects, and let a unit that is still
+    /// starting up finish; returns the `Q0` answer (`X0 F0` for a unit at rest, an error it
+    /// stopped on, or the command it is still running).
+    pub fn connect(&mut self, op: &mut impl Operator<L>) -> Result<Response, PrinterError> {
+        loop {
+            let mut answer = match self.handshake(op) {
+                Ok(answer) => answer,
+                Err(Fault::Link(why)) => {
+                    self.link_lost(op, why)?;
+                    continue;
+                }
+                Err(Fault::Fatal(error)) => return Err(error),
+            };
+            let booting = |a: &Response| a.code == RequestCode::Reset && a.param == ParamCode::Processing;
+            let deadline = self.link.now_ms() + self.options.command_timeout_ms;
+            while booting(&answer) && self.link.now_ms() < deadline {
+                match self.poll(op) {
+                    Ok(next) => answer = next,
+                    Err(Fault::Link(why)) => {
+                        self.link_lost(op, why)?;
+                        break;
+                    }
+                    Err(Fault::Fatal(error)) => return Err(error),
+                }
+            }
+            if !booting(&answer) || self.link.now_ms() >= deadline {
+                return Ok(answer);
+            }
+        }
+    }
+
+    /// Send a request that is not a command (`R`, `W`, `B`, `f`, `S`) and return its answer,
+    /// re-handshaking if the link fails on the way.
+    pub fn request(&mut self, op: &mut impl Operator<L>, request: Request) -> Result<Response, PrinterError> {
+        loop {
+            match self.exchange(op, request) {
+                Ok(answer) => return Ok(answer),
+                Err(Fault::Link(why)) => {
+                    self.link_lost(op, why)?;
+                    self.connect(op)?;
+                }
+                Err(Fault::Fatal(error)) => return Err(error),
+            }
+        }
+    }
+
+    /// `X<value>`: the unit restarts without an answer; wait out the link timeout and connect
+    /// again, as the printer does. Returns the first `Q0` answer after the restart.
+    pub fn reset(&mut self, op: &mut impl Operator<L>, value: u8) -> Result<Response, PrinterError> {
+        self.send(op, Request::new(RequestCode::Reset, value))?;
+        self.wait_silence(op, LINK_TIMEOUT_MS)?;
+        op.event(&mut self.link, &PrinterEvent::LinkLost("timeout"));
+        self.flush();
+        self.connect(op)
+    }
+
+    /// Run a printer command (`T L U E K H`) to its end, playing the printer throughout; a
+    /// command the unit restarted under is repeated (for `T`, after an unload), as Prusa's mmu2
+    /// layer does.
+    pub fn command(&mut self, op: &mut impl Operator<L>, request: Request) -> Result<Outcome, PrinterError> {
+        for _ in 0..MAX_INTERRUPTS {
+            match self.run(op, request)? {
+                Some(outcome) => return Ok(outcome),
+                None if request.code == RequestCode::Tool => {
+                    let unload = Request::new(RequestCode::Unload, 0);
+                    if let Some(outcome) = self.run(op, unload)?
+                        && outcome != Outcome::Finished(ResultCode::OK)
+                    {
+                        return Ok(outcome);
+                    }
+                }
+                None => {}
+            }
+        }
+        Err(PrinterError::Stuck(request))
+    }
+
+    /// Whether the unit's hub sensor (its FINDA, register 0x08) saw filament at the last poll.
+    pub fn finda(&self) -> bool {
+        self.polled(0x08).is_some_and(|v| v != 0)
+    }
+
+    /// One run of `request`; `None` when the unit restarted under it.
+    fn run(&mut self, op: &mut impl Operator<L>, request: Request) -> Result<Option<Outcome>, PrinterError> {
+        let started = self.link.now_ms();
+        let mut rejects = 0;
+        loop {
+            let answer = self.request(op, request)?;
+            match answer.param {
+                ParamCode::Accepted => break,
+                ParamCode::Rejected if rejects < MAX_REJECTS => rejects += 1,
+                _ => return Ok(Some(Outcome::Rejected)),
+            }
+        }
+        let mut retries_left = AUTO_RETRIES;
+        let mut shown: Option<Response> = None;
+        loop {
+            if self.link.now_ms().saturating_sub(started) > self.options.command_timeout_ms {
+                return Err(PrinterError::Stuck(request));
+            }
+            let answer = match self.poll(op) {
+                Ok(answer) => answer,
+                Err(Fault::Link(why)) => {
+                    self.link_lost(op, why)?;
+                    self.connect(op)?
+                }
+                Err(Fault::Fatal(error)) => return Err(error),
+            };
+            if (answer.code, answer.value) != (request.code, request.value) {
+                if answer.code == RequestCode::Reset && answer.param == ParamCode::Finished {
+                    op.event(&mut self.link, &PrinterEvent::Interrupted(request));
+                    return Ok(None);
+                }
+                self.link_lost(op, "garbled")?;
+                self.connect(op)?;
+                continue;
+            }
+            let new = shown != Some(answer);
+            shown = Some(answer);
+            let value = answer.param_value.unwrap_or(0);
+            match answer.param {
+                ParamCode::Processing if new => {
+                    let progress = ProgressCode(value as u8);
+                    op.event(&mut self.link, &PrinterEvent::Progress(request, progress));
+                }
+                ParamCode::Processing => {}
+                ParamCode::Error => {
+                    let error = ErrorCode(value);
+                    if new {
+                        op.event(&mut self.link, &PrinterEvent::Error(request, error));
+                    }
+                    if retries_left > 0 && has_retry(error) {
+                        if self.press(op, ButtonCode::MIDDLE)? {
+                            retries_left -= 1;
+                            op.event(&mut self.link, &PrinterEvent::AutoRetry(error, retries_left));
+                            shown = None;
+                        }
+                    } else {
+                        match op.decide(&mut self.link, request, error) {
+                            Decision::Press(button) => {
+                                self.press(op, button)?;
+                                shown = None;
+                            }
+                            Decision::Wait => {}
+                            Decision::GiveUp => return Ok(Some(Outcome::GaveUp(error))),
+                        }
+                    }
+                }
+                ParamCode::Button => {
+                    // The unit's own button while the printer is in charge: send it back.
+                    self.press(op, ButtonCode(value as u8))?;
+                }
+                ParamCode::Finished => {
+                    let result = ResultCode(value);
+                    op.event(&mut self.link, &PrinterEvent::Finished(request, result));
+                    return Ok(Some(Outcome::Finished(result)));
+                }
+                ParamCode::Accepted | ParamCode::Rejected => {
+                    self.link_lost(op, "garbled")?;
+                    self.connect(op)?;
+                    continue;
+                }
+            }
+            op.event(&mut self.link, &PrinterEvent::Heartbeat(request));
+        }
+    }
+
+    /// Send button `button`; true when the unit accepted it.
+    fn press(&mut self, op: &mut impl Operator<L>, button: ButtonCode) -> Result<bool, PrinterError> {
+        op.event(&mut self.link, &PrinterEvent::Button(button));
+        let answer = self.request(op, Request::new(RequestCode::Button, button.0))?;
+        Ok(answer.param == ParamCode::Accepted)
+    }
+
+    /// Wait for the heartbeat (reporting the filament sensor at once), then `Q0` and the
+    /// register poll.
+    fn poll(&mut self, op: &mut impl Operator<L>) -> Result<Response, Fault> {
+        while self.link.now_ms() < self.last_activity_ms + HEARTBEAT_MS {
+            self.report_fsensor(op)?;
+            let mut stray = Vec::new();
+            self.link.receive(POLL_STEP_MS, &mut stray)?;
+            if !stray.is_empty() {
+                // Nothing is expected between exchanges; the printer drops it.
+                self.last_activity_ms = self.link.now_ms();
+            }
+        }
+        let answer = self.exchange(op, Request::new(RequestCode::Query, 0))?;
+        self.report_fsensor(op)?;
+        self.poll_registers(op)?;
+        Ok(answer)
+    }
+
+    fn report_fsensor(&mut self, op: &mut impl Operator<L>) -> Result<(), Fault> {
+        let state = self.link.fsensor();
+        if self.reported_fsensor != Some(state) {
+            self.exchange(op, Request::new(RequestCode::FilamentSensor, state))?;
+            self.reported_fsensor = Some(state);
+        }
+        Ok(())
+    }
+
+    fn poll_registers(&mut self, op: &mut impl Operator<L>) -> Result<(), Fault> {
+        for (i, &address) in POLLED_REGISTERS.iter().enumerate() {
+            let answer = self.exchange(op, Request::new(RequestCode::Read, address))?;
+            self.registers[i] = (answer.param == ParamCode::Accepted)
+                .then_some(answer.param_value)
+                .flatten();
+        }
+        Ok(())
+    }
+
+    fn handshake(&mut self, op: &mut impl Operator<L>) -> Result<Response, Fault> {
+        let (major, minor, revision) = self.options.version;
+        let expected = [major, minor, revision];
+        let mut version = [0u16; 4];
+        let mut retries = VERSION_RETRIES;
+        let mut wrong = 0;
+        let mut part = 0u8;
+        while part < 4 {
+            let answer = self.exchange(op, Request::new(RequestCode::Version, part))?;
+            if (answer.code, answer.value, answer.param) != (RequestCode::Version, part, ParamCode::Accepted)
+            {
+                wrong += 1;
+                if wrong >= MAX_WRONG_ANSWERS {
+                    return Err(Fault::Link("garbled"));
+                }
+                continue;
+            }
+            let got = answer.param_value;
+            if let Some(&want) = expected.get(usize::from(part))
+                && got != Some(u16::from(want))
+            {
+                retries -= 1;
+                if retries == 0 {
+                    return Err(Fault::Fatal(PrinterError::VersionMismatch { part, got }));
+                }
+                continue;
+            }
+            version[usize::from(part)] = got.unwrap_or(0);
+            part += 1;
+        }
+        self.dropouts = 0;
+        // `A` or `R`: the printer does not check.
+        self.exchange(op, Request::write(0x0b, self.options.extra_load_mm))?;
+        self.exchange(op, Request::write(0x14, self.options.slow_feed_mm_s))?;
+        self.reported_fsensor = None;
+        self.report_fsensor(op)?;
+        op.event(
+            &mut self.link,
+            &PrinterEvent::Connected {
+                version: (major, minor, revision),
+                build: version[3],
+            },
+        );
+        let answer = self.exchange(op, Request::new(RequestCode::Query, 0))?;
+        self.poll_registers(op)?;
+        Ok(answer)
+    }
+
+    /// Count a link fault; the tenth in a row ends the session. Then the printer drops what is
+    /// in flight (after a garbled answer it first waits out a heartbeat period).
+    fn link_lost(&mut self, op: &mut impl Operator<L>, why: &'static str) -> Result<(), PrinterError> {
+        op.event(&mut self.link, &PrinterEvent::LinkLost(why));
+        self.dropouts += 1;
+        if self.dropouts >= MAX_DROPOUTS {
+            return Err(PrinterError::NotResponding);
+        }
+        if why == "garbled" {
+            self.wait_silence(op, HEARTBEAT_MS)?;
+        }
+        self.flush();
+        Ok(())
+    }
+
+    /// Let `ms` pass since the last activity, dropping whatever arrives.
+    fn wait_silence(&mut self, _op: &mut impl Operator<L>, ms: u64) -> Result<(), PrinterError> {
+        while self.link.now_ms() < self.last_activity_ms + ms {
+            let mut dropped = Vec::new();
+            self.link.receive(POLL_STEP_MS, &mut dropped)?;
+        }
+        Ok(())
+    }
+
+    fn flush(&mut self) {
+        self.inbox.clear();
+        self.decoder.reset();
+    }
+
+    fn send(&mut self, op: &mut impl Operator<L>, request: Request) -> io::Result<()> {
+        op.event(&mut self.link, &PrinterEvent::Sent(request));
+        self.link.send(request.encode().as_bytes())?;
+        self.last_activity_ms = self.link.now_ms();
+        Ok(())
+    }
+
+    /// Send `request` and wait for one complete answer within the link timeout.
+    fn exchange(&mut self, op: &mut impl Operator<L>, request: Request) -> Result<Response, Fault> {
+        self.flush();
+        self.send(op, request)?;
+        loop {
+            for byte in std::mem::take(&mut self.inbox).into_iter() {
+                match self.decoder.feed(byte) {
+                    Some(Ok(answer)) => {
+                        op.event(&mut self.link, &PrinterEvent::Received(answer));
+                        return Ok(answer);
+                    }
+                    Some(Err(_)) => return Err(Fault::Link("garbled")),
+                    None => {}
+                }
+            }
+            let now = self.link.now_ms();
+            if now >= self.last_activity_ms + LINK_TIMEOUT_MS {
+                return Err(Fault::Link("timeout"));
+            }
+            let wait = (self.last_activity_ms + LINK_TIMEOUT_MS - now).min(POLL_STEP_MS);
+            let before = self.inbox.len();
+            self.link.receive(wait, &mut self.inbox)?;
+            if self.inbox.len() > before {
+                self.last_activity_ms = self.link.now_ms();
+            }
+        }
+    }
+}

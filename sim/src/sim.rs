@@ -1,0 +1,606 @@
+//! The simulated unit on its wire: the unchanged unit logic stepped against the physical model,
+//! with the printer's mechanics around it and the harness faults (UART, power) in between.
+//!
+//! A [`Sim`] takes the bytes a printer sends and returns the bytes the unit answers, one
+//! millisecond of virtual time per [`Sim::step`]. The printer's *mechanics* (its extruder and
+//! filament sensor) live here too, because no printer-side program can move them over the wire:
+//! they react to the traffic the way a Prusa printer's firmware does (spec §5.7), by watching
+//! the frames go by. The printer's *protocol logic* (handshake, polling, retries) is the
+//! client's business; see [`crate::printer`].
+
+use std::collections::VecDeque;
+
+use mmu_firmware::ops::Status;
+use mmu_firmware::{BoardAction, Config, Instant};
+use mmu_model::{Model, ModelConfig, Rng};
+use mmu_protocol::{
+    ParamCode, ProgressCode, Request, RequestCode, RequestDecoder, Response, ResponseDecoder,
+};
+
+use crate::event::{Event, EventKind, FaultAction};
+use crate::fault::{ScheduledFault, SimFault, SimFaultKind};
+use crate::logic::{UnitLogic, new_logic};
+
+/// How far the printer pushes its extruder on its own while the unit reports `P1c`, mm
+/// (Prusa-Firmware-Buddy's value, spec §5.7).
+pub const COFEED_MM: f32 = 189.9;
+/// The printer's unload before it asks for another tool or an unload: ramming, then pulling the
+/// filament out of its gears, mm and mm/s.
+pub const PRINTER_UNLOAD_MM: f32 = 80.0;
+/// Speed of the printer's unload, mm/s.
+pub const PRINTER_UNLOAD_MM_S: f32 = 80.0;
+/// The printer's help during `P3` of an error recovery (MK4 values, spec §5.7), mm and mm/s.
+pub const UNLOAD_HELP_MM: f32 = 20.0;
+/// A frame longer than this without a newline is passed on as it is (garbage).
+const MAX_FRAME: usize = 32;
+/// Slot motion is reported at most this often, ms.
+const SLOT_REPORT_MS: u64 = 100;
+
+/// What the simulator is made of.
+#[derive(Debug, Clone)]
+pub struct SimOptions {
+    /// Slots, 1 to 5.
+    pub slots: usize,
+    /// Seed of every random draw (sensor noise, UART faults).
+    pub seed: u64,
+    /// The unit logic's configuration.
+    pub unit: Config,
+    /// Geometry and physics.
+    pub model: ModelConfig,
+    /// How fast the printer pulls filament while it prints after a tool change, mm/s (0: it does
+    /// not print).
+    pub print_mm_s: f32,
+    /// How long the unit takes to boot after a reset or power-up, ms.
+    pub boot_ms: u32,
+}
+
+impl Default for SimOptions {
+    fn default() -> Self {
+        SimOptions {
+            slots: 3,
+            seed: 1,
+            unit: Config::default(),
+            model: ModelConfig::default(),
+            print_mm_s: 1.0,
+            boot_ms: 50,
+        }
+    }
+}
+
+/// Options the simulator cannot run with.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct BadOptions(pub String);
+
+impl std::fmt::Display for BadOptions {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for BadOptions {}
+
+/// A command the unit finished, as the simulator saw it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CommandRecord {
+    /// The request.
+    pub request: (RequestCode, u8),
+    /// When the unit accepted it, ms of virtual time.
+    pub started_ms: u64,
+    /// When it finished, ms of virtual time.
+    pub finished_ms: u64,
+    /// Tip of the filament past the hub sensor when it started, mm (what an unload had to move).
+    pub start_tip_mm: Option<f32>,
+    /// Whether it stopped on an error on the way.
+    pub had_error: bool,
+}
+
+/// The printer's mechanics, driven by the frames on the wire.
+#[derive(Debug)]
+struct PrinterMechanics {
+    requests: RequestDecoder,
+    responses: ResponseDecoder,
+    /// The printer's copies of registers 0x0b and 0x14, as it wrote them.
+    extra_load_mm: f32,
+    slow_mm_s: f32,
+    /// The command in progress, as the printer sees it.
+    command: Option<(RequestCode, u8)>,
+    feeding_to_fsensor: bool,
+    cofeeding: bool,
+    print_mm_s: f32,
+}
+
+/// The simulated unit. See the [module documentation](self).
+pub struct Sim {
+    options: SimOptions,
+    logic: Box<dyn UnitLogic>,
+    model: Model,
+    now_ms: u64,
+    /// Virtual time of the unit's last boot: its clock starts at 0 there.
+    boot_epoch_ms: u64,
+    /// Unpowered or booting until then.
+    off_until_ms: Option<u64>,
+    rng: Rng,
+    corrupt: f32,
+    drop: f32,
+    schedule: Vec<ScheduledFault>,
+    printer: PrinterMechanics,
+    /// The printer's frame being received, passed on at its newline.
+    frame: Vec<u8>,
+    /// Frames held back while the printer unloads its extruder before sending them.
+    held: VecDeque<u8>,
+    /// The printer is unloading its extruder: its frames wait.
+    unloading_extruder: bool,
+    events: Vec<Event>,
+    last_fsensor: u8,
+    last_slot_report: Vec<(Option<f32>, u64)>,
+    last_command: ((RequestCode, u8), Status),
+    running: Option<CommandRecord>,
+    finished: Vec<CommandRecord>,
+}
+
+impl Sim {
+    /// A unit just powered on, with every slot's filament parked and nothing loaded.
+    pub fn new(options: SimOptions) -> Result<Sim, BadOptions> {
+        let logic = new_logic(options.slots, options.unit.clone()).ok_or_else(|| {
+            BadOptions(format!(
+                "a unit has 1 to {} slots, not {}",
+                mmu_firmware::MAX_SLOTS,
+                options.slots
+            ))
+        })?;
+        let model = Model::new(options.model.clone(), options.slots, options.seed);
+        let printer = PrinterMechanics {
+            requests: RequestDecoder::new(),
+            responses: ResponseDecoder::new(),
+            extra_load_mm: f32::from(options.unit.extra_load_mm),
+            slow_mm_s: f32::from(options.unit.slow_speed),
+            command: None,
+            feeding_to_fsensor: false,
+            cofeeding: false,
+            print_mm_s: options.print_mm_s,
+        };
+        let last_command = logic.command();
+        Ok(Sim {
+            rng: Rng::new(options.seed ^ 0x5541_5254), // "UART": independent of the model's noise
+            last_slot_report: (0..options.slots).map(|slot| (model.tip_mm(slot), 0)).collect(),
+            options,
+            logic,
+            model,
+            now_ms: 0,
+            boot_epoch_ms: 0,
+            off_until_ms: None,
+            corrupt: 0.0,
+            drop: 0.0,
+            schedule: Vec::new(),
+            printer,
+            frame: Vec::new(),
+            held: VecDeque::new(),
+            unloading_extruder: false,
+            events: Vec::new(),
+            last_fsensor: 0,
+            last_command,
+            running: None,
+            finished: Vec::new(),
+        })
+    }
+
+    /// Virtual time, ms since start.
+    pub fn now_ms(&self) -> u64 {
+        self.now_ms
+    }
+
+    /// The options the simulator was built with.
+    pub fn options(&self) -> &SimOptions {
+        &self.options
+    }
+
+    /// The unit logic's configuration.
+    pub fn unit_config(&self) -> &Config {
+        self.logic.config()
+    }
+
+    /// The physical model (filament positions, the printer's sensor).
+    pub fn model(&self) -> &Model {
+        &self.model
+    }
+
+    /// The physical model, to play the user (insert or pull out filament).
+    pub fn model_mut(&mut self) -> &mut Model {
+        &mut self.model
+    }
+
+    /// The command the unit is carrying out and where it stands.
+    pub fn unit_command(&self) -> ((RequestCode, u8), Status) {
+        self.logic.command()
+    }
+
+    /// The unit is powered and booted.
+    pub fn is_powered(&self) -> bool {
+        self.off_until_ms.is_none()
+    }
+
+    /// A button on the unit was pressed (ignored while it is off).
+    pub fn press_button(&mut self, button: mmu_protocol::ButtonCode) {
+        if self.is_powered() {
+            self.logic.press_button(button);
+        }
+    }
+
+    /// Inject `fault` now. False when the model refuses it (e.g. an unknown slot).
+    pub fn inject(&mut self, fault: SimFault) -> bool {
+        let ok = match fault {
+            SimFault::Model(fault) => self.model.inject(fault),
+            SimFault::UartCorrupt { probability } => {
+                self.corrupt = probability.clamp(0.0, 1.0);
+                true
+            }
+            SimFault::UartDrop { probability } => {
+                self.drop = probability.clamp(0.0, 1.0);
+                true
+            }
+            SimFault::PowerLoss { off_ms } => {
+                self.power_off(off_ms);
+                true
+            }
+        };
+        if ok {
+            self.event(EventKind::Fault {
+                action: FaultAction::Inject,
+                fault: fault.to_string(),
+            });
+        }
+        ok
+    }
+
+    /// Clear the fault of `kind`; false when none was active.
+    pub fn clear(&mut self, kind: SimFaultKind) -> bool {
+        let (cleared, name) = match kind {
+            SimFaultKind::Model(kind) => {
+                let name = self
+                    .model
+                    .active_faults()
+                    .iter()
+                    .find(|f| f.kind() == kind)
+                    .map(|f| SimFault::Model(*f).to_string());
+                (self.model.clear(kind), name)
+            }
+            SimFaultKind::UartCorrupt => (
+                std::mem::take(&mut self.corrupt) > 0.0,
+                Some("uart-corrupt".into()),
+            ),
+            SimFaultKind::UartDrop => (std::mem::take(&mut self.drop) > 0.0, Some("uart-drop".into())),
+            SimFaultKind::PowerLoss => (false, None),
+        };
+        if let (true, Some(fault)) = (cleared, name) {
+            self.event(EventKind::Fault {
+                action: FaultAction::Clear,
+                fault,
+            });
+        }
+        cleared
+    }
+
+    /// The faults now active, in `--fault` syntax.
+    pub fn active_faults(&self) -> Vec<SimFault> {
+        let mut faults: Vec<SimFault> = self
+            .model
+            .active_faults()
+            .iter()
+            .map(|f| SimFault::Model(*f))
+            .collect();
+        if self.corrupt > 0.0 {
+            faults.push(SimFault::UartCorrupt {
+                probability: self.corrupt,
+            });
+        }
+        if self.drop > 0.0 {
+            faults.push(SimFault::UartDrop {
+                probability: self.drop,
+            });
+        }
+        faults
+    }
+
+    /// Inject `fault.fault` at `fault.at_ms` and clear it at `fault.until_ms`.
+    pub fn schedule(&mut self, fault: ScheduledFault) {
+        self.schedule.push(fault);
+    }
+
+    /// Events since the last call, oldest first.
+    pub fn take_events(&mut self) -> Vec<Event> {
+        std::mem::take(&mut self.events)
+    }
+
+    /// Commands the unit finished since the last call, oldest first.
+    pub fn take_finished(&mut self) -> Vec<CommandRecord> {
+        std::mem::take(&mut self.finished)
+    }
+
+    /// One millisecond of virtual time: the printer's bytes `rx` reach the unit, what the unit
+    /// sends is appended to `tx`.
+    pub fn step(&mut self, rx: &[u8], tx: &mut Vec<u8>) {
+        self.run_schedule();
+        let to_unit = self.pass_printer_bytes(rx);
+        let mut from_unit = Vec::new();
+        match self.off_until_ms {
+            Some(until) => {
+                self.model.step(1, &[]);
+                if self.now_ms + 1 >= until {
+                    self.boot();
+                }
+            }
+            None => {
+                let now = Instant::from_millis(self.now_ms - self.boot_epoch_ms);
+                let action = self.logic.step(now, 1, &mut self.model, &to_unit, &mut from_unit);
+                if let Some(action) = action {
+                    self.power_off(self.options.boot_ms);
+                    if action == BoardAction::EraseAndReset {
+                        // Nothing persists yet: a reset is the whole erase.
+                    }
+                }
+            }
+        }
+        self.uart_faults(&mut from_unit);
+        for &byte in &from_unit {
+            self.printer_hears(byte);
+        }
+        tx.extend_from_slice(&from_unit);
+        self.printer_mechanics();
+        self.now_ms += 1;
+        self.watch();
+    }
+
+    fn event(&mut self, what: EventKind) {
+        self.events.push(Event {
+            t_ms: self.now_ms,
+            what,
+        });
+    }
+
+    fn run_schedule(&mut self) {
+        let now = self.now_ms;
+        let due: Vec<ScheduledFault> = self
+            .schedule
+            .iter()
+            .filter(|f| f.at_ms == now || f.until_ms == Some(now))
+            .copied()
+            .collect();
+        for fault in due {
+            if fault.at_ms == now {
+                self.inject(fault.fault);
+            } else {
+                self.clear(fault.fault.kind());
+            }
+        }
+        self.schedule
+            .retain(|f| f.until_ms.map_or(f.at_ms > now, |until| until > now));
+    }
+
+    fn power_off(&mut self, off_ms: u32) {
+        if self.off_until_ms.is_none() {
+            self.event(EventKind::Power { on: false });
+        }
+        self.off_until_ms = Some(self.now_ms + u64::from(off_ms.max(1)));
+    }
+
+    fn boot(&mut self) {
+        self.off_until_ms = None;
+        self.boot_epoch_ms = self.now_ms + 1;
+        self.logic = new_logic(self.options.slots, self.options.unit.clone())
+            .unwrap_or_else(|| unreachable!("the slot count was checked in Sim::new"));
+        self.running = None;
+        self.event(EventKind::Power { on: true });
+    }
+
+    /// The printer's bytes: whole frames pass at their newline, unless the printer must first
+    /// unload its extruder (then they wait for it); then the UART faults strike.
+    fn pass_printer_bytes(&mut self, rx: &[u8]) -> Vec<u8> {
+        let mut out = Vec::new();
+        for &byte in rx {
+            self.frame.push(byte);
+            if let Some(Ok(request)) = self.printer.requests.feed(byte) {
+                self.printer_sends(&request);
+            }
+            if byte == b'\n' || self.frame.len() >= MAX_FRAME {
+                self.held.extend(self.frame.drain(..));
+            }
+        }
+        self.unloading_extruder &= self.model.extruder_busy();
+        if !self.unloading_extruder {
+            out.extend(self.held.drain(..));
+        }
+        self.uart_faults(&mut out);
+        if self.off_until_ms.is_some() {
+            out.clear();
+        }
+        out
+    }
+
+    fn uart_faults(&mut self, bytes: &mut Vec<u8>) {
+        if self.corrupt == 0.0 && self.drop == 0.0 {
+            return;
+        }
+        let (corrupt, drop) = (f64::from(self.corrupt), f64::from(self.drop));
+        let rng = &mut self.rng;
+        bytes.retain_mut(|byte| {
+            if rng.uniform() < corrupt {
+                *byte ^= 1 << (rng.next_u64() % 8);
+            }
+            rng.uniform() >= drop
+        });
+    }
+
+    /// The printer sent `request`: stop printing for a command, and unload the extruder first
+    /// when the command needs the filament out of it (spec §5.6: ramming, then `U0`/`T`).
+    fn printer_sends(&mut self, request: &Request) {
+        let p = &mut self.printer;
+        match request.code {
+            RequestCode::Write if request.value == 0x0b => {
+                p.extra_load_mm = f32::from(request.value2);
+            }
+            RequestCode::Write if request.value == 0x14 => {
+                p.slow_mm_s = f32::from(request.value2);
+            }
+            code if code.is_command() => {
+                self.model.set_printing(None);
+                let same_tool =
+                    code == RequestCode::Tool && self.model.loaded_slot() == Some(usize::from(request.value));
+                let needs_unload = matches!(
+                    code,
+                    RequestCode::Unload | RequestCode::Tool | RequestCode::Eject | RequestCode::Cut
+                ) && !same_tool;
+                let gears = self.model.config().extruder_gears_mm;
+                let in_gears = self
+                    .model
+                    .loaded_slot()
+                    .and_then(|slot| self.model.tip_mm(slot))
+                    .is_some_and(|tip| tip >= gears);
+                if needs_unload && in_gears && !self.model.extruder_busy() {
+                    self.model.extruder_move(-PRINTER_UNLOAD_MM, PRINTER_UNLOAD_MM_S);
+                    self.unloading_extruder = true;
+                    self.event(EventKind::Extruder {
+                        action: "ramming",
+                        mm: -PRINTER_UNLOAD_MM,
+                    });
+                }
+            }
+            _ => {}
+        }
+    }
+
+    /// A byte of the unit's answer reached the printer.
+    fn printer_hears(&mut self, byte: u8) {
+        let Some(Ok(response)) = self.printer.responses.feed(byte) else {
+            return;
+        };
+        self.printer_reacts(&response);
+    }
+
+    fn printer_reacts(&mut self, response: &Response) {
+        let p = &mut self.printer;
+        let echo = (response.code, response.value);
+        if response.code.is_command() && response.param == ParamCode::Accepted {
+            p.command = Some(echo);
+            return;
+        }
+        if p.command != Some(echo) {
+            return;
+        }
+        match response.param {
+            ParamCode::Processing => {
+                let progress = ProgressCode(response.param_value.unwrap_or(0) as u8);
+                p.feeding_to_fsensor = progress == ProgressCode::FEEDING_TO_FSENSOR;
+                let helps_unload = progress == ProgressCode::UNLOADING_TO_FINDA
+                    && !matches!(response.code, RequestCode::Unload | RequestCode::Tool);
+                if helps_unload && self.model.fsensor_state() != 0 && !self.model.extruder_busy() {
+                    self.model.extruder_move(-UNLOAD_HELP_MM, UNLOAD_HELP_MM);
+                    self.event(EventKind::Extruder {
+                        action: "unload-help",
+                        mm: -UNLOAD_HELP_MM,
+                    });
+                }
+            }
+            ParamCode::Finished => {
+                p.command = None;
+                p.feeding_to_fsensor = false;
+                if response.code == RequestCode::Tool {
+                    let rate = p.print_mm_s;
+                    self.model.set_printing((rate > 0.0).then_some(rate));
+                }
+            }
+            _ => p.feeding_to_fsensor = false,
+        }
+    }
+
+    /// Co-feeding during `P1c` (spec §5.7).
+    fn printer_mechanics(&mut self) {
+        let state = self.model.fsensor_state();
+        let p = &mut self.printer;
+        if p.cofeeding && state != 0 {
+            p.cofeeding = false;
+            p.feeding_to_fsensor = false;
+            let (mm, speed) = (p.extra_load_mm + 2.0, p.slow_mm_s);
+            self.model.extruder_move(mm, speed);
+            self.event(EventKind::Extruder {
+                action: "extra-load",
+                mm,
+            });
+        } else if p.feeding_to_fsensor && !p.cofeeding && state == 0 {
+            p.cofeeding = true;
+            let speed = p.slow_mm_s;
+            self.model.extruder_move(COFEED_MM, speed);
+            self.event(EventKind::Extruder {
+                action: "co-feed",
+                mm: COFEED_MM,
+            });
+        }
+    }
+
+    /// Report what changed: the printer's sensor, slot motion, the unit's command.
+    fn watch(&mut self) {
+        let state = self.model.fsensor_state();
+        if state != self.last_fsensor {
+            self.last_fsensor = state;
+            self.event(EventKind::Fsensor { state });
+        }
+        for slot in 0..self.last_slot_report.len() {
+            let tip = self.model.tip_mm(slot);
+            let (last_tip, last_ms) = self.last_slot_report[slot];
+            let moved = match (tip, last_tip) {
+                (Some(a), Some(b)) => (a - b).abs() >= 0.1,
+                (a, b) => a.is_some() != b.is_some(),
+            };
+            if moved && self.now_ms >= last_ms + SLOT_REPORT_MS {
+                self.last_slot_report[slot] = (tip, self.now_ms);
+                self.event(EventKind::Slot {
+                    slot,
+                    tip_mm: tip.map(|t| (t * 10.0).round() / 10.0),
+                });
+            }
+        }
+        if self.is_powered() {
+            self.watch_command();
+        }
+    }
+
+    fn watch_command(&mut self) {
+        let current = self.logic.command();
+        if current == self.last_command {
+            return;
+        }
+        let ((code, value), status) = current;
+        let new_request = current.0 != self.last_command.0;
+        self.last_command = current;
+        let request = format!("{}{value:x}", code.as_char());
+        let text = match status {
+            Status::Running(progress) => format!("running {progress}"),
+            Status::Failed(error) => format!("error {error}"),
+            Status::Finished => String::from("finished"),
+        };
+        self.event(EventKind::Command {
+            request,
+            status: text,
+        });
+        if new_request && code.is_command() {
+            let start_tip_mm = self.model.loaded_slot().and_then(|slot| self.model.tip_mm(slot));
+            self.running = Some(CommandRecord {
+                request: (code, value),
+                started_ms: self.now_ms,
+                finished_ms: self.now_ms,
+                start_tip_mm,
+                had_error: false,
+            });
+        }
+        if let Some(record) = &mut self.running {
+            match status {
+                Status::Failed(_) => record.had_error = true,
+                Status::Finished => {
+                    record.finished_ms = self.now_ms;
+                    self.finished.push(*record);
+                    self.running = None;
+                }
+                Status::Running(_) => {}
+            }
+        }
+    }
+}
