@@ -2,10 +2,16 @@
 //!
 //! Subcommands live in sibling modules; this file only parses the command line and dispatches:
 //! - `mmu encode request|response ...`: print a frame exactly as on the wire ([`codec_cli`]);
-//! - `mmu decode [--json]`: explain frames or printer log lines read from stdin ([`codec_cli`]).
+//! - `mmu decode [--json]`: explain frames or printer log lines read from stdin ([`codec_cli`]);
+//! - `mmu sim`: the simulated unit on stdin/stdout or a pseudo-terminal ([`sim_cli`]);
+//! - `mmu printer`: the printer's side against a real unit or the simulator ([`printer_cli`]);
+//! - `mmu demo`: a scripted session against the simulator ([`demo`]).
 
 mod codec_cli;
+mod demo;
 mod explain;
+mod printer_cli;
+mod sim_cli;
 
 use std::error::Error;
 use std::process::ExitCode;
@@ -17,7 +23,7 @@ use clap::{Parser, Subcommand};
 #[command(
     name = "mmu",
     version,
-    about = "Host tool for the MMU firmware: Prusa MMU3 protocol encoder and decoder"
+    about = "Host tool for the MMU firmware: simulator, printer emulator, Prusa MMU3 frame encoder and decoder"
 )]
 struct Cli {
     #[command(subcommand)]
@@ -33,6 +39,14 @@ enum Command {
     /// Explain frames read from stdin, one output line per input line. A line is a bare frame
     /// (`T0*a4`) or a printer log line (`MMU2:>T0*a4.` request, `MMU2:<T0 E8003*13.` response).
     Decode(codec_cli::DecodeArgs),
+    /// Serve the simulated unit (the unit logic on a physical model) on stdin/stdout or a
+    /// pseudo-terminal, bytes exactly as on the UART.
+    Sim(sim_cli::SimArgs),
+    /// Play the printer: handshake, commands, register access, soak runs; against a unit on a
+    /// serial port or the simulator.
+    Printer(printer_cli::PrinterArgs),
+    /// A scripted session against the simulator: handshake, tool changes, preload, eject.
+    Demo(demo::DemoArgs),
 }
 
 fn main() -> ExitCode {
@@ -40,6 +54,9 @@ fn main() -> ExitCode {
     let result: Result<(), Box<dyn Error>> = match &cli.command {
         Command::Encode(command) => codec_cli::encode(command),
         Command::Decode(args) => codec_cli::decode(args),
+        Command::Sim(args) => sim_cli::run(args),
+        Command::Printer(args) => printer_cli::run(args),
+        Command::Demo(args) => demo::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
