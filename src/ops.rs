@@ -438,7 +438,11 @@ impl Operation {
                 }
             }
             Phase::FeedToNozzle { .. } => {
-                if moved_mm >= i32::from(config.extra_load_mm) {
+                // The extruder has the filament when it pulled it in, or when its idle gears hold
+                // the tip and the tube fills up behind it (its push came before this phase).
+                if moved_mm >= i32::from(config.extra_load_mm)
+                    || bowden_compressed(unit.hub.tension.reading(), config)
+                {
                     Goal::Reached
                 } else {
                     Goal::Follow
@@ -566,6 +570,14 @@ pub fn follow_duty(speed: u16, tension: Option<u16>, config: &Config) -> Duty {
     });
     let limit = i32::from(config.tension_max_duty.min(config.max_duty));
     Duty::from_permille((open_loop + correction).clamp(0, limit) as u16)
+}
+
+/// The Bowden tube is pushed together well past the follower's deadband: the filament's tip is
+/// held ahead.
+fn bowden_compressed(tension: Option<u16>, config: &Config) -> bool {
+    tension.is_some_and(|value| {
+        u32::from(value) + 2 * u32::from(config.tension_deadband) < u32::from(config.tension_neutral)
+    })
 }
 
 /// What a finished phase says about where the slot's filament is now.

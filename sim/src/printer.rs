@@ -352,11 +352,21 @@ impl<L: Link> Printer<L> {
         let started = self.link.now_ms();
         let mut rejects = 0;
         loop {
-            let answer = self.request(op, request)?;
-            match answer.param {
-                ParamCode::Accepted => break,
-                ParamCode::Rejected if rejects < MAX_REJECTS => rejects += 1,
-                _ => return Ok(Some(Outcome::Rejected)),
+            match self.exchange(op, request) {
+                Ok(answer) if answer.param == ParamCode::Accepted => break,
+                Ok(answer) if answer.param == ParamCode::Rejected && rejects < MAX_REJECTS => {
+                    rejects += 1;
+                }
+                Ok(_) => return Ok(Some(Outcome::Rejected)),
+                Err(Fault::Link(why)) => {
+                    self.link_lost(op, why)?;
+                    // The answer may be what got lost: a unit running the command says so.
+                    let state = self.connect(op)?;
+                    if (state.code, state.value) == (request.code, request.value) {
+                        break;
+                    }
+                }
+                Err(Fault::Fatal(error)) => return Err(error),
             }
         }
         let mut retries_left = AUTO_RETRIES;

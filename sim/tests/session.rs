@@ -66,5 +66,150 @@ fn handshake_then_tool_changes_load_to_the_nozzle() {
         assert_eq!(model.loaded_slot(), Some(usize::from(slot)));
         assert_ne!(model.fsensor_state(), 0);
     }
-    eprintln!("{:?}", op.progress());
+    // The printer sees what its once-a-second `Q0` catches: the short push into the nozzle
+    // (5 mm) falls between two polls.
+    let seen = op.progress();
+    assert_eq!(
+        &seen[seen.len() - 3..],
+        [
+            ProgressCode::FEEDING_TO_FINDA,
+            ProgressCode::FEEDING_TO_BONDTECH,
+            ProgressCode::FEEDING_TO_FSENSOR,
+        ]
+    );
+    assert!(seen.contains(&ProgressCode::UNLOADING_TO_FINDA));
+}
+
+fn connected() -> (Printer<SimLink>, Watcher) {
+    let mut printer = printer();
+    let mut op = Watcher::default();
+    printer.connect(&mut op).unwrap();
+    (printer, op)
+}
+
+fn run(printer: &mut Printer<SimLink>, op: &mut Watcher, code: RequestCode, value: u8) -> Outcome {
+    printer.command(op, Request::new(code, value)).unwrap()
+}
+
+const OK: Outcome = Outcome::Finished(ResultCode::OK);
+
+#[test]
+fn unload_parks_the_filament_and_preload_brings_a_new_one_to_park() {
+    let (mut printer, mut op) = connected();
+    assert_eq!(run(&mut printer, &mut op, RequestCode::Tool, 0), OK);
+    assert_eq!(run(&mut printer, &mut op, RequestCode::Unload, 0), OK);
+    let model = printer.link().sim().model();
+    assert_eq!(model.loaded_slot(), None);
+    let park = -f32::from(printer.link().sim().unit_config().park_mm);
+    let tip = model.tip_mm(0).unwrap();
+    assert!((tip - park).abs() < 3.0, "parked at {tip} mm, park is {park} mm");
+
+    // The user puts a new spool in slot 2, its tip through the drive gear past the slot sensor.
+    let model = printer.link_mut().sim_mut().model_mut();
+    model.remove_filament(2);
+    model.insert_filament(2, -90.0);
+    assert_eq!(run(&mut printer, &mut op, RequestCode::Load, 2), OK);
+    let tip = printer.link().sim().model().tip_mm(2).unwrap();
+    assert!(
+        (tip - park).abs() < 3.0,
+        "preloaded to {tip} mm, park is {park} mm"
+    );
+}
+
+#[test]
+fn eject_waits_for_continue_then_the_slot_is_empty() {
+    let (mut printer, mut op) = connected();
+    assert_eq!(run(&mut printer, &mut op, RequestCode::Eject, 1), OK);
+    assert!(op.events.contains(&PrinterEvent::Error(
+        Request::new(RequestCode::Eject, 1),
+        ErrorCode::FILAMENT_EJECTED
+    )));
+    assert_eq!(printer.link().sim().model().tip_mm(1), None);
+    // The next tool change on that slot finds no filament and says so.
+    let outcome = run(&mut printer, &mut op, RequestCode::Tool, 1);
+    assert_eq!(outcome, Outcome::GaveUp(ErrorCode::FINDA_DIDNT_SWITCH_ON));
+}
+
+#[test]
+fn a_slot_the_unit_lacks_is_an_invalid_tool_and_the_next_command_works() {
+    let (mut printer, mut op) = connected();
+    let outcome = run(&mut printer, &mut op, RequestCode::Tool, 7);
+    assert_eq!(outcome, Outcome::GaveUp(ErrorCode::INVALID_TOOL));
+    assert_eq!(run(&mut printer, &mut op, RequestCode::Tool, 2), OK);
+}
+
+#[test]
+fn a_jam_fails_after_three_automatic_retries_and_clears_with_retry() {
+    let (mut printer, mut op) = connected();
+    printer
+        .link_mut()
+        .sim_mut()
+        .inject(mmu_sim::SimFault::Model(mmu_model::Fault::BowdenJam));
+    let outcome = run(&mut printer, &mut op, RequestCode::Tool, 1);
+    let Outcome::GaveUp(error) = outcome else {
+        panic!("a Bowden jam cannot load: {outcome:?}");
+    };
+    let retries = op
+        .events
+        .iter()
+        .filter(|e| matches!(e, PrinterEvent::AutoRetry(..)))
+        .count();
+    assert_eq!(retries, 3, "{:?}", op.events);
+    assert!(printer.link().sim().model().fsensor_state() == 0, "{error}");
+}
+
+#[test]
+fn corrupted_and_dropped_bytes_cost_time_not_the_tool_change() {
+    let (mut printer, mut op) = connected();
+    let sim = printer.link_mut().sim_mut();
+    sim.inject(mmu_sim::SimFault::UartCorrupt { probability: 0.003 });
+    sim.inject(mmu_sim::SimFault::UartDrop { probability: 0.003 });
+    for slot in [1, 2] {
+        let outcome = run(&mut printer, &mut op, RequestCode::Tool, slot);
+        assert_eq!(outcome, OK, "{:?}", op.events);
+    }
+    let lost = op
+        .events
+        .iter()
+        .filter(|e| matches!(e, PrinterEvent::LinkLost(_)))
+        .count();
+    assert!(lost > 0, "the faults hit the link");
+    assert_eq!(printer.link().sim().model().loaded_slot(), Some(2));
+}
+
+#[test]
+fn a_reset_restarts_the_unit_and_the_printer_connects_again() {
+    let (mut printer, mut op) = connected();
+    let first = printer.reset(&mut op, 0).unwrap();
+    assert_eq!(
+        (first.code, first.param, first.param_value),
+        (RequestCode::Reset, mmu_protocol::ParamCode::Finished, Some(0))
+    );
+    let connects = op
+        .events
+        .iter()
+        .filter(|e| matches!(e, PrinterEvent::Connected { .. }))
+        .count();
+    assert_eq!(connects, 2);
+}
+
+#[test]
+fn a_printer_expecting_another_version_stops_with_the_update_screen() {
+    let sim = Sim::new(SimOptions::default()).unwrap();
+    let options = PrinterOptions {
+        version: (3, 0, 2),
+        ..PrinterOptions::default()
+    };
+    let mut printer = Printer::new(SimLink::new(sim), options);
+    let error = printer.connect(&mut Watcher::default()).unwrap_err();
+    assert!(
+        matches!(
+            error,
+            mmu_sim::PrinterError::VersionMismatch {
+                part: 2,
+                got: Some(3)
+            }
+        ),
+        "{error}"
+    );
 }
