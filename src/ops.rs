@@ -23,6 +23,12 @@ pub type Plan = Vec<Phase, MAX_PHASES>;
 
 /// How long a check may wait for the sensors to settle after start, ms.
 const SENSOR_SETTLE_MS: u64 = 1000;
+/// How long the Bowden tube must stay compressed before the extruder's gears count as holding
+/// the tip, ms (one noisy reading is not enough).
+const HELD_CONFIRM_MS: u64 = 60;
+/// Extra travel allowed to the push into the extruder beyond twice its nominal distance, mm: the
+/// printer pushes its own extra load + 2 mm, and the tube takes up some before it holds.
+const NOZZLE_PUSH_MARGIN_MM: u16 = 10;
 
 /// One bounded step of a command.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -156,7 +162,10 @@ fn bounds(phase: Phase, config: &Config) -> Option<Bounds> {
         ),
         Phase::FeedToNozzle { .. } => forward(
             config.slow_speed,
-            config.extra_load_mm.saturating_mul(2),
+            config
+                .extra_load_mm
+                .saturating_mul(2)
+                .saturating_add(NOZZLE_PUSH_MARGIN_MM),
             ErrorCode::MOVE_PULLEY_FAILED,
         ),
         Phase::UnloadToHub { .. } => reverse(
@@ -201,9 +210,14 @@ pub enum Status {
 #[derive(Debug, Clone, Copy)]
 struct PhaseRun {
     started: Instant,
+    /// Odometry when this attempt started: the bounds count from here.
     from_centi: i32,
+    /// Odometry when the phase first started, kept across Retry: distance goals count from here.
+    goal_from_centi: i32,
     /// Odometry at a milestone inside the phase (the hub cleared, the printer's sensor cleared).
     mark_centi: Option<i32>,
+    /// Since when the Bowden tube reads compressed.
+    compressed_since: Option<Instant>,
 }
 
 /// One command being carried out.
@@ -220,6 +234,8 @@ pub struct Operation {
     /// Odometry of a slot when the hub sensor last saw its tip leave, so parking that follows an
     /// unload measures from the hub and not from where the unload stopped.
     hub_cleared: Option<(usize, i32)>,
+    /// The failed phase's [`PhaseRun::goal_from_centi`], for the attempt after Retry.
+    resume_goal_from: Option<i32>,
 }
 
 impl Operation {
@@ -239,6 +255,7 @@ impl Operation {
             status,
             trust_sensors: false,
             hub_cleared: None,
+            resume_goal_from: None,
         }
     }
 
@@ -313,6 +330,7 @@ impl Operation {
     fn advance(&mut self) {
         self.index += 1;
         self.run = None;
+        self.resume_goal_from = None;
         self.status = match self.phase() {
             Some(phase) => Status::Running(phase.progress()),
             None => Status::Finished,
@@ -325,7 +343,7 @@ impl Operation {
         {
             feeder.brake(now, config);
         }
-        self.run = None;
+        self.resume_goal_from = self.run.take().map(|run| run.goal_from_centi);
         self.status = Status::Failed(error);
     }
 
@@ -373,15 +391,19 @@ impl Operation {
             return Outcome::Fail(ErrorCode::INVALID_TOOL);
         };
         let odometry = feeder.odometry_centi();
+        let resume = self.resume_goal_from.take();
         let run = *self.run.get_or_insert(PhaseRun {
             started: now,
             from_centi: odometry,
+            goal_from_centi: resume.unwrap_or(odometry),
             mark_centi: None,
+            compressed_since: None,
         });
-        let moved_mm = match bounds.direction {
-            Direction::Forward => (odometry - run.from_centi) / 100,
-            Direction::Reverse => (run.from_centi - odometry) / 100,
+        let travel = |from: i32| match bounds.direction {
+            Direction::Forward => (odometry - from) / 100,
+            Direction::Reverse => (from - odometry) / 100,
         };
+        let (moved_mm, toward_goal_mm) = (travel(run.from_centi), travel(run.goal_from_centi));
 
         if let Some(fault) = [
             SensorId::MotorHall(slot),
@@ -424,7 +446,7 @@ impl Operation {
                 if unit.fsensor_triggered() {
                     return Outcome::Fail(ErrorCode::FSENSOR_TOO_EARLY);
                 }
-                if moved_mm >= i32::from(bounds.max_mm) {
+                if toward_goal_mm >= i32::from(bounds.max_mm) {
                     Goal::Reached
                 } else {
                     Goal::Drive
@@ -438,15 +460,15 @@ impl Operation {
                 }
             }
             Phase::FeedToNozzle { .. } => {
-                // The extruder has the filament when it pulled it in, or when its idle gears hold
-                // the tip and the tube fills up behind it (its push came before this phase).
-                if moved_mm >= i32::from(config.extra_load_mm)
-                    || bowden_compressed(unit.hub.tension.reading(), config)
-                {
-                    Goal::Reached
-                } else {
-                    Goal::Follow
-                }
+                // The extruder has the filament when its gears hold the tip and the tube fills up
+                // behind it: after the printer's own push, or at once if that push came first.
+                // Odometry alone would be fooled by a slipping drive; it decides only without a
+                // tension reading.
+                let held = match unit.hub.tension.reading() {
+                    Some(tension) => self.compressed_for(tension, now, config) >= HELD_CONFIRM_MS,
+                    None => toward_goal_mm >= i32::from(config.extra_load_mm),
+                };
+                if held { Goal::Reached } else { Goal::Follow }
             }
             Phase::UnloadToHub { .. } => {
                 if unit.fsensor_triggered() && moved_mm >= i32::from(config.unload_check_mm) {
@@ -490,6 +512,19 @@ impl Operation {
         Outcome::Continue
     }
 
+    /// How long the Bowden tube has read compressed (well past the follower's deadband), ms.
+    fn compressed_for(&mut self, tension: u16, now: Instant, config: &Config) -> u64 {
+        let compressed =
+            u32::from(tension) + 2 * u32::from(config.tension_deadband) < u32::from(config.tension_neutral);
+        let Some(run) = self.run.as_mut() else { return 0 };
+        run.compressed_since = if compressed {
+            run.compressed_since.or(Some(now))
+        } else {
+            None
+        };
+        run.compressed_since.map_or(0, |since| now.millis_since(since))
+    }
+
     fn hub_mark(&self, slot: usize) -> Option<i32> {
         self.hub_cleared
             .filter(|&(cleared, _)| cleared == slot)
@@ -512,7 +547,9 @@ impl Operation {
                 .get_or_insert(PhaseRun {
                     started: now,
                     from_centi: 0,
+                    goal_from_centi: 0,
                     mark_centi: None,
+                    compressed_since: None,
                 })
                 .started;
             if now.millis_since(started) > SENSOR_SETTLE_MS {
@@ -570,14 +607,6 @@ pub fn follow_duty(speed: u16, tension: Option<u16>, config: &Config) -> Duty {
     });
     let limit = i32::from(config.tension_max_duty.min(config.max_duty));
     Duty::from_permille((open_loop + correction).clamp(0, limit) as u16)
-}
-
-/// The Bowden tube is pushed together well past the follower's deadband: the filament's tip is
-/// held ahead.
-fn bowden_compressed(tension: Option<u16>, config: &Config) -> bool {
-    tension.is_some_and(|value| {
-        u32::from(value) + 2 * u32::from(config.tension_deadband) < u32::from(config.tension_neutral)
-    })
 }
 
 /// What a finished phase says about where the slot's filament is now.

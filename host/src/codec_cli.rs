@@ -522,11 +522,13 @@ fn parse_number(text: &str, max: u16) -> Result<u16, String> {
         .ok_or_else(|| format!("{text} is too large (at most {max})"))
 }
 
-fn parse_u8(text: &str) -> Result<u8, String> {
+/// A `u8`, decimal or `0x` hex (also for `mmu printer`).
+pub(crate) fn parse_u8(text: &str) -> Result<u8, String> {
     parse_number(text, u8::MAX.into()).and_then(|v| u8::try_from(v).map_err(|e| e.to_string()))
 }
 
-fn parse_u16(text: &str) -> Result<u16, String> {
+/// A `u16`, decimal or `0x` hex (also for `mmu printer`).
+pub(crate) fn parse_u16(text: &str) -> Result<u16, String> {
     parse_number(text, u16::MAX)
 }
 

@@ -128,6 +128,26 @@ fn filament_sensor_state(value: u8) -> &'static str {
     }
 }
 
+/// A request as on the wire without its CRC, e.g. `T1` or `Wb 1e`.
+pub fn request_label(request: &Request) -> String {
+    without_crc(request.encode().as_str()).to_string()
+}
+
+/// A response as on the wire without its CRC, e.g. `T1 E8003` or `X0 F0`.
+pub fn response_label(response: &Response) -> String {
+    without_crc(response.encode().as_str()).to_string()
+}
+
+/// A frame's text up to its `*<crc>`.
+fn without_crc(frame: &str) -> &str {
+    frame.split_once('*').map_or(frame, |(body, _)| body)
+}
+
+/// An error code as a person reads it: `FSENSOR_DIDNT_SWITCH_ON (printer screen 04103)`.
+pub fn error_meaning(error: ErrorCode) -> String {
+    format!("{error} (printer screen {:05})", error.printer_screen())
+}
+
 /// What a request asks for, e.g. `tool change slot 1` or `write register 0x0b Extra_Load_Distance = 5`.
 pub fn request_meaning(request: &Request) -> String {
     let v = request.value;
@@ -172,10 +192,7 @@ pub fn response_meaning(response: &Response) -> String {
             Err(_) => format!("UnknownProgress{p:x}"),
         },
         (ParamCode::Processing, None) => "processing (no progress code)".to_string(),
-        (ParamCode::Error, Some(e)) => {
-            let code = ErrorCode(e);
-            format!("{code} (printer screen {:05})", code.printer_screen())
-        }
+        (ParamCode::Error, Some(e)) => error_meaning(ErrorCode(e)),
         (ParamCode::Error, None) => "error (no error code)".to_string(),
         (ParamCode::Finished, Some(r)) => match ResultCode(r).name() {
             Some(name) => format!("finished {name}"),
@@ -241,5 +258,8 @@ mod tests {
         );
         let s3 = Response::read(&Request::new(RequestCode::Version, 3), 896);
         assert_eq!(response_meaning(&s3), "version build = 896");
+        assert_eq!(request_label(&Request::write(0x0b, 30)), "Wb 1e");
+        assert_eq!(request_label(&t1), "T1");
+        assert_eq!(response_label(&e), "T0 E8003");
     }
 }

@@ -1,12 +1,623 @@
-//! `mmu printer`: the printer's side, against a unit on a serial port or the simulator.
+//! `mmu printer`: the printer's side of the MMU protocol, as Prusa's firmware plays it, against a
+//! unit on a serial port (`--port`) or the in-process simulator (`--sim`).
+//!
+//! The protocol logic (handshake, `Q0` heartbeat, `f` reports, register poll, automatic Retry,
+//! re-handshake after a link timeout) is [`mmu_sim::Printer`]. This module adds the printer's
+//! menu actions on top of it ([`Session`]: status, tool change, preload, unload, eject, cut,
+//! home, reset, register access, buttons) and soak runs; [`console`] is the person at the
+//! printer (what is shown, how dialogs are answered) and [`serial`] the wire to a real unit.
+//! `mmu demo` ([`crate::demo`]) plays a script on the same [`Session`].
+
+pub mod console;
+pub mod serial;
 
 use std::error::Error;
+use std::fmt;
+use std::path::PathBuf;
+
+use clap::{Subcommand, ValueEnum};
+use mmu_protocol::{ErrorCode, ParamCode, Request, RequestCode, Response};
+use mmu_sim::printer::POLLED_REGISTERS;
+use mmu_sim::soak::{SoakOptions, SoakReport};
+use mmu_sim::{
+    FAULT_HELP, Outcome, Printer, PrinterError, PrinterOptions, ScheduledFault, Sim, SimLink, SimOptions,
+};
+use serde_json::{Map, Value, json};
+
+use crate::codec_cli::{parse_u8, parse_u16};
+use crate::explain::{
+    error_meaning, register_name, request_label, request_meaning, response_label, response_meaning,
+};
+use console::{Console, JsonLine, Target, result_name, state_text};
+use serial::{EventsTail, FsensorSource, SerialLink};
+
+/// Shown after `mmu printer --help`.
+const AFTER_HELP: &str = "\
+Numbers are decimal or 0x hex. Faults (--fault, simulator only):";
 
 /// `mmu printer` options.
 #[derive(Debug, clap::Args)]
-pub struct PrinterArgs {}
+#[command(after_long_help = format!("{AFTER_HELP}\n{FAULT_HELP}"))]
+pub struct PrinterArgs {
+    /// A real unit on this serial port (115200 8N1), e.g. /dev/ttyACM0.
+    #[arg(long, value_name = "DEV", conflicts_with = "sim")]
+    pub port: Option<String>,
+    /// The in-process simulator, in virtual time (as fast as possible unless --time-scale).
+    #[arg(long, global = true)]
+    pub sim: bool,
+    /// The simulated unit (--sim only).
+    #[command(flatten)]
+    pub sim_options: SimTargetArgs,
+    /// Follow the printer's filament sensor in the events file that `mmu sim --events PATH`
+    /// writes (--port only).
+    #[arg(long, value_name = "PATH", requires = "port", conflicts_with = "fsensor")]
+    pub fsensor_events: Option<PathBuf>,
+    /// The printer's filament sensor, fixed (--port only): 0 no filament, 1 at the sensor,
+    /// 2 in the nozzle. Default 0.
+    #[arg(long, value_name = "STATE", requires = "port", value_parser = clap::value_parser!(u8).range(0..=3))]
+    pub fsensor: Option<u8>,
+    /// The unit firmware version the printer supports; S0..S2 must answer it exactly
+    /// (MK4, MK3.5, Core One: 3.0.3; MK3S: 3.0.2).
+    #[arg(long, value_name = "X.Y.Z", default_value = "3.0.3", value_parser = parse_version)]
+    pub expect_version: (u8, u8, u8),
+    /// One JSON object per line per event, and a final `result` object.
+    #[arg(long, global = true)]
+    pub json: bool,
+    /// Show every frame sent (`>`) and received (`<`).
+    #[arg(short, long, global = true)]
+    pub verbose: bool,
+    /// What the printer does.
+    #[command(subcommand)]
+    pub action: Action,
+}
+
+/// The simulated unit of `--sim`.
+#[derive(Debug, clap::Args)]
+pub struct SimTargetArgs {
+    /// Slots of the simulated unit.
+    #[arg(long, value_name = "N", default_value_t = 3, conflicts_with = "port")]
+    pub slots: usize,
+    /// Seed of the simulator's random draws (and of `soak` unless it has its own).
+    #[arg(long, value_name = "S", default_value_t = 1, conflicts_with = "port")]
+    pub seed: u64,
+    /// Inject a fault, e.g. `jam:1` or `uart-drop:0.05@2000-9000` (repeatable; the list is
+    /// at the end of --help).
+    #[arg(long = "fault", value_name = "SPEC", conflicts_with = "port")]
+    pub faults: Vec<ScheduledFault>,
+    /// Pace the simulator at K × real time (default, or 0: as fast as possible).
+    #[arg(long, value_name = "K", conflicts_with = "port", value_parser = parse_time_scale)]
+    pub time_scale: Option<f64>,
+}
+
+/// What `mmu printer` does, as the printer's menus and G-codes would.
+#[derive(Debug, Subcommand)]
+pub enum Action {
+    /// Connect; show the unit's version, its state (the first Q0 answer), FINDA and the polled
+    /// registers.
+    Status,
+    /// Tool change `T<SLOT>`: the loaded slot comes out, SLOT goes to the nozzle.
+    Tool {
+        /// The slot (0 is the first).
+        #[arg(value_parser = parse_u8)]
+        slot: u8,
+    },
+    /// Preload `L<SLOT>`: feed the slot's filament to the hub sensor, then park it.
+    Load {
+        /// The slot.
+        #[arg(value_parser = parse_u8)]
+        slot: u8,
+    },
+    /// Unload `U0`: the loaded filament goes back to its park position.
+    Unload,
+    /// Eject: `U0` if FINDA sees filament, then `E<SLOT>`; the printer's FILAMENT_EJECTED dialog
+    /// is answered with Continue (`B1`).
+    Eject {
+        /// The slot.
+        #[arg(value_parser = parse_u8)]
+        slot: u8,
+    },
+    /// Cut: `U0` if FINDA sees filament, then `K<SLOT>`.
+    Cut {
+        /// The slot.
+        #[arg(value_parser = parse_u8)]
+        slot: u8,
+    },
+    /// Home `H0`: the unit checks its sensors.
+    Home,
+    /// Reset `X0` (with --erase: `X2a`, erase the EEPROM too), connect again and show the first
+    /// Q0 answer.
+    Reset {
+        /// Erase the unit's persisted data first (`M709 X42`).
+        #[arg(long)]
+        erase: bool,
+    },
+    /// Read register ADDRESS: `R<ADDRESS>`.
+    Read {
+        /// The register, e.g. 0x08.
+        #[arg(value_parser = parse_u8)]
+        address: u8,
+    },
+    /// Write VALUE to register ADDRESS: `W<ADDRESS> <VALUE>`.
+    Write {
+        /// The register, e.g. 0x0b.
+        #[arg(value_parser = parse_u8)]
+        address: u8,
+        /// The value, 0..=65535.
+        #[arg(value_parser = parse_u16)]
+        value: u16,
+    },
+    /// Press a button: `B<N>` (0 Right, 1 Middle = Retry/Continue, 2 Left).
+    Button {
+        /// The button.
+        #[arg(value_parser = parse_u8)]
+        button: u8,
+    },
+    /// Many tool changes on the simulator, with random faults if asked; prints the figures and
+    /// exits non-zero when a change failed, got stuck or panicked.
+    Soak(SoakArgs),
+}
+
+impl Action {
+    /// The action's name, as on the command line.
+    fn name(&self) -> &'static str {
+        match self {
+            Action::Status => "status",
+            Action::Tool { .. } => "tool",
+            Action::Load { .. } => "load",
+            Action::Unload => "unload",
+            Action::Eject { .. } => "eject",
+            Action::Cut { .. } => "cut",
+            Action::Home => "home",
+            Action::Reset { .. } => "reset",
+            Action::Read { .. } => "read",
+            Action::Write { .. } => "write",
+            Action::Button { .. } => "button",
+            Action::Soak(_) => "soak",
+        }
+    }
+}
+
+/// `mmu printer soak` options.
+#[derive(Debug, clap::Args)]
+pub struct SoakArgs {
+    /// Tool changes to run.
+    #[arg(long, value_name = "N", default_value_t = 100)]
+    pub changes: u32,
+    /// Faults to inject.
+    #[arg(long, value_enum, default_value_t = Faults::None)]
+    pub faults: Faults,
+    /// Seed of the run (default: the simulator's --seed).
+    #[arg(long, value_name = "S")]
+    pub seed: Option<u64>,
+}
+
+/// Faults of a soak run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Faults {
+    /// None: every change must simply work.
+    None,
+    /// Random faults, injected and later cleared.
+    Random,
+}
+
+/// Why an action failed, with the unit's error when it stopped on one.
+#[derive(Debug)]
+pub struct Failure {
+    message: String,
+    error: Option<ErrorCode>,
+}
+
+impl Failure {
+    /// A failure with no unit error behind it.
+    pub fn new(message: impl Into<String>) -> Self {
+        Failure {
+            message: message.into(),
+            error: None,
+        }
+    }
+
+    /// A command stopped on the unit's `error`.
+    fn unit(message: String, error: ErrorCode) -> Self {
+        Failure {
+            message,
+            error: Some(error),
+        }
+    }
+
+    /// The failure as the fields of a final JSON `result` object.
+    fn details(&self) -> Map<String, Value> {
+        let mut details = Map::new();
+        details.insert("message".into(), self.message.clone().into());
+        if let Some(error) = self.error {
+            details.insert("error".into(), error.to_string().into());
+            details.insert("screen".into(), format!("{:05}", error.printer_screen()).into());
+        }
+        details
+    }
+}
+
+impl fmt::Display for Failure {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.message)
+    }
+}
+
+impl Error for Failure {}
+
+impl From<PrinterError> for Failure {
+    fn from(error: PrinterError) -> Self {
+        Failure::new(error.to_string())
+    }
+}
+
+/// What a successful action found: the fields of the final JSON `result` object.
+pub type Details = Map<String, Value>;
+
+/// The printer on a link with the person at it: the printer's menu actions.
+pub struct Session<L: Target> {
+    printer: Printer<L>,
+    console: Console,
+}
+
+impl<L: Target> Session<L> {
+    /// A printer set up with `options` on `link`, not yet connected.
+    pub fn new(link: L, options: PrinterOptions, console: Console) -> Self {
+        Session {
+            printer: Printer::new(link, options),
+            console,
+        }
+    }
+
+    /// The person at the printer.
+    pub fn console(&self) -> &Console {
+        &self.console
+    }
+
+    /// The link, to play the user on the simulator.
+    pub fn link_mut(&mut self) -> &mut L {
+        self.printer.link_mut()
+    }
+
+    /// The printer's clock, ms.
+    pub fn now_ms(&self) -> u64 {
+        self.printer.link().now_ms()
+    }
+
+    /// Handshake; returns the unit's state (the first `Q0` answer) and says so when the unit is
+    /// not at rest.
+    pub fn connect(&mut self) -> Result<Response, Failure> {
+        let state = self.printer.connect(&mut self.console)?;
+        if state.param != ParamCode::Finished {
+            let text = format!("the unit is not at rest: {}", state_text(&state));
+            self.console.note(self.now_ms(), &text);
+        }
+        Ok(state)
+    }
+
+    /// Run a command (`T L U E K H`) to its end.
+    pub fn command(&mut self, request: Request) -> Result<Details, Failure> {
+        let outcome = self.printer.command(&mut self.console, request)?;
+        let label = request_label(&request);
+        match outcome {
+            Outcome::Finished(result) => {
+                let mut details = Details::new();
+                details.insert("request".into(), label.into());
+                details.insert("result".into(), result_name(result).into());
+                Ok(details)
+            }
+            Outcome::Rejected => Err(Failure::new(format!(
+                "{label} rejected: the unit answered R every time"
+            ))),
+            Outcome::GaveUp(error @ ErrorCode::INVALID_TOOL) => Err(Failure::unit(
+                format!(
+                    "{label} rejected by the unit: it has no slot {}: {}",
+                    request.value,
+                    error_meaning(error)
+                ),
+                error,
+            )),
+            Outcome::GaveUp(error) => Err(Failure::unit(
+                format!("{label} stopped on error {}", error_meaning(error)),
+                error,
+            )),
+        }
+    }
+
+    /// Eject as the printer does: `U0` first if FINDA sees filament, then `E<slot>`; the
+    /// console answers the FILAMENT_EJECTED dialog.
+    pub fn eject(&mut self, slot: u8) -> Result<Details, Failure> {
+        self.unload_if_finda()?;
+        self.command(Request::new(RequestCode::Eject, slot))
+    }
+
+    /// Cut as the printer does: `U0` first if FINDA sees filament, then `K<slot>`.
+    pub fn cut(&mut self, slot: u8) -> Result<Details, Failure> {
+        self.unload_if_finda()?;
+        self.command(Request::new(RequestCode::Cut, slot))
+    }
+
+    fn unload_if_finda(&mut self) -> Result<(), Failure> {
+        if self.printer.finda() {
+            self.console
+                .note(self.now_ms(), "FINDA sees filament: the printer unloads first");
+            self.command(Request::new(RequestCode::Unload, 0))?;
+        }
+        Ok(())
+    }
+
+    /// Show the unit's version, `state`, FINDA and the polled registers.
+    pub fn status(&mut self, state: &Response) -> Details {
+        let mut details = Details::new();
+        if let Some(((major, minor, revision), build)) = self.console.version() {
+            let version = format!("{major}.{minor}.{revision}");
+            self.console
+                .say(&format!("unit firmware: {version}, build {build}"));
+            details.insert("version".into(), version.into());
+            details.insert("build".into(), build.into());
+        }
+        self.console.say(&format!("state (Q0): {}", state_text(state)));
+        details.extend(state_details(state));
+        let finda = self.printer.finda();
+        let seen = if finda { "filament present" } else { "no filament" };
+        self.console.say(&format!("FINDA: {seen}"));
+        details.insert("finda".into(), finda.into());
+        self.console.say("polled registers:");
+        let mut registers = Vec::new();
+        for address in POLLED_REGISTERS {
+            let Some(value) = self.printer.polled(address) else {
+                self.console.say(&format!("  register 0x{address:02x}: not read"));
+                continue;
+            };
+            let answer = Response::read(&Request::new(RequestCode::Read, address), value);
+            self.console.say(&format!("  {}", response_meaning(&answer)));
+            registers.push(json!({
+                "address": address,
+                "name": register_name(address),
+                "value": value,
+            }));
+        }
+        details.insert("registers".into(), registers.into());
+        details
+    }
+
+    /// `X<value>`, then connect again; show the first `Q0` answer.
+    pub fn reset(&mut self, value: u8) -> Result<Details, Failure> {
+        let state = self.printer.reset(&mut self.console, value)?;
+        self.console
+            .say(&format!("after the reset, Q0: {}", state_text(&state)));
+        Ok(state_details(&state))
+    }
+
+    /// A request that is not a command (`R`, `W`, `B`): its answer, or a failure when the unit
+    /// refuses it.
+    pub fn ask(&mut self, request: Request) -> Result<Details, Failure> {
+        let answer = self.printer.request(&mut self.console, request)?;
+        let label = request_label(&request);
+        let what = request_meaning(&request);
+        if (answer.code, answer.value) != (request.code, request.value) {
+            let got = response_label(&answer);
+            return Err(Failure::new(format!("{label} ({what}): unexpected answer {got}")));
+        }
+        if answer.param != ParamCode::Accepted {
+            let said = response_meaning(&answer);
+            return Err(Failure::new(format!("{label} ({what}): {said} by the unit")));
+        }
+        let meaning = match answer.param_value {
+            Some(_) => response_meaning(&answer),
+            None => format!("{what}: accepted"),
+        };
+        self.console.say(&meaning);
+        let mut details = Details::new();
+        details.insert("request".into(), label.into());
+        details.insert("meaning".into(), meaning.into());
+        if let Some(value) = answer.param_value {
+            details.insert("value".into(), value.into());
+        }
+        Ok(details)
+    }
+
+    /// Print the final JSON `result` line for `action` and stop the spinner.
+    pub fn finish(&mut self, action: &'static str, result: &Result<Details, Failure>) {
+        let (ok, details) = match result {
+            Ok(details) => (true, details.clone()),
+            Err(failure) => (false, failure.details()),
+        };
+        self.console.close();
+        self.console.emit(&JsonLine::Result { action, ok, details });
+    }
+}
+
+/// The unit's state (a `Q0` answer) as JSON fields.
+fn state_details(state: &Response) -> Details {
+    let mut details = Details::new();
+    details.insert("state".into(), response_label(state).into());
+    details.insert("state_meaning".into(), response_meaning(state).into());
+    details
+}
 
 /// Run `mmu printer`.
-pub fn run(_args: &PrinterArgs) -> Result<(), Box<dyn Error>> {
-    Err("not written yet".into())
+pub fn run(args: &PrinterArgs) -> Result<(), Box<dyn Error>> {
+    let console = Console::new(args.json, args.verbose);
+    if let Action::Soak(soak) = &args.action {
+        return run_soak(args, soak, console);
+    }
+    let options = printer_options(args);
+    match (&args.port, args.sim) {
+        (Some(port), false) => {
+            let link = SerialLink::open(port, fsensor_source(args))?;
+            run_session(Session::new(link, options, console), &args.action)
+        }
+        (None, true) => {
+            let link = sim_link(&args.sim_options)?;
+            run_session(Session::new(link, options, console), &args.action)
+        }
+        _ => Err("choose the unit: --port DEV (a real one) or --sim (the simulator)".into()),
+    }
+}
+
+/// Connect, perform `action`, print the result line.
+fn run_session<L: Target>(mut session: Session<L>, action: &Action) -> Result<(), Box<dyn Error>> {
+    let result = perform(&mut session, action);
+    session.finish(action.name(), &result);
+    result.map(|_| ()).map_err(Into::into)
+}
+
+/// Connect, then do what `action` asks.
+fn perform<L: Target>(session: &mut Session<L>, action: &Action) -> Result<Details, Failure> {
+    let state = session.connect()?;
+    use RequestCode::{Button, Home, Load, Read, Tool, Unload};
+    match *action {
+        Action::Status => Ok(session.status(&state)),
+        Action::Tool { slot } => session.command(Request::new(Tool, slot)),
+        Action::Load { slot } => session.command(Request::new(Load, slot)),
+        Action::Unload => session.command(Request::new(Unload, 0)),
+        Action::Eject { slot } => session.eject(slot),
+        Action::Cut { slot } => session.cut(slot),
+        Action::Home => session.command(Request::new(Home, 0)),
+        Action::Reset { erase } => session.reset(if erase { 42 } else { 0 }),
+        Action::Read { address } => session.ask(Request::new(Read, address)),
+        Action::Write { address, value } => session.ask(Request::write(address, value)),
+        Action::Button { button } => session.ask(Request::new(Button, button)),
+        Action::Soak(_) => Err(Failure::new("soak runs on its own simulator")),
+    }
+}
+
+/// The printer's set-up: its supported unit version, the rest as Prusa's firmware has it.
+fn printer_options(args: &PrinterArgs) -> PrinterOptions {
+    PrinterOptions {
+        version: args.expect_version,
+        ..PrinterOptions::default()
+    }
+}
+
+/// The simulator of `--sim`, with its faults scheduled and its pace set.
+pub fn sim_link(args: &SimTargetArgs) -> Result<SimLink, Box<dyn Error>> {
+    let mut sim = Sim::new(SimOptions {
+        slots: args.slots,
+        seed: args.seed,
+        ..SimOptions::default()
+    })?;
+    for fault in &args.faults {
+        sim.schedule(*fault);
+    }
+    let mut link = SimLink::new(sim);
+    link.set_time_scale(args.time_scale);
+    Ok(link)
+}
+
+/// The printer's filament sensor for `--port`.
+fn fsensor_source(args: &PrinterArgs) -> FsensorSource {
+    match &args.fsensor_events {
+        Some(path) => {
+            if !path.exists() && !args.json {
+                eprintln!(
+                    "mmu: {} does not exist yet; the filament sensor reads 0 until it does",
+                    path.display()
+                );
+            }
+            FsensorSource::Events(EventsTail::new(path.clone()))
+        }
+        None => FsensorSource::Fixed(args.fsensor.unwrap_or(0)),
+    }
+}
+
+/// `mmu printer soak`: the report, and a failure when it did not pass.
+fn run_soak(args: &PrinterArgs, soak: &SoakArgs, mut console: Console) -> Result<(), Box<dyn Error>> {
+    if args.port.is_some() {
+        return Err("soak runs on the simulator: drop --port".into());
+    }
+    if !args.sim_options.faults.is_empty() {
+        return Err("soak injects its own faults (--faults random): drop --fault".into());
+    }
+    let seed = soak.seed.unwrap_or(args.sim_options.seed);
+    let options = SoakOptions {
+        changes: soak.changes,
+        random_faults: soak.faults == Faults::Random,
+        seed,
+        sim: SimOptions {
+            slots: args.sim_options.slots,
+            seed,
+            ..SimOptions::default()
+        },
+        printer: printer_options(args),
+    };
+    let bar = console.progress_bar(u64::from(soak.changes), "tool changes");
+    let report = soak_run(&options, &mut |done| {
+        if let Some(bar) = &bar {
+            bar.set_position(u64::from(done));
+        }
+    });
+    if let Some(bar) = bar {
+        bar.finish_and_clear();
+    }
+    console.close();
+    console.say(&report.to_string());
+    console.emit(&JsonLine::Result {
+        action: "soak",
+        ok: report.passed(),
+        details: soak_details(&report, seed),
+    });
+    if report.passed() {
+        Ok(())
+    } else {
+        Err(format!("soak failed: {}", report.summary_line()).into())
+    }
+}
+
+/// The soak run itself (`mmu_sim::soak`), kept apart so the wiring above does not depend on how
+/// it is called.
+fn soak_run(options: &SoakOptions, progress: &mut dyn FnMut(u32)) -> SoakReport {
+    mmu_sim::soak::run(options, progress)
+}
+
+fn soak_details(report: &SoakReport, seed: u64) -> Details {
+    let mut details = Details::new();
+    details.insert("seed".into(), seed.into());
+    details.insert("summary".into(), report.summary_line().into());
+    details.insert("report".into(), report.to_string().into());
+    details.insert("changes".into(), report.changes.into());
+    details.insert("faults_injected".into(), report.faults_injected.into());
+    details.insert("recovered".into(), report.recovered.into());
+    details.insert("unrecovered".into(), report.unrecovered.into());
+    details.insert("stuck".into(), report.stuck.into());
+    details.insert("panics".into(), report.panics.into());
+    details
+}
+
+/// `3.0.3` → (3, 0, 3).
+fn parse_version(text: &str) -> Result<(u8, u8, u8), String> {
+    let parts: Vec<Option<u8>> = text.split('.').map(|part| part.parse().ok()).collect();
+    match parts.as_slice() {
+        [Some(major), Some(minor), Some(revision)] => Ok((*major, *minor, *revision)),
+        _ => Err(format!("{text:?} is not a version such as 3.0.3")),
+    }
+}
+
+/// A pace: a finite number ≥ 0 (0: as fast as possible).
+pub fn parse_time_scale(text: &str) -> Result<f64, String> {
+    text.parse::<f64>()
+        .ok()
+        .filter(|k| k.is_finite() && *k >= 0.0)
+        .ok_or_else(|| format!("{text:?} is not a time scale (a number ≥ 0; 0: as fast as possible)"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn numbers_and_versions() {
+        assert_eq!(parse_u8("0x0b"), Ok(11));
+        assert_eq!(parse_u8("30"), Ok(30));
+        assert!(parse_u8("256").is_err());
+        assert!(parse_u8("0x").is_err());
+        assert!(parse_u8("-1").is_err());
+        assert_eq!(parse_u16("0xffff"), Ok(65535));
+        assert_eq!(parse_version("3.0.2"), Ok((3, 0, 2)));
+        assert!(parse_version("3.0").is_err());
+        assert!(parse_version("3.0.x").is_err());
+        assert_eq!(parse_time_scale("0"), Ok(0.0));
+        assert!(parse_time_scale("-1").is_err());
+        assert!(parse_time_scale("inf").is_err());
+    }
 }

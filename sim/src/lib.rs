@@ -5,7 +5,8 @@
 //!   Bytes in, bytes out, one millisecond per step: `mmu sim` serves it on stdio or a pty.
 //! - [`printer`]: the printer's side of the protocol over any [`Link`]; [`SimLink`] is the
 //!   in-process one (`mmu printer --sim`).
-//! - [`soak`]: long runs of tool changes with random faults, and the figures they give.
+//! - [`soak`]: long runs of tool changes with random faults, and the figures they give;
+//!   [`timing`]: the physical minimum a tool change is measured against.
 
 pub mod event;
 pub mod fault;
@@ -14,6 +15,7 @@ pub mod logic;
 pub mod printer;
 pub mod sim;
 pub mod soak;
+pub mod timing;
 
 pub use event::{Event, EventKind};
 pub use fault::{FAULT_HELP, ScheduledFault, SimFault, SimFaultKind};

@@ -168,8 +168,9 @@ impl std::fmt::Display for PrinterError {
             }
             PrinterError::Stuck(request) => write!(
                 f,
-                "{} did not finish in time: the unit is stuck",
-                request.encode().as_str().trim_end()
+                "{}{:x} did not finish in time: the unit is stuck",
+                request.code.as_char(),
+                request.value
             ),
         }
     }
@@ -383,14 +384,12 @@ impl<L: Link> Printer<L> {
                 }
                 Err(Fault::Fatal(error)) => return Err(error),
             };
-            if (answer.code, answer.value) != (request.code, request.value) {
-                if answer.code == RequestCode::Reset && answer.param == ParamCode::Finished {
-                    op.event(&mut self.link, &PrinterEvent::Interrupted(request));
-                    return Ok(None);
-                }
-                self.link_lost(op, "garbled")?;
-                self.connect(op)?;
-                continue;
+            // Only `F` must echo the command: a unit that restarted reports `X0 F0` (or its start-up
+            // error, which is handled as this command's, as the printer does).
+            let echoes = (answer.code, answer.value) == (request.code, request.value);
+            if answer.param == ParamCode::Finished && !echoes {
+                op.event(&mut self.link, &PrinterEvent::Interrupted(request));
+                return Ok(None);
             }
             let new = shown != Some(answer);
             shown = Some(answer);

@@ -1,10 +1,60 @@
 //! Soak runs: many tool changes across all slots with random faults injected and later cleared,
 //! recovered as the printer and its user would, and the figures that come out.
 //!
-//! (Contract only; the run itself is being written.)
+//! [`run`] plays a printer ([`Printer`] over [`SimLink`]) against a fresh [`Sim`] and asks for
+//! tool changes, each to a random slot other than the loaded one. With random faults, some changes
+//! ([`FAULT_PROBABILITY`]) get a fault from a mix that matters to the unit (a jam of the target
+//! slot or of the Bowden tube, a slipping or dead drive, sensor noise, a disconnected sensor, a
+//! spool runout, a corrupting or lossy UART), injected at a random moment of up to
+//! [`MAX_FAULT_DELAY_MS`] after the `T` is sent (to the millisecond: the link steps the simulator
+//! one millisecond at a time while the printer waits and strikes in between). Recovery is what a
+//! printer and its user do:
+//!
+//! 1. the printer presses Retry by itself up to three times on errors that have it
+//!    ([`crate::printer::AUTO_RETRIES`]);
+//! 2. then the simulated user fixes the unit (clears the fault; puts a filament back if a runout
+//!    left the slot empty) and presses Retry, up to [`USER_RETRIES`] times; on an error without a
+//!    fault to fix the user just presses Retry that often;
+//! 3. if the change still does not finish, the user gives up: the change is *unrecovered*.
+//!
+//! Faults that raise no error (noise the filters absorb, a tolerated slip, a few lost bytes) are
+//! cleared once the change is over. A change whose printer gives up on the link or whose command
+//! does not end in time ([`PrinterOptions::command_timeout_ms`]) is *stuck*; a panic in the unit
+//! logic or the simulator is caught and counted. After an unrecovered, stuck or panicked change the
+//! rig is rebuilt (a fresh unit with every filament parked, a new connection) so the run goes on;
+//! [`SoakReport::notes`] says what happened with enough detail to reproduce it (the run is
+//! deterministic for its seed and options: the same seed gives the same changes and faults).
+//!
+//! The times of the fault-free changes (the unit's own time from accepting the `T` to finishing
+//! it, as [`Sim::take_finished`] records it) are compared with the physical minimum of
+//! [`crate::timing`].
 
-use crate::printer::PrinterOptions;
-use crate::sim::SimOptions;
+use std::fmt;
+use std::panic::{AssertUnwindSafe, catch_unwind};
+use std::time::Instant;
+
+use mmu_model::{Fault, Rail, Rng, SensorId};
+use mmu_protocol::{ButtonCode, ErrorCode, Request, RequestCode, ResultCode};
+
+use crate::fault::SimFault;
+use crate::link::SimLink;
+use crate::printer::{Decision, Link, Operator, Outcome, Printer, PrinterEvent, PrinterOptions};
+use crate::sim::{CommandRecord, Sim, SimOptions};
+use crate::timing::tool_change_minimum;
+
+/// With random faults, the chance that a tool change gets a fault.
+pub const FAULT_PROBABILITY: f64 = 0.3;
+/// A fault strikes up to this long after the `T` is sent, ms (uniformly drawn, to the
+/// millisecond; a change that ends before its fault's moment runs without it).
+pub const MAX_FAULT_DELAY_MS: u64 = 8000;
+/// Retry presses the simulated user makes on one change's errors (counted again from zero once
+/// the fault is fixed) before giving up.
+pub const USER_RETRIES: u8 = 3;
+/// A finished change must leave the tip at least this close to the extruder gears (where a
+/// turning extruder grips it), mm.
+const GRIP_TOLERANCE_MM: f32 = 0.01;
+/// Keeps the soak's random draws independent of the model's and the UART's ("SOAK").
+const SOAK_STREAM: u64 = 0x534f_414b;
 
 /// What a soak run does.
 #[derive(Debug, Clone)]
@@ -21,6 +71,45 @@ pub struct SoakOptions {
     pub printer: PrinterOptions,
 }
 
+/// How one kind of fault fared.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct FaultKindTally {
+    /// The fault's name, as in `--fault` without its slot and parameters (`jam`, `slip`,
+    /// `disconnect:hub-filament`, `disconnect:motor-hall`, ...).
+    pub kind: String,
+    /// Times injected.
+    pub injected: u32,
+    /// Changes that finished after it.
+    pub recovered: u32,
+    /// Changes that did not finish after it.
+    pub unrecovered: u32,
+    /// Changes that got stuck after it.
+    pub stuck: u32,
+    /// Changes that panicked after it.
+    pub panics: u32,
+}
+
+/// Times of the tool changes that ran without a fault.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct ToolChangeTimes {
+    /// Tool changes timed.
+    pub changes: u32,
+    /// Mean time, s (the unit's: from accepting the `T` to finishing it).
+    pub mean_s: f64,
+    /// Longest time, s.
+    pub max_s: f64,
+    /// Mean physical minimum of the same changes, s ([`crate::timing`]).
+    pub physical_minimum_mean_s: f64,
+}
+
+impl ToolChangeTimes {
+    /// Mean time over mean physical minimum; `None` without timed changes.
+    pub fn ratio_to_minimum(&self) -> Option<f64> {
+        (self.changes > 0 && self.physical_minimum_mean_s > 0.0)
+            .then(|| self.mean_s / self.physical_minimum_mean_s)
+    }
+}
+
 /// What a soak run found.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct SoakReport {
@@ -30,12 +119,35 @@ pub struct SoakReport {
     pub faults_injected: u32,
     /// Faults after which the tool change completed.
     pub recovered: u32,
-    /// Faults after which the tool change failed even once the fault was cleared and Retry pressed.
+    /// Tool changes that failed even once the fault was cleared and Retry pressed; this includes
+    /// changes that failed without any fault ([`SoakReport::failed_without_fault`]).
     pub unrecovered: u32,
     /// Commands that never ended, or a link that never came back.
     pub stuck: u32,
     /// Panics caught in the unit logic or the simulator.
     pub panics: u32,
+    /// Of [`SoakReport::unrecovered`]: changes that failed with no fault injected.
+    pub failed_without_fault: u32,
+    /// Times the rig was rebuilt (a fresh unit with every filament parked, a new printer
+    /// connection) after an unrecovered, stuck or panicked change.
+    pub rig_restarts: u32,
+    /// Per fault kind, in the order they first struck.
+    pub by_fault_kind: Vec<FaultKindTally>,
+    /// Times of the fault-free tool changes.
+    pub tool_change_times: ToolChangeTimes,
+    /// Virtual time simulated, s.
+    pub simulated_s: f64,
+    /// Wall time the run took, s.
+    pub wall_s: f64,
+    /// One line per unrecovered, stuck or panicked change: change number, request, fault and when
+    /// it struck, the errors seen, how it ended and where the filaments were. Not part of the
+    /// [`Display`](fmt::Display) output: a caller prints them after it if it wants.
+    pub notes: Vec<String>,
+    /// One line per injected fault, in order: the change, the fault and when it struck, the
+    /// errors the unit stopped on, and how the change ended.
+    pub fault_log: Vec<String>,
+    /// Why the run stopped before its last change (the rig could not be started), if it did.
+    pub aborted: Option<String>,
 }
 
 impl SoakReport {
@@ -48,8 +160,624 @@ impl SoakReport {
         )
     }
 
-    /// Nothing unrecovered, stuck or panicked.
+    /// Nothing unrecovered, stuck or panicked, and the run was not aborted.
     pub fn passed(&self) -> bool {
-        self.unrecovered == 0 && self.stuck == 0 && self.panics == 0
+        self.unrecovered == 0 && self.stuck == 0 && self.panics == 0 && self.aborted.is_none()
     }
+
+    /// Simulated seconds per wall-clock second (0 if no wall time passed).
+    pub fn speed(&self) -> f64 {
+        if self.wall_s > 0.0 {
+            self.simulated_s / self.wall_s
+        } else {
+            0.0
+        }
+    }
+
+    fn tally(&mut self, kind: String) -> &mut FaultKindTally {
+        let index = match self.by_fault_kind.iter().position(|t| t.kind == kind) {
+            Some(index) => index,
+            None => {
+                self.by_fault_kind.push(FaultKindTally {
+                    kind,
+                    ..FaultKindTally::default()
+                });
+                self.by_fault_kind.len() - 1
+            }
+        };
+        &mut self.by_fault_kind[index]
+    }
+}
+
+/// The summary line first, then the statistics: tool-change times against the physical
+/// minimum, simulation speed, faults by kind, failures without a fault, rig restarts, an abort.
+impl fmt::Display for SoakReport {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        writeln!(f, "{}", self.summary_line())?;
+        let times = &self.tool_change_times;
+        match times.ratio_to_minimum() {
+            Some(ratio) => writeln!(
+                f,
+                "tool change: mean {:.2} s, max {:.2} s, physical minimum {:.2} s (mean/minimum {ratio:.2}) over {} fault-free changes",
+                times.mean_s, times.max_s, times.physical_minimum_mean_s, times.changes
+            )?,
+            None => writeln!(f, "tool change: no fault-free tool change was timed")?,
+        }
+        write!(
+            f,
+            "simulated {:.0} s in {:.1} s wall ({:.0} sim s per wall s)",
+            self.simulated_s,
+            self.wall_s,
+            self.speed()
+        )?;
+        if !self.by_fault_kind.is_empty() {
+            write!(f, "\nfaults by kind:")?;
+            for t in &self.by_fault_kind {
+                write!(
+                    f,
+                    "\n  {}: {} injected, {} recovered, {} unrecovered, {} stuck, {} panics",
+                    t.kind, t.injected, t.recovered, t.unrecovered, t.stuck, t.panics
+                )?;
+            }
+        }
+        if self.failed_without_fault > 0 {
+            write!(
+                f,
+                "\n{} of the unrecovered changes failed without any fault",
+                self.failed_without_fault
+            )?;
+        }
+        if self.rig_restarts > 0 {
+            write!(
+                f,
+                "\nrig restarted {} times (a fresh unit with every filament parked) after unrecovered, stuck or panicked changes",
+                self.rig_restarts
+            )?;
+        }
+        if let Some(why) = &self.aborted {
+            write!(f, "\naborted: {why}")?;
+        }
+        Ok(())
+    }
+}
+
+/// The `--fault` name of a fault's kind, without slot and parameters.
+fn kind_name(fault: &SimFault) -> String {
+    let name = match fault {
+        SimFault::Model(Fault::Jam { .. }) => "jam",
+        SimFault::Model(Fault::BowdenJam) => "bowden-jam",
+        SimFault::Model(Fault::Slip { .. }) => "slip",
+        SimFault::Model(Fault::MotorDead { .. }) => "motor-dead",
+        SimFault::Model(Fault::SensorNoise { .. }) => "noise",
+        SimFault::Model(Fault::SensorDisconnected { sensor, .. }) => match sensor {
+            SensorId::HubFilament => "disconnect:hub-filament",
+            SensorId::HubTension => "disconnect:hub-tension",
+            SensorId::HubCutter => "disconnect:hub-cutter",
+            SensorId::SlotFilament(_) => "disconnect:slot-filament",
+            SensorId::MotorHall(_) => "disconnect:motor-hall",
+        },
+        SimFault::Model(Fault::SpoolRunout { .. }) => "runout",
+        SimFault::UartCorrupt { .. } => "uart-corrupt",
+        SimFault::UartDrop { .. } => "uart-drop",
+        SimFault::PowerLoss { .. } => "power-loss",
+    };
+    name.to_string()
+}
+
+/// A uniform draw in `low..high`, rounded to `1/scale` so the fault prints as it was injected.
+fn draw(rng: &mut Rng, low: f64, high: f64, scale: f64) -> f32 {
+    ((low + (high - low) * rng.uniform()) * scale).round() as f32 / scale as f32
+}
+
+/// A random fault that concerns a change to `target`.
+fn draw_fault(rng: &mut Rng, target: usize) -> SimFault {
+    let rail = if rng.uniform() < 0.5 {
+        Rail::Low
+    } else {
+        Rail::High
+    };
+    match rng.next_u64() % 9 {
+        0 => SimFault::Model(Fault::Jam { slot: target }),
+        1 => SimFault::Model(Fault::BowdenJam),
+        2 => SimFault::Model(Fault::Slip {
+            slot: target,
+            ratio: draw(rng, 0.3, 0.9, 100.0),
+        }),
+        3 => SimFault::Model(Fault::MotorDead { slot: target }),
+        4 => SimFault::Model(Fault::SensorNoise {
+            sigma: draw(rng, 30.0, 90.0, 1.0),
+        }),
+        5 => {
+            let sensor = match rng.next_u64() % 4 {
+                0 => SensorId::HubFilament,
+                1 => SensorId::HubTension,
+                2 => SensorId::SlotFilament(target),
+                _ => SensorId::MotorHall(target),
+            };
+            SimFault::Model(Fault::SensorDisconnected { sensor, rail })
+        }
+        6 => SimFault::Model(Fault::SpoolRunout { slot: target }),
+        7 => SimFault::UartCorrupt {
+            probability: draw(rng, 0.001, 0.01, 10_000.0),
+        },
+        _ => SimFault::UartDrop {
+            probability: draw(rng, 0.001, 0.01, 10_000.0),
+        },
+    }
+}
+
+/// A fault that has struck.
+#[derive(Debug, Clone, Copy)]
+struct Strike {
+    fault: SimFault,
+    /// When, ms of virtual time.
+    at_ms: u64,
+}
+
+/// The in-process link with a fault that strikes at an exact virtual millisecond: while the
+/// printer waits for the unit, the simulator is stepped one millisecond at a time (as
+/// [`SimLink`] does) and an armed fault is injected as soon as its moment comes.
+struct StrikingLink {
+    link: SimLink,
+    /// The fault waiting to strike and the virtual time it strikes at, ms.
+    armed: Option<(SimFault, u64)>,
+    /// The fault that struck during this change.
+    struck: Option<Strike>,
+}
+
+impl StrikingLink {
+    fn new(sim: Sim) -> Self {
+        StrikingLink {
+            link: SimLink::new(sim),
+            armed: None,
+            struck: None,
+        }
+    }
+
+    fn sim(&self) -> &Sim {
+        self.link.sim()
+    }
+
+    fn sim_mut(&mut self) -> &mut Sim {
+        self.link.sim_mut()
+    }
+
+    /// Inject the armed fault if its moment has come.
+    fn strike_if_due(&mut self) {
+        let now = self.link.now_ms();
+        if let Some((fault, at_ms)) = self.armed
+            && now >= at_ms
+        {
+            self.armed = None;
+            if self.link.sim_mut().inject(fault) {
+                self.struck = Some(Strike { fault, at_ms: now });
+            }
+        }
+    }
+}
+
+impl Link for StrikingLink {
+    fn send(&mut self, bytes: &[u8]) -> std::io::Result<()> {
+        self.link.send(bytes)
+    }
+
+    fn receive(&mut self, max_ms: u64, into: &mut Vec<u8>) -> std::io::Result<()> {
+        let before = into.len();
+        for _ in 0..max_ms {
+            self.strike_if_due();
+            self.link.receive(1, into)?;
+            if into.len() > before {
+                break;
+            }
+        }
+        self.strike_if_due();
+        Ok(())
+    }
+
+    fn now_ms(&self) -> u64 {
+        self.link.now_ms()
+    }
+
+    fn fsensor(&mut self) -> u8 {
+        self.link.fsensor()
+    }
+}
+
+/// The person at the printer during a soak: arms the change's fault when the `T` goes out, and on
+/// an error the printer does not retry away, fixes the unit and presses Retry.
+#[derive(Debug, Default)]
+struct SoakUser {
+    /// The slot the change loads.
+    target: u8,
+    /// The change's fault and its delay after the `T` is sent, ms, until it is armed.
+    planned: Option<(SimFault, u64)>,
+    /// When the `T` was first sent, ms of virtual time.
+    sent_ms: Option<u64>,
+    /// The struck fault has been fixed.
+    fixed: bool,
+    /// Retry presses since the start of the change or the fix.
+    presses: u8,
+    /// The errors seen, in order (repeats of the same error in a row once).
+    errors: Vec<ErrorCode>,
+}
+
+impl SoakUser {
+    /// Ready for a change to `target` with the fault `planned` (and its delay).
+    fn for_change(target: u8, planned: Option<(SimFault, u64)>) -> Self {
+        SoakUser {
+            target,
+            planned,
+            ..SoakUser::default()
+        }
+    }
+
+    /// Fix the unit if a fault struck and is not fixed yet: clear it, and put a filament back
+    /// into a slot a runout emptied. True if there was something to fix.
+    fn fix(&mut self, link: &mut StrikingLink) -> bool {
+        let Some(strike) = link.struck.filter(|_| !self.fixed) else {
+            return false;
+        };
+        self.fixed = true;
+        let sim = link.sim_mut();
+        sim.clear(strike.fault.kind());
+        if let SimFault::Model(Fault::SpoolRunout { slot }) = strike.fault
+            && sim.model().tip_mm(slot).is_none()
+        {
+            let park_mm = -f32::from(sim.unit_config().park_mm);
+            sim.model_mut().insert_filament(slot, park_mm);
+        }
+        true
+    }
+
+    /// The change is over: a fault that has not struck yet never will, and one still active
+    /// (it raised no error) is cleared.
+    fn change_over(&mut self, link: &mut StrikingLink) {
+        self.planned = None;
+        link.armed = None;
+        self.fix(link);
+    }
+}
+
+impl Operator<StrikingLink> for SoakUser {
+    fn event(&mut self, link: &mut StrikingLink, event: &PrinterEvent) {
+        match event {
+            PrinterEvent::Sent(request)
+                if request.code == RequestCode::Tool
+                    && request.value == self.target
+                    && self.sent_ms.is_none() =>
+            {
+                let now = link.now_ms();
+                self.sent_ms = Some(now);
+                link.armed = self
+                    .planned
+                    .take()
+                    .map(|(fault, delay_ms)| (fault, now + delay_ms));
+            }
+            PrinterEvent::Error(_, error) if self.errors.last() != Some(error) => self.errors.push(*error),
+            _ => {}
+        }
+    }
+
+    fn decide(&mut self, link: &mut StrikingLink, _request: Request, _error: ErrorCode) -> Decision {
+        if self.fix(link) {
+            self.presses = 0;
+        }
+        if self.presses < USER_RETRIES {
+            self.presses += 1;
+            Decision::Press(ButtonCode::MIDDLE)
+        } else {
+            Decision::GiveUp
+        }
+    }
+}
+
+/// The printer on a simulated unit, and the slot it has loaded.
+struct Rig {
+    printer: Printer<StrikingLink>,
+    loaded: Option<u8>,
+}
+
+impl Rig {
+    /// A fresh unit (every filament parked, nothing loaded) and a printer connected to it. The
+    /// first rig's simulator has the run's seed; rebuilt ones derive theirs from it.
+    fn start(options: &SoakOptions, generation: u64) -> Result<Rig, String> {
+        let seed = options
+            .seed
+            .wrapping_add(generation.wrapping_mul(0x9e37_79b9_7f4a_7c15));
+        let sim = Sim::new(SimOptions {
+            seed,
+            ..options.sim.clone()
+        })
+        .map_err(|error| error.to_string())?;
+        let mut printer = Printer::new(StrikingLink::new(sim), options.printer);
+        printer
+            .connect(&mut SoakUser::default())
+            .map_err(|error| format!("the printer could not connect: {error}"))?;
+        Ok(Rig {
+            printer,
+            loaded: None,
+        })
+    }
+
+    fn sim(&self) -> &Sim {
+        self.printer.link().sim()
+    }
+}
+
+/// How a tool change ended.
+enum ChangeEnd {
+    /// Finished, with the new filament in the extruder.
+    Done,
+    /// Ended without the filament loaded: why.
+    Failed(String),
+    /// The printer gave up on the unit or the command did not end: why.
+    Stuck(String),
+}
+
+/// Where the unit and the filaments stand, for a note.
+fn describe(sim: &Sim) -> String {
+    let ((code, value), status) = sim.unit_command();
+    let status = match status {
+        mmu_firmware::ops::Status::Running(progress) => format!("running {progress}"),
+        mmu_firmware::ops::Status::Failed(error) => format!("error {error}"),
+        mmu_firmware::ops::Status::Finished => "finished".to_string(),
+    };
+    let model = sim.model();
+    let tips: Vec<String> = (0..model.slot_count())
+        .map(|slot| match model.tip_mm(slot) {
+            Some(tip) => format!("{slot}:{tip:.1}"),
+            None => format!("{slot}:none"),
+        })
+        .collect();
+    format!(
+        "unit {}{value:x} {status}; tips {}; fsensor {}; t {:.1} s",
+        code.as_char(),
+        tips.join(" "),
+        model.fsensor_state(),
+        sim.now_ms() as f64 / 1000.0
+    )
+}
+
+/// Run one tool change to `target` (unloading first when it is the loaded slot: a unit with one
+/// slot).
+fn tool_change(rig: &mut Rig, user: &mut SoakUser, target: u8) -> ChangeEnd {
+    if rig.loaded == Some(target) {
+        match rig.printer.command(user, Request::new(RequestCode::Unload, 0)) {
+            Ok(Outcome::Finished(ResultCode::OK)) => rig.loaded = None,
+            Ok(outcome) => return ChangeEnd::Failed(format!("the unload before it ended {outcome:?}")),
+            Err(error) => return ChangeEnd::Stuck(error.to_string()),
+        }
+    }
+    let end = match rig.printer.command(user, Request::new(RequestCode::Tool, target)) {
+        Ok(Outcome::Finished(ResultCode::OK)) => {
+            let model = rig.sim().model();
+            let gears_mm = model.config().extruder_gears_mm;
+            match model.tip_mm(usize::from(target)) {
+                _ if model.loaded_slot() != Some(usize::from(target)) => {
+                    ChangeEnd::Failed("reported finished, but another filament is loaded".into())
+                }
+                Some(tip) if tip >= gears_mm - GRIP_TOLERANCE_MM && model.fsensor_state() != 0 => {
+                    rig.loaded = Some(target);
+                    ChangeEnd::Done
+                }
+                tip => ChangeEnd::Failed(format!(
+                    "reported finished, but the tip stopped at {} before the extruder gears at {gears_mm} mm",
+                    tip.map_or("none".to_string(), |tip| format!("{tip:.2} mm"))
+                )),
+            }
+        }
+        Ok(Outcome::Finished(result)) => ChangeEnd::Failed(format!("finished with result {}", result.0)),
+        Ok(Outcome::Rejected) => ChangeEnd::Failed("the unit rejected it".into()),
+        Ok(Outcome::GaveUp(error)) => ChangeEnd::Failed(format!("gave up on {error}")),
+        Err(error) => ChangeEnd::Stuck(error.to_string()),
+    };
+    user.change_over(rig.printer.link_mut());
+    end
+}
+
+/// Running sums of the fault-free tool-change times.
+#[derive(Debug, Default)]
+struct TimeSums {
+    changes: u32,
+    sum_s: f64,
+    max_s: f64,
+    minimum_sum_s: f64,
+}
+
+impl TimeSums {
+    /// Add the tool changes among `records` that finished without an error.
+    fn add(&mut self, sim: &Sim, records: &[CommandRecord]) {
+        for record in records {
+            if record.request.0 != RequestCode::Tool || record.had_error {
+                continue;
+            }
+            let minimum =
+                tool_change_minimum(sim.unit_config(), sim.model().config(), record.start_tip_mm).total_s();
+            if !minimum.is_finite() {
+                continue;
+            }
+            let took_s = record.finished_ms.saturating_sub(record.started_ms) as f64 / 1000.0;
+            self.changes += 1;
+            self.sum_s += took_s;
+            self.max_s = self.max_s.max(took_s);
+            self.minimum_sum_s += minimum;
+        }
+    }
+
+    fn times(&self) -> ToolChangeTimes {
+        if self.changes == 0 {
+            return ToolChangeTimes::default();
+        }
+        let n = f64::from(self.changes);
+        ToolChangeTimes {
+            changes: self.changes,
+            mean_s: self.sum_s / n,
+            max_s: self.max_s,
+            physical_minimum_mean_s: self.minimum_sum_s / n,
+        }
+    }
+}
+
+/// The text of a caught panic.
+fn panic_text(payload: &(dyn std::any::Any + Send)) -> String {
+    payload
+        .downcast_ref::<&str>()
+        .map(|s| (*s).to_string())
+        .or_else(|| payload.downcast_ref::<String>().cloned())
+        .unwrap_or_else(|| "a panic without a message".into())
+}
+
+/// Run `options.changes` tool changes as the [module documentation](self) describes; `progress`
+/// is called with the number of changes done after each one.
+pub fn run(options: &SoakOptions, progress: &mut dyn FnMut(u32)) -> SoakReport {
+    let wall = Instant::now();
+    let mut report = SoakReport::default();
+    let mut rng = Rng::new(options.seed ^ SOAK_STREAM);
+    let mut times = TimeSums::default();
+    let mut simulated_ms = 0u64;
+    let mut generation = 0u64;
+    let mut rig: Option<Rig> = None;
+    let slots = u8::try_from(options.sim.slots).unwrap_or(u8::MAX);
+
+    for change in 1..=options.changes {
+        let mut current = match rig.take() {
+            Some(current) => current,
+            None => {
+                let started = catch_unwind(|| Rig::start(options, generation));
+                generation += 1;
+                match started {
+                    Ok(Ok(current)) => {
+                        if generation > 1 {
+                            report.rig_restarts += 1;
+                        }
+                        current
+                    }
+                    Ok(Err(why)) => {
+                        report.aborted = Some(format!("before change {change}: {why}"));
+                        break;
+                    }
+                    Err(payload) => {
+                        report.panics += 1;
+                        report.aborted = Some(format!(
+                            "before change {change}: starting the rig panicked: {}",
+                            panic_text(payload.as_ref())
+                        ));
+                        break;
+                    }
+                }
+            }
+        };
+
+        let others: Vec<u8> = (0..slots).filter(|&slot| Some(slot) != current.loaded).collect();
+        let target = match others.len() {
+            0 => 0,
+            n => others[(rng.next_u64() % n as u64) as usize],
+        };
+        let planned = (options.random_faults && rng.uniform() < FAULT_PROBABILITY).then(|| {
+            let fault = draw_fault(&mut rng, usize::from(target));
+            (fault, rng.next_u64() % (MAX_FAULT_DELAY_MS + 1))
+        });
+        let from = current.loaded;
+        let mut user = SoakUser::for_change(target, planned);
+        current.printer.link_mut().struck = None;
+
+        let end = catch_unwind(AssertUnwindSafe(|| tool_change(&mut current, &mut user, target)));
+        report.changes += 1;
+
+        let struck = current.printer.link().struck;
+        let kind = struck.map(|strike| kind_name(&strike.fault));
+        if let Some(kind) = &kind {
+            report.faults_injected += 1;
+            report.tally(kind.clone()).injected += 1;
+        }
+        let context = || {
+            let loaded = from.map_or("nothing loaded".to_string(), |slot| format!("slot {slot} loaded"));
+            let fault = match struck {
+                Some(strike) => format!(
+                    "{} struck {:.1} s after T{target} was sent",
+                    strike.fault,
+                    strike.at_ms.saturating_sub(user.sent_ms.unwrap_or(strike.at_ms)) as f64 / 1000.0
+                ),
+                None => "no fault".to_string(),
+            };
+            let errors: Vec<String> = user.errors.iter().map(ToString::to_string).collect();
+            let errors = if errors.is_empty() {
+                "no error".to_string()
+            } else {
+                format!("errors {}", errors.join(", "))
+            };
+            format!("change {change} (T{target}, {loaded}): {fault}; {errors}")
+        };
+
+        // How the change ended, and for a failure where the unit and the filaments were.
+        let (verdict, failure_detail): (String, Option<String>) = match end {
+            Ok(ChangeEnd::Done) => {
+                if let Some(kind) = &kind {
+                    report.recovered += 1;
+                    report.tally(kind.clone()).recovered += 1;
+                }
+                ("recovered".to_string(), None)
+            }
+            Ok(ChangeEnd::Failed(why)) => {
+                report.unrecovered += 1;
+                match &kind {
+                    Some(kind) => report.tally(kind.clone()).unrecovered += 1,
+                    None => report.failed_without_fault += 1,
+                }
+                (
+                    format!("unrecovered: {why}"),
+                    Some(format!("; {}", describe(current.sim()))),
+                )
+            }
+            Ok(ChangeEnd::Stuck(why)) => {
+                report.stuck += 1;
+                if let Some(kind) = &kind {
+                    report.tally(kind.clone()).stuck += 1;
+                }
+                (
+                    format!("stuck: {why}"),
+                    Some(format!("; {}", describe(current.sim()))),
+                )
+            }
+            Err(payload) => {
+                report.panics += 1;
+                if let Some(kind) = &kind {
+                    report.tally(kind.clone()).panics += 1;
+                }
+                // A simulator that panicked is not asked where things are.
+                (
+                    format!("panic: {}", panic_text(payload.as_ref())),
+                    Some(String::new()),
+                )
+            }
+        };
+        if struck.is_some() {
+            report.fault_log.push(format!("{} -> {verdict}", context()));
+        }
+        let keep = failure_detail.is_none();
+        if let Some(detail) = failure_detail {
+            report.notes.push(format!("{} -> {verdict}{detail}", context()));
+        }
+
+        if keep {
+            let sim = current.printer.link_mut().sim_mut();
+            let records = sim.take_finished();
+            sim.take_events();
+            if struck.is_none() {
+                times.add(current.sim(), &records);
+            }
+            rig = Some(current);
+        } else {
+            simulated_ms += current.sim().now_ms();
+        }
+        progress(change);
+    }
+
+    if let Some(current) = &rig {
+        simulated_ms += current.sim().now_ms();
+    }
+    report.tool_change_times = times.times();
+    report.simulated_s = simulated_ms as f64 / 1000.0;
+    report.wall_s = wall.elapsed().as_secs_f64();
+    report
 }

@@ -50,7 +50,12 @@ pub struct ToolChangeMinimum {
 impl ToolChangeMinimum {
     /// The whole tool change, s.
     pub fn total_s(&self) -> f64 {
-        self.unload_s + self.park_s + self.feed_to_hub_s + self.bowden_s + self.to_fsensor_s + self.extra_load_s
+        self.unload_s
+            + self.park_s
+            + self.feed_to_hub_s
+            + self.bowden_s
+            + self.to_fsensor_s
+            + self.extra_load_s
     }
 }
 
@@ -70,7 +75,11 @@ fn segment_s(distance_mm: f64, speed_mm_s: u16) -> f64 {
 /// `geometry`, when the loaded filament's tip starts at `start_tip_mm` (mm past the hub sensor, as
 /// [`CommandRecord::start_tip_mm`](crate::CommandRecord::start_tip_mm) records it; `None`: nothing
 /// loaded, no unload). See the [module documentation](self) for the segments.
-pub fn tool_change_minimum(config: &Config, geometry: &ModelConfig, start_tip_mm: Option<f32>) -> ToolChangeMinimum {
+pub fn tool_change_minimum(
+    config: &Config,
+    geometry: &ModelConfig,
+    start_tip_mm: Option<f32>,
+) -> ToolChangeMinimum {
     let park_mm = f64::from(config.park_mm);
     let (unload_s, park_s) = match start_tip_mm {
         Some(tip) => (

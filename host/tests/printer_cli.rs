@@ -1,0 +1,225 @@
+//! End-to-end tests of `mmu printer` and `mmu demo` against the in-process simulator, as a user
+//! runs them. The simulator runs in virtual time, so each run takes a fraction of a second.
+
+use std::process::{Command, Output};
+
+use serde_json::Value;
+
+/// Runs `mmu args...` and returns its output.
+fn mmu(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_mmu"))
+        .args(args)
+        .output()
+        .expect("the mmu binary runs")
+}
+
+fn stdout(output: &Output) -> String {
+    String::from_utf8(output.stdout.clone()).expect("stdout is UTF-8")
+}
+
+fn stderr(output: &Output) -> String {
+    String::from_utf8(output.stderr.clone()).expect("stderr is UTF-8")
+}
+
+/// `mmu printer --sim args...`, which must succeed; its stdout.
+fn printer_ok(args: &[&str]) -> String {
+    let mut full = vec!["printer", "--sim"];
+    full.extend_from_slice(args);
+    let output = mmu(&full);
+    assert!(
+        output.status.success(),
+        "{args:?} failed:\n{}{}",
+        stdout(&output),
+        stderr(&output)
+    );
+    stdout(&output)
+}
+
+/// `mmu printer --sim args...`, which must fail; its stdout and stderr together.
+fn printer_fails(args: &[&str]) -> String {
+    let mut full = vec!["printer", "--sim"];
+    full.extend_from_slice(args);
+    let output = mmu(&full);
+    let text = format!("{}{}", stdout(&output), stderr(&output));
+    assert!(!output.status.success(), "{args:?} should fail:\n{text}");
+    text
+}
+
+/// The JSON objects of `mmu printer --sim --json args...`, one per line, and whether it succeeded.
+fn printer_json(args: &[&str]) -> (Vec<Value>, bool) {
+    let mut full = vec!["printer", "--sim", "--json"];
+    full.extend_from_slice(args);
+    let output = mmu(&full);
+    let lines = stdout(&output)
+        .lines()
+        .map(|line| serde_json::from_str(line).unwrap_or_else(|e| panic!("{line:?}: {e}")))
+        .collect();
+    (lines, output.status.success())
+}
+
+fn events<'a>(lines: &'a [Value], kind: &str) -> Vec<&'a Value> {
+    lines.iter().filter(|line| line["event"] == kind).collect()
+}
+
+#[test]
+fn a_tool_change_names_its_phases_and_finishes() {
+    let out = printer_ok(&["tool", "1"]);
+    assert!(out.contains("connected: unit firmware 3.0.3"), "{out}");
+    assert!(out.contains("T1: FeedingToFSensor"), "{out}");
+    assert!(out.contains("T1: finished OK"), "{out}");
+}
+
+#[test]
+fn json_output_is_one_object_per_line_ending_in_the_result() {
+    let (lines, ok) = printer_json(&["tool", "1"]);
+    assert!(ok);
+    assert_eq!(events(&lines, "connected").len(), 1, "{lines:?}");
+    let progress = events(&lines, "progress");
+    assert!(
+        progress
+            .iter()
+            .any(|p| p["name"] == "FeedingToFSensor" && p["code"] == 28)
+    );
+    let finished = events(&lines, "finished");
+    assert_eq!(finished.len(), 1, "{lines:?}");
+    assert_eq!(finished[0]["request"], "T1");
+    assert_eq!(finished[0]["result"], "OK");
+    assert!(finished[0]["duration_ms"].as_u64().is_some_and(|ms| ms > 1000));
+    let last = lines.last().expect("some output");
+    assert_eq!(last["event"], "result");
+    assert_eq!(last["action"], "tool");
+    assert_eq!(last["ok"], true);
+}
+
+#[test]
+fn a_slot_the_unit_lacks_is_rejected() {
+    let text = printer_fails(&["tool", "7"]);
+    assert!(text.contains("T7: rejected by the unit"), "{text}");
+    assert!(text.contains("INVALID_TOOL (printer screen 04502)"), "{text}");
+    // Only the protocol's limit is checked before asking the unit.
+    let output = mmu(&["printer", "--sim", "tool", "256"]);
+    assert_eq!(output.status.code(), Some(2));
+    assert!(stderr(&output).contains("too large"));
+}
+
+#[test]
+fn eject_shows_the_dialog_and_continues() {
+    let out = printer_ok(&["eject", "1"]);
+    assert!(out.contains("FILAMENT_EJECTED (screen 04507)"), "{out}");
+    assert!(out.contains("[Continue]"), "{out}");
+    assert!(out.contains("pulls the filament out of slot 1"), "{out}");
+    assert!(out.contains("Continue pressed (B1)"), "{out}");
+    assert!(out.contains("E1: finished OK"), "{out}");
+}
+
+#[test]
+fn cut_with_nothing_in_finda_goes_straight_to_k() {
+    // Each run has a fresh simulator with nothing in FINDA, so no `U0` first; the demo shows the
+    // unload before an eject.
+    let out = printer_ok(&["cut", "2"]);
+    assert!(!out.contains("unloads first"), "{out}");
+    assert!(out.contains("K2: finished OK"), "{out}");
+}
+
+#[test]
+fn a_jam_ends_in_its_named_error_after_three_automatic_retries() {
+    let text = printer_fails(&["--fault", "jam:1", "tool", "1"]);
+    assert!(text.contains("sim: fault jam:1 injected"), "{text}");
+    assert!(
+        text.contains("T1: error STALLED_PULLEY (printer screen 04105)"),
+        "{text}"
+    );
+    for left in [2, 1, 0] {
+        assert!(text.contains(&format!("T1: auto Retry ({left} left)")), "{text}");
+    }
+    assert_eq!(text.matches("auto Retry").count(), 3, "{text}");
+    assert!(
+        text.contains("mmu: error: T1 stopped on error STALLED_PULLEY (printer screen 04105)"),
+        "{text}"
+    );
+
+    let (lines, ok) = printer_json(&["--fault", "jam:1", "tool", "1"]);
+    assert!(!ok);
+    assert_eq!(events(&lines, "retry").len(), 3, "{lines:?}");
+    let last = lines.last().expect("some output");
+    assert_eq!(last["ok"], false);
+    assert_eq!(last["error"], "STALLED_PULLEY");
+    assert_eq!(last["screen"], "04105");
+}
+
+#[test]
+fn registers_read_and_write() {
+    let out = printer_ok(&["read", "0x00"]);
+    assert!(out.contains("register 0x00 Project_Major = 3"), "{out}");
+    let (lines, ok) = printer_json(&["read", "0"]);
+    assert!(ok);
+    assert_eq!(lines.last().expect("some output")["value"], 3);
+
+    let out = printer_ok(&["write", "0x0b", "30"]);
+    assert!(
+        out.contains("write register 0x0b Extra_Load_Distance = 30: accepted"),
+        "{out}"
+    );
+    let text = printer_fails(&["write", "0x99", "1"]);
+    assert!(text.contains("rejected by the unit"), "{text}");
+}
+
+#[test]
+fn status_shows_version_state_and_registers() {
+    let out = printer_ok(&["status"]);
+    for expected in [
+        "unit firmware: 3.0.3, build 1",
+        "state (Q0): X0 F0 (finished OK)",
+        "FINDA: no filament",
+        "register 0x08 FINDA_State = 0",
+        "register 0x1b Selector_Slot",
+    ] {
+        assert!(out.contains(expected), "{expected:?} missing:\n{out}");
+    }
+}
+
+#[test]
+fn reset_reconnects_and_shows_the_first_answer() {
+    let out = printer_ok(&["reset"]);
+    assert!(out.contains("link lost (timeout)"), "{out}");
+    assert!(out.contains("after the reset, Q0: X0 F0"), "{out}");
+}
+
+#[test]
+fn a_printer_expecting_another_version_stops() {
+    let text = printer_fails(&["--expect-version", "3.0.2", "status"]);
+    assert!(
+        text.contains("MMU FW UPDATE NEEDED (printer screen 04504)"),
+        "{text}"
+    );
+}
+
+#[test]
+fn the_unit_must_be_chosen() {
+    let output = mmu(&["printer", "status"]);
+    assert!(!output.status.success());
+    assert!(stderr(&output).contains("--port DEV"), "{}", stderr(&output));
+}
+
+#[test]
+fn soak_prints_its_report() {
+    let out = printer_ok(&["soak", "--changes", "2"]);
+    assert!(out.starts_with("soak: 2 tool changes"), "{out}");
+}
+
+#[test]
+fn the_demo_runs_its_script() {
+    let output = mmu(&["demo", "--fast"]);
+    let out = stdout(&output);
+    assert!(output.status.success(), "{out}{}", stderr(&output));
+    for expected in [
+        "connected: unit firmware 3.0.3",
+        "T2: finished OK",
+        "FINDA sees filament: the printer unloads first",
+        "E1: printer dialog FILAMENT_EJECTED",
+        "L1: finished OK",
+        "demo: 5 tool changes (T0 ",
+    ] {
+        assert!(out.contains(expected), "{expected:?} missing:\n{out}");
+    }
+}
