@@ -213,3 +213,39 @@ fn a_printer_expecting_another_version_stops_with_the_update_screen() {
         "{error}"
     );
 }
+
+#[test]
+fn a_slipping_drive_still_delivers_the_tip_into_the_extruder_gears() {
+    let (mut printer, mut op) = connected();
+    let gears = printer.link().sim().model().config().extruder_gears_mm;
+    printer
+        .link_mut()
+        .sim_mut()
+        .inject(mmu_sim::SimFault::Model(mmu_model::Fault::Slip {
+            slot: 1,
+            ratio: 0.6,
+        }));
+    assert_eq!(run(&mut printer, &mut op, RequestCode::Tool, 1), OK);
+    let tip = printer.link().sim().model().tip_mm(1).unwrap();
+    assert!(
+        tip >= gears,
+        "the tip stopped at {tip} mm, the gears are at {gears} mm"
+    );
+}
+
+#[test]
+fn noisy_sensors_do_not_end_the_push_into_the_extruder_early() {
+    let (mut printer, mut op) = connected();
+    let gears = printer.link().sim().model().config().extruder_gears_mm;
+    printer
+        .link_mut()
+        .sim_mut()
+        .inject(mmu_sim::SimFault::Model(mmu_model::Fault::SensorNoise {
+            sigma: 90.0,
+        }));
+    for slot in [1, 0, 2] {
+        assert_eq!(run(&mut printer, &mut op, RequestCode::Tool, slot), OK);
+        let tip = printer.link().sim().model().tip_mm(usize::from(slot)).unwrap();
+        assert!(tip >= gears, "slot {slot}: the tip stopped at {tip} mm");
+    }
+}
