@@ -1,12 +1,420 @@
-//! `mmu sim`: the simulated unit served on stdin/stdout or a pseudo-terminal.
+//! `mmu sim`: the simulated unit served to a real printer-side program, on stdin/stdout or a
+//! pseudo-terminal.
+//!
+//! The simulator ([`Sim`]) runs in virtual time, one millisecond per step, and knows nothing of
+//! clocks or file descriptors. This module paces it against the wall clock (`--time-scale`
+//! virtual ms per wall ms) and connects it to a byte stream, so that a program that only knows
+//! the wire protocol (`mmu printer`, a test, a printer's firmware behind a pty) talks to it as to
+//! a unit on a UART. The protocol channel carries the unit's bytes exactly as on the wire and
+//! nothing else; notes go to stderr.
+//!
+//! The printer's filament sensor is part of the simulation, but only the printer reports it
+//! (`f`). The `--events` file makes it visible, for the printer-side program to follow: one JSON
+//! line per event, e.g. `{"t_ms":1234,"kind":"fsensor","state":2}`, written at once.
+//!
+//! Shape: a reader thread turns the input (stdin, or the pty's master end) into chunks on a
+//! channel; the main loop feeds each chunk to the step after its arrival, writes what the unit
+//! answers at once, and waits for input or the next millisecond whenever it is not behind.
 
 use std::error::Error;
+use std::fs::File;
+use std::io::{self, Read, Write};
+use std::path::{Path, PathBuf};
+use std::sync::mpsc::{self, Receiver, RecvTimeoutError, TryRecvError};
+use std::thread;
+use std::time::{Duration, Instant};
+
+use clap::{ArgGroup, Args};
+use mmu_sim::event::FaultAction;
+use mmu_sim::{Event, EventKind, FAULT_HELP, ScheduledFault, Sim, SimOptions};
+
+/// After stdin ends, the simulator runs this long more, in virtual and in wall time, so that the
+/// answer to the last request still goes out.
+const EOF_GRACE: Duration = Duration::from_millis(100);
+/// [`EOF_GRACE`] in virtual ms.
+const EOF_GRACE_MS: u64 = EOF_GRACE.as_millis() as u64;
+/// Longest wait for input while the simulator is not behind.
+const IDLE_WAIT: Duration = Duration::from_millis(1);
+/// Most steps between two looks at the input, so that a simulator that cannot keep up with the
+/// time scale still hears the printer and answers promptly.
+const MAX_STEPS_PER_BATCH: u64 = 100;
+/// Falling this far behind the wall clock earns one warning.
+const LAG_WARNING: Duration = Duration::from_secs(1);
+/// Bytes the reader thread takes from the input at once.
+const READ_CHUNK: usize = 256;
 
 /// `mmu sim` options.
-#[derive(Debug, clap::Args)]
-pub struct SimArgs {}
+#[derive(Debug, Args)]
+#[command(group(ArgGroup::new("transport").required(true).args(["stdio", "pty"])))]
+#[command(after_long_help = format!("Faults (--fault SPEC):\n{FAULT_HELP}"))]
+pub struct SimArgs {
+    /// Serve the protocol on stdin/stdout; stdout carries only the unit's bytes. Exits when stdin
+    /// ends.
+    #[arg(long)]
+    pub stdio: bool,
+    /// Create a pseudo-terminal, print its path on stdout and serve the protocol on it until
+    /// killed.
+    #[arg(long)]
+    pub pty: bool,
+    /// Write every simulator event (filament sensor, faults, power, commands, slot motion) to
+    /// this file, one JSON line each, flushed at once.
+    #[arg(long, value_name = "PATH")]
+    pub events: Option<PathBuf>,
+    /// Slots of the unit, 1 to 5.
+    #[arg(long, value_name = "N", default_value_t = 3, value_parser = parse_slots)]
+    pub slots: usize,
+    /// Seed of every random draw (sensor noise, UART faults).
+    #[arg(long, value_name = "S", default_value_t = 1)]
+    pub seed: u64,
+    /// Virtual ms per wall ms: 1 is real time, 10 runs ten times faster.
+    #[arg(long, value_name = "K", default_value_t = 1.0, value_parser = parse_time_scale)]
+    pub time_scale: f64,
+    /// Inject a fault, e.g. `jam:1@2000-9000` (at 2 s of virtual time, cleared at 9 s); may be
+    /// repeated. `mmu sim --help` lists the faults.
+    #[arg(long = "fault", value_name = "SPEC", value_parser = parse_fault)]
+    pub faults: Vec<ScheduledFault>,
+    /// How fast the simulated printer pulls filament while it prints after a tool change, mm/s
+    /// (0: it does not print).
+    #[arg(
+        long,
+        value_name = "MM_S",
+        default_value_t = SimOptions::default().print_mm_s,
+        value_parser = parse_print_rate
+    )]
+    pub print_rate: f32,
+    /// Print nothing on stderr but errors.
+    #[arg(long, short)]
+    pub quiet: bool,
+}
 
 /// Run `mmu sim`.
-pub fn run(_args: &SimArgs) -> Result<(), Box<dyn Error>> {
-    Err("not written yet".into())
+pub fn run(args: &SimArgs) -> Result<(), Box<dyn Error>> {
+    let mut sim = Sim::new(SimOptions {
+        slots: args.slots,
+        seed: args.seed,
+        print_mm_s: args.print_rate,
+        ..SimOptions::default()
+    })?;
+    for fault in &args.faults {
+        sim.schedule(*fault);
+    }
+    let events = args.events.as_deref().map(create_events_file).transpose()?;
+    let notes = Notes { quiet: args.quiet };
+    notes.say(&start_line(args));
+    let server = Server {
+        sim,
+        events,
+        notes,
+        time_scale: args.time_scale,
+        lag_warned: false,
+    };
+    if args.stdio {
+        let input = spawn_reader(Box::new(io::stdin()));
+        server.serve(input, Box::new(io::stdout().lock()))
+    } else {
+        serve_pty(server)
+    }
+}
+
+/// The simulator with its pacing and its side outputs.
+struct Server {
+    sim: Sim,
+    events: Option<File>,
+    notes: Notes,
+    time_scale: f64,
+    /// The lag warning was given.
+    lag_warned: bool,
+}
+
+impl Server {
+    /// Run until the input ends (plus a grace period), the output is closed, or an error.
+    fn serve(
+        mut self,
+        input: Receiver<io::Result<Vec<u8>>>,
+        mut output: Box<dyn Write>,
+    ) -> Result<(), Box<dyn Error>> {
+        let mut inbox = Inbox {
+            chunks: Some(input),
+            pending: Vec::new(),
+        };
+        let start = Instant::now();
+        let mut input_ended: Option<(u64, Instant)> = None;
+        loop {
+            let now_ms = self.sim.now_ms();
+            if input_ended
+                .is_some_and(|(at_ms, at)| now_ms >= at_ms + EOF_GRACE_MS && at.elapsed() >= EOF_GRACE)
+            {
+                return Ok(());
+            }
+            let behind_ms = self.due_ms(start.elapsed()).saturating_sub(now_ms);
+            if behind_ms == 0 {
+                inbox.collect(IDLE_WAIT)?;
+            } else {
+                inbox.collect(Duration::ZERO)?;
+                self.warn_if_lagging(behind_ms);
+                let steps = behind_ms.min(MAX_STEPS_PER_BATCH);
+                if !self.run_steps(steps, &mut inbox.pending, &mut output)? {
+                    return Ok(());
+                }
+            }
+            if input_ended.is_none() && inbox.chunks.is_none() {
+                input_ended = Some((self.sim.now_ms(), Instant::now()));
+            }
+        }
+    }
+
+    /// Step the simulator `steps` times, `received` going in with the first step, then pass on
+    /// what the unit sent and what happened. False when the printer side closed the output.
+    fn run_steps(
+        &mut self,
+        steps: u64,
+        received: &mut Vec<u8>,
+        output: &mut dyn Write,
+    ) -> Result<bool, Box<dyn Error>> {
+        let mut sent = Vec::new();
+        for _ in 0..steps {
+            self.sim.step(received, &mut sent);
+            received.clear();
+        }
+        let open = self.send(output, &sent)?;
+        self.record_events()?;
+        Ok(open)
+    }
+
+    /// Say once that the machine is too slow for the time scale.
+    fn warn_if_lagging(&mut self, behind_ms: u64) {
+        let behind_wall_ms = behind_ms as f64 / self.time_scale;
+        if !self.lag_warned && behind_wall_ms > LAG_WARNING.as_millis() as f64 {
+            self.lag_warned = true;
+            self.notes.say(&format!(
+                "the simulator cannot keep up with --time-scale {}: virtual time lags behind",
+                self.time_scale
+            ));
+        }
+    }
+
+    /// Virtual time due after `elapsed` of wall time, ms.
+    fn due_ms(&self, elapsed: Duration) -> u64 {
+        // Saturating conversion: a float too large for u64 gives u64::MAX.
+        (elapsed.as_secs_f64() * 1000.0 * self.time_scale) as u64
+    }
+
+    /// Write the unit's bytes and flush. False when the printer side closed the output.
+    fn send(&self, output: &mut dyn Write, bytes: &[u8]) -> Result<bool, Box<dyn Error>> {
+        if bytes.is_empty() {
+            return Ok(true);
+        }
+        match output.write_all(bytes).and_then(|()| output.flush()) {
+            Ok(()) => Ok(true),
+            Err(err) if err.kind() == io::ErrorKind::BrokenPipe => {
+                self.notes.say("the printer side closed the output; stopping");
+                Ok(false)
+            }
+            Err(err) if err.kind() == io::ErrorKind::TimedOut => {
+                // A pty nobody reads: the unit's UART would drop the bytes too.
+                self.notes
+                    .say(&format!("nobody reads the output: {} bytes dropped", bytes.len()));
+                Ok(true)
+            }
+            Err(err) => Err(format!("cannot write the unit's bytes: {err}").into()),
+        }
+    }
+
+    /// Write the simulator's new events to the events file and the notable ones to stderr. The
+    /// lines go out in one write, so that a reader following the file never sees half a line.
+    fn record_events(&mut self) -> Result<(), Box<dyn Error>> {
+        let events = self.sim.take_events();
+        if events.is_empty() {
+            return Ok(());
+        }
+        for event in &events {
+            if let Some(note) = event_note(event) {
+                self.notes.say(&note);
+            }
+        }
+        if let Some(file) = &mut self.events {
+            let lines: String = events.iter().map(|event| event.to_json() + "\n").collect();
+            file.write_all(lines.as_bytes())
+                .map_err(|err| format!("cannot write the events file: {err}"))?;
+        }
+        Ok(())
+    }
+}
+
+/// Serve on a new pseudo-terminal until killed.
+#[cfg(unix)]
+fn serve_pty(server: Server) -> Result<(), Box<dyn Error>> {
+    use serialport::{SerialPort, TTYPort};
+
+    let (master, slave) = TTYPort::pair().map_err(|err| format!("cannot create a pseudo-terminal: {err}"))?;
+    let path = slave.name().ok_or("the pseudo-terminal has no path")?;
+    let reader = master
+        .try_clone_native()
+        .map_err(|err| format!("cannot share the pseudo-terminal: {err}"))?;
+    let mut stdout = io::stdout();
+    writeln!(stdout, "{path}")
+        .and_then(|()| stdout.flush())
+        .map_err(|err| format!("cannot print the pseudo-terminal's path: {err}"))?;
+    server.notes.say(&format!("serving on {path}"));
+    // Our own open slave end: without it the master end hangs up (reads and writes fail)
+    // whenever no client has the path open, e.g. before the first client or between two.
+    let _keep_open = slave;
+    server.serve(spawn_reader(Box::new(reader)), Box::new(master))
+}
+
+/// Pseudo-terminals are a Unix thing.
+#[cfg(not(unix))]
+fn serve_pty(_server: Server) -> Result<(), Box<dyn Error>> {
+    Err("--pty needs a Unix system; use --stdio".into())
+}
+
+/// The printer's bytes, as the reader thread hands them over.
+struct Inbox {
+    /// `None` once the input ended.
+    chunks: Option<Receiver<io::Result<Vec<u8>>>>,
+    /// Received, not yet given to the simulator.
+    pending: Vec<u8>,
+}
+
+impl Inbox {
+    /// Take whatever arrived, waiting up to `wait` for the first chunk (just waiting, once the
+    /// input ended).
+    fn collect(&mut self, wait: Duration) -> Result<(), Box<dyn Error>> {
+        let Some(chunks) = &self.chunks else {
+            thread::sleep(wait);
+            return Ok(());
+        };
+        let mut next = chunks.recv_timeout(wait);
+        loop {
+            match next {
+                Ok(chunk) => {
+                    let chunk = chunk.map_err(|err| format!("cannot read the printer's bytes: {err}"))?;
+                    self.pending.extend_from_slice(&chunk);
+                }
+                Err(RecvTimeoutError::Timeout) => return Ok(()),
+                Err(RecvTimeoutError::Disconnected) => break,
+            }
+            next = chunks.try_recv().map_err(|err| match err {
+                TryRecvError::Empty => RecvTimeoutError::Timeout,
+                TryRecvError::Disconnected => RecvTimeoutError::Disconnected,
+            });
+        }
+        self.chunks = None;
+        Ok(())
+    }
+}
+
+/// Read `input` on a thread of its own until it ends; the chunks arrive on the returned channel,
+/// which disconnects at the end of the input (after an error, if one ended it).
+fn spawn_reader(mut input: Box<dyn Read + Send>) -> Receiver<io::Result<Vec<u8>>> {
+    let (chunks, received) = mpsc::channel();
+    thread::spawn(move || {
+        let mut buffer = [0; READ_CHUNK];
+        loop {
+            let chunk = match input.read(&mut buffer) {
+                Ok(0) => return,
+                Ok(n) => Ok(buffer[..n].to_vec()),
+                // A serial port's read times out when nothing comes: keep waiting.
+                Err(err)
+                    if matches!(
+                        err.kind(),
+                        io::ErrorKind::Interrupted | io::ErrorKind::TimedOut | io::ErrorKind::WouldBlock
+                    ) =>
+                {
+                    continue;
+                }
+                Err(err) => Err(err),
+            };
+            let failed = chunk.is_err();
+            if chunks.send(chunk).is_err() || failed {
+                return;
+            }
+        }
+    });
+    received
+}
+
+/// Human-readable lines on stderr, unless `--quiet`.
+#[derive(Debug, Clone, Copy)]
+struct Notes {
+    quiet: bool,
+}
+
+impl Notes {
+    fn say(&self, line: &str) {
+        if !self.quiet {
+            eprintln!("mmu sim: {line}");
+        }
+    }
+}
+
+/// What the simulator is set up with, as one line.
+fn start_line(args: &SimArgs) -> String {
+    let faults = if args.faults.is_empty() {
+        String::from("none")
+    } else {
+        args.faults.iter().map(fault_spec).collect::<Vec<_>>().join(", ")
+    };
+    format!(
+        "{} slots, seed {}, time scale {}x, print rate {} mm/s, faults: {faults}",
+        args.slots, args.seed, args.time_scale, args.print_rate
+    )
+}
+
+/// A scheduled fault in `--fault` syntax.
+fn fault_spec(fault: &ScheduledFault) -> String {
+    match fault.until_ms {
+        Some(until_ms) => format!("{}@{}-{until_ms}", fault.fault, fault.at_ms),
+        None => format!("{}@{}", fault.fault, fault.at_ms),
+    }
+}
+
+/// The stderr note for an event worth telling a person about: faults and power.
+fn event_note(event: &Event) -> Option<String> {
+    let what = match &event.what {
+        EventKind::Fault {
+            action: FaultAction::Inject,
+            fault,
+        } => format!("fault injected: {fault}"),
+        EventKind::Fault {
+            action: FaultAction::Clear,
+            fault,
+        } => format!("fault cleared: {fault}"),
+        EventKind::Power { on: false } => String::from("the unit lost power"),
+        EventKind::Power { on: true } => String::from("the unit booted"),
+        _ => return None,
+    };
+    Some(format!("at {:.3} s: {what}", event.t_ms as f64 / 1000.0))
+}
+
+/// Create (or truncate) the events file.
+fn create_events_file(path: &Path) -> Result<File, Box<dyn Error>> {
+    File::create(path)
+        .map_err(|err| format!("cannot create the events file {}: {err}", path.display()).into())
+}
+
+fn parse_slots(text: &str) -> Result<usize, String> {
+    let max = mmu_firmware::MAX_SLOTS;
+    match text.parse::<usize>() {
+        Ok(slots) if (1..=max).contains(&slots) => Ok(slots),
+        _ => Err(format!("a unit has 1 to {max} slots")),
+    }
+}
+
+fn parse_time_scale(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(scale) if scale.is_finite() && scale > 0.0 => Ok(scale),
+        _ => Err(String::from("the time scale is a number above 0 (1: real time)")),
+    }
+}
+
+fn parse_print_rate(text: &str) -> Result<f32, String> {
+    match text.parse::<f32>() {
+        Ok(rate) if rate.is_finite() && rate >= 0.0 => Ok(rate),
+        _ => Err(String::from("the print rate is a number of mm/s, 0 or more")),
+    }
+}
+
+fn parse_fault(text: &str) -> Result<ScheduledFault, String> {
+    text.parse::<ScheduledFault>().map_err(|err| err.to_string())
 }
