@@ -542,7 +542,7 @@ fn run_soak(args: &PrinterArgs, soak: &SoakArgs, mut console: Console) -> Result
         printer: printer_options(args),
     };
     let bar = console.progress_bar(u64::from(soak.changes), "tool changes");
-    let report = soak_run(&options, &mut |done| {
+    let report = mmu_sim::soak::run(&options, &mut |done| {
         if let Some(bar) = &bar {
             bar.set_position(u64::from(done));
         }
@@ -552,6 +552,9 @@ fn run_soak(args: &PrinterArgs, soak: &SoakArgs, mut console: Console) -> Result
     }
     console.close();
     console.say(&report.to_string());
+    for note in &report.notes {
+        console.say(note);
+    }
     console.emit(&JsonLine::Result {
         action: "soak",
         ok: report.passed(),
@@ -562,12 +565,6 @@ fn run_soak(args: &PrinterArgs, soak: &SoakArgs, mut console: Console) -> Result
     } else {
         Err(format!("soak failed: {}", report.summary_line()).into())
     }
-}
-
-/// The soak run itself (`mmu_sim::soak`), kept apart so the wiring above does not depend on how
-/// it is called.
-fn soak_run(options: &SoakOptions, progress: &mut dyn FnMut(u32)) -> SoakReport {
-    mmu_sim::soak::run(options, progress)
 }
 
 fn soak_details(report: &SoakReport, seed: u64) -> Details {

@@ -52,7 +52,7 @@ pub enum EventKind {
     },
     /// The printer's extruder started a move of its own.
     Extruder {
-        /// Why: `co-feed`, `extra-load`, `unload-help`, `ramming`.
+        /// Why: `co-feed`, `extra-load`, `load-to-nozzle`, `unload-help`, `ramming`.
         action: &'static str,
         /// Distance, mm (negative: retract).
         mm: f32,

@@ -29,6 +29,11 @@ pub const COFEED_MM: f32 = 189.9;
 pub const PRINTER_UNLOAD_MM: f32 = 80.0;
 /// Speed of the printer's unload, mm/s.
 pub const PRINTER_UNLOAD_MM_S: f32 = 80.0;
+/// After a tool change the printer loads the new filament from its gears into the nozzle, mm and
+/// mm/s.
+pub const LOAD_TO_NOZZLE_MM: f32 = 60.0;
+/// Speed of the printer's load to the nozzle, mm/s.
+pub const LOAD_TO_NOZZLE_MM_S: f32 = 15.0;
 /// The printer's help during `P3` of an error recovery (MK4 values, spec §5.7), mm and mm/s.
 pub const UNLOAD_HELP_MM: f32 = 20.0;
 /// A frame longer than this without a newline is passed on as it is (garbage).
@@ -94,6 +99,17 @@ pub struct CommandRecord {
     pub had_error: bool,
 }
 
+/// The printer's own unload before a command that needs its extruder empty.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum PrinterUnload {
+    /// Nothing to do: frames pass.
+    Done,
+    /// A command came: the extruder's move in progress ends first.
+    Waiting,
+    /// Ramming and pulling the filament out of the gears.
+    Ramming,
+}
+
 /// The printer's mechanics, driven by the frames on the wire.
 #[derive(Debug)]
 struct PrinterMechanics {
@@ -128,8 +144,8 @@ pub struct Sim {
     frame: Vec<u8>,
     /// Frames held back while the printer unloads its extruder before sending them.
     held: VecDeque<u8>,
-    /// The printer is unloading its extruder: its frames wait.
-    unloading_extruder: bool,
+    /// Where the printer's unload before a command stands: its frames wait until it is done.
+    printer_unload: PrinterUnload,
     events: Vec<Event>,
     last_fsensor: u8,
     last_slot_report: Vec<(Option<f32>, u64)>,
@@ -175,7 +191,7 @@ impl Sim {
             printer,
             frame: Vec::new(),
             held: VecDeque::new(),
-            unloading_extruder: false,
+            printer_unload: PrinterUnload::Done,
             events: Vec::new(),
             last_fsensor: 0,
             last_command,
@@ -405,8 +421,8 @@ impl Sim {
                 self.held.extend(self.frame.drain(..));
             }
         }
-        self.unloading_extruder &= self.model.extruder_busy();
-        if !self.unloading_extruder {
+        self.advance_printer_unload();
+        if self.printer_unload == PrinterUnload::Done {
             out.extend(self.held.drain(..));
         }
         self.uart_faults(&mut out);
@@ -449,23 +465,39 @@ impl Sim {
                     code,
                     RequestCode::Unload | RequestCode::Tool | RequestCode::Eject | RequestCode::Cut
                 ) && !same_tool;
-                let gears = self.model.config().extruder_gears_mm;
-                let in_gears = self
-                    .model
-                    .loaded_slot()
-                    .and_then(|slot| self.model.tip_mm(slot))
-                    .is_some_and(|tip| tip >= gears);
-                if needs_unload && in_gears && !self.model.extruder_busy() {
-                    self.model.extruder_move(-PRINTER_UNLOAD_MM, PRINTER_UNLOAD_MM_S);
-                    self.unloading_extruder = true;
-                    self.event(EventKind::Extruder {
-                        action: "ramming",
-                        mm: -PRINTER_UNLOAD_MM,
-                    });
+                if needs_unload && self.printer_unload == PrinterUnload::Done {
+                    self.printer_unload = PrinterUnload::Waiting;
                 }
             }
             _ => {}
         }
+    }
+
+    /// The printer finishes the extruder move in progress (e.g. its load to the nozzle), then
+    /// rams and pulls the filament out of its gears if it is in them.
+    fn advance_printer_unload(&mut self) {
+        if self.model.extruder_busy() {
+            return;
+        }
+        self.printer_unload = match self.printer_unload {
+            PrinterUnload::Waiting if self.filament_in_extruder_gears() => {
+                self.model.extruder_move(-PRINTER_UNLOAD_MM, PRINTER_UNLOAD_MM_S);
+                self.event(EventKind::Extruder {
+                    action: "ramming",
+                    mm: -PRINTER_UNLOAD_MM,
+                });
+                PrinterUnload::Ramming
+            }
+            _ => PrinterUnload::Done,
+        };
+    }
+
+    fn filament_in_extruder_gears(&self) -> bool {
+        let gears = self.model.config().extruder_gears_mm;
+        self.model
+            .loaded_slot()
+            .and_then(|slot| self.model.tip_mm(slot))
+            .is_some_and(|tip| tip >= gears)
     }
 
     /// A byte of the unit's answer reached the printer.
@@ -506,6 +538,13 @@ impl Sim {
                 if response.code == RequestCode::Tool {
                     let rate = p.print_mm_s;
                     self.model.set_printing((rate > 0.0).then_some(rate));
+                    if self.model.fsensor_state() != 2 {
+                        self.model.extruder_move(LOAD_TO_NOZZLE_MM, LOAD_TO_NOZZLE_MM_S);
+                        self.event(EventKind::Extruder {
+                            action: "load-to-nozzle",
+                            mm: LOAD_TO_NOZZLE_MM,
+                        });
+                    }
                 }
             }
             _ => p.feeding_to_fsensor = false,

@@ -39,7 +39,7 @@ use mmu_protocol::{ButtonCode, ErrorCode, Request, RequestCode, ResultCode};
 use crate::fault::SimFault;
 use crate::link::SimLink;
 use crate::printer::{Decision, Link, Operator, Outcome, Printer, PrinterEvent, PrinterOptions};
-use crate::sim::{CommandRecord, Sim, SimOptions};
+use crate::sim::{CommandRecord, PRINTER_UNLOAD_MM, PRINTER_UNLOAD_MM_S, Sim, SimOptions};
 use crate::timing::tool_change_minimum;
 
 /// With random faults, the chance that a tool change gets a fault.
@@ -411,8 +411,9 @@ impl SoakUser {
         }
     }
 
-    /// Fix the unit if a fault struck and is not fixed yet: clear it, and put a filament back
-    /// into a slot a runout emptied. True if there was something to fix.
+    /// Fix the unit if a fault struck and is not fixed yet: clear it, put a filament back into a
+    /// slot a runout emptied, and pull the old filament out of the extruder's gears if the fault
+    /// kept the printer's own unload from doing so. True if there was something to fix.
     fn fix(&mut self, link: &mut StrikingLink) -> bool {
         let Some(strike) = link.struck.filter(|_| !self.fixed) else {
             return false;
@@ -425,6 +426,18 @@ impl SoakUser {
         {
             let park_mm = -f32::from(sim.unit_config().park_mm);
             sim.model_mut().insert_filament(slot, park_mm);
+        }
+        let model = sim.model();
+        let gears = model.config().extruder_gears_mm;
+        let old_in_gears = model
+            .loaded_slot()
+            .filter(|&slot| slot != usize::from(self.target))
+            .and_then(|slot| model.tip_mm(slot))
+            .is_some_and(|tip| tip >= gears);
+        if old_in_gears {
+            // From the printer's menu: heat and retract.
+            sim.model_mut()
+                .extruder_move(-PRINTER_UNLOAD_MM, PRINTER_UNLOAD_MM_S);
         }
         true
     }
@@ -461,6 +474,9 @@ impl Operator<StrikingLink> for SoakUser {
     fn decide(&mut self, link: &mut StrikingLink, _request: Request, _error: ErrorCode) -> Decision {
         if self.fix(link) {
             self.presses = 0;
+        }
+        if link.sim().model().extruder_busy() {
+            return Decision::Wait;
         }
         if self.presses < USER_RETRIES {
             self.presses += 1;

@@ -106,6 +106,9 @@ fn the_printer_unloads_its_extruder_before_the_unit_hears_the_unload() {
         wire.sim.model().tip_mm(1).unwrap() >= gears,
         "loaded into the gears"
     );
+    // The printer loads on into its nozzle (60 mm at 15 mm/s).
+    wire.idle(4500);
+    assert_eq!(wire.sim.model().fsensor_state(), 2);
 
     let sent = wire.sim.now_ms();
     let (answer, answered) = wire.ask(Request::new(RequestCode::Unload, 0), 3000).unwrap();
