@@ -25,7 +25,7 @@ pub type Plan = Vec<Phase, MAX_PHASES>;
 const SENSOR_SETTLE_MS: u64 = 1000;
 /// How long the Bowden tube must stay compressed before the extruder's gears count as holding
 /// the tip, ms (one noisy reading is not enough).
-const HELD_CONFIRM_MS: u64 = 60;
+const HELD_CONFIRM_MS: u64 = 100;
 /// Extra travel allowed to the push into the extruder beyond twice its nominal distance, mm: the
 /// printer pushes its own extra load + 2 mm, and the tube takes up some before it holds.
 const NOZZLE_PUSH_MARGIN_MM: u16 = 10;
@@ -512,10 +512,11 @@ impl Operation {
         Outcome::Continue
     }
 
-    /// How long the Bowden tube has read compressed (well past the follower's deadband), ms.
+    /// How long the Bowden tube has read compressed past the follower's deadband (where
+    /// [`follow_duty`] backs off, so the tube settles there when the tip is held), ms.
     fn compressed_for(&mut self, tension: u16, now: Instant, config: &Config) -> u64 {
         let compressed =
-            u32::from(tension) + 2 * u32::from(config.tension_deadband) < u32::from(config.tension_neutral);
+            u32::from(tension) + u32::from(config.tension_deadband) < u32::from(config.tension_neutral);
         let Some(run) = self.run.as_mut() else { return 0 };
         run.compressed_since = if compressed {
             run.compressed_since.or(Some(now))

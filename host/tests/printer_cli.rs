@@ -222,4 +222,6 @@ fn the_demo_runs_its_script() {
     ] {
         assert!(out.contains(expected), "{expected:?} missing:\n{out}");
     }
+    // Commands follow each other as on a printer: the link never times out.
+    assert!(!out.contains("link lost"), "{out}");
 }

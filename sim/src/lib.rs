@@ -20,5 +20,7 @@ pub mod timing;
 pub use event::{Event, EventKind};
 pub use fault::{FAULT_HELP, ScheduledFault, SimFault, SimFaultKind};
 pub use link::SimLink;
-pub use printer::{Decision, Link, Operator, Outcome, Printer, PrinterError, PrinterEvent, PrinterOptions};
+pub use printer::{
+    Decision, Link, LinkFault, Operator, Outcome, Printer, PrinterError, PrinterEvent, PrinterOptions,
+};
 pub use sim::{CommandRecord, Sim, SimOptions};

@@ -34,6 +34,9 @@ const MAX_REJECTS: u8 = 3;
 const MAX_WRONG_ANSWERS: u8 = 10;
 /// The link is looked at this often while waiting, ms.
 const POLL_STEP_MS: u64 = 5;
+/// A request whose answer is lost this many times, each time after a good handshake, ends the
+/// session (the printer itself would retry for ever).
+const MAX_REQUEST_ATTEMPTS: u8 = 5;
 /// The mmu2 layer repeats a command interrupted by a unit restart this many times.
 const MAX_INTERRUPTS: u8 = 3;
 
@@ -98,12 +101,31 @@ pub enum PrinterEvent {
     Button(ButtonCode),
     /// The command finished.
     Finished(Request, ResultCode),
-    /// No valid answer: `timeout` or `garbled`; the printer re-handshakes.
-    LinkLost(&'static str),
+    /// No valid answer; the printer re-handshakes.
+    LinkLost(LinkFault),
     /// The unit restarted under the command; the printer repeats it.
     Interrupted(Request),
     /// One `Q0` cycle of a command passed.
     Heartbeat(Request),
+}
+
+/// Why the printer lost the link.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LinkFault {
+    /// No complete answer within [`LINK_TIMEOUT_MS`] (the printer's `CommunicationTimeout`).
+    Timeout,
+    /// An answer that does not decode or does not fit (`ProtocolError`).
+    Garbled,
+}
+
+impl LinkFault {
+    /// `timeout` or `garbled`.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            LinkFault::Timeout => "timeout",
+            LinkFault::Garbled => "garbled",
+        }
+    }
 }
 
 /// What the person at the printer does about an error the printer did not retry away.
@@ -149,8 +171,10 @@ pub enum PrinterError {
         /// What the unit answered.
         got: Option<u16>,
     },
-    /// Ten link faults in a row (screen 04401).
+    /// Ten timeouts in a row (screen 04401).
     NotResponding,
+    /// Ten garbled answers in a row (screen 04402).
+    ProtocolError,
     /// A command did not end in time.
     Stuck(Request),
 }
@@ -164,7 +188,10 @@ impl std::fmt::Display for PrinterError {
                 "MMU FW UPDATE NEEDED (printer screen 04504): S{part} answered {got:?}"
             ),
             PrinterError::NotResponding => {
-                f.write_str("MMU_NOT_RESPONDING (printer screen 04401): no valid answer 10 times in a row")
+                f.write_str("MMU_NOT_RESPONDING (printer screen 04401): no answer 10 times in a row")
+            }
+            PrinterError::ProtocolError => {
+                f.write_str("PROTOCOL_ERROR (printer screen 04402): a garbled answer 10 times in a row")
             }
             PrinterError::Stuck(request) => write!(
                 f,
@@ -187,8 +214,8 @@ impl From<io::Error> for PrinterError {
 /// Why one step of the dialogue failed.
 #[derive(Debug)]
 enum Fault {
-    /// The link is lost (`timeout`, `garbled`): re-handshake.
-    Link(&'static str),
+    /// The link is lost: re-handshake.
+    Link(LinkFault),
     /// Nothing to recover.
     Fatal(PrinterError),
 }
@@ -227,7 +254,8 @@ pub struct Printer<L> {
     inbox: Vec<u8>,
     last_activity_ms: u64,
     reported_fsensor: Option<u8>,
-    dropouts: u8,
+    /// Consecutive timeouts and garbled answers (the printer's two drop-out filters).
+    dropouts: [u8; 2],
     /// The last values of [`POLLED_REGISTERS`].
     registers: [Option<u16>; POLLED_REGISTERS.len()],
 }
@@ -243,7 +271,7 @@ impl<L: Link> Printer<L> {
             inbox: Vec::new(),
             last_activity_ms: now,
             reported_fsensor: None,
-            dropouts: 0,
+            dropouts: [0; 2],
             registers: [None; POLLED_REGISTERS.len()],
         }
     }
@@ -270,6 +298,7 @@ impl<L: Link> Printer<L> {
     /// starting up finish; returns the `Q0` answer (`X0 F0` for a unit at rest, an error it
     /// stopped on, or the command it is still running).
     pub fn connect(&mut self, op: &mut impl Operator<L>) -> Result<Response, PrinterError> {
+        let deadline = self.link.now_ms() + self.options.command_timeout_ms;
         loop {
             let mut answer = match self.handshake(op) {
                 Ok(answer) => answer,
@@ -280,9 +309,8 @@ impl<L: Link> Printer<L> {
                 Err(Fault::Fatal(error)) => return Err(error),
             };
             let booting = |a: &Response| a.code == RequestCode::Reset && a.param == ParamCode::Processing;
-            let deadline = self.link.now_ms() + self.options.command_timeout_ms;
             while booting(&answer) && self.link.now_ms() < deadline {
-                match self.poll(op) {
+                match self.poll(op, false) {
                     Ok(next) => answer = next,
                     Err(Fault::Link(why)) => {
                         self.link_lost(op, why)?;
@@ -300,24 +328,30 @@ impl<L: Link> Printer<L> {
     /// Send a request that is not a command (`R`, `W`, `B`, `f`, `S`) and return its answer,
     /// re-handshaking if the link fails on the way.
     pub fn request(&mut self, op: &mut impl Operator<L>, request: Request) -> Result<Response, PrinterError> {
-        loop {
+        let mut lost = LinkFault::Timeout;
+        for _ in 0..MAX_REQUEST_ATTEMPTS {
             match self.exchange(op, request) {
                 Ok(answer) => return Ok(answer),
                 Err(Fault::Link(why)) => {
+                    lost = why;
                     self.link_lost(op, why)?;
                     self.connect(op)?;
                 }
                 Err(Fault::Fatal(error)) => return Err(error),
             }
         }
+        Err(match lost {
+            LinkFault::Timeout => PrinterError::NotResponding,
+            LinkFault::Garbled => PrinterError::ProtocolError,
+        })
     }
 
     /// `X<value>`: the unit restarts without an answer; wait out the link timeout and connect
     /// again, as the printer does. Returns the first `Q0` answer after the restart.
     pub fn reset(&mut self, op: &mut impl Operator<L>, value: u8) -> Result<Response, PrinterError> {
         self.send(op, Request::new(RequestCode::Reset, value))?;
-        self.wait_silence(op, LINK_TIMEOUT_MS)?;
-        op.event(&mut self.link, &PrinterEvent::LinkLost("timeout"));
+        self.wait_silence(LINK_TIMEOUT_MS)?;
+        op.event(&mut self.link, &PrinterEvent::LinkLost(LinkFault::Timeout));
         self.flush();
         self.connect(op)
     }
@@ -353,6 +387,9 @@ impl<L: Link> Printer<L> {
         let started = self.link.now_ms();
         let mut rejects = 0;
         loop {
+            if self.link.now_ms().saturating_sub(started) > self.options.command_timeout_ms {
+                return Err(PrinterError::Stuck(request));
+            }
             match self.exchange(op, request) {
                 Ok(answer) if answer.param == ParamCode::Accepted => break,
                 Ok(answer) if answer.param == ParamCode::Rejected && rejects < MAX_REJECTS => {
@@ -361,9 +398,11 @@ impl<L: Link> Printer<L> {
                 Ok(_) => return Ok(Some(Outcome::Rejected)),
                 Err(Fault::Link(why)) => {
                     self.link_lost(op, why)?;
-                    // The answer may be what got lost: a unit running the command says so.
+                    // The answer may be what got lost: a unit running the command says so (an `F`
+                    // with the same echo may be an earlier command's).
                     let state = self.connect(op)?;
-                    if (state.code, state.value) == (request.code, request.value) {
+                    let running = matches!(state.param, ParamCode::Processing | ParamCode::Error);
+                    if running && (state.code, state.value) == (request.code, request.value) {
                         break;
                     }
                 }
@@ -376,7 +415,7 @@ impl<L: Link> Printer<L> {
             if self.link.now_ms().saturating_sub(started) > self.options.command_timeout_ms {
                 return Err(PrinterError::Stuck(request));
             }
-            let answer = match self.poll(op) {
+            let answer = match self.poll(op, true) {
                 Ok(answer) => answer,
                 Err(Fault::Link(why)) => {
                     self.link_lost(op, why)?;
@@ -432,7 +471,7 @@ impl<L: Link> Printer<L> {
                     return Ok(Some(Outcome::Finished(result)));
                 }
                 ParamCode::Accepted | ParamCode::Rejected => {
-                    self.link_lost(op, "garbled")?;
+                    self.link_lost(op, LinkFault::Garbled)?;
                     self.connect(op)?;
                     continue;
                 }
@@ -448,19 +487,19 @@ impl<L: Link> Printer<L> {
         Ok(answer.param == ParamCode::Accepted)
     }
 
-    /// Wait for the heartbeat (reporting the filament sensor at once), then `Q0` and the
-    /// register poll.
-    fn poll(&mut self, op: &mut impl Operator<L>) -> Result<Response, Fault> {
+    /// Wait for the heartbeat (reporting a change of the filament sensor at once), then `Q0`,
+    /// `f` (after every `P`/`E` answer while a command runs, else on a change) and the register
+    /// poll.
+    fn poll(&mut self, op: &mut impl Operator<L>, in_command: bool) -> Result<Response, Fault> {
         while self.link.now_ms() < self.last_activity_ms + HEARTBEAT_MS {
             self.report_fsensor(op)?;
-            let mut stray = Vec::new();
-            self.link.receive(POLL_STEP_MS, &mut stray)?;
-            if !stray.is_empty() {
-                // Nothing is expected between exchanges; the printer drops it.
-                self.last_activity_ms = self.link.now_ms();
-            }
+            // Nothing is expected between exchanges; the printer drops it.
+            self.link.receive(POLL_STEP_MS, &mut Vec::new())?;
         }
         let answer = self.exchange(op, Request::new(RequestCode::Query, 0))?;
+        if in_command && matches!(answer.param, ParamCode::Processing | ParamCode::Error) {
+            self.reported_fsensor = None;
+        }
         self.report_fsensor(op)?;
         self.poll_registers(op)?;
         Ok(answer)
@@ -498,7 +537,7 @@ impl<L: Link> Printer<L> {
             {
                 wrong += 1;
                 if wrong >= MAX_WRONG_ANSWERS {
-                    return Err(Fault::Link("garbled"));
+                    return Err(Fault::Link(LinkFault::Garbled));
                 }
                 continue;
             }
@@ -515,7 +554,7 @@ impl<L: Link> Printer<L> {
             version[usize::from(part)] = got.unwrap_or(0);
             part += 1;
         }
-        self.dropouts = 0;
+        self.dropouts = [0; 2];
         // `A` or `R`: the printer does not check.
         self.exchange(op, Request::write(0x0b, self.options.extra_load_mm))?;
         self.exchange(op, Request::write(0x14, self.options.slow_feed_mm_s))?;
@@ -533,24 +572,29 @@ impl<L: Link> Printer<L> {
         Ok(answer)
     }
 
-    /// Count a link fault; the tenth in a row ends the session. Then the printer drops what is
-    /// in flight (after a garbled answer it first waits out a heartbeat period).
-    fn link_lost(&mut self, op: &mut impl Operator<L>, why: &'static str) -> Result<(), PrinterError> {
+    /// Count a link fault; the tenth of a kind in a row ends the session. Then the printer drops
+    /// what is in flight (after a garbled answer it first waits out a heartbeat period).
+    fn link_lost(&mut self, op: &mut impl Operator<L>, why: LinkFault) -> Result<(), PrinterError> {
         op.event(&mut self.link, &PrinterEvent::LinkLost(why));
-        self.dropouts += 1;
-        if self.dropouts >= MAX_DROPOUTS {
-            return Err(PrinterError::NotResponding);
+        let count = &mut self.dropouts[why as usize];
+        *count += 1;
+        if *count >= MAX_DROPOUTS {
+            return Err(match why {
+                LinkFault::Timeout => PrinterError::NotResponding,
+                LinkFault::Garbled => PrinterError::ProtocolError,
+            });
         }
-        if why == "garbled" {
-            self.wait_silence(op, HEARTBEAT_MS)?;
+        if why == LinkFault::Garbled {
+            self.wait_silence(HEARTBEAT_MS)?;
         }
         self.flush();
         Ok(())
     }
 
     /// Let `ms` pass since the last activity, dropping whatever arrives.
-    fn wait_silence(&mut self, _op: &mut impl Operator<L>, ms: u64) -> Result<(), PrinterError> {
-        while self.link.now_ms() < self.last_activity_ms + ms {
+    fn wait_silence(&mut self, ms: u64) -> Result<(), PrinterError> {
+        let end = self.last_activity_ms + ms;
+        while self.link.now_ms() < end {
             let mut dropped = Vec::new();
             self.link.receive(POLL_STEP_MS, &mut dropped)?;
         }
@@ -573,6 +617,8 @@ impl<L: Link> Printer<L> {
     fn exchange(&mut self, op: &mut impl Operator<L>, request: Request) -> Result<Response, Fault> {
         self.flush();
         self.send(op, request)?;
+        // Bytes keep the link alive, but a stream that never makes a frame is garbage.
+        let give_up = self.last_activity_ms + 2 * LINK_TIMEOUT_MS;
         loop {
             for byte in std::mem::take(&mut self.inbox).into_iter() {
                 match self.decoder.feed(byte) {
@@ -580,13 +626,16 @@ impl<L: Link> Printer<L> {
                         op.event(&mut self.link, &PrinterEvent::Received(answer));
                         return Ok(answer);
                     }
-                    Some(Err(_)) => return Err(Fault::Link("garbled")),
+                    Some(Err(_)) => return Err(Fault::Link(LinkFault::Garbled)),
                     None => {}
                 }
             }
             let now = self.link.now_ms();
             if now >= self.last_activity_ms + LINK_TIMEOUT_MS {
-                return Err(Fault::Link("timeout"));
+                return Err(Fault::Link(LinkFault::Timeout));
+            }
+            if now >= give_up {
+                return Err(Fault::Link(LinkFault::Garbled));
             }
             let wait = (self.last_activity_ms + LINK_TIMEOUT_MS - now).min(POLL_STEP_MS);
             let before = self.inbox.len();

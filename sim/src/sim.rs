@@ -11,7 +11,7 @@
 use std::collections::VecDeque;
 
 use mmu_firmware::ops::Status;
-use mmu_firmware::{BoardAction, Config, Instant};
+use mmu_firmware::{Config, Instant};
 use mmu_model::{Model, ModelConfig, Rng};
 use mmu_protocol::{
     ParamCode, ProgressCode, Request, RequestCode, RequestDecoder, Response, ResponseDecoder,
@@ -25,16 +25,15 @@ use crate::logic::{UnitLogic, new_logic};
 /// (Prusa-Firmware-Buddy's value, spec §5.7).
 pub const COFEED_MM: f32 = 189.9;
 /// The printer's unload before it asks for another tool or an unload: ramming, then pulling the
-/// filament out of its gears, mm and mm/s.
+/// filament out of its gears, mm.
 pub const PRINTER_UNLOAD_MM: f32 = 80.0;
 /// Speed of the printer's unload, mm/s.
 pub const PRINTER_UNLOAD_MM_S: f32 = 80.0;
-/// After a tool change the printer loads the new filament from its gears into the nozzle, mm and
-/// mm/s.
+/// After a tool change the printer loads the new filament from its gears into the nozzle, mm.
 pub const LOAD_TO_NOZZLE_MM: f32 = 60.0;
 /// Speed of the printer's load to the nozzle, mm/s.
 pub const LOAD_TO_NOZZLE_MM_S: f32 = 15.0;
-/// The printer's help during `P3` of an error recovery (MK4 values, spec §5.7), mm and mm/s.
+/// The printer's help during `P3` of an error recovery (MK4 values, spec §5.7): 20 mm at 20 mm/s.
 pub const UNLOAD_HELP_MM: f32 = 20.0;
 /// A frame longer than this without a newline is passed on as it is (garbage).
 const MAX_FRAME: usize = 32;
@@ -99,17 +98,6 @@ pub struct CommandRecord {
     pub had_error: bool,
 }
 
-/// The printer's own unload before a command that needs its extruder empty.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum PrinterUnload {
-    /// Nothing to do: frames pass.
-    Done,
-    /// A command came: the extruder's move in progress ends first.
-    Waiting,
-    /// Ramming and pulling the filament out of the gears.
-    Ramming,
-}
-
 /// The printer's mechanics, driven by the frames on the wire.
 #[derive(Debug)]
 struct PrinterMechanics {
@@ -144,8 +132,8 @@ pub struct Sim {
     frame: Vec<u8>,
     /// Frames held back while the printer unloads its extruder before sending them.
     held: VecDeque<u8>,
-    /// Where the printer's unload before a command stands: its frames wait until it is done.
-    printer_unload: PrinterUnload,
+    /// The printer is ramming and pulling its filament out before a command: its frames wait.
+    ramming: bool,
     events: Vec<Event>,
     last_fsensor: u8,
     last_slot_report: Vec<(Option<f32>, u64)>,
@@ -191,7 +179,7 @@ impl Sim {
             printer,
             frame: Vec::new(),
             held: VecDeque::new(),
-            printer_unload: PrinterUnload::Done,
+            ramming: false,
             events: Vec::new(),
             last_fsensor: 0,
             last_command,
@@ -348,11 +336,9 @@ impl Sim {
             None => {
                 let now = Instant::from_millis(self.now_ms - self.boot_epoch_ms);
                 let action = self.logic.step(now, 1, &mut self.model, &to_unit, &mut from_unit);
-                if let Some(action) = action {
+                // Nothing persists yet: an erase is a plain reset.
+                if action.is_some() {
                     self.power_off(self.options.boot_ms);
-                    if action == BoardAction::EraseAndReset {
-                        // Nothing persists yet: a reset is the whole erase.
-                    }
                 }
             }
         }
@@ -421,8 +407,8 @@ impl Sim {
                 self.held.extend(self.frame.drain(..));
             }
         }
-        self.advance_printer_unload();
-        if self.printer_unload == PrinterUnload::Done {
+        self.ramming &= self.model.extruder_busy();
+        if !self.ramming {
             out.extend(self.held.drain(..));
         }
         self.uart_faults(&mut out);
@@ -465,31 +451,20 @@ impl Sim {
                     code,
                     RequestCode::Unload | RequestCode::Tool | RequestCode::Eject | RequestCode::Cut
                 ) && !same_tool;
-                if needs_unload && self.printer_unload == PrinterUnload::Done {
-                    self.printer_unload = PrinterUnload::Waiting;
+                // A command ends whatever the extruder was doing (its load into the nozzle):
+                // the printer's own moves come before it sends the next command.
+                self.model.extruder_move(0.0, PRINTER_UNLOAD_MM_S);
+                if needs_unload && !self.ramming && self.filament_in_extruder_gears() {
+                    self.model.extruder_move(-PRINTER_UNLOAD_MM, PRINTER_UNLOAD_MM_S);
+                    self.ramming = true;
+                    self.event(EventKind::Extruder {
+                        action: "ramming",
+                        mm: -PRINTER_UNLOAD_MM,
+                    });
                 }
             }
             _ => {}
         }
-    }
-
-    /// The printer finishes the extruder move in progress (e.g. its load to the nozzle), then
-    /// rams and pulls the filament out of its gears if it is in them.
-    fn advance_printer_unload(&mut self) {
-        if self.model.extruder_busy() {
-            return;
-        }
-        self.printer_unload = match self.printer_unload {
-            PrinterUnload::Waiting if self.filament_in_extruder_gears() => {
-                self.model.extruder_move(-PRINTER_UNLOAD_MM, PRINTER_UNLOAD_MM_S);
-                self.event(EventKind::Extruder {
-                    action: "ramming",
-                    mm: -PRINTER_UNLOAD_MM,
-                });
-                PrinterUnload::Ramming
-            }
-            _ => PrinterUnload::Done,
-        };
     }
 
     fn filament_in_extruder_gears(&self) -> bool {

@@ -119,6 +119,9 @@ pub struct SoakReport {
     pub faults_injected: u32,
     /// Faults after which the tool change completed.
     pub recovered: u32,
+    /// Of [`SoakReport::recovered`]: faults that stopped the unit with an error first (the others
+    /// were ridden out: noise below the thresholds, a few lost bytes, a mild slip).
+    pub recovered_after_error: u32,
     /// Tool changes that failed even once the fault was cleared and Retry pressed; this includes
     /// changes that failed without any fault ([`SoakReport::failed_without_fault`]).
     pub unrecovered: u32,
@@ -210,6 +213,13 @@ impl fmt::Display for SoakReport {
             self.wall_s,
             self.speed()
         )?;
+        if self.recovered > 0 {
+            write!(
+                f,
+                "\n{} of the {} recovered faults had stopped the unit with an error",
+                self.recovered_after_error, self.recovered
+            )?;
+        }
         if !self.by_fault_kind.is_empty() {
             write!(f, "\nfaults by kind:")?;
             for t in &self.by_fault_kind {
@@ -730,6 +740,7 @@ pub fn run(options: &SoakOptions, progress: &mut dyn FnMut(u32)) -> SoakReport {
             Ok(ChangeEnd::Done) => {
                 if let Some(kind) = &kind {
                     report.recovered += 1;
+                    report.recovered_after_error += u32::from(!user.errors.is_empty());
                     report.tally(kind.clone()).recovered += 1;
                 }
                 ("recovered".to_string(), None)

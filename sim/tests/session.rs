@@ -66,6 +66,12 @@ fn handshake_then_tool_changes_load_to_the_nozzle() {
         assert_eq!(model.loaded_slot(), Some(usize::from(slot)));
         assert_ne!(model.fsensor_state(), 0);
     }
+    // Back to back, each command reaches the unit well within the link timeout.
+    assert!(
+        !op.events.iter().any(|e| matches!(e, PrinterEvent::LinkLost(_))),
+        "{:?}",
+        op.events
+    );
     // The printer sees what its once-a-second `Q0` catches: the short push into the nozzle
     // (5 mm) falls between two polls.
     let seen = op.progress();
@@ -248,4 +254,46 @@ fn noisy_sensors_do_not_end_the_push_into_the_extruder_early() {
         let tip = printer.link().sim().model().tip_mm(usize::from(slot)).unwrap();
         assert!(tip >= gears, "slot {slot}: the tip stopped at {tip} mm");
     }
+}
+
+/// Clears every fault when the printer gives up retrying by itself, then presses Retry.
+#[derive(Default)]
+struct Fixer {
+    errors: Vec<ErrorCode>,
+}
+
+impl Operator<SimLink> for Fixer {
+    fn event(&mut self, _link: &mut SimLink, event: &PrinterEvent) {
+        if let PrinterEvent::Error(_, error) = event {
+            self.errors.push(*error);
+        }
+    }
+
+    fn decide(&mut self, link: &mut SimLink, _request: Request, _error: ErrorCode) -> Decision {
+        link.sim_mut().model_mut().clear_all();
+        Decision::Press(ButtonCode::MIDDLE)
+    }
+}
+
+#[test]
+fn retry_after_a_bowden_jam_feeds_on_from_where_the_tip_stopped() {
+    let mut printer = printer();
+    let mut op = Fixer::default();
+    printer.connect(&mut op).unwrap();
+    let jam = mmu_sim::SimFault::Model(mmu_model::Fault::BowdenJam);
+    printer.link_mut().sim_mut().inject(jam);
+    let outcome = printer
+        .command(&mut op, Request::new(RequestCode::Tool, 1))
+        .unwrap();
+    assert_eq!(outcome, OK, "{:?}", op.errors);
+    assert!(!op.errors.is_empty(), "the jam stopped the feed");
+    // Counting the Bowden distance again from zero would run the tip into the printer's sensor
+    // during the fast feed.
+    assert!(
+        !op.errors.contains(&ErrorCode::FSENSOR_TOO_EARLY),
+        "{:?}",
+        op.errors
+    );
+    let gears = printer.link().sim().model().config().extruder_gears_mm;
+    assert!(printer.link().sim().model().tip_mm(1).unwrap() >= gears);
 }

@@ -563,7 +563,8 @@ impl<L: Target> Operator<L> for Console {
             PrinterEvent::AutoRetry(error, left) => self.auto_retry(t_ms, *error, *left),
             PrinterEvent::Button(button) => self.button(t_ms, *button),
             PrinterEvent::Finished(request, result) => self.finished_command(t_ms, request, *result),
-            PrinterEvent::LinkLost(why) => {
+            PrinterEvent::LinkLost(fault) => {
+                let why = fault.as_str();
                 let text = format!("link lost ({why}): the printer connects again");
                 self.show(t_ms, &text, || JsonLine::LinkLost { t_ms, why });
             }
