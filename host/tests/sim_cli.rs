@@ -431,6 +431,19 @@ fn stdio_serves_a_printer_session() {
 fn pty_serves_a_serial_port_client() {
     let scale = TIME_SCALE.to_string();
     let mut sim = SimProcess::spawn(&["--pty", "--time-scale", &scale, "--quiet"]);
+    let path = pty_path(&mut sim);
+    assert!(path.starts_with('/'), "not a path: {path:?}");
+
+    for session in 0..2 {
+        let port = open_port(&path, session);
+        let writer = port.try_clone().expect("the port can be cloned");
+        let mut printer = Printer::new(Box::new(writer), FromUnit::Port(port), None);
+        printer.handshake();
+    }
+}
+
+/// The pty's path, as `mmu sim --pty` prints it.
+fn pty_path(sim: &mut SimProcess) -> String {
     let stdout = sim.child.stdout.take().expect("stdout is piped");
     let (path_sender, path_receiver) = mpsc::channel();
     thread::spawn(move || {
@@ -441,14 +454,31 @@ fn pty_serves_a_serial_port_client() {
     let path = path_receiver
         .recv_timeout(ANSWER_TIMEOUT)
         .expect("mmu sim prints the pty's path");
-    let path = path.trim_end().to_string();
-    assert!(path.starts_with('/'), "not a path: {path:?}");
+    path.trim_end().to_string()
+}
 
-    for session in 0..2 {
-        let port = open_port(&path, session);
-        let writer = port.try_clone().expect("the port can be cloned");
-        let mut printer = Printer::new(Box::new(writer), FromUnit::Port(port), None);
-        printer.handshake();
+/// The two halves of the product together, as a user runs them: `mmu printer --port` plays the
+/// printer against `mmu sim --pty`, following the simulator's events for its filament sensor.
+/// Slower than the simulator alone: the printer keeps its own clock in wall time.
+#[test]
+fn the_printer_tool_drives_the_simulator_over_a_pty() {
+    let events = EventsFile::create("printer-over-pty");
+    let mut sim = SimProcess::spawn(&["--pty", "--time-scale", "5", "--quiet", "--events", events.path()]);
+    let path = pty_path(&mut sim);
+    for action in [&["tool", "1"][..], &["eject", "2"][..]] {
+        let output = Command::new(env!("CARGO_BIN_EXE_mmu"))
+            .args(["printer", "--port", &path, "--fsensor-events", events.path()])
+            .args(action)
+            .output()
+            .expect("the mmu binary runs");
+        let out = String::from_utf8_lossy(&output.stdout);
+        assert!(
+            output.status.success(),
+            "{action:?}: {out}{}",
+            String::from_utf8_lossy(&output.stderr)
+        );
+        assert!(out.contains("connected: unit firmware 3.0.3"), "{out}");
+        assert!(!out.contains("link lost"), "{out}");
     }
 }
 
