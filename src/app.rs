@@ -15,6 +15,7 @@ use mmu_protocol::{
 
 use crate::config::Config;
 use crate::ops::{self, Operation, Status, follow_duty};
+use crate::persist::{Counters, Snapshot};
 use crate::time::Instant;
 use crate::unit::{Lane, Unit};
 
@@ -50,36 +51,17 @@ pub struct Outputs<const N: usize> {
     pub status_led: bool,
 }
 
-/// Counters behind the diagnostic registers.
-#[derive(Debug, Clone)]
-pub(crate) struct Counters<const N: usize> {
-    /// Errors raised (register 0x04).
-    pub drive_errors: u16,
-    /// Completed tool changes per slot.
-    pub tool_changes: [u16; N],
-    /// Errors raised while driving each slot.
-    pub failures: [u16; N],
-    /// Responses that did not fit a step's transmit buffer.
-    pub dropped_responses: u16,
-}
-
-impl<const N: usize> Default for Counters<N> {
-    fn default() -> Self {
-        Counters {
-            drive_errors: 0,
-            tool_changes: [0; N],
-            failures: [0; N],
-            dropped_responses: 0,
-        }
-    }
-}
-
 /// The unit logic for `N` slots (1 to 5).
 pub struct App<const N: usize> {
     pub(crate) config: Config,
     pub(crate) unit: Unit<N>,
     pub(crate) operation: Operation,
     pub(crate) counters: Counters<N>,
+    /// Responses that did not fit a step's transmit buffer (not persisted).
+    pub(crate) dropped_responses: u16,
+    /// Odometry of each slot at the last step, and the motion driven since start, 1/100 mm.
+    odometry_seen: [i32; N],
+    fed_centi: [u64; N],
     decoder: RequestDecoder,
     /// The time of the current step.
     pub(crate) now: Instant,
@@ -100,6 +82,9 @@ impl<const N: usize> App<N> {
             unit: Unit::default(),
             operation: Operation::new((RequestCode::Reset, 0), &[ops::Phase::CheckSensors]),
             counters: Counters::default(),
+            dropped_responses: 0,
+            odometry_seen: [0; N],
+            fed_centi: [0; N],
             decoder: RequestDecoder::new(),
             now: Instant::ZERO,
             pending_button: None,
@@ -143,6 +128,7 @@ impl<const N: usize> App<N> {
         let before = self.operation.status();
         self.operation.step(&mut self.unit, now, &self.config);
         self.count_transition(before);
+        self.count_fed();
         self.drive_motors(now, &mut out);
         out.status_led = match self.operation.status() {
             Status::Running(_) => true,
@@ -207,7 +193,7 @@ impl<const N: usize> App<N> {
         if let Some(response) = response {
             let frame = response.encode();
             if out.tx.extend_from_slice(frame.as_bytes()).is_err() {
-                self.counters.dropped_responses = self.counters.dropped_responses.saturating_add(1);
+                self.dropped_responses = self.dropped_responses.saturating_add(1);
             }
         }
     }
@@ -241,6 +227,46 @@ impl<const N: usize> App<N> {
             Err(error) => Operation::failed(key, error),
         };
         Response::bare(request.code, request.value, ParamCode::Accepted)
+    }
+
+    /// Add the motion of the slot the running command drives to its fed distance (the extruder
+    /// pulling a loaded slot while printing does not count).
+    fn count_fed(&mut self) {
+        let driving = self.operation.driving_slot();
+        for (slot, feeder) in self.unit.feeders.iter().enumerate() {
+            let odometry = feeder.odometry_centi();
+            let seen = core::mem::replace(&mut self.odometry_seen[slot], odometry);
+            if driving == Some(slot) {
+                self.fed_centi[slot] += u64::from(odometry.abs_diff(seen));
+                self.counters.fed_mm[slot] = u32::try_from(self.fed_centi[slot] / 100).unwrap_or(u32::MAX);
+            }
+        }
+    }
+
+    /// What the unit keeps across a restart: lanes, counters, settings.
+    pub fn snapshot(&self) -> Snapshot<N> {
+        Snapshot {
+            lanes: core::array::from_fn(|slot| self.unit.lane(slot)),
+            counters: self.counters,
+            settings: self.settings(),
+        }
+    }
+
+    /// Take back what a previous run kept, before the first step. Settings go through the
+    /// register checks (a value out of range is dropped); the start-up check then compares the
+    /// lanes with what the sensors show.
+    pub fn restore(&mut self, snapshot: &Snapshot<N>) {
+        for (slot, &lane) in snapshot.lanes.iter().enumerate() {
+            self.unit.set_lane(slot, lane);
+        }
+        self.counters = snapshot.counters;
+        self.fed_centi = snapshot.counters.fed_mm.map(|mm| u64::from(mm) * 100);
+        // Twice: a pair of thresholds may only be valid once both are in.
+        for _ in 0..2 {
+            for &(address, value) in &snapshot.settings {
+                self.write_register(address, value);
+            }
+        }
     }
 
     fn count_transition(&mut self, before: Status) {

@@ -12,6 +12,7 @@ pub mod app;
 pub mod config;
 pub mod feeder;
 pub mod ops;
+pub mod persist;
 pub mod registers;
 pub mod sensor;
 pub mod time;

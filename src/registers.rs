@@ -10,6 +10,7 @@ use mmu_protocol::ErrorCode;
 use crate::app::App;
 use crate::config::Config;
 use crate::ops::Status;
+use crate::persist::MAX_SETTINGS;
 use crate::sensor::Thresholds;
 use crate::unit::{SensorId, Unit};
 
@@ -172,7 +173,7 @@ impl<const N: usize> App<N> {
                         .is_some_and(|s| s.fault().is_some())
                 })
                 .fold(0u16, |mask, i| mask | (1 << i)),
-            DROPPED_RESPONSES => self.counters.dropped_responses,
+            DROPPED_RESPONSES => self.dropped_responses,
             a if sensor_at::<N>(a, RAW).is_some() => unit.sensor(sensor_at::<N>(a, RAW)?)?.raw(),
             a if sensor_at::<N>(a, FILTERED).is_some() => {
                 unit.sensor(sensor_at::<N>(a, FILTERED)?)?.filtered()
@@ -200,6 +201,20 @@ impl<const N: usize> App<N> {
             _ => return None,
         };
         Some(value)
+    }
+
+    /// Every writable setting and its value: the plain settings, then the sensors' thresholds.
+    pub(crate) fn settings(&self) -> heapless::Vec<(u8, u16), MAX_SETTINGS> {
+        let threshold_registers =
+            (0..Unit::<N>::SENSOR_COUNT as u8).flat_map(|i| [THRESHOLD_ON + i, THRESHOLD_OFF + i]);
+        let mut settings = heapless::Vec::new();
+        for address in SETTINGS.iter().map(|s| s.address).chain(threshold_registers) {
+            if let Some(value) = self.read_register(address) {
+                // MAX_SETTINGS holds every setting of a 5-slot unit.
+                let _ = settings.push((address, value));
+            }
+        }
+        settings
     }
 
     /// Write `value` to register `address`; false (answered `R`) when the register is unknown or

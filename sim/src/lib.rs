@@ -10,6 +10,7 @@
 
 pub mod event;
 pub mod fault;
+pub mod flash;
 pub mod link;
 pub mod logic;
 pub mod printer;
