@@ -1,13 +1,31 @@
-//! The unit logic with its slot count chosen at run time.
+//! The unit logic with its slot count chosen at run time, and its persisted state.
 //!
 //! [`App`] takes its slot count as a const generic, as the firmware must; the simulator's
-//! `--slots` is a run-time value. [`UnitLogic`] is the object-safe face of `App<N>` that
-//! [`new_logic`] builds for any supported count.
+//! `--slots` is a run-time value. [`UnitLogic`] is the object-safe face of an `App<N>` with its
+//! [`Store`] that [`new_logic`] builds for any supported count. The flash outlives the logic: a
+//! restart takes it back with [`UnitLogic::into_flash`] and boots a new logic on it.
 
+use embassy_futures::block_on;
 use mmu_firmware::ops::Status;
+use mmu_firmware::persist::Store;
+use mmu_firmware::unit::Lane;
 use mmu_firmware::{App, BoardAction, Config, Instant, MAX_SLOTS, MotorCommand};
 use mmu_model::Model;
 use mmu_protocol::{ButtonCode, RequestCode};
+
+use crate::flash::{G0_PAGE, MemFlash};
+
+/// The simulated unit's flash for persisted state: 16 pages of the STM32G0 (32 KiB).
+pub type UnitFlash = MemFlash<G0_PAGE>;
+/// Pages of [`UnitFlash`].
+pub const STORE_PAGES: usize = 16;
+/// Counters and settings are compared with the flash this often; lanes every step, ms.
+const FULL_CHECK_MS: u64 = 1000;
+
+/// An empty (erased) unit flash.
+pub fn blank_flash() -> UnitFlash {
+    MemFlash::new(STORE_PAGES)
+}
 
 /// One App of any slot count, stepped against the model.
 pub trait UnitLogic: Send {
@@ -31,9 +49,61 @@ pub trait UnitLogic: Send {
 
     /// The configuration the logic runs with.
     fn config(&self) -> &Config;
+
+    /// Take the flash out for the next boot (this logic is done: its store is left blank).
+    fn take_flash(&mut self) -> UnitFlash;
 }
 
-impl<const N: usize> UnitLogic for App<N> {
+/// An App with its store.
+struct PersistentApp<const N: usize> {
+    app: App<N>,
+    store: Store<UnitFlash, N>,
+    lanes: [Lane; N],
+    checked_at: Option<Instant>,
+}
+
+impl<const N: usize> PersistentApp<N> {
+    /// Boot on `flash`: what it holds is restored before the first step. A store that cannot be
+    /// read is erased (the unit starts as new rather than not at all).
+    fn boot(config: Config, flash: UnitFlash) -> Self {
+        let range = 0..(STORE_PAGES * G0_PAGE) as u32;
+        let mut store = Store::new(flash, range).unwrap_or_else(|_| unreachable!("a valid region"));
+        let mut app = App::new(config);
+        match block_on(store.load()) {
+            Ok(snapshot) => app.restore(&snapshot),
+            Err(_) => {
+                let _ = block_on(store.erase());
+            }
+        }
+        let lanes = app.snapshot().lanes;
+        PersistentApp {
+            app,
+            store,
+            lanes,
+            checked_at: None,
+        }
+    }
+
+    /// Keep what changed: lanes at once, the rest as the store's policy allows.
+    fn persist(&mut self, now: Instant) {
+        let lanes = core::array::from_fn(|slot| self.app.unit().lane(slot));
+        let full_check = self
+            .checked_at
+            .is_none_or(|at| now.millis_since(at) >= FULL_CHECK_MS);
+        if lanes == self.lanes && !full_check {
+            return;
+        }
+        self.lanes = lanes;
+        self.checked_at = Some(now);
+        let snapshot = self.app.snapshot();
+        if self.store.save_due(&snapshot, now) {
+            // A failed write leaves the old record; the next change tries again.
+            let _ = block_on(self.store.save(&snapshot, now));
+        }
+    }
+}
+
+impl<const N: usize> UnitLogic for PersistentApp<N> {
     fn step(
         &mut self,
         now: Instant,
@@ -43,8 +113,15 @@ impl<const N: usize> UnitLogic for App<N> {
         tx: &mut Vec<u8>,
     ) -> Option<BoardAction> {
         let samples = model.samples::<N>();
-        let out = App::step(self, now, &samples, rx);
+        let out = self.app.step(now, &samples, rx);
         tx.extend_from_slice(&out.tx);
+        match out.action {
+            None => self.persist(now),
+            Some(BoardAction::EraseAndReset) => {
+                let _ = block_on(self.store.erase());
+            }
+            Some(BoardAction::Reset) => {}
+        }
         let motors = if out.action.is_some() {
             [MotorCommand::Coast; N]
         } else {
@@ -55,29 +132,33 @@ impl<const N: usize> UnitLogic for App<N> {
     }
 
     fn command(&self) -> ((RequestCode, u8), Status) {
-        let operation = self.operation();
+        let operation = self.app.operation();
         (operation.request, operation.status())
     }
 
     fn press_button(&mut self, button: ButtonCode) {
-        App::press_button(self, button);
+        self.app.press_button(button);
     }
 
     fn config(&self) -> &Config {
-        App::config(self)
+        self.app.config()
+    }
+
+    fn take_flash(&mut self) -> UnitFlash {
+        std::mem::replace(self.store.flash(), blank_flash())
     }
 }
 
-/// A freshly booted unit logic with `slots` slots, or `None` when the count is not 1 to
+/// A unit logic with `slots` slots booted on `flash`, or `None` when the count is not 1 to
 /// [`MAX_SLOTS`].
-pub fn new_logic(slots: usize, config: Config) -> Option<Box<dyn UnitLogic>> {
+pub fn new_logic(slots: usize, config: Config, flash: UnitFlash) -> Option<Box<dyn UnitLogic>> {
     const _: () = assert!(MAX_SLOTS == 5, "new_logic lists every slot count");
     Some(match slots {
-        1 => Box::new(App::<1>::new(config)),
-        2 => Box::new(App::<2>::new(config)),
-        3 => Box::new(App::<3>::new(config)),
-        4 => Box::new(App::<4>::new(config)),
-        5 => Box::new(App::<5>::new(config)),
+        1 => Box::new(PersistentApp::<1>::boot(config, flash)),
+        2 => Box::new(PersistentApp::<2>::boot(config, flash)),
+        3 => Box::new(PersistentApp::<3>::boot(config, flash)),
+        4 => Box::new(PersistentApp::<4>::boot(config, flash)),
+        5 => Box::new(PersistentApp::<5>::boot(config, flash)),
         _ => return None,
     })
 }
@@ -90,7 +171,7 @@ mod tests {
     #[test]
     fn every_supported_slot_count_boots_and_no_other() {
         for slots in 1..=MAX_SLOTS {
-            let mut logic = new_logic(slots, Config::default()).expect("supported count");
+            let mut logic = new_logic(slots, Config::default(), blank_flash()).expect("supported count");
             let mut model = Model::new(ModelConfig::default(), slots, 1);
             let mut tx = Vec::new();
             for ms in 0..300 {
@@ -98,7 +179,7 @@ mod tests {
             }
             assert_eq!(logic.command(), ((RequestCode::Reset, 0), Status::Finished));
         }
-        assert!(new_logic(0, Config::default()).is_none());
-        assert!(new_logic(MAX_SLOTS + 1, Config::default()).is_none());
+        assert!(new_logic(0, Config::default(), blank_flash()).is_none());
+        assert!(new_logic(MAX_SLOTS + 1, Config::default(), blank_flash()).is_none());
     }
 }

@@ -19,7 +19,7 @@ use mmu_protocol::{
 
 use crate::event::{Event, EventKind, FaultAction};
 use crate::fault::{ScheduledFault, SimFault, SimFaultKind};
-use crate::logic::{UnitLogic, new_logic};
+use crate::logic::{UnitLogic, blank_flash, new_logic};
 
 /// How far the printer pushes its extruder on its own while the unit reports `P1c`, mm
 /// (Prusa-Firmware-Buddy's value, spec §5.7).
@@ -145,7 +145,7 @@ pub struct Sim {
 impl Sim {
     /// A unit just powered on, with every slot's filament parked and nothing loaded.
     pub fn new(options: SimOptions) -> Result<Sim, BadOptions> {
-        let logic = new_logic(options.slots, options.unit.clone()).ok_or_else(|| {
+        let logic = new_logic(options.slots, options.unit.clone(), blank_flash()).ok_or_else(|| {
             BadOptions(format!(
                 "a unit has 1 to {} slots, not {}",
                 mmu_firmware::MAX_SLOTS,
@@ -336,7 +336,7 @@ impl Sim {
             None => {
                 let now = Instant::from_millis(self.now_ms - self.boot_epoch_ms);
                 let action = self.logic.step(now, 1, &mut self.model, &to_unit, &mut from_unit);
-                // Nothing persists yet: an erase is a plain reset.
+                // The logic erased its store already for `X42`.
                 if action.is_some() {
                     self.power_off(self.options.boot_ms);
                 }
@@ -388,7 +388,8 @@ impl Sim {
     fn boot(&mut self) {
         self.off_until_ms = None;
         self.boot_epoch_ms = self.now_ms + 1;
-        self.logic = new_logic(self.options.slots, self.options.unit.clone())
+        let flash = self.logic.take_flash();
+        self.logic = new_logic(self.options.slots, self.options.unit.clone(), flash)
             .unwrap_or_else(|| unreachable!("the slot count was checked in Sim::new"));
         self.running = None;
         self.event(EventKind::Power { on: true });

@@ -297,3 +297,104 @@ fn retry_after_a_bowden_jam_feeds_on_from_where_the_tip_stopped() {
     let gears = printer.link().sim().model().config().extruder_gears_mm;
     assert!(printer.link().sim().model().tip_mm(1).unwrap() >= gears);
 }
+
+#[test]
+fn a_power_loss_mid_tool_change_is_resumed_from_the_stored_lanes() {
+    let (mut printer, mut op) = connected();
+    assert_eq!(run(&mut printer, &mut op, RequestCode::Tool, 0), OK);
+    let now = printer.link().sim().now_ms();
+    // Mid-way through the next change: slot 0 is out, slot 1 is on its way through the Bowden.
+    printer.link_mut().sim_mut().schedule(mmu_sim::ScheduledFault {
+        fault: mmu_sim::SimFault::PowerLoss { off_ms: 300 },
+        at_ms: now + 6_000,
+        until_ms: None,
+    });
+    assert_eq!(
+        run(&mut printer, &mut op, RequestCode::Tool, 1),
+        OK,
+        "{:?}",
+        op.events
+    );
+    assert!(
+        op.events
+            .contains(&PrinterEvent::Interrupted(Request::new(RequestCode::Tool, 1))),
+        "{:?}",
+        op.events
+    );
+    let model = printer.link().sim().model();
+    assert_eq!(model.loaded_slot(), Some(1));
+    assert!(model.tip_mm(1).unwrap() >= model.config().extruder_gears_mm);
+    let parked = -f32::from(printer.link().sim().unit_config().park_mm);
+    assert!((model.tip_mm(0).unwrap() - parked).abs() < 3.0);
+}
+
+#[test]
+fn after_a_restart_the_unit_knows_which_slot_is_loaded() {
+    let (mut printer, mut op) = connected();
+    assert_eq!(run(&mut printer, &mut op, RequestCode::Tool, 2), OK);
+    printer.link_mut().idle(5_000);
+    printer
+        .link_mut()
+        .sim_mut()
+        .inject(mmu_sim::SimFault::PowerLoss { off_ms: 1_000 });
+    let state = printer.connect(&mut op).unwrap();
+    // The stored lanes agree with the hub sensor: no UNLOAD MANUALLY.
+    assert_eq!(
+        (state.code, state.param, state.param_value),
+        (RequestCode::Reset, mmu_protocol::ParamCode::Finished, Some(0))
+    );
+    assert_eq!(run(&mut printer, &mut op, RequestCode::Tool, 0), OK);
+    assert_eq!(printer.link().sim().model().loaded_slot(), Some(0));
+}
+
+#[test]
+fn erasing_forgets_the_loaded_slot_so_the_unit_asks_for_a_manual_unload() {
+    let (mut printer, mut op) = connected();
+    assert_eq!(run(&mut printer, &mut op, RequestCode::Tool, 1), OK);
+    let state = printer.reset(&mut op, 42).unwrap();
+    assert_eq!(
+        (state.param, state.param_value),
+        (
+            mmu_protocol::ParamCode::Error,
+            Some(ErrorCode::FINDA_VS_EEPROM_DISREPANCY.0)
+        )
+    );
+}
+
+#[test]
+fn filament_found_where_the_stored_state_has_none_stops_the_unit_until_retry() {
+    let (mut printer, mut op) = connected();
+    let sim = printer.link_mut().sim_mut();
+    sim.inject(mmu_sim::SimFault::PowerLoss { off_ms: 2_000 });
+    // While the unit is off, someone pushes slot 2's filament into the hub.
+    sim.model_mut().remove_filament(2);
+    sim.model_mut().insert_filament(2, 20.0);
+    let state = printer.connect(&mut op).unwrap();
+    assert_eq!(
+        (state.param, state.param_value),
+        (
+            mmu_protocol::ParamCode::Error,
+            Some(ErrorCode::FINDA_VS_EEPROM_DISREPANCY.0)
+        ),
+        "no motor moves on a guess"
+    );
+    assert!(printer.link().sim().model().motor_speed_mm_s(2).unwrap().abs() < 0.1);
+    // The user pulls it back to its park position and presses Retry: the unit checks again.
+    let sim = printer.link_mut().sim_mut();
+    sim.model_mut().remove_filament(2);
+    sim.model_mut().insert_filament(2, -15.0);
+    printer.link_mut().idle(500);
+    let pressed = printer
+        .request(&mut op, Request::new(RequestCode::Button, 1))
+        .unwrap();
+    assert_eq!(pressed.param, mmu_protocol::ParamCode::Accepted);
+    printer.link_mut().idle(1_000);
+    let state = printer
+        .request(&mut op, Request::new(RequestCode::Query, 0))
+        .unwrap();
+    assert_eq!(
+        (state.code, state.param),
+        (RequestCode::Reset, mmu_protocol::ParamCode::Finished)
+    );
+    assert_eq!(run(&mut printer, &mut op, RequestCode::Tool, 2), OK);
+}
