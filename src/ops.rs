@@ -430,6 +430,9 @@ impl Operation {
                     // An empty slot: nothing to feed.
                     return Outcome::Fail(ErrorCode::FINDA_DIDNT_SWITCH_ON);
                 } else {
+                    // Known (and persisted) before the tip leaves the park position, so a restart
+                    // mid-way knows whose filament may be in the hub path.
+                    unit.set_lane(slot, Lane::InHub);
                     Goal::Drive
                 }
             }
@@ -560,7 +563,9 @@ impl Operation {
         };
         match (hub, unit.active()) {
             (true, None) => return Outcome::Fail(ErrorCode::FINDA_VS_EEPROM_DISREPANCY),
-            (false, Some(slot)) if self.trust_sensors => unit.set_lane(slot, Lane::Unknown),
+            // The user has looked: the slot's tip is somewhere before the hub sensor. It keeps the
+            // path until the next command parks it from there.
+            (false, Some(slot)) if self.trust_sensors => unit.set_lane(slot, Lane::InHub),
             (false, Some(_)) => return Outcome::Fail(ErrorCode::FINDA_VS_EEPROM_DISREPANCY),
             _ => {}
         }

@@ -5,7 +5,8 @@
 //! tool changes, each to a random slot other than the loaded one. With random faults, some changes
 //! ([`FAULT_PROBABILITY`]) get a fault from a mix that matters to the unit (a jam of the target
 //! slot or of the Bowden tube, a slipping or dead drive, sensor noise, a disconnected sensor, a
-//! spool runout, a corrupting or lossy UART), injected at a random moment of up to
+//! spool runout, a power loss of up to 3 s (the unit restarts with its stored state), a corrupting
+//! or lossy UART), injected at a random moment of up to
 //! [`MAX_FAULT_DELAY_MS`] after the `T` is sent (to the millisecond: the link steps the simulator
 //! one millisecond at a time while the printer waits and strikes in between). Recovery is what a
 //! printer and its user do:
@@ -286,7 +287,7 @@ fn draw_fault(rng: &mut Rng, target: usize) -> SimFault {
     } else {
         Rail::High
     };
-    match rng.next_u64() % 9 {
+    match rng.next_u64() % 10 {
         0 => SimFault::Model(Fault::Jam { slot: target }),
         1 => SimFault::Model(Fault::BowdenJam),
         2 => SimFault::Model(Fault::Slip {
@@ -307,7 +308,10 @@ fn draw_fault(rng: &mut Rng, target: usize) -> SimFault {
             SimFault::Model(Fault::SensorDisconnected { sensor, rail })
         }
         6 => SimFault::Model(Fault::SpoolRunout { slot: target }),
-        7 => SimFault::UartCorrupt {
+        7 => SimFault::PowerLoss {
+            off_ms: draw(rng, 50.0, 3_000.0, 1.0) as u32,
+        },
+        8 => SimFault::UartCorrupt {
             probability: draw(rng, 0.001, 0.01, 10_000.0),
         },
         _ => SimFault::UartDrop {
