@@ -27,9 +27,9 @@ pub const AUTO_RETRIES: u8 = 3;
 /// The registers the printer reads after every `Q0` (FINDA, pulley position, selector slot,
 /// error count, idler slot).
 pub const POLLED_REGISTERS: [u8; 5] = [0x08, 0x1b, 0x1c, 0x04, 0x1a];
-/// How often the printer sends a rejected command again before this tool gives up (the printer
-/// itself never gives up).
-const MAX_REJECTS: u8 = 3;
+/// How long the printer keeps sending a rejected command again (a unit still starting up rejects
+/// commands for a moment) before this tool gives up, ms; the printer itself never gives up.
+const REJECTS_FOR_MS: u64 = 2000;
 /// Answers with the wrong code while a version is asked for, before the link counts as garbled.
 const MAX_WRONG_ANSWERS: u8 = 10;
 /// The link is looked at this often while waiting, ms.
@@ -385,15 +385,20 @@ impl<L: Link> Printer<L> {
     /// One run of `request`; `None` when the unit restarted under it.
     fn run(&mut self, op: &mut impl Operator<L>, request: Request) -> Result<Option<Outcome>, PrinterError> {
         let started = self.link.now_ms();
-        let mut rejects = 0;
+        let mut first_reject = None;
         loop {
             if self.link.now_ms().saturating_sub(started) > self.options.command_timeout_ms {
                 return Err(PrinterError::Stuck(request));
             }
             match self.exchange(op, request) {
                 Ok(answer) if answer.param == ParamCode::Accepted => break,
-                Ok(answer) if answer.param == ParamCode::Rejected && rejects < MAX_REJECTS => {
-                    rejects += 1;
+                Ok(answer)
+                    if answer.param == ParamCode::Rejected
+                        && self.link.now_ms() - *first_reject.get_or_insert(self.link.now_ms())
+                            < REJECTS_FOR_MS =>
+                {
+                    // Again at once, as the printer does (one poll step apart here).
+                    self.link.receive(POLL_STEP_MS, &mut Vec::new())?;
                 }
                 Ok(_) => return Ok(Some(Outcome::Rejected)),
                 Err(Fault::Link(why)) => {
