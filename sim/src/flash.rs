@@ -34,6 +34,28 @@ impl NorFlashError for FlashError {
     }
 }
 
+/// How much a flash has been worn.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct FlashWear {
+    /// Bytes written.
+    pub bytes_written: u64,
+    /// Page erases, all pages together.
+    pub erases: u64,
+    /// The most erases one page has seen.
+    pub max_page_erases: u64,
+}
+
+impl FlashWear {
+    /// The wear of two flashes (or two lives of one) together; the page maximum is the larger.
+    pub fn add(self, other: FlashWear) -> FlashWear {
+        FlashWear {
+            bytes_written: self.bytes_written + other.bytes_written,
+            erases: self.erases + other.erases,
+            max_page_erases: self.max_page_erases.max(other.max_page_erases),
+        }
+    }
+}
+
 /// The flash, with pages of `PAGE` bytes.
 #[derive(Debug, Clone)]
 pub struct MemFlash<const PAGE: usize> {
@@ -78,6 +100,15 @@ impl<const PAGE: usize> MemFlash<PAGE> {
     /// The most erases any page has seen.
     pub fn max_erases(&self) -> u64 {
         self.erases.iter().copied().max().unwrap_or(0)
+    }
+
+    /// How much it has been worn.
+    pub fn wear(&self) -> FlashWear {
+        FlashWear {
+            bytes_written: self.bytes_written,
+            erases: self.erases.iter().sum(),
+            max_page_erases: self.max_erases(),
+        }
     }
 
     fn check(&self, offset: u32, len: usize, align: usize) -> Result<std::ops::Range<usize>, FlashError> {

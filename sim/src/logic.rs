@@ -13,7 +13,7 @@ use mmu_firmware::{App, BoardAction, Config, Instant, MAX_SLOTS, MotorCommand};
 use mmu_model::Model;
 use mmu_protocol::{ButtonCode, RequestCode};
 
-use crate::flash::{G0_PAGE, MemFlash};
+use crate::flash::{FlashWear, G0_PAGE, MemFlash};
 
 /// The simulated unit's flash for persisted state: 16 pages of the STM32G0 (32 KiB).
 pub type UnitFlash = MemFlash<G0_PAGE>;
@@ -52,6 +52,9 @@ pub trait UnitLogic: Send {
 
     /// Take the flash out for the next boot (this logic is done: its store is left blank).
     fn take_flash(&mut self) -> UnitFlash;
+
+    /// How much the flash has been worn so far.
+    fn flash_wear(&mut self) -> FlashWear;
 }
 
 /// An App with its store.
@@ -146,6 +149,10 @@ impl<const N: usize> UnitLogic for PersistentApp<N> {
 
     fn take_flash(&mut self) -> UnitFlash {
         std::mem::replace(self.store.flash(), blank_flash())
+    }
+
+    fn flash_wear(&mut self) -> FlashWear {
+        self.store.flash().wear()
     }
 }
 

@@ -218,6 +218,11 @@ impl Sim {
         self.logic.command()
     }
 
+    /// How much the unit's flash has been worn by its persisted state.
+    pub fn flash_wear(&mut self) -> crate::flash::FlashWear {
+        self.logic.flash_wear()
+    }
+
     /// The unit is powered and booted.
     pub fn is_powered(&self) -> bool {
         self.off_until_ms.is_none()

@@ -38,6 +38,7 @@ use mmu_model::{Fault, Rail, Rng, SensorId};
 use mmu_protocol::{ButtonCode, ErrorCode, Request, RequestCode, ResultCode};
 
 use crate::fault::SimFault;
+use crate::flash::FlashWear;
 use crate::link::SimLink;
 use crate::printer::{Decision, Link, Operator, Outcome, Printer, PrinterEvent, PrinterOptions};
 use crate::sim::{CommandRecord, PRINTER_UNLOAD_MM, PRINTER_UNLOAD_MM_S, Sim, SimOptions};
@@ -56,6 +57,9 @@ pub const USER_RETRIES: u8 = 3;
 const GRIP_TOLERANCE_MM: f32 = 0.01;
 /// Keeps the soak's random draws independent of the model's and the UART's ("SOAK").
 const SOAK_STREAM: u64 = 0x534f_414b;
+
+/// Erase cycles a page of the STM32G071's flash is specified for (datasheet: 10 kcycles).
+pub const ENDURANCE_CYCLES: u64 = 10_000;
 
 /// What a soak run does.
 #[derive(Debug, Clone)]
@@ -141,6 +145,8 @@ pub struct SoakReport {
     pub tool_change_times: ToolChangeTimes,
     /// Virtual time simulated, s.
     pub simulated_s: f64,
+    /// What the persisted state did to the unit's flash (16 pages of 2 KiB), over every rig.
+    pub flash: FlashWear,
     /// Wall time the run took, s.
     pub wall_s: f64,
     /// One line per unrecovered, stuck or panicked change: change number, request, fault and when
@@ -214,6 +220,23 @@ impl fmt::Display for SoakReport {
             self.wall_s,
             self.speed()
         )?;
+        let flash = self.flash;
+        if flash.bytes_written > 0 {
+            write!(
+                f,
+                "\nflash: {} B written, {} page erases (at most {} of one page)",
+                flash.bytes_written, flash.erases, flash.max_page_erases
+            )?;
+            if flash.max_page_erases > 0 {
+                let lifetime =
+                    f64::from(self.changes) * ENDURANCE_CYCLES as f64 / flash.max_page_erases as f64;
+                write!(
+                    f,
+                    ": {:.1} million tool changes before a page reaches {ENDURANCE_CYCLES} erases",
+                    lifetime / 1e6
+                )?;
+            }
+        }
         if self.recovered > 0 {
             write!(
                 f,
@@ -800,12 +823,18 @@ pub fn run(options: &SoakOptions, progress: &mut dyn FnMut(u32)) -> SoakReport {
             rig = Some(current);
         } else {
             simulated_ms += current.sim().now_ms();
+            report.flash = report
+                .flash
+                .add(current.printer.link_mut().sim_mut().flash_wear());
         }
         progress(change);
     }
 
-    if let Some(current) = &rig {
+    if let Some(current) = &mut rig {
         simulated_ms += current.sim().now_ms();
+        report.flash = report
+            .flash
+            .add(current.printer.link_mut().sim_mut().flash_wear());
     }
     report.tool_change_times = times.times();
     report.simulated_s = simulated_ms as f64 / 1000.0;

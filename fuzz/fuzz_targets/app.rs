@@ -1,0 +1,123 @@
+//! Feeds the whole unit logic ([`App`]) random byte streams and random sensor values, stepped
+//! in virtual time. Besides "never panics", it checks what a user would notice first:
+//! - never two slots fed towards the hub at once;
+//! - no phase drives a motor beyond its bound (the slowest phase's bound with the default
+//!   configuration);
+//! - after any input, a `Q0` gets exactly one well-formed answer.
+//!
+//! `tests/properties.rs` is its bounded proptest twin that runs in CI.
+
+#![no_main]
+
+use libfuzzer_sys::fuzz_target;
+use mmu_firmware::{App, Config, Direction, HubSamples, Instant, MotorCommand, Samples, SlotSamples};
+use mmu_protocol::{Request, RequestCode, ResponseDecoder};
+
+const SLOTS: usize = 3;
+/// The slow search for the printer's sensor, (30 + 90) mm at 20 mm/s, twice over, plus 1 s.
+const LONGEST_PHASE_MS: u64 = 120 * 2000 / 20 + 1000;
+/// Virtual time one input may run, ms (keeps each run short).
+const MAX_RUN_MS: u64 = 60_000;
+
+/// Takes values from the fuzzer's bytes; zeros once they run out.
+struct Bytes<'a>(&'a [u8]);
+
+impl Bytes<'_> {
+    fn u8(&mut self) -> u8 {
+        let (&first, rest) = self.0.split_first().unwrap_or((&0, &[]));
+        self.0 = rest;
+        first
+    }
+
+    fn adc(&mut self) -> u16 {
+        u16::from_le_bytes([self.u8(), self.u8()]) % 4096
+    }
+
+    fn samples(&mut self) -> Samples<SLOTS> {
+        Samples {
+            slots: core::array::from_fn(|_| SlotSamples {
+                motor_hall: self.adc(),
+                filament: self.adc(),
+            }),
+            hub: HubSamples {
+                filament: self.adc(),
+                tension: self.adc(),
+                cutter: self.adc(),
+            },
+        }
+    }
+
+    /// What the printer sends: a valid frame, raw bytes, or nothing.
+    fn rx(&mut self) -> Vec<u8> {
+        match self.u8() % 4 {
+            0 => {
+                let code = RequestCode::ALL[usize::from(self.u8()) % RequestCode::ALL.len()];
+                let value = self.u8() % 8;
+                let request = if code == RequestCode::Write {
+                    Request::write(value.wrapping_mul(9), u16::from_le_bytes([self.u8(), self.u8()]))
+                } else {
+                    Request::new(code, value)
+                };
+                request.encode().as_bytes().to_vec()
+            }
+            1 => (0..self.u8() % 24).map(|_| self.u8()).collect(),
+            _ => Vec::new(),
+        }
+    }
+}
+
+/// Per slot: since when the same phase of the same operation has driven it.
+#[derive(Default)]
+struct Watch {
+    driven_since: [Option<(u64, String)>; SLOTS],
+}
+
+impl Watch {
+    fn check(&mut self, app: &App<SLOTS>, now: u64, motors: &[MotorCommand; SLOTS]) {
+        let forward = motors
+            .iter()
+            .filter(|m| matches!(m, MotorCommand::Drive { direction: Direction::Forward, duty } if duty.permille() > 0))
+            .count();
+        assert!(forward <= 1, "two slots fed towards the hub at once: {motors:?}");
+        let phase = format!("{:?}/{:?}", app.operation().request, app.operation().phase());
+        for (slot, motor) in motors.iter().enumerate() {
+            let by_phase = app.operation().driving_slot() == Some(slot) && motor.is_driving();
+            let entry = &mut self.driven_since[slot];
+            match (by_phase, entry.as_ref()) {
+                (true, Some((since, running))) if *running == phase => {
+                    assert!(now - since <= LONGEST_PHASE_MS, "slot {slot} driven {} ms in {phase}", now - since);
+                }
+                (true, _) => *entry = Some((now, phase.clone())),
+                (false, _) => *entry = None,
+            }
+        }
+    }
+}
+
+fuzz_target!(|data: &[u8]| {
+    let mut bytes = Bytes(data);
+    let mut app = App::<SLOTS>::new(Config::default());
+    let mut watch = Watch::default();
+    let mut now = 0u64;
+    while !bytes.0.is_empty() && now < MAX_RUN_MS {
+        let rx = bytes.rx();
+        let samples = bytes.samples();
+        let hold_ms = u64::from(bytes.u8()) * 4;
+        let out = app.step(Instant::from_millis(now), &samples, &rx);
+        watch.check(&app, now, &out.motors);
+        if out.action.is_some() {
+            app = App::new(Config::default());
+            watch = Watch::default();
+        }
+        for _ in 0..hold_ms {
+            now += 1;
+            let out = app.step(Instant::from_millis(now), &samples, &[]);
+            watch.check(&app, now, &out.motors);
+        }
+        let answer = app.step(Instant::from_millis(now), &samples, b"\nQ0*ea\n");
+        let mut decoder = ResponseDecoder::new();
+        let frames: Vec<_> = answer.tx.iter().filter_map(|&b| decoder.feed(b)).collect();
+        assert_eq!(frames.len(), 1, "{frames:?}");
+        assert!(frames[0].is_ok(), "{frames:?}");
+    }
+});
