@@ -47,7 +47,7 @@ pub struct FlashWear {
 
 impl FlashWear {
     /// The wear of two flashes (or two lives of one) together; the page maximum is the larger.
-    pub fn add(self, other: FlashWear) -> FlashWear {
+    pub fn combined(self, other: FlashWear) -> FlashWear {
         FlashWear {
             bytes_written: self.bytes_written + other.bytes_written,
             erases: self.erases + other.erases,
