@@ -825,7 +825,7 @@ pub fn run(options: &SoakOptions, progress: &mut dyn FnMut(u32)) -> SoakReport {
             simulated_ms += current.sim().now_ms();
             report.flash = report
                 .flash
-                .add(current.printer.link_mut().sim_mut().flash_wear());
+                .combined(current.printer.link_mut().sim_mut().flash_wear());
         }
         progress(change);
     }
@@ -834,7 +834,7 @@ pub fn run(options: &SoakOptions, progress: &mut dyn FnMut(u32)) -> SoakReport {
         simulated_ms += current.sim().now_ms();
         report.flash = report
             .flash
-            .add(current.printer.link_mut().sim_mut().flash_wear());
+            .combined(current.printer.link_mut().sim_mut().flash_wear());
     }
     report.tool_change_times = times.times();
     report.simulated_s = simulated_ms as f64 / 1000.0;
