@@ -39,6 +39,8 @@ pub const FAILURES: u8 = 0xc8;
 
 /// Extension: filament speed of slot `k` from its motor Hall sensor, mm/s, at `SPEED + k` (read only).
 pub const SPEED: u8 = 0xd0;
+/// Extension: filament fed or pulled by slot `k`'s moves, whole metres, at `FED_METRES + k` (read only).
+pub const FED_METRES: u8 = 0xe0;
 
 /// Sensor diagnostic blocks hold up to 16 sensors (3 hub + 2 per slot, at most 13).
 const SENSOR_BLOCK: u8 = 16;
@@ -89,6 +91,14 @@ const SETTINGS: &[Setting] = &[
     setting!(0x4d, 0..=2000, tension_deadband),
     setting!(0x4e, 0..=100, tension_gain),
     setting!(0x4f, 0..=1000, tension_max_duty),
+    // The revision `S2` reports: 3 for Buddy firmware (MK4, MK3.5, Core One), 2 for MK3S firmware.
+    Setting {
+        address: 0x52,
+        min: 0,
+        max: 255,
+        get: |c| c.version.revision.into(),
+        set: |c, v| c.version.revision = v as u8,
+    },
 ];
 
 fn setting(address: u8) -> Option<&'static Setting> {
@@ -197,6 +207,10 @@ impl<const N: usize> App<N> {
                 .speed_mm_s(self.now, config),
             a if slot_at::<N>(a, FAILURES).is_some() => {
                 *self.counters.failures.get(slot_at::<N>(a, FAILURES)?)?
+            }
+            a if slot_at::<N>(a, FED_METRES).is_some() => {
+                let mm = *self.counters.fed_mm.get(slot_at::<N>(a, FED_METRES)?)?;
+                u16::try_from(mm / 1000).unwrap_or(u16::MAX)
             }
             _ => return None,
         };

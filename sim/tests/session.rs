@@ -398,3 +398,35 @@ fn filament_found_where_the_stored_state_has_none_stops_the_unit_until_retry() {
     );
     assert_eq!(run(&mut printer, &mut op, RequestCode::Tool, 2), OK);
 }
+
+#[test]
+fn the_reported_version_is_a_setting_kept_across_restarts() {
+    let (mut printer, mut op) = connected();
+    let written = printer.request(&mut op, Request::write(0x52, 2)).unwrap();
+    assert_eq!(written.param, mmu_protocol::ParamCode::Accepted);
+    // Settings are written at most every 10 s.
+    printer.link_mut().idle(11_000);
+    let sim = printer.link_mut().sim_mut();
+    sim.inject(mmu_sim::SimFault::PowerLoss { off_ms: 500 });
+    let error = printer.connect(&mut op).unwrap_err();
+    assert!(
+        matches!(
+            error,
+            mmu_sim::PrinterError::VersionMismatch {
+                part: 2,
+                got: Some(2)
+            }
+        ),
+        "{error}"
+    );
+    let sim = std::mem::replace(
+        printer.link_mut().sim_mut(),
+        Sim::new(SimOptions::default()).unwrap(),
+    );
+    let mk3s = PrinterOptions {
+        version: (3, 0, 2),
+        ..PrinterOptions::default()
+    };
+    let mut printer = Printer::new(SimLink::new(sim), mk3s);
+    printer.connect(&mut op).unwrap();
+}
