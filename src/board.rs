@@ -10,13 +10,17 @@
 //! - [`emergency_stop`]: every bridge off through raw register writes, usable at any time (boot,
 //!   panic, fault, reset) without the HAL;
 //! - [`init`]: clocks and peripherals, returning the [`Control`] half (motors, printer UART, LED,
-//!   button, watchdog) and the [`Sampler`] half (ADC);
-//! - [`reset_cause`], [`reset`], [`erase_persisted`].
+//!   button, watchdog), the [`Sampler`] half (ADC) and the [`StoreFlash`] (the persisted state's
+//!   region of the internal flash, [`STORE_RANGE`]);
+//! - [`reset_cause`], [`reset`].
 
 use core::convert::Infallible;
+use core::ops::Range;
 use core::task::Poll;
 
+use embassy_embedded_hal::adapter::BlockingAsync;
 use embassy_stm32::adc::{self, Adc, AdcChannel as _, AdcConfig, AnyAdcChannel, Averaging, SampleTime};
+use embassy_stm32::flash::{self, Blocking, Flash};
 use embassy_stm32::gpio::{AnyPin, Input, Level, Output, OutputType, Pin, Pull, Speed};
 use embassy_stm32::pac;
 use embassy_stm32::peripherals::{self, ADC1, TIM3};
@@ -29,6 +33,7 @@ use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_stm32::{Peri, bind_interrupts, dma};
 use embassy_time::{Duration, with_timeout};
 use embedded_io_async::{Read as _, ReadReady as _, Write as _};
+use embedded_storage::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
 use mmu_hal_port::tb6612::{Channel, Tb6612};
 use mmu_hal_port::{Button as _, MotorCommand, Samples, StatusLed as _};
 use static_cell::ConstStaticCell;
@@ -110,6 +115,7 @@ pin_map! {
         adc_dma: DMA1_CH1, "ADC scan results";
         printer_uart: USART3, "Printer MMU port, 115200 8N1 (USART2 stays on the ST-LINK VCP)";
         watchdog: IWDG, "Independent watchdog, fed by the control loop";
+        flash: FLASH, "Internal flash: the persisted state in its last 16 pages (STORE_RANGE)";
     }
     pins {
         // field         pin    function      NUCLEO header   wired to                                   safe
@@ -211,9 +217,68 @@ pub fn reset_cause() -> ResetCause {
     cause
 }
 
-/// Erases persisted data (`X42`). The unit persists nothing yet, so there is nothing to erase.
-pub fn erase_persisted() {
-    defmt::info!("erase: no persisted data on this board yet");
+/// The persisted state's region, as offsets from the flash base (0x0800_0000): the last 16 pages
+/// (2 KiB each) of the 128 KiB, 0x0801_8000..0x0802_0000. memory.x ends FLASH before it, so no
+/// code or data is ever linked there, and `probe-rs` (which only erases the pages it programs)
+/// leaves it alone when the firmware is flashed again.
+pub const STORE_RANGE: Range<u32> = 0x1_8000..0x2_0000;
+
+/// The persisted state's flash, as `mmu_firmware::persist::Store` wants it (async NOR flash).
+/// The operations are blocking underneath: see [`WatchedFlash`].
+pub type StoreFlash = BlockingAsync<WatchedFlash>;
+
+/// The internal flash, reloading the watchdog before each program or erase it starts.
+///
+/// The STM32G071RB has a single flash bank: while a page is erased (22 ms typical, 40 ms at most)
+/// or a double word programmed (85 µs typical), every fetch from flash stalls, so the CPU stops
+/// altogether: no task, no interrupt (the vectors are in flash too). The motors keep the last
+/// command applied; UART bytes that arrive meanwhile, past the receiver's own buffer, are lost
+/// (overrun; the printer's protocol retries); the timers and the ADC's DMA carry on. One save writes
+/// a few double words, and erases a page when the map moves to the next one; a repair after a
+/// power cut, or erasing the whole store, erases several pages in a row. Each erase is shorter
+/// than [`WATCHDOG_TIMEOUT_US`], so reloading before each operation keeps a long run of them from
+/// resetting the MCU, while a stall outside the flash (the control loop itself) still does.
+pub struct WatchedFlash(Flash<'static, Blocking>);
+
+/// Reloads the independent watchdog: the register write of `IndependentWatchdog::pet`, for the
+/// flash, which cannot own the driver ([`Control`] does).
+fn reload_watchdog() {
+    pac::IWDG.kr().write(|w| w.set_key(pac::iwdg::vals::Key::RESET));
+}
+
+impl ErrorType for WatchedFlash {
+    type Error = flash::Error;
+}
+
+impl ReadNorFlash for WatchedFlash {
+    const READ_SIZE: usize = <Flash<'static, Blocking> as ReadNorFlash>::READ_SIZE;
+
+    fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), flash::Error> {
+        self.0.blocking_read(offset, bytes)
+    }
+
+    fn capacity(&self) -> usize {
+        self.0.capacity()
+    }
+}
+
+impl NorFlash for WatchedFlash {
+    const WRITE_SIZE: usize = <Flash<'static, Blocking> as NorFlash>::WRITE_SIZE;
+    const ERASE_SIZE: usize = <Flash<'static, Blocking> as NorFlash>::ERASE_SIZE;
+
+    fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), flash::Error> {
+        reload_watchdog();
+        self.0.blocking_write(offset, bytes)
+    }
+
+    /// One page at a time, the watchdog reloaded before each.
+    fn erase(&mut self, from: u32, to: u32) -> Result<(), flash::Error> {
+        for page in (from..to).step_by(Self::ERASE_SIZE) {
+            reload_watchdog();
+            self.0.blocking_erase(page, page + Self::ERASE_SIZE as u32)?;
+        }
+        Ok(())
+    }
 }
 
 /// Stops every motor and restarts the MCU.
@@ -398,7 +463,7 @@ fn low(pin: Peri<'static, impl Pin>) -> Output<'static> {
 
 /// Starts the clocks and every peripheral of the board. The bridges come up in standby with both
 /// inputs low and duty 0; the watchdog is running when this returns.
-pub fn init() -> (Control, Sampler) {
+pub fn init() -> (Control, Sampler, StoreFlash) {
     let mut config = embassy_stm32::Config::default();
     // 64 MHz from the internal 16 MHz oscillator: VCO 16 x 8 = 128 MHz, R / 2.
     config.rcc.pll = Some(Pll {
@@ -509,5 +574,6 @@ pub fn init() -> (Control, Sampler) {
         dma: parts.adc_dma,
         inputs,
     };
-    (control, sampler)
+    let store = BlockingAsync::new(WatchedFlash(Flash::new_blocking(parts.flash)));
+    (control, sampler, store)
 }

@@ -4,10 +4,11 @@
 //! Tasks (one thread-mode Embassy executor):
 //! - `sample_task`: a DMA scan of all nine Hall sensors every millisecond (Ticker), published
 //!   to the control task through [`LATEST`];
-//! - `control_task`: every millisecond (Ticker) it drains the bytes the printer sent, debounces
-//!   the button, steps the App, applies the motor commands, queues the response bytes, drives the
-//!   status LED, carries out resets, and feeds the watchdog when it stepped on time with fresh
-//!   samples.
+//! - `control_task`: at boot it restores what the unit kept in flash ([`Persisted`]); then every
+//!   millisecond (Ticker) it drains the bytes the printer sent, debounces the button, steps the
+//!   App, applies the motor commands, queues the response bytes, drives the status LED, carries
+//!   out resets, feeds the watchdog when it stepped on time with fresh samples, and writes what
+//!   changed to flash.
 //!
 //! The printer UART's receive path needs no task of its own: the USART interrupt moves every byte
 //! into a 256-byte ring as it arrives, whatever the tasks are doing (a byte could only be lost if
@@ -31,9 +32,12 @@ use cortex_m_rt::{ExceptionFrame, entry, exception};
 use defmt::{error, info, unwrap, warn};
 use defmt_rtt as _;
 use embassy_executor::Executor;
+use embassy_futures::block_on;
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_time::{Duration, Instant as Clock, Ticker};
+use mmu_firmware::persist::Store;
+use mmu_firmware::unit::Lane;
 use mmu_firmware::{App, BoardAction, Config, Instant, MotorCommand, Outputs, Samples};
 use mmu_protocol::ButtonCode;
 use static_cell::StaticCell;
@@ -56,6 +60,9 @@ const DEBOUNCE: Duration = Duration::from_millis(20);
 const FLUSH_BEFORE_RESET: Duration = Duration::from_millis(20);
 /// Interval of the statistics log line.
 const STATS_PERIOD: Duration = Duration::from_secs(60);
+/// Lanes are compared with the flash every step; counters and settings this often, ms (building
+/// the full snapshot costs more than a step should spend every millisecond).
+const FULL_CHECK_MS: u64 = 1000;
 
 /// The latest sensor scan and when it was taken (`None` before the first one).
 static LATEST: Mutex<CriticalSectionRawMutex, Cell<Option<(Clock, Samples<SLOTS>)>>> =
@@ -73,9 +80,9 @@ fn main() -> ! {
 
     static EXECUTOR: StaticCell<Executor> = StaticCell::new();
     EXECUTOR.init(Executor::new()).run(|spawner| {
-        let (control, sampler) = board::init();
+        let (control, sampler, flash) = board::init();
         spawner.spawn(unwrap!(sample_task(sampler)));
-        spawner.spawn(unwrap!(control_task(control)));
+        spawner.spawn(unwrap!(control_task(control, flash)));
     })
 }
 
@@ -91,8 +98,9 @@ async fn sample_task(mut sampler: board::Sampler) {
 }
 
 #[embassy_executor::task]
-async fn control_task(mut board: board::Control) {
+async fn control_task(mut board: board::Control, flash: board::StoreFlash) {
     let mut app = App::<SLOTS>::new(Config::default());
+    let mut persisted = Persisted::boot(&mut app, flash);
     let mut ticker = Ticker::every(CONTROL_PERIOD);
     let mut deadline = Clock::now() + CONTROL_PERIOD;
     let mut button = Debounce::new(Clock::now());
@@ -123,7 +131,7 @@ async fn control_task(mut board: board::Control) {
             stats.tx_dropped += 1;
         }
         if let Some(action) = out.action {
-            perform(action, &mut board).await;
+            perform(action, &mut board, &mut persisted).await;
         }
         if lateness <= ON_TIME && fresh {
             board.feed_watchdog();
@@ -131,6 +139,15 @@ async fn control_task(mut board: board::Control) {
             stats.unfed += 1;
         }
         stats.step(now, lateness, fresh);
+
+        // Last, just after the feed: a write stalls the CPU (see `board::WatchedFlash`; a page
+        // erase up to 40 ms), the motors keeping this step's commands meanwhile. The ticks it
+        // missed are dropped rather than caught up in a burst of late, unfed steps.
+        if persisted.update(&app, now) {
+            stats.saves += 1;
+            ticker.reset();
+            deadline = Clock::now() + CONTROL_PERIOD;
+        }
     }
 }
 
@@ -141,15 +158,97 @@ fn step(app: &mut App<SLOTS>, now: Clock, samples: &Samples<SLOTS>, rx: &[u8]) -
     app.step(Instant::from_millis(now.as_millis()), samples, rx)
 }
 
-/// Carries out a reset request after its response has been sent.
-async fn perform(action: BoardAction, board: &mut board::Control) -> ! {
+/// Carries out a reset request after its response has been sent. `X42` first erases the whole
+/// store (16 pages: up to 640 ms with the CPU stalled, the motors coasting).
+async fn perform(action: BoardAction, board: &mut board::Control, persisted: &mut Persisted) -> ! {
     info!("board action: {}", action);
     board.apply(&[MotorCommand::Coast; SLOTS]);
     board.flush(FLUSH_BEFORE_RESET).await;
     if action == BoardAction::EraseAndReset {
-        board::erase_persisted();
+        match block_on(persisted.store.erase()) {
+            Ok(()) => info!("store erased"),
+            Err(e) => error!("store: erase failed: {}", e),
+        }
     }
     board::reset()
+}
+
+/// The App's state in flash, as the simulator keeps it (`sim/src/logic.rs`).
+///
+/// The store's futures never wait: every flash operation of [`board::StoreFlash`] completes,
+/// blocking, on the first poll. So they run under `block_on` in plain out-of-line functions:
+/// their state stays out of the control task's future (1.6 KiB less static RAM than awaiting
+/// them there, and less code).
+struct Persisted {
+    store: Store<board::StoreFlash, SLOTS>,
+    /// The lanes as of the last comparison with the flash.
+    lanes: [Lane; SLOTS],
+    /// When the full snapshot was last compared.
+    checked_at: Option<Instant>,
+}
+
+impl Persisted {
+    /// Restores into `app` what the flash holds, before its first step. A store that cannot be
+    /// read is erased: the unit starts as new rather than not at all.
+    #[inline(never)]
+    fn boot(app: &mut App<SLOTS>, flash: board::StoreFlash) -> Self {
+        let mut store = unwrap!(Store::new(flash, board::STORE_RANGE));
+        match block_on(store.load()) {
+            Ok(snapshot) => {
+                let c = &snapshot.counters;
+                info!(
+                    "restored: lanes {}, {} settings, errors {}, tool changes {}, failures {}, fed {} mm",
+                    snapshot.lanes,
+                    snapshot.settings.len(),
+                    c.drive_errors,
+                    c.tool_changes,
+                    c.failures,
+                    c.fed_mm
+                );
+                app.restore(&snapshot);
+            }
+            Err(e) => {
+                warn!("store: load failed ({}), erasing it: the unit starts as new", e);
+                if let Err(e) = block_on(store.erase()) {
+                    error!("store: erase failed: {}", e);
+                }
+            }
+        }
+        Persisted {
+            store,
+            lanes: lanes(app),
+            checked_at: None,
+        }
+    }
+
+    /// Writes what changed: the lanes at once, the rest as the store's policy allows. Returns
+    /// whether it wrote, i.e. stalled the CPU. A failed write leaves the previous record in
+    /// flash; the next change tries again.
+    #[inline(never)]
+    fn update(&mut self, app: &App<SLOTS>, now: Clock) -> bool {
+        let now = Instant::from_millis(now.as_millis());
+        let lanes = lanes(app);
+        let full_check = self
+            .checked_at
+            .is_none_or(|at| now.millis_since(at) >= FULL_CHECK_MS);
+        if lanes == self.lanes && !full_check {
+            return false;
+        }
+        self.lanes = lanes;
+        self.checked_at = Some(now);
+        let snapshot = app.snapshot();
+        if !self.store.save_due(&snapshot, now) {
+            return false;
+        }
+        if let Err(e) = block_on(self.store.save(&snapshot, now)) {
+            error!("store: save failed: {}", e);
+        }
+        true
+    }
+}
+
+fn lanes(app: &App<SLOTS>) -> [Lane; SLOTS] {
+    core::array::from_fn(|slot| app.unit().lane(slot))
 }
 
 /// Turns the raw button level into one event per press.
@@ -193,6 +292,8 @@ struct Stats {
     stale: u32,
     unfed: u32,
     tx_dropped: u32,
+    /// Flash writes (each stalled the CPU).
+    saves: u32,
 }
 
 impl Stats {
@@ -205,6 +306,7 @@ impl Stats {
             stale: 0,
             unfed: 0,
             tx_dropped: 0,
+            saves: 0,
         }
     }
 
@@ -222,19 +324,21 @@ impl Stats {
         }
         if self.late + self.stale + self.tx_dropped > 0 {
             warn!(
-                "control: {} steps, {} late (max {} us), {} with stale samples, {} watchdog feeds skipped, {} responses dropped",
+                "control: {} steps, {} late (max {} us), {} with stale samples, {} watchdog feeds skipped, {} responses dropped, {} flash writes",
                 self.steps,
                 self.late,
                 self.max_lateness.as_micros(),
                 self.stale,
                 self.unfed,
-                self.tx_dropped
+                self.tx_dropped,
+                self.saves
             );
         } else {
             info!(
-                "control: {} steps on time, max lateness {} us",
+                "control: {} steps on time, max lateness {} us, {} flash writes",
                 self.steps,
-                self.max_lateness.as_micros()
+                self.max_lateness.as_micros(),
+                self.saves
             );
         }
         *self = Stats::new(now);
