@@ -4,15 +4,12 @@
 mod common;
 
 use common::Rig;
+use common::bounds::Watch;
 use mmu_firmware::ops::Status;
-use mmu_firmware::{App, Config, Direction, HubSamples, Instant, MotorCommand, Samples, SlotSamples};
+use mmu_firmware::{App, Config, HubSamples, Instant, MotorCommand, Samples, SlotSamples};
 use mmu_model::{Fault, Rail, SensorId};
 use mmu_protocol::{Request, RequestCode};
 use proptest::prelude::*;
-
-/// The longest any single phase may drive with the default configuration: the slow search for
-/// the printer's sensor, (30 + 90) mm at 20 mm/s, twice over, plus 1 s of slack.
-const LONGEST_PHASE_MS: u64 = 120 * 2000 / 20 + 1000;
 
 fn request() -> impl Strategy<Value = Request> {
     (0..RequestCode::ALL.len(), 0u8..8, any::<u16>()).prop_map(|(code, value, value2)| {
@@ -56,38 +53,14 @@ fn samples() -> impl Strategy<Value = Samples<3>> {
         })
 }
 
-/// Follows the App's motor commands and checks the bounds every step.
-#[derive(Default)]
-struct Watch {
-    /// Per slot: since when it has been driven by the same phase of the same operation.
-    driven_since: [Option<(u64, String)>; 3],
-}
-
-impl Watch {
-    fn check(&mut self, app: &App<3>, now: u64, motors: &[MotorCommand; 3]) -> Result<(), TestCaseError> {
-        let forward = motors
-            .iter()
-            .filter(|m| matches!(m, MotorCommand::Drive { direction: Direction::Forward, duty } if duty.permille() > 0))
-            .count();
-        prop_assert!(forward <= 1, "two slots fed towards the hub at once: {motors:?}");
-        let phase = format!("{:?}/{:?}", app.operation().request, app.operation().phase());
-        for (slot, motor) in motors.iter().enumerate() {
-            let by_phase = app.operation().driving_slot() == Some(slot) && motor.is_driving();
-            let entry = &mut self.driven_since[slot];
-            match (by_phase, entry.as_ref()) {
-                (true, Some((since, running))) if *running == phase => {
-                    prop_assert!(
-                        now - since <= LONGEST_PHASE_MS,
-                        "slot {slot} driven {} ms in {phase}",
-                        now - since
-                    );
-                }
-                (true, _) => *entry = Some((now, phase.clone())),
-                (false, _) => *entry = None,
-            }
-        }
-        Ok(())
-    }
+/// [`Watch::check`] as a proptest failure.
+fn check(
+    watch: &mut Watch<3>,
+    app: &App<3>,
+    now: u64,
+    motors: &[MotorCommand; 3],
+) -> Result<(), TestCaseError> {
+    watch.check(app, now, motors).map_err(TestCaseError::fail)
 }
 
 proptest! {
@@ -109,7 +82,7 @@ proptest! {
                 Input::Garbage(bytes) => bytes.clone(),
             };
             let out = app.step(Instant::from_millis(now), &samples, &rx);
-            watch.check(&app, now, &out.motors)?;
+            check(&mut watch, &app, now, &out.motors)?;
             if out.action.is_some() {
                 app = App::new(Config::default());
                 watch = Watch::default();
@@ -117,7 +90,7 @@ proptest! {
             for _ in 0..hold_ms {
                 now += 1;
                 let out = app.step(Instant::from_millis(now), &samples, &[]);
-                watch.check(&app, now, &out.motors)?;
+                check(&mut watch, &app, now, &out.motors)?;
             }
             // After garbage the decoder resynchronises at the next newline.
             let answer = app.step(Instant::from_millis(now), &samples, b"\nQ0*ea\n");

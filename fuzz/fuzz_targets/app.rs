@@ -10,12 +10,15 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use mmu_firmware::{App, Config, Direction, HubSamples, Instant, MotorCommand, Samples, SlotSamples};
+use mmu_firmware::{App, Config, HubSamples, Instant, Samples, SlotSamples};
 use mmu_protocol::{Request, RequestCode, ResponseDecoder};
 
+#[path = "../../tests/common/bounds.rs"]
+mod bounds;
+
+use bounds::Watch;
+
 const SLOTS: usize = 3;
-/// The slow search for the printer's sensor, (30 + 90) mm at 20 mm/s, twice over, plus 1 s.
-const LONGEST_PHASE_MS: u64 = 120 * 2000 / 20 + 1000;
 /// Virtual time one input may run, ms (keeps each run short).
 const MAX_RUN_MS: u64 = 60_000;
 
@@ -66,45 +69,19 @@ impl Bytes<'_> {
     }
 }
 
-/// Per slot: since when the same phase of the same operation has driven it.
-#[derive(Default)]
-struct Watch {
-    driven_since: [Option<(u64, String)>; SLOTS],
-}
-
-impl Watch {
-    fn check(&mut self, app: &App<SLOTS>, now: u64, motors: &[MotorCommand; SLOTS]) {
-        let forward = motors
-            .iter()
-            .filter(|m| matches!(m, MotorCommand::Drive { direction: Direction::Forward, duty } if duty.permille() > 0))
-            .count();
-        assert!(forward <= 1, "two slots fed towards the hub at once: {motors:?}");
-        let phase = format!("{:?}/{:?}", app.operation().request, app.operation().phase());
-        for (slot, motor) in motors.iter().enumerate() {
-            let by_phase = app.operation().driving_slot() == Some(slot) && motor.is_driving();
-            let entry = &mut self.driven_since[slot];
-            match (by_phase, entry.as_ref()) {
-                (true, Some((since, running))) if *running == phase => {
-                    assert!(now - since <= LONGEST_PHASE_MS, "slot {slot} driven {} ms in {phase}", now - since);
-                }
-                (true, _) => *entry = Some((now, phase.clone())),
-                (false, _) => *entry = None,
-            }
-        }
-    }
-}
-
 fuzz_target!(|data: &[u8]| {
     let mut bytes = Bytes(data);
     let mut app = App::<SLOTS>::new(Config::default());
-    let mut watch = Watch::default();
+    let mut watch = Watch::<SLOTS>::default();
     let mut now = 0u64;
     while !bytes.0.is_empty() && now < MAX_RUN_MS {
         let rx = bytes.rx();
         let samples = bytes.samples();
         let hold_ms = u64::from(bytes.u8()) * 4;
         let out = app.step(Instant::from_millis(now), &samples, &rx);
-        watch.check(&app, now, &out.motors);
+        if let Err(broken) = watch.check(&app, now, &out.motors) {
+            panic!("{broken}");
+        }
         if out.action.is_some() {
             app = App::new(Config::default());
             watch = Watch::default();
@@ -112,7 +89,9 @@ fuzz_target!(|data: &[u8]| {
         for _ in 0..hold_ms {
             now += 1;
             let out = app.step(Instant::from_millis(now), &samples, &[]);
-            watch.check(&app, now, &out.motors);
+            if let Err(broken) = watch.check(&app, now, &out.motors) {
+            panic!("{broken}");
+        }
         }
         let answer = app.step(Instant::from_millis(now), &samples, b"\nQ0*ea\n");
         let mut decoder = ResponseDecoder::new();

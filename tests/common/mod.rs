@@ -3,6 +3,8 @@
 
 #![allow(dead_code)] // each test file uses a different part of the rig
 
+pub mod bounds;
+
 use mmu_firmware::{App, Config, Instant, MotorCommand};
 use mmu_model::{Fault, Model, ModelConfig};
 use mmu_protocol::{ParamCode, ProgressCode, Request, RequestCode, Response, ResponseDecoder};

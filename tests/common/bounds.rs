@@ -1,0 +1,51 @@
+//! The motor bounds every input must keep, shared by the proptest (`tests/properties.rs`) and
+//! the App fuzz target (`fuzz/fuzz_targets/app.rs`, which includes this file by path).
+
+use mmu_firmware::{App, Direction, MotorCommand};
+
+/// The longest any single phase may drive with the default configuration: the slow search for
+/// the printer's sensor, (30 + 90) mm at 20 mm/s, twice over, plus 1 s of slack.
+pub const LONGEST_PHASE_MS: u64 = 120 * 2000 / 20 + 1000;
+
+/// Follows the App's motor commands step by step.
+pub struct Watch<const N: usize> {
+    /// Per slot: since when it has been driven by the same phase of the same operation.
+    driven_since: [Option<(u64, String)>; N],
+}
+
+impl<const N: usize> Default for Watch<N> {
+    fn default() -> Self {
+        Watch {
+            driven_since: core::array::from_fn(|_| None),
+        }
+    }
+}
+
+impl<const N: usize> Watch<N> {
+    /// Never two slots fed towards the hub at once; no phase drives a motor beyond
+    /// [`LONGEST_PHASE_MS`]. Says what went wrong.
+    pub fn check(&mut self, app: &App<N>, now: u64, motors: &[MotorCommand; N]) -> Result<(), String> {
+        let forward = motors
+            .iter()
+            .filter(|m| matches!(m, MotorCommand::Drive { direction: Direction::Forward, duty } if duty.permille() > 0))
+            .count();
+        if forward > 1 {
+            return Err(format!("two slots fed towards the hub at once: {motors:?}"));
+        }
+        let phase = format!("{:?}/{:?}", app.operation().request, app.operation().phase());
+        for (slot, motor) in motors.iter().enumerate() {
+            let by_phase = app.operation().driving_slot() == Some(slot) && motor.is_driving();
+            let entry = &mut self.driven_since[slot];
+            match (by_phase, entry.as_ref()) {
+                (true, Some((since, running))) if *running == phase => {
+                    if now - since > LONGEST_PHASE_MS {
+                        return Err(format!("slot {slot} driven {} ms in {phase}", now - since));
+                    }
+                }
+                (true, _) => *entry = Some((now, phase.clone())),
+                (false, _) => *entry = None,
+            }
+        }
+        Ok(())
+    }
+}
