@@ -281,6 +281,42 @@ impl NorFlash for WatchedFlash {
     }
 }
 
+/// Set by [`on_flash_double_ecc_error`] for the next boot: erase the store instead of reading it.
+/// In `.uninit`, so it survives a system reset; after power-up it holds garbage, which matches
+/// [`ERASE_STORE_MAGIC`] with negligible odds.
+#[unsafe(link_section = ".uninit.mmu.ERASE_STORE")]
+static mut ERASE_STORE: core::mem::MaybeUninit<u32> = core::mem::MaybeUninit::uninit();
+const ERASE_STORE_MAGIC: u32 = 0x4543_4345;
+
+/// A flash read hit a double ECC error (the NMI). On this part a double-word write cut by a power
+/// loss can leave one in the store; reading it again would raise the NMI again at every boot.
+/// So: motors off, the store marked for erasure at the next boot, the flag cleared, reset.
+pub fn on_flash_double_ecc_error() -> ! {
+    emergency_stop();
+    if pac::FLASH.eccr().read().eccd() {
+        // SAFETY: a plain word write from the NMI handler, the only writer, just before a reset.
+        unsafe {
+            core::ptr::addr_of_mut!(ERASE_STORE)
+                .cast::<u32>()
+                .write_volatile(ERASE_STORE_MAGIC)
+        };
+        pac::FLASH.eccr().modify(|w| w.set_eccd(true));
+    }
+    cortex_m::peripheral::SCB::sys_reset()
+}
+
+/// Whether the last run ended on a flash double ECC error, so the store must be erased before
+/// anything reads it. Clears the request.
+pub fn take_store_erase_request() -> bool {
+    let flag = core::ptr::addr_of_mut!(ERASE_STORE).cast::<u32>();
+    // SAFETY: read and cleared once at boot, before the NMI path could run again.
+    unsafe {
+        let requested = flag.read_volatile() == ERASE_STORE_MAGIC;
+        flag.write_volatile(0);
+        requested
+    }
+}
+
 /// Stops every motor and restarts the MCU.
 pub fn reset() -> ! {
     emergency_stop();

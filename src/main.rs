@@ -193,6 +193,12 @@ impl Persisted {
     #[inline(never)]
     fn boot(app: &mut App<SLOTS>, flash: board::StoreFlash) -> Self {
         let mut store = unwrap!(Store::new(flash, board::STORE_RANGE));
+        if board::take_store_erase_request() {
+            warn!("store: a flash ECC error stopped the last run, erasing the store: the unit starts as new");
+            if let Err(e) = block_on(store.erase()) {
+                error!("store: erase failed: {}", e);
+            }
+        }
         match block_on(store.load()) {
             Ok(snapshot) => {
                 let c = &snapshot.counters;
@@ -364,6 +370,13 @@ fn panic(info: &PanicInfo) -> ! {
         }
     }
     cortex_m::asm::udf()
+}
+
+/// The NMI: on this part a double ECC error reading the flash (see
+/// `board::on_flash_double_ecc_error`: the store is erased at the next boot).
+#[exception]
+unsafe fn NonMaskableInt() -> ! {
+    board::on_flash_double_ecc_error()
 }
 
 /// A fault (or a panic's `udf`): every motor off, then wait for the watchdog reset.
