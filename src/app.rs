@@ -243,10 +243,15 @@ impl<const N: usize> App<N> {
         }
     }
 
+    /// Where each slot's filament is.
+    pub fn lanes(&self) -> [Lane; N] {
+        core::array::from_fn(|slot| self.unit.lane(slot))
+    }
+
     /// What the unit keeps across a restart: lanes, counters, settings.
     pub fn snapshot(&self) -> Snapshot<N> {
         Snapshot {
-            lanes: core::array::from_fn(|slot| self.unit.lane(slot)),
+            lanes: self.lanes(),
             counters: self.counters,
             settings: self.settings(),
         }

@@ -36,8 +36,7 @@ use embassy_futures::block_on;
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_time::{Duration, Instant as Clock, Ticker};
-use mmu_firmware::persist::Store;
-use mmu_firmware::unit::Lane;
+use mmu_firmware::persist::{Boot, Keeper, Store};
 use mmu_firmware::{App, BoardAction, Config, Instant, MotorCommand, Outputs, Samples};
 use mmu_protocol::ButtonCode;
 use static_cell::StaticCell;
@@ -60,9 +59,6 @@ const DEBOUNCE: Duration = Duration::from_millis(20);
 const FLUSH_BEFORE_RESET: Duration = Duration::from_millis(20);
 /// Interval of the statistics log line.
 const STATS_PERIOD: Duration = Duration::from_secs(60);
-/// Lanes are compared with the flash every step; counters and settings this often, ms (building
-/// the full snapshot costs more than a step should spend every millisecond).
-const FULL_CHECK_MS: u64 = 1000;
 
 /// The latest sensor scan and when it was taken (`None` before the first one).
 static LATEST: Mutex<CriticalSectionRawMutex, Cell<Option<(Clock, Samples<SLOTS>)>>> =
@@ -131,7 +127,7 @@ async fn control_task(mut board: board::Control, flash: board::StoreFlash) {
             stats.tx_dropped += 1;
         }
         if let Some(action) = out.action {
-            perform(action, &mut board, &mut persisted).await;
+            perform(action, &mut board, &mut persisted, &app).await;
         }
         if lateness <= ON_TIME && fresh {
             board.feed_watchdog();
@@ -158,49 +154,45 @@ fn step(app: &mut App<SLOTS>, now: Clock, samples: &Samples<SLOTS>, rx: &[u8]) -
     app.step(Instant::from_millis(now.as_millis()), samples, rx)
 }
 
-/// Carries out a reset request after its response has been sent. `X42` first erases the whole
-/// store (16 pages: up to 640 ms with the CPU stalled, the motors coasting).
-async fn perform(action: BoardAction, board: &mut board::Control, persisted: &mut Persisted) -> ! {
+/// Carries out a reset request after its response has been sent: the state is saved first
+/// (`X0`), or forgotten (`X42`: blank records, power-cut safe).
+async fn perform(
+    action: BoardAction,
+    board: &mut board::Control,
+    persisted: &mut Persisted,
+    app: &App<SLOTS>,
+) -> ! {
     info!("board action: {}", action);
     board.apply(&[MotorCommand::Coast; SLOTS]);
     board.flush(FLUSH_BEFORE_RESET).await;
-    if action == BoardAction::EraseAndReset {
-        match block_on(persisted.store.erase()) {
-            Ok(()) => info!("store erased"),
-            Err(e) => error!("store: erase failed: {}", e),
-        }
-    }
+    persisted.before(action, app);
     board::reset()
 }
 
-/// The App's state in flash, as the simulator keeps it (`sim/src/logic.rs`).
+/// The App's state in flash, kept by the policy the simulator runs too ([`Keeper`]).
 ///
 /// The store's futures never wait: every flash operation of [`board::StoreFlash`] completes,
 /// blocking, on the first poll. So they run under `block_on` in plain out-of-line functions:
 /// their state stays out of the control task's future (1.6 KiB less static RAM than awaiting
 /// them there, and less code).
-struct Persisted {
-    store: Store<board::StoreFlash, SLOTS>,
-    /// The lanes as of the last comparison with the flash.
-    lanes: [Lane; SLOTS],
-    /// When the full snapshot was last compared.
-    checked_at: Option<Instant>,
-}
+struct Persisted(Keeper<board::StoreFlash, SLOTS>);
 
 impl Persisted {
-    /// Restores into `app` what the flash holds, before its first step. A store that cannot be
-    /// read is erased: the unit starts as new rather than not at all.
+    /// Restores into `app` what the flash holds, before its first step. After a flash ECC error
+    /// the store is wiped first; a store that cannot be read is wiped too.
     #[inline(never)]
     fn boot(app: &mut App<SLOTS>, flash: board::StoreFlash) -> Self {
         let mut store = unwrap!(Store::new(flash, board::STORE_RANGE));
         if board::take_store_erase_request() {
-            warn!("store: a flash ECC error stopped the last run, erasing the store: the unit starts as new");
-            if let Err(e) = block_on(store.erase()) {
-                error!("store: erase failed: {}", e);
+            warn!("store: a flash ECC error stopped the last run, wiping the store: the unit starts as new");
+            if let Err(e) = block_on(store.wipe()) {
+                error!("store: wipe failed: {}", e);
             }
         }
-        match block_on(store.load()) {
-            Ok(snapshot) => {
+        let (keeper, boot) = block_on(Keeper::boot(store, app));
+        match boot {
+            Boot::Restored => {
+                let snapshot = app.snapshot();
                 let c = &snapshot.counters;
                 info!(
                     "restored: lanes {}, {} settings, errors {}, tool changes {}, failures {}, fed {} mm",
@@ -211,50 +203,34 @@ impl Persisted {
                     c.failures,
                     c.fed_mm
                 );
-                app.restore(&snapshot);
             }
-            Err(e) => {
-                warn!("store: load failed ({}), erasing it: the unit starts as new", e);
-                if let Err(e) = block_on(store.erase()) {
-                    error!("store: erase failed: {}", e);
-                }
-            }
+            Boot::Wiped(Ok(())) => warn!("store: unreadable, wiped: the unit starts as new"),
+            Boot::Wiped(Err(e)) => error!("store: unreadable and the wipe failed: {}", e),
         }
-        Persisted {
-            store,
-            lanes: lanes(app),
-            checked_at: None,
-        }
+        Persisted(keeper)
     }
 
-    /// Writes what changed: the lanes at once, the rest as the store's policy allows. Returns
-    /// whether it wrote, i.e. stalled the CPU. A failed write leaves the previous record in
-    /// flash; the next change tries again.
+    /// Writes what changed (see [`Keeper::update`]). Returns whether it wrote, i.e. stalled the
+    /// CPU. A failed write leaves the previous record in flash; the next step tries again.
     #[inline(never)]
     fn update(&mut self, app: &App<SLOTS>, now: Clock) -> bool {
-        let now = Instant::from_millis(now.as_millis());
-        let lanes = lanes(app);
-        let full_check = self
-            .checked_at
-            .is_none_or(|at| now.millis_since(at) >= FULL_CHECK_MS);
-        if lanes == self.lanes && !full_check {
-            return false;
+        match block_on(self.0.update(app, Instant::from_millis(now.as_millis()))) {
+            Ok(wrote) => wrote,
+            Err(e) => {
+                error!("store: save failed: {}", e);
+                true
+            }
         }
-        self.lanes = lanes;
-        self.checked_at = Some(now);
-        let snapshot = app.snapshot();
-        if !self.store.save_due(&snapshot, now) {
-            return false;
-        }
-        if let Err(e) = block_on(self.store.save(&snapshot, now)) {
-            error!("store: save failed: {}", e);
-        }
-        true
     }
-}
 
-fn lanes(app: &App<SLOTS>) -> [Lane; SLOTS] {
-    core::array::from_fn(|slot| app.unit().lane(slot))
+    /// Saves everything before a reset, or forgets it for `X42`.
+    #[inline(never)]
+    fn before(&mut self, action: BoardAction, app: &App<SLOTS>) {
+        match block_on(self.0.before(action, app)) {
+            Ok(()) => info!("store: {} done", action),
+            Err(e) => error!("store: {} failed: {}", action, e),
+        }
+    }
 }
 
 /// Turns the raw button level into one event per press.

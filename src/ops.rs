@@ -561,6 +561,18 @@ impl Operation {
             }
             return Outcome::Continue;
         };
+        // At most one slot can be past its park position: stored lanes that say otherwise are
+        // not to be believed. After Retry they are forgotten and the hub sensor decides.
+        if (0..N).filter(|&slot| unit.lane(slot).owns_hub()).count() > 1 {
+            if !self.trust_sensors {
+                return Outcome::Fail(ErrorCode::FINDA_VS_EEPROM_DISREPANCY);
+            }
+            for slot in 0..N {
+                if unit.lane(slot).owns_hub() {
+                    unit.set_lane(slot, Lane::Unknown);
+                }
+            }
+        }
         match (hub, unit.active()) {
             (true, None) => return Outcome::Fail(ErrorCode::FINDA_VS_EEPROM_DISREPANCY),
             // The user has looked: the slot's tip is somewhere before the hub sensor. It keeps the

@@ -1,28 +1,34 @@
 //! What the unit keeps across restarts, and how it is kept in flash.
 //!
 //! Three records, each written only when it changed: the lane state (where each slot's filament
-//! is: written at once, so a power cut leaves the last known position), the counters and the
-//! settings (written at most every [`SLOW_RECORD_PERIOD_MS`]). They live in a
+//! is) and the settings at once, so a power cut leaves the last known position and setting; the
+//! counters at most every [`SLOW_RECORD_PERIOD_MS`] (and before a reset). They live in a
 //! [`sequential_storage`] map over any `embedded-storage-async` NOR flash: the map writes each
 //! record as a new CRC-protected item and wears the pages evenly, so a power cut during a write
 //! leaves the previous record readable. A record that does not decode (another format, an
-//! older layout) is ignored and the unit starts from its defaults.
+//! older layout) is ignored and the unit starts from its defaults. [`Keeper`] is the policy the
+//! firmware and the simulator share: restore at boot, save as the App changes.
 
 use embedded_storage_async::nor_flash::NorFlash;
 use heapless::Vec;
 use sequential_storage::cache::{Cache, Uncached};
 use sequential_storage::map::{MapConfig, MapStorage};
 
+use crate::app::App;
+use crate::app::BoardAction;
 use crate::time::Instant;
 use crate::unit::Lane;
 
 /// Settings registers a unit has at most (plain settings and two thresholds per sensor).
 pub const MAX_SETTINGS: usize = 64;
-/// Counters and settings are written at most this often, ms.
+/// Counters are written at most this often, ms (they change while the unit works).
 pub const SLOW_RECORD_PERIOD_MS: u64 = 10_000;
+/// [`Keeper::update`] compares counters and settings this often; lanes every step, ms.
+pub const FULL_CHECK_MS: u64 = 1000;
 /// The layout version of every record: a record with another is ignored.
 const FORMAT: u8 = 1;
-/// Room for the largest record (the settings, 3 bytes each) with its key, rounded up to words.
+/// Room for the largest record (the settings: a 2-byte header and 3 bytes each) with its key and
+/// the map's word alignment.
 const BUFFER: usize = 8 + 3 * MAX_SETTINGS;
 
 /// The record keys of the map.
@@ -268,11 +274,9 @@ impl<F: NorFlash, const N: usize> Store<F, N> {
 
     /// Whether [`Store::save`] would write something now.
     pub fn save_due(&self, snapshot: &Snapshot<N>, now: Instant) -> bool {
-        snapshot.lanes != self.saved.lanes || (self.slow_changed(snapshot) && self.slow_allowed(now))
-    }
-
-    fn slow_changed(&self, snapshot: &Snapshot<N>) -> bool {
-        snapshot.counters != self.saved.counters || snapshot.settings != self.saved.settings
+        snapshot.lanes != self.saved.lanes
+            || snapshot.settings != self.saved.settings
+            || (snapshot.counters != self.saved.counters && self.slow_allowed(now))
     }
 
     fn slow_allowed(&self, now: Instant) -> bool {
@@ -280,29 +284,28 @@ impl<F: NorFlash, const N: usize> Store<F, N> {
             .is_none_or(|at| now.millis_since(at) >= SLOW_RECORD_PERIOD_MS)
     }
 
-    /// Write what changed: the lanes at once, counters and settings at most every
-    /// [`SLOW_RECORD_PERIOD_MS`]. Returns how many records were written.
-    pub async fn save(&mut self, snapshot: &Snapshot<N>, now: Instant) -> Result<u8, StoreError> {
+    /// Write what changed: lanes and settings at once, counters at most every
+    /// [`SLOW_RECORD_PERIOD_MS`] (`None`: now, whatever the period, e.g. before a reset).
+    /// Returns how many records were written.
+    pub async fn save(&mut self, snapshot: &Snapshot<N>, now: Option<Instant>) -> Result<u8, StoreError> {
         let mut written = 0;
         if snapshot.lanes != self.saved.lanes {
             self.write(Record::Lanes, &encode_lanes(&snapshot.lanes)).await?;
             self.saved.lanes = snapshot.lanes;
             written += 1;
         }
-        if self.slow_changed(snapshot) && self.slow_allowed(now) {
-            if snapshot.counters != self.saved.counters {
-                self.write(Record::Counters, &encode_counters(&snapshot.counters))
-                    .await?;
-                self.saved.counters = snapshot.counters;
-                written += 1;
-            }
-            if snapshot.settings != self.saved.settings {
-                self.write(Record::Settings, &encode_settings(&snapshot.settings))
-                    .await?;
-                self.saved.settings = snapshot.settings.clone();
-                written += 1;
-            }
-            self.slow_saved_at = Some(now);
+        if snapshot.settings != self.saved.settings {
+            self.write(Record::Settings, &encode_settings(&snapshot.settings))
+                .await?;
+            self.saved.settings = snapshot.settings.clone();
+            written += 1;
+        }
+        if snapshot.counters != self.saved.counters && now.is_none_or(|now| self.slow_allowed(now)) {
+            self.write(Record::Counters, &encode_counters(&snapshot.counters))
+                .await?;
+            self.saved.counters = snapshot.counters;
+            self.slow_saved_at = now;
+            written += 1;
         }
         Ok(written)
     }
@@ -314,12 +317,100 @@ impl<F: NorFlash, const N: usize> Store<F, N> {
         Ok(())
     }
 
-    /// Erase every record (`X42`): the next start is a first start.
-    pub async fn erase(&mut self) -> Result<(), StoreError> {
-        self.map.erase_all().await?;
-        self.saved = Snapshot::default();
-        self.slow_saved_at = None;
+    /// Forget everything (`X42`): write blank records (lanes unknown, counters zero, no
+    /// settings) as ordinary items, so a power cut leaves either the old state or the blank one.
+    /// (Erasing the pages instead could bring old records back: a cut mid-erase leaves some
+    /// pages erased and older ones intact.)
+    pub async fn forget(&mut self) -> Result<(), StoreError> {
+        let blank = Snapshot::<N>::default();
+        self.write(Record::Lanes, &encode_lanes(&blank.lanes)).await?;
+        self.write(Record::Counters, &encode_counters(&blank.counters))
+            .await?;
+        self.write(Record::Settings, &encode_settings(&blank.settings))
+            .await?;
+        self.saved = blank;
         Ok(())
+    }
+
+    /// Erase the region when it cannot be read, then write blank records (see [`Store::forget`]).
+    pub async fn wipe(&mut self) -> Result<(), StoreError> {
+        self.map.erase_all().await?;
+        self.forget().await
+    }
+}
+
+/// What [`Keeper::boot`] found in the flash.
+#[derive(Debug)]
+pub enum Boot {
+    /// The stored state is restored into the App.
+    Restored,
+    /// The store could not be read and was wiped (or could not even be wiped): a first start.
+    Wiped(Result<(), StoreError>),
+}
+
+/// The persistence policy of a running unit, shared by the firmware and the simulator: restore
+/// at boot; then lanes and settings saved in the step they change, counters as the store allows,
+/// everything before a reset.
+pub struct Keeper<F: NorFlash, const N: usize> {
+    store: Store<F, N>,
+    /// The lanes as of the last comparison with the flash.
+    lanes: [Lane; N],
+    /// When counters and settings were last compared.
+    checked_at: Option<Instant>,
+}
+
+impl<F: NorFlash, const N: usize> Keeper<F, N> {
+    /// Restore into `app` (before its first step) what `store` holds; a store that cannot be
+    /// read is wiped, and the unit starts as new rather than not at all.
+    pub async fn boot(mut store: Store<F, N>, app: &mut App<N>) -> (Self, Boot) {
+        let boot = match store.load().await {
+            Ok(snapshot) => {
+                app.restore(&snapshot);
+                Boot::Restored
+            }
+            Err(StoreError) => Boot::Wiped(store.wipe().await),
+        };
+        let keeper = Keeper {
+            store,
+            lanes: app.lanes(),
+            checked_at: None,
+        };
+        (keeper, boot)
+    }
+
+    /// After a step: save what changed. Lanes are compared every step (cheap); the full snapshot
+    /// every [`FULL_CHECK_MS`] or when lanes changed. `Ok(true)` when it wrote (the flash may
+    /// have stalled the CPU); a failed write leaves the previous record and is tried again.
+    pub async fn update(&mut self, app: &App<N>, now: Instant) -> Result<bool, StoreError> {
+        let lanes = app.lanes();
+        let full_check = self
+            .checked_at
+            .is_none_or(|at| now.millis_since(at) >= FULL_CHECK_MS);
+        if lanes == self.lanes && !full_check {
+            return Ok(false);
+        }
+        self.checked_at = Some(now);
+        let snapshot = app.snapshot();
+        if !self.store.save_due(&snapshot, now) {
+            self.lanes = lanes;
+            return Ok(false);
+        }
+        self.store.save(&snapshot, Some(now)).await?;
+        self.lanes = lanes;
+        Ok(true)
+    }
+
+    /// Before the board carries out `action`: save everything (`X0`), or forget it (`X42`).
+    pub async fn before(&mut self, action: BoardAction, app: &App<N>) -> Result<(), StoreError> {
+        match action {
+            BoardAction::Reset => self.store.save(&app.snapshot(), None).await.map(drop),
+            BoardAction::EraseAndReset => self.store.forget().await,
+        }
+    }
+
+    /// The store.
+    pub fn store(&mut self) -> &mut Store<F, N> {
+        &mut self.store
     }
 }
 

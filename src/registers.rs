@@ -125,6 +125,23 @@ fn thresholds_mut(config: &mut Config, sensor: SensorId) -> Option<&mut Threshol
     }
 }
 
+/// The value of writable setting `address` in `config`: a plain setting or a threshold.
+fn setting_value<const N: usize>(config: &Config, address: u8) -> Option<u16> {
+    if let Some(setting) = setting(address) {
+        return Some((setting.get)(config));
+    }
+    let (sensor, on) = match (
+        sensor_at::<N>(address, THRESHOLD_ON),
+        sensor_at::<N>(address, THRESHOLD_OFF),
+    ) {
+        (Some(sensor), _) => (sensor, true),
+        (None, Some(sensor)) => (sensor, false),
+        (None, None) => return None,
+    };
+    let thresholds = thresholds(config, sensor)?;
+    Some(if on { thresholds.on } else { thresholds.off })
+}
+
 /// A diagnostic block offset: `address - base` when it names one of the unit's sensors.
 fn sensor_at<const N: usize>(address: u8, base: u8) -> Option<SensorId> {
     let index = address.checked_sub(base).filter(|&i| i < SENSOR_BLOCK)?;
@@ -217,13 +234,17 @@ impl<const N: usize> App<N> {
         Some(value)
     }
 
-    /// Every writable setting and its value: the plain settings, then the sensors' thresholds.
+    /// Every writable setting that differs from its default, and its value: the plain settings,
+    /// then the sensors' thresholds.
     pub(crate) fn settings(&self) -> heapless::Vec<(u8, u16), MAX_SETTINGS> {
+        let defaults = Config::default();
         let threshold_registers =
             (0..Unit::<N>::SENSOR_COUNT as u8).flat_map(|i| [THRESHOLD_ON + i, THRESHOLD_OFF + i]);
         let mut settings = heapless::Vec::new();
         for address in SETTINGS.iter().map(|s| s.address).chain(threshold_registers) {
-            if let Some(value) = self.read_register(address) {
+            let value = setting_value::<N>(&self.config, address);
+            // Only what differs from the defaults: a later firmware's defaults then apply.
+            if let Some(value) = value.filter(|&v| Some(v) != setting_value::<N>(&defaults, address)) {
                 // MAX_SETTINGS holds every setting of a 5-slot unit.
                 let _ = settings.push((address, value));
             }

@@ -90,8 +90,8 @@ fuzz_target!(|data: &[u8]| {
             now += 1;
             let out = app.step(Instant::from_millis(now), &samples, &[]);
             if let Err(broken) = watch.check(&app, now, &out.motors) {
-            panic!("{broken}");
-        }
+                panic!("{broken}");
+            }
         }
         let answer = app.step(Instant::from_millis(now), &samples, b"\nQ0*ea\n");
         let mut decoder = ResponseDecoder::new();

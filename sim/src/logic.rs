@@ -7,8 +7,7 @@
 
 use embassy_futures::block_on;
 use mmu_firmware::ops::Status;
-use mmu_firmware::persist::Store;
-use mmu_firmware::unit::Lane;
+use mmu_firmware::persist::{Keeper, Store};
 use mmu_firmware::{App, BoardAction, Config, Instant, MAX_SLOTS, MotorCommand};
 use mmu_model::Model;
 use mmu_protocol::{ButtonCode, RequestCode};
@@ -19,8 +18,6 @@ use crate::flash::{FlashWear, G0_PAGE, MemFlash};
 pub type UnitFlash = MemFlash<G0_PAGE>;
 /// Pages of [`UnitFlash`].
 pub const STORE_PAGES: usize = 16;
-/// Counters and settings are compared with the flash this often; lanes every step, ms.
-const FULL_CHECK_MS: u64 = 1000;
 
 /// An empty (erased) unit flash.
 pub fn blank_flash() -> UnitFlash {
@@ -57,52 +54,20 @@ pub trait UnitLogic: Send {
     fn flash_wear(&mut self) -> FlashWear;
 }
 
-/// An App with its store.
+/// An App with its store, kept by the firmware's own policy ([`Keeper`]).
 struct PersistentApp<const N: usize> {
     app: App<N>,
-    store: Store<UnitFlash, N>,
-    lanes: [Lane; N],
-    checked_at: Option<Instant>,
+    keeper: Keeper<UnitFlash, N>,
 }
 
 impl<const N: usize> PersistentApp<N> {
-    /// Boot on `flash`: what it holds is restored before the first step. A store that cannot be
-    /// read is erased (the unit starts as new rather than not at all).
+    /// Boot on `flash`: what it holds is restored before the first step.
     fn boot(config: Config, flash: UnitFlash) -> Self {
         let range = 0..(STORE_PAGES * G0_PAGE) as u32;
-        let mut store = Store::new(flash, range).unwrap_or_else(|_| unreachable!("a valid region"));
+        let store = Store::new(flash, range).unwrap_or_else(|_| unreachable!("a valid region"));
         let mut app = App::new(config);
-        match block_on(store.load()) {
-            Ok(snapshot) => app.restore(&snapshot),
-            Err(_) => {
-                let _ = block_on(store.erase());
-            }
-        }
-        let lanes = app.snapshot().lanes;
-        PersistentApp {
-            app,
-            store,
-            lanes,
-            checked_at: None,
-        }
-    }
-
-    /// Keep what changed: lanes at once, the rest as the store's policy allows.
-    fn persist(&mut self, now: Instant) {
-        let lanes = core::array::from_fn(|slot| self.app.unit().lane(slot));
-        let full_check = self
-            .checked_at
-            .is_none_or(|at| now.millis_since(at) >= FULL_CHECK_MS);
-        if lanes == self.lanes && !full_check {
-            return;
-        }
-        self.lanes = lanes;
-        self.checked_at = Some(now);
-        let snapshot = self.app.snapshot();
-        if self.store.save_due(&snapshot, now) {
-            // A failed write leaves the old record; the next change tries again.
-            let _ = block_on(self.store.save(&snapshot, now));
-        }
+        let (keeper, _) = block_on(Keeper::boot(store, &mut app));
+        PersistentApp { app, keeper }
     }
 }
 
@@ -118,13 +83,11 @@ impl<const N: usize> UnitLogic for PersistentApp<N> {
         let samples = model.samples::<N>();
         let out = self.app.step(now, &samples, rx);
         tx.extend_from_slice(&out.tx);
-        match out.action {
-            None => self.persist(now),
-            Some(BoardAction::EraseAndReset) => {
-                let _ = block_on(self.store.erase());
-            }
-            Some(BoardAction::Reset) => {}
-        }
+        // A failed write leaves the old record; the keeper tries again.
+        let _ = match out.action {
+            None => block_on(self.keeper.update(&self.app, now)).map(drop),
+            Some(action) => block_on(self.keeper.before(action, &self.app)),
+        };
         let motors = if out.action.is_some() {
             [MotorCommand::Coast; N]
         } else {
@@ -148,11 +111,11 @@ impl<const N: usize> UnitLogic for PersistentApp<N> {
     }
 
     fn take_flash(&mut self) -> UnitFlash {
-        std::mem::replace(self.store.flash(), blank_flash())
+        std::mem::replace(self.keeper.store().flash(), blank_flash())
     }
 
     fn flash_wear(&mut self) -> FlashWear {
-        self.store.flash().wear()
+        self.keeper.store().flash().wear()
     }
 }
 

@@ -26,8 +26,8 @@ struct Step {
     at: Instant,
 }
 
-/// Tool changes back and forth with their counters, settings written by the printer, and an
-/// erase in the middle (`None`).
+/// Tool changes back and forth with their counters, settings written by the printer, and
+/// `X42` (`None`) before and after the region has wrapped.
 fn sequence() -> Vec<Option<Step>> {
     let mut steps = Vec::new();
     let mut snapshot = Snapshot::<SLOTS> {
@@ -35,7 +35,7 @@ fn sequence() -> Vec<Option<Step>> {
         ..Snapshot::default()
     };
     let mut t = 0;
-    for change in 0..12u16 {
+    for change in 0..24u16 {
         let (from, to) = (usize::from(change) % SLOTS, usize::from(change + 1) % SLOTS);
         for (slot, lane) in [
             (from, Lane::InHub),
@@ -59,8 +59,9 @@ fn sequence() -> Vec<Option<Step>> {
                 .settings
                 .extend([(0x0b, 5 + change), (0x22, 360), (0x90, 2600)]);
         }
-        if change == 6 {
+        if matches!(change, 6 | 17 | 22) {
             steps.push(None);
+            snapshot = Snapshot::default();
         }
     }
     steps
@@ -70,8 +71,8 @@ fn sequence() -> Vec<Option<Step>> {
 fn run(flash: &mut Store<Flash, SLOTS>, steps: &[Option<Step>]) -> Result<(), usize> {
     for (index, step) in steps.iter().enumerate() {
         let result = match step {
-            Some(step) => block_on(flash.save(&step.snapshot, step.at)).map(drop),
-            None => block_on(flash.erase()),
+            Some(step) => block_on(flash.save(&step.snapshot, Some(step.at))).map(drop),
+            None => block_on(flash.forget()),
         };
         result.map_err(|_| index)?;
     }
@@ -142,21 +143,28 @@ fn every_power_cut_leaves_the_old_or_the_new_record() {
 }
 
 #[test]
-fn counters_and_settings_are_written_at_a_bounded_rate_lanes_at_once() {
+fn counters_are_written_at_a_bounded_rate_lanes_and_settings_at_once() {
     let mut unit = store(Flash::new(PAGES));
     let mut snapshot = Snapshot::<SLOTS>::default();
-    let at = Instant::from_millis;
+    let at = |ms| Some(Instant::from_millis(ms));
     snapshot.counters = Counters {
         drive_errors: 1,
         ..Counters::default()
     };
     assert_eq!(block_on(unit.save(&snapshot, at(0))), Ok(1));
     snapshot.counters.drive_errors = 2;
-    assert!(!unit.save_due(&snapshot, at(5_000)), "too soon for counters");
+    assert!(
+        !unit.save_due(&snapshot, Instant::from_millis(5_000)),
+        "too soon for counters"
+    );
     assert_eq!(block_on(unit.save(&snapshot, at(5_000))), Ok(0));
     snapshot.lanes[1] = Lane::Loaded;
-    assert!(unit.save_due(&snapshot, at(5_001)), "lanes go at once");
-    assert_eq!(block_on(unit.save(&snapshot, at(5_001))), Ok(1));
+    snapshot.settings.push((0x52, 2)).unwrap();
+    assert!(
+        unit.save_due(&snapshot, Instant::from_millis(5_001)),
+        "lanes and settings go at once"
+    );
+    assert_eq!(block_on(unit.save(&snapshot, at(5_001))), Ok(2));
     assert_eq!(
         block_on(unit.save(&snapshot, at(10_000))),
         Ok(1),
@@ -167,4 +175,12 @@ fn counters_and_settings_are_written_at_a_bounded_rate_lanes_at_once() {
         Ok(0),
         "nothing changed"
     );
+    snapshot.counters.drive_errors = 3;
+    assert_eq!(
+        block_on(unit.save(&snapshot, None)),
+        Ok(1),
+        "before a reset, at once"
+    );
+    let mut rebooted = store(unit.into_flash());
+    assert_eq!(block_on(rebooted.load()).unwrap(), snapshot);
 }

@@ -430,3 +430,28 @@ fn the_reported_version_is_a_setting_kept_across_restarts() {
     let mut printer = Printer::new(SimLink::new(sim), mk3s);
     printer.connect(&mut op).unwrap();
 }
+
+#[test]
+fn counters_are_saved_before_a_reset() {
+    let (mut printer, mut op) = connected();
+    printer
+        .link_mut()
+        .sim_mut()
+        .inject(mmu_sim::SimFault::Model(mmu_model::Fault::BowdenJam));
+    let outcome = run(&mut printer, &mut op, RequestCode::Tool, 1);
+    assert!(matches!(outcome, Outcome::GaveUp(_)), "{outcome:?}");
+    // The tip is stuck in the Bowden tube, past the hub sensor: after the reset the stored lanes
+    // agree with the sensors and the start-up check adds no error.
+    let errors = printer
+        .request(&mut op, Request::new(RequestCode::Read, 0x04))
+        .unwrap()
+        .param_value;
+    assert!(errors.is_some_and(|n| n >= 4), "{errors:?}");
+    // At once, well within the 10 s the counters otherwise wait for.
+    printer.reset(&mut op, 0).unwrap();
+    let after = printer
+        .request(&mut op, Request::new(RequestCode::Read, 0x04))
+        .unwrap()
+        .param_value;
+    assert_eq!(after, errors);
+}
