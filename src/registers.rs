@@ -125,19 +125,24 @@ fn thresholds_mut(config: &mut Config, sensor: SensorId) -> Option<&mut Threshol
     }
 }
 
+/// The sensor whose threshold register `address` is, and whether it is the "on" threshold.
+fn threshold_at<const N: usize>(address: u8) -> Option<(SensorId, bool)> {
+    match (
+        sensor_at::<N>(address, THRESHOLD_ON),
+        sensor_at::<N>(address, THRESHOLD_OFF),
+    ) {
+        (Some(sensor), _) => Some((sensor, true)),
+        (None, Some(sensor)) => Some((sensor, false)),
+        (None, None) => None,
+    }
+}
+
 /// The value of writable setting `address` in `config`: a plain setting or a threshold.
 fn setting_value<const N: usize>(config: &Config, address: u8) -> Option<u16> {
     if let Some(setting) = setting(address) {
         return Some((setting.get)(config));
     }
-    let (sensor, on) = match (
-        sensor_at::<N>(address, THRESHOLD_ON),
-        sensor_at::<N>(address, THRESHOLD_OFF),
-    ) {
-        (Some(sensor), _) => (sensor, true),
-        (None, Some(sensor)) => (sensor, false),
-        (None, None) => return None,
-    };
+    let (sensor, on) = threshold_at::<N>(address)?;
     let thresholds = thresholds(config, sensor)?;
     Some(if on { thresholds.on } else { thresholds.off })
 }
@@ -160,8 +165,8 @@ impl<const N: usize> App<N> {
     pub fn read_register(&self, address: u8) -> Option<u16> {
         let config = &self.config;
         let unit = &self.unit;
-        if let Some(setting) = setting(address) {
-            return Some((setting.get)(config));
+        if let Some(value) = setting_value::<N>(config, address) {
+            return Some(value);
         }
         let value = match address {
             0x00 => config.version.major.into(),
@@ -204,12 +209,6 @@ impl<const N: usize> App<N> {
             a if sensor_at::<N>(a, RAW).is_some() => unit.sensor(sensor_at::<N>(a, RAW)?)?.raw(),
             a if sensor_at::<N>(a, FILTERED).is_some() => {
                 unit.sensor(sensor_at::<N>(a, FILTERED)?)?.filtered()
-            }
-            a if sensor_at::<N>(a, THRESHOLD_ON).is_some() => {
-                thresholds(config, sensor_at::<N>(a, THRESHOLD_ON)?)?.on
-            }
-            a if sensor_at::<N>(a, THRESHOLD_OFF).is_some() => {
-                thresholds(config, sensor_at::<N>(a, THRESHOLD_OFF)?)?.off
             }
             a if slot_at::<N>(a, ODOMETRY).is_some() => {
                 unit.feeders.get(slot_at::<N>(a, ODOMETRY)?)?.odometry_mm() as i16 as u16
@@ -272,13 +271,8 @@ impl<const N: usize> App<N> {
                 Err(_) => false,
             };
         }
-        let (sensor, on) = match (
-            sensor_at::<N>(address, THRESHOLD_ON),
-            sensor_at::<N>(address, THRESHOLD_OFF),
-        ) {
-            (Some(sensor), _) => (sensor, true),
-            (None, Some(sensor)) => (sensor, false),
-            (None, None) => return false,
+        let Some((sensor, on)) = threshold_at::<N>(address) else {
+            return false;
         };
         let Some(thresholds) = thresholds_mut(&mut self.config, sensor) else {
             return false;

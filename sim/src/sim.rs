@@ -40,6 +40,16 @@ const MAX_FRAME: usize = 32;
 /// Slot motion is reported at most this often, ms.
 const SLOT_REPORT_MS: u64 = 100;
 
+/// A command's state as events and notes show it: `running FeedingToFinda`,
+/// `error FINDA_DIDNT_SWITCH_ON` or `finished`.
+pub fn status_text(status: Status) -> String {
+    match status {
+        Status::Running(progress) => format!("running {progress}"),
+        Status::Failed(error) => format!("error {error}"),
+        Status::Finished => String::from("finished"),
+    }
+}
+
 /// What the simulator is made of.
 #[derive(Debug, Clone)]
 pub struct SimOptions {
@@ -592,11 +602,7 @@ impl Sim {
         let new_request = current.0 != self.last_command.0;
         self.last_command = current;
         let request = format!("{}{value:x}", code.as_char());
-        let text = match status {
-            Status::Running(progress) => format!("running {progress}"),
-            Status::Failed(error) => format!("error {error}"),
-            Status::Finished => String::from("finished"),
-        };
+        let text = status_text(status);
         self.event(EventKind::Command {
             request,
             status: text,

@@ -41,7 +41,7 @@ use crate::fault::SimFault;
 use crate::flash::FlashWear;
 use crate::link::SimLink;
 use crate::printer::{Decision, Link, Operator, Outcome, Printer, PrinterEvent, PrinterOptions};
-use crate::sim::{CommandRecord, PRINTER_UNLOAD_MM, PRINTER_UNLOAD_MM_S, Sim, SimOptions};
+use crate::sim::{CommandRecord, PRINTER_UNLOAD_MM, PRINTER_UNLOAD_MM_S, Sim, SimOptions, status_text};
 use crate::timing::tool_change_minimum;
 
 /// With random faults, the chance that a tool change gets a fault.
@@ -570,11 +570,7 @@ enum ChangeEnd {
 /// Where the unit and the filaments stand, for a note.
 fn describe(sim: &Sim) -> String {
     let ((code, value), status) = sim.unit_command();
-    let status = match status {
-        mmu_firmware::ops::Status::Running(progress) => format!("running {progress}"),
-        mmu_firmware::ops::Status::Failed(error) => format!("error {error}"),
-        mmu_firmware::ops::Status::Finished => "finished".to_string(),
-    };
+    let status = status_text(status);
     let model = sim.model();
     let tips: Vec<String> = (0..model.slot_count())
         .map(|slot| match model.tip_mm(slot) {
