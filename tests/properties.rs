@@ -4,9 +4,9 @@
 mod common;
 
 use common::Rig;
-use common::bounds::Watch;
+use common::bounds::Bench;
 use mmu_firmware::ops::Status;
-use mmu_firmware::{App, Config, HubSamples, Instant, MotorCommand, Samples, SlotSamples};
+use mmu_firmware::{HubSamples, Samples, SlotSamples};
 use mmu_model::{Fault, Rail, SensorId};
 use mmu_protocol::{Request, RequestCode};
 use proptest::prelude::*;
@@ -53,16 +53,6 @@ fn samples() -> impl Strategy<Value = Samples<3>> {
         })
 }
 
-/// [`Watch::check`] as a proptest failure.
-fn check(
-    watch: &mut Watch<3>,
-    app: &App<3>,
-    now: u64,
-    motors: &[MotorCommand; 3],
-) -> Result<(), TestCaseError> {
-    watch.check(app, now, motors).map_err(TestCaseError::fail)
-}
-
 proptest! {
     #![proptest_config(ProptestConfig { cases: 48, ..ProptestConfig::default() })]
 
@@ -72,32 +62,14 @@ proptest! {
     fn arbitrary_input_never_panics_or_runs_a_motor_unbounded(
         script in proptest::collection::vec((input(), samples(), 1u64..400), 1..60),
     ) {
-        let mut app = App::<3>::new(Config::default());
-        let mut watch = Watch::default();
-        let mut now = 0u64;
+        let mut bench = Bench::<3>::default();
         for (input, samples, hold_ms) in script {
             let rx = match &input {
                 Input::Nothing => Vec::new(),
                 Input::Frame(request) => request.encode().as_bytes().to_vec(),
                 Input::Garbage(bytes) => bytes.clone(),
             };
-            let out = app.step(Instant::from_millis(now), &samples, &rx);
-            check(&mut watch, &app, now, &out.motors)?;
-            if out.action.is_some() {
-                app = App::new(Config::default());
-                watch = Watch::default();
-            }
-            for _ in 0..hold_ms {
-                now += 1;
-                let out = app.step(Instant::from_millis(now), &samples, &[]);
-                check(&mut watch, &app, now, &out.motors)?;
-            }
-            // After garbage the decoder resynchronises at the next newline.
-            let answer = app.step(Instant::from_millis(now), &samples, b"\nQ0*ea\n");
-            let mut decoder = mmu_protocol::ResponseDecoder::new();
-            let frames: Vec<_> = answer.tx.iter().filter_map(|&b| decoder.feed(b)).collect();
-            prop_assert_eq!(frames.len(), 1);
-            prop_assert!(frames[0].is_ok());
+            bench.feed(&rx, &samples, hold_ms).map_err(TestCaseError::fail)?;
         }
     }
 }

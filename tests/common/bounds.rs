@@ -1,7 +1,9 @@
-//! The motor bounds every input must keep, shared by the proptest (`tests/properties.rs`) and
-//! the App fuzz target (`fuzz/fuzz_targets/app.rs`, which includes this file by path).
+//! The App under arbitrary input and the bounds it must keep, shared by the proptest
+//! (`tests/properties.rs`) and the App fuzz target (`fuzz/fuzz_targets/app.rs`, which includes
+//! this file by path).
 
-use mmu_firmware::{App, Direction, MotorCommand};
+use mmu_firmware::{App, Config, Direction, Instant, MotorCommand, Samples};
+use mmu_protocol::ResponseDecoder;
 
 /// The longest any single phase may drive with the default configuration: the slow search for
 /// the printer's sensor, (30 + 90) mm at 20 mm/s, twice over, plus 1 s of slack.
@@ -47,5 +49,56 @@ impl<const N: usize> Watch<N> {
             }
         }
         Ok(())
+    }
+}
+
+/// An App stepped in virtual time, checked after every step.
+pub struct Bench<const N: usize> {
+    app: App<N>,
+    watch: Watch<N>,
+    now: u64,
+}
+
+impl<const N: usize> Default for Bench<N> {
+    fn default() -> Self {
+        Bench {
+            app: App::new(Config::default()),
+            watch: Watch::default(),
+            now: 0,
+        }
+    }
+}
+
+impl<const N: usize> Bench<N> {
+    /// Virtual time, ms.
+    pub fn now(&self) -> u64 {
+        self.now
+    }
+
+    /// One step with the printer's bytes `rx` (a reset request restarts the App), then
+    /// `hold_ms` steps with nothing sent, all with `samples`; then a `Q0` after a newline must get
+    /// exactly one well-formed answer (after garbage the decoder resynchronises there). Says what
+    /// went wrong.
+    pub fn feed(&mut self, rx: &[u8], samples: &Samples<N>, hold_ms: u64) -> Result<(), String> {
+        let out = self.app.step(Instant::from_millis(self.now), samples, rx);
+        self.watch.check(&self.app, self.now, &out.motors)?;
+        if out.action.is_some() {
+            self.app = App::new(Config::default());
+            self.watch = Watch::default();
+        }
+        for _ in 0..hold_ms {
+            self.now += 1;
+            let out = self.app.step(Instant::from_millis(self.now), samples, &[]);
+            self.watch.check(&self.app, self.now, &out.motors)?;
+        }
+        let answer = self
+            .app
+            .step(Instant::from_millis(self.now), samples, b"\nQ0*ea\n");
+        let mut decoder = ResponseDecoder::new();
+        let frames: Vec<_> = answer.tx.iter().filter_map(|&b| decoder.feed(b)).collect();
+        match frames.as_slice() {
+            [Ok(_)] => Ok(()),
+            _ => Err(format!("Q0 got {frames:?}")),
+        }
     }
 }
