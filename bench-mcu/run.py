@@ -46,6 +46,9 @@ MARKS = {
 STATUS = {0: "running", 1: "error", 2: "finished"}
 
 
+FUNCTIONS = []  # (address, size, name) of every function, for --profile
+
+
 def elf_symbols_and_segments(path):
     """PT_LOAD segments (address, bytes) and symbol addresses of a 32-bit little-endian ELF."""
     data = open(path, "rb").read()
@@ -72,6 +75,8 @@ def elf_symbols_and_segments(path):
             name = strings[st_name:strings.index(b"\0", st_name)].decode()
             if name:
                 symbols[name] = st_value
+                if st_size and struct.unpack_from("<B", data, off + 12)[0] & 0xF == 2:
+                    FUNCTIONS.append((st_value & ~1, st_size, name))
     return segments, symbols
 
 
@@ -152,6 +157,8 @@ class Bench:
         self.block_cache = {}
         self.exact = exact_steps is not None
         self.exact_steps = exact_steps
+        self.profile = None
+        self.in_step = False
         mark_at = self.symbols["bench_mark"] & ~1
         self.native = None
         if self.exact:
@@ -199,6 +206,8 @@ class Bench:
 
     def on_instruction(self, uc, address, size, _):
         self.count += 1
+        if self.profile is not None and self.in_step:
+            self.profile[address] = self.profile.get(address, 0) + 1
         if address == self.mark_at:
             self.on_mark(uc)
 
@@ -226,6 +235,7 @@ class Bench:
                                                   arm.UC_ARM_REG_R2, arm.UC_ARM_REG_R3))
         name = MARKS.get(kind, f"mark {kind}")
         sp = uc.reg_read(arm.UC_ARM_REG_SP)
+        self.in_step = name == "step_begin"
         if name.endswith("_begin"):
             self.stack_used(sp)
             self.open[name[:-6]] = (self.count, sp)
@@ -276,10 +286,30 @@ def main():
     parser.add_argument("--max-worst", type=int, help="fail if the worst step + save exceeds this")
     parser.add_argument("--max-idle", type=int, help="fail if the idle median exceeds this")
     parser.add_argument("--max-save", type=int, help="fail if the costliest save exceeds this")
+    parser.add_argument("--profile", type=int, metavar="STEPS",
+                        help="only list the functions App::step spends its instructions in over the first STEPS steps")
     parser.add_argument("--exact-steps", type=int, default=300,
                         help="recount this many first steps instruction by instruction (0: skip)")
     args = parser.parse_args()
     session = open(args.session, "rb").read()
+    if args.profile:
+        bench = Bench(args.elf, session, exact_steps=args.profile)
+        bench.profile = {}
+        bench.run()
+        demangle = shutil.which("rustfilt")
+        totals = {}
+        functions = sorted(FUNCTIONS)
+        import bisect
+        starts = [f[0] for f in functions]
+        for address, n in bench.profile.items():
+            i = bisect.bisect_right(starts, address) - 1
+            name = functions[i][2] if i >= 0 and address < starts[i] + functions[i][1] else hex(address)
+            totals[name] = totals.get(name, 0) + n
+        total = sum(totals.values())
+        print(f"App::step over {len(bench.steps)} steps: {total / max(1, len(bench.steps)):.0f} instr per step")
+        for name, n in sorted(totals.items(), key=lambda t: -t[1])[:25]:
+            print(f"  {100 * n / total:5.1f} %  {n / max(1, len(bench.steps)):7.0f}  {name[:110]}")
+        return
 
     bench = Bench(args.elf, session)
     bench.run()

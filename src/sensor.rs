@@ -126,17 +126,18 @@ fn divide_small(sum: u32, len: usize) -> u32 {
 }
 
 /// The high 32 bits of the 64-bit product `a × b`, from 16-bit halves: four single-cycle
-/// multiplications on the Cortex-M0+ instead of a 64-bit multiplication routine.
-const fn mul_high(a: u32, b: u32) -> u32 {
+/// multiplications on the Cortex-M0+ instead of the 64-bit multiplication routine
+/// (`__aeabi_lmul`), which LLVM would otherwise turn this back into (hence the `black_box`).
+fn mul_high(a: u32, b: u32) -> u32 {
     let (a0, a1) = (a & 0xffff, a >> 16);
-    let (b0, b1) = (b & 0xffff, b >> 16);
+    let (b0, b1) = (b & 0xffff, core::hint::black_box(b >> 16));
     let (low, cross1, cross2) = (a0 * b0, a0 * b1, a1 * b0);
     let carry = ((low >> 16) + (cross1 & 0xffff) + (cross2 & 0xffff)) >> 16;
     a1 * b1 + (cross1 >> 16) + (cross2 >> 16) + carry
 }
 
 /// `x / 1000` for any `u32`, without a division (the multiplier is `⌈2³⁸ / 1000⌉`).
-pub const fn div1000(x: u32) -> u32 {
+pub fn div1000(x: u32) -> u32 {
     mul_high(x, 0x1062_4dd3) >> 6
 }
 
