@@ -582,7 +582,7 @@ fn soak_details(report: &SoakReport, seed: u64) -> Details {
 }
 
 /// `3.0.3` → (3, 0, 3).
-fn parse_version(text: &str) -> Result<(u8, u8, u8), String> {
+pub(crate) fn parse_version(text: &str) -> Result<(u8, u8, u8), String> {
     let parts: Vec<Option<u8>> = text.split('.').map(|part| part.parse().ok()).collect();
     match parts.as_slice() {
         [Some(major), Some(minor), Some(revision)] => Ok((*major, *minor, *revision)),

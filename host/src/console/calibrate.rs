@@ -1,0 +1,510 @@
+//! Calibration from the host, with the requests and registers every unit has: no new firmware.
+//!
+//! - **mm per motor revolution** (0x42): a preloaded slot is ejected (`E`) with its filament kept
+//!   gripped: between the park position and the slot sensor clearing, the unit's odometry
+//!   (0xb0+k) counts the path from the hub sensor to the slot sensor minus the park distance
+//!   (0x41, counted in the same units). That path's real length is known from the build
+//!   (`--slot-to-hub-mm`), so the ratio corrects the unit's mm per revolution. Every slot with
+//!   filament is measured; the mean is saved.
+//! - **Bowden length** (0x22): from the park position a tool change runs with the fast part of
+//!   the Bowden feed set to nothing, so the whole tube is fed slowly while the printer's filament
+//!   sensor is watched (the simulator's, the `--fsensor-events` file's, or the person pressing
+//!   Enter); the odometry when it triggers, less the park distance, is the length. The search is
+//!   bounded by `--max-bowden-mm`; the unit's own bounds stay in force.
+//! - **thresholds** (0x90+i on, 0xa0+i off) of every presence sensor: the filtered levels
+//!   (0x70+i) with and without filament, measured during the two runs above; `on` and `off` sit at
+//!   60 % and 40 % of the way from the empty to the full level.
+//! - **park distance** (0x41): the unit has no sensor where the slot paths join, so it is the
+//!   distance from the hub sensor back to the join (`--merge-mm`, measured on the hub) plus a
+//!   margin, checked by preloading every parked slot (a tip left past the join would block the
+//!   next).
+//!
+//! Every result is written to the unit, which saves it, and printed.
+
+use std::str::FromStr;
+
+use clap::ValueEnum;
+use mmu_protocol::{ParamCode, Request, RequestCode};
+use mmu_sim::Link;
+
+use super::person::EjectDialog;
+use super::{Bench, FsensorMode};
+
+/// Distance from the hub sensor to each slot sensor on the reference unit, mm (the model's
+/// `slot_sensor_mm`).
+pub const SLOT_TO_HUB_MM: f64 = 95.0;
+/// Longest Bowden feed while searching for the printer's sensor, mm.
+pub const MAX_BOWDEN_MM: u16 = 1000;
+/// Clearance of a parked tip beyond the join of the slot paths, mm.
+pub const PARK_MARGIN_MM: u16 = 5;
+/// Level readings averaged per measurement.
+const SAMPLES: usize = 8;
+/// Between two readings, ms.
+const SAMPLE_GAP_MS: u64 = 20;
+/// How far the simulated user pushes an ejected filament back in, mm.
+const PUSH_BACK_MM: f32 = 5.0;
+/// The Bowden register's smallest value; the fast part is set to the same, so it is nothing.
+const BOWDEN_MIN_MM: u16 = 50;
+
+/// What to calibrate.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Step {
+    /// Everything below, in order (park only with --merge-mm).
+    All,
+    /// Filament per motor revolution, from the slot-to-hub distance.
+    MmPerRev,
+    /// The Bowden length, to the printer's filament sensor.
+    Bowden,
+    /// The presence sensors' on/off thresholds.
+    Thresholds,
+    /// The park distance, from --merge-mm.
+    Park,
+}
+
+impl FromStr for Step {
+    type Err = String;
+
+    fn from_str(text: &str) -> Result<Self, String> {
+        <Step as ValueEnum>::from_str(text, true)
+    }
+}
+
+/// How to calibrate.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CalibrateOptions {
+    /// The slot the Bowden is measured with.
+    pub slot: u8,
+    /// The real distance from the hub sensor to a slot sensor, mm.
+    pub slot_to_hub_mm: f64,
+    /// The longest Bowden feed, mm.
+    pub max_bowden_mm: u16,
+    /// The distance from the hub sensor back to where the slot paths join, mm.
+    pub merge_mm: Option<u16>,
+}
+
+impl Default for CalibrateOptions {
+    fn default() -> Self {
+        CalibrateOptions {
+            slot: 0,
+            slot_to_hub_mm: SLOT_TO_HUB_MM,
+            max_bowden_mm: MAX_BOWDEN_MM,
+            merge_mm: None,
+        }
+    }
+}
+
+/// A sensor's level: the mean filtered reading and the raw readings' spread.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Level {
+    /// Mean filtered reading, counts.
+    pub mean: f64,
+    /// Standard deviation of the raw readings, counts.
+    pub sigma: f64,
+}
+
+/// What calibration saved.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Results {
+    /// Register 0x42.
+    pub mm_per_rev_centi: Option<u16>,
+    /// Register 0x22.
+    pub bowden_mm: Option<u16>,
+    /// Register 0x41.
+    pub park_mm: Option<u16>,
+    /// Sensor index, on, off.
+    pub thresholds: Vec<(u8, u16, u16)>,
+}
+
+/// One slot's eject run.
+struct SlotRun {
+    slot: u8,
+    /// Odometry from the park position to the slot sensor clearing, plus the park distance.
+    path_mm: i32,
+    present: Level,
+    absent: Level,
+}
+
+/// The diagnostic index of slot `slot`'s filament sensor (hub filament is 0).
+fn slot_sensor(slot: u8) -> u8 {
+    3 + 2 * slot
+}
+
+/// Run `step` and save what it measures.
+pub fn run(bench: &mut Bench, step: Step, options: &CalibrateOptions) -> Result<Results, String> {
+    idle(bench)?;
+    let mut results = Results::default();
+    let wants = |s: Step| step == Step::All || step == s;
+    let mut runs = Vec::new();
+    let mut hub_absent = None;
+    if wants(Step::MmPerRev) || wants(Step::Thresholds) {
+        for slot in 0..bench.slots() {
+            if !has_filament(bench, slot)? {
+                bench.say(&format!("slot {slot}: no filament, skipped"));
+                continue;
+            }
+            hub_absent.get_or_insert(level(bench, 0)?);
+            runs.push(eject_run(bench, slot)?);
+        }
+        if runs.is_empty() {
+            return Err("no slot has filament: load one first".into());
+        }
+    }
+    if wants(Step::MmPerRev) {
+        results.mm_per_rev_centi = Some(save_mm_per_rev(bench, &runs, options)?);
+    }
+    let mut hub_present = None;
+    if wants(Step::Bowden) {
+        let (bowden, level) = measure_bowden(bench, options)?;
+        hub_present = level;
+        results.bowden_mm = Some(bowden);
+    } else if wants(Step::Thresholds) {
+        hub_present = Some(hub_level_loaded(bench, options.slot)?);
+    }
+    if wants(Step::Thresholds) {
+        for run in &runs {
+            let (on, off) = save_thresholds(bench, slot_sensor(run.slot), run.present, run.absent)?;
+            results.thresholds.push((slot_sensor(run.slot), on, off));
+        }
+        if let (Some(present), Some(absent)) = (hub_present, hub_absent) {
+            let (on, off) = save_thresholds(bench, 0, present, absent)?;
+            results.thresholds.push((0, on, off));
+        }
+    }
+    if wants(Step::Park) {
+        match options.merge_mm {
+            Some(merge) => results.park_mm = Some(save_park(bench, merge)?),
+            None if step == Step::Park => {
+                return Err("park needs --merge-mm: the distance from the hub sensor back to where the slot paths join".into());
+            }
+            None => bench.say("park distance: unchanged (give the hub's --merge-mm to set it)"),
+        }
+    }
+    bench.say("calibration saved in the unit");
+    Ok(results)
+}
+
+/// The unit must be at rest.
+fn idle(bench: &mut Bench) -> Result<(), String> {
+    let state = bench.request(Request::new(RequestCode::Query, 0))?;
+    if state.param == ParamCode::Finished {
+        Ok(())
+    } else {
+        bench.describe_state(&state);
+        Err("calibration needs the unit at rest".into())
+    }
+}
+
+/// Whether `slot` has filament: parked, loaded, or its sensor sees it.
+fn has_filament(bench: &mut Bench, slot: u8) -> Result<bool, String> {
+    let lane = bench.read(0xb8 + slot)?;
+    if lane != 0 {
+        return Ok(true);
+    }
+    let index = slot_sensor(slot);
+    let (filtered, on) = (bench.read(0x70 + index)?, bench.read(0x90 + index)?);
+    Ok(filtered >= on)
+}
+
+/// The slot's filament parked before the hub (unloading what is loaded first).
+fn park(bench: &mut Bench, slot: u8) -> Result<(), String> {
+    if bench.read(0x08)? != 0 {
+        bench.command(Request::new(RequestCode::Unload, 0))?;
+    }
+    if bench.read(0xb8 + slot)? != 1 {
+        bench.command(Request::new(RequestCode::Load, slot))?;
+    }
+    Ok(())
+}
+
+/// The slot's odometry, mm (signed).
+fn odometry(bench: &mut Bench, slot: u8) -> Result<i32, String> {
+    Ok(i32::from(bench.read(0xb0 + slot)? as i16))
+}
+
+/// Sensor `index`'s level now.
+fn level(bench: &mut Bench, index: u8) -> Result<Level, String> {
+    let mut filtered = Vec::with_capacity(SAMPLES);
+    let mut raw = Vec::with_capacity(SAMPLES);
+    for _ in 0..SAMPLES {
+        filtered.push(f64::from(bench.read(0x70 + index)?));
+        raw.push(f64::from(bench.read(0x60 + index)?));
+        bench.link().pause(SAMPLE_GAP_MS).map_err(|e| e.to_string())?;
+    }
+    let mean = |values: &[f64]| values.iter().sum::<f64>() / values.len() as f64;
+    let raw_mean = mean(&raw);
+    let variance = raw.iter().map(|v| (v - raw_mean).powi(2)).sum::<f64>() / raw.len() as f64;
+    Ok(Level {
+        mean: mean(&filtered),
+        sigma: variance.sqrt(),
+    })
+}
+
+/// Park `slot`, eject it with its filament kept gripped, measure, and put it back.
+fn eject_run(bench: &mut Bench, slot: u8) -> Result<SlotRun, String> {
+    park(bench, slot)?;
+    let present = level(bench, slot_sensor(slot))?;
+    let parked_at = odometry(bench, slot)?;
+    let park_mm = i32::from(bench.read(0x41)?);
+    bench.person.eject = EjectDialog::KeepIn;
+    let ejected = bench.command(Request::new(RequestCode::Eject, slot));
+    bench.person.eject = EjectDialog::TakeOut;
+    ejected?;
+    let cleared_at = odometry(bench, slot)?;
+    let absent = level(bench, slot_sensor(slot))?;
+    put_back(bench, slot)?;
+    Ok(SlotRun {
+        slot,
+        path_mm: parked_at - cleared_at + park_mm,
+        present,
+        absent,
+    })
+}
+
+/// The ejected filament goes back in until the slot sensor sees it, then is parked.
+fn put_back(bench: &mut Bench, slot: u8) -> Result<(), String> {
+    let pushed = bench.link().sim_mut().is_some_and(|sim| {
+        let model = sim.model_mut();
+        let tip = model.tip_mm(usize::from(slot));
+        tip.is_some_and(|tip| model.insert_filament(usize::from(slot), tip + PUSH_BACK_MM))
+    });
+    if pushed {
+        bench.say(&format!(
+            "the simulated user pushes slot {slot}'s filament back in by {PUSH_BACK_MM} mm"
+        ));
+    } else {
+        bench.say(&format!(
+            "Push slot {slot}'s filament back in by about 5 mm, until the slot sensor sees it, then press Enter."
+        ));
+        if bench.person.input.line("calibrate> ").is_none() {
+            return Err("no answer: calibration stopped".into());
+        }
+    }
+    bench.command(Request::new(RequestCode::Load, slot))
+}
+
+/// Save the mean mm per revolution the runs give.
+fn save_mm_per_rev(bench: &mut Bench, runs: &[SlotRun], options: &CalibrateOptions) -> Result<u16, String> {
+    let was = bench.read(0x42)?;
+    let known = options.slot_to_hub_mm;
+    let mut values = Vec::new();
+    for run in runs {
+        let counted = f64::from(run.path_mm);
+        if !(known / 3.0..=known * 3.0).contains(&counted) {
+            return Err(format!(
+                "slot {}: the unit counted {counted} mm for the {known} mm from the hub sensor to the slot sensor: \
+                 check the motor's Hall sensor thresholds and --slot-to-hub-mm",
+                run.slot
+            ));
+        }
+        let centi = f64::from(was) * known / counted;
+        bench.say(&format!(
+            "slot {}: the unit counted {counted} mm for the {known} mm from the hub sensor to the slot sensor: {:.2} mm per motor revolution",
+            run.slot,
+            centi / 100.0
+        ));
+        values.push(centi);
+    }
+    let mean = values.iter().sum::<f64>() / values.len() as f64;
+    let centi = mean.round().clamp(10.0, 5000.0) as u16;
+    bench.write(0x42, centi)?;
+    bench.say(&format!(
+        "mm per motor revolution: {:.2} (register 0x42 = {centi}, was {was})",
+        f64::from(centi) / 100.0
+    ));
+    Ok(centi)
+}
+
+/// Feed slot `options.slot` from its park position until the printer's sensor triggers; save the
+/// length. Also the hub sensor's level with filament, measured while it is loaded.
+fn measure_bowden(bench: &mut Bench, options: &CalibrateOptions) -> Result<(u16, Option<Level>), String> {
+    let slot = options.slot;
+    park(bench, slot)?;
+    let was = bench.read(0x22)?;
+    let saved = [(0x4a, bench.read(0x4a)?), (0x48, bench.read(0x48)?)];
+    let search = options
+        .max_bowden_mm
+        .saturating_sub(BOWDEN_MIN_MM)
+        .clamp(10, 2000);
+    bench.write(0x4a, BOWDEN_MIN_MM)?;
+    bench.write(0x22, BOWDEN_MIN_MM)?;
+    bench.write(0x48, search)?;
+    let measured = feed_to_fsensor(bench, slot, options);
+    let restored = saved
+        .iter()
+        .try_for_each(|&(address, value)| bench.write(address, value));
+    let (length, hub_present) = match measured {
+        Ok(found) => found,
+        Err(error) => {
+            bench.write(0x22, was)?;
+            return Err(error);
+        }
+    };
+    restored?;
+    let length = u16::try_from(length)
+        .ok()
+        .filter(|&l| l >= BOWDEN_MIN_MM)
+        .ok_or_else(|| format!("a Bowden length of {length} mm makes no sense: nothing saved"))?;
+    bench.write(0x22, length)?;
+    bench.say(&format!("Bowden length: {length} mm (register 0x22, was {was})"));
+    Ok((length, hub_present))
+}
+
+/// The tool change with the slow search; the odometry at the printer's sensor less the park
+/// position, and the hub's level while loaded.
+fn feed_to_fsensor(
+    bench: &mut Bench,
+    slot: u8,
+    options: &CalibrateOptions,
+) -> Result<(i32, Option<Level>), String> {
+    let started_at = odometry(bench, slot)?;
+    let park_mm = i32::from(bench.read(0x41)?);
+    let speed = u64::from(bench.read(0x14)?.max(1));
+    let by_key =
+        bench.link().sim().is_none() && !bench.fsensor_events && bench.link().fsensor == FsensorMode::Auto;
+    if bench.link().fsensor() != 0 {
+        return Err(
+            "the printer's filament sensor already sees filament: clear the Bowden tube first".into(),
+        );
+    }
+    bench.request(Request::new(RequestCode::FilamentSensor, 0))?;
+    let enter = by_key.then(|| {
+        bench.say(&format!(
+            "Press Enter the moment the filament reaches the printer's filament sensor (feeding at {speed} mm/s, at most {} mm).",
+            options.max_bowden_mm
+        ));
+        bench.person.input.watch_enter()
+    });
+    let tool = Request::new(RequestCode::Tool, slot);
+    let answer = bench.request(tool)?;
+    if answer.param != ParamCode::Accepted {
+        return Err("the unit refused the tool change".into());
+    }
+    let bound_ms = u64::from(options.max_bowden_mm) * 2000 / speed + 10_000;
+    let deadline = bench.link().now_ms() + bound_ms;
+    let mut next_query = 0;
+    let triggered_at = loop {
+        let triggered = match &enter {
+            Some(enter) => enter.try_recv().is_ok(),
+            None => bench.link().fsensor() != 0,
+        };
+        if triggered {
+            let at = odometry(bench, slot)?;
+            if by_key {
+                bench.link().fsensor = FsensorMode::Fixed(1);
+            }
+            let state = bench.link().fsensor();
+            bench.request(Request::new(RequestCode::FilamentSensor, state))?;
+            break at;
+        }
+        let now = bench.link().now_ms();
+        if now >= next_query {
+            next_query = now + 200;
+            let state = bench.request(Request::new(RequestCode::Query, 0))?;
+            if state.param != ParamCode::Processing {
+                bench.describe_state(&state);
+                return Err(format!(
+                    "the printer's filament sensor was not seen within {} mm",
+                    options.max_bowden_mm
+                ));
+            }
+        }
+        if now > deadline {
+            return Err("the printer's filament sensor was not seen in time".into());
+        }
+        bench.link().pause(5).map_err(|e| e.to_string())?;
+    };
+    let outcome = bench
+        .printer
+        .follow(&mut bench.person, tool)
+        .map_err(|e| e.to_string())?;
+    bench.outcome(tool, outcome)?;
+    let hub = level(bench, 0)?;
+    if by_key {
+        bench.say("the printer's filament sensor now reads off as the filament comes back");
+        bench.link().fsensor = FsensorMode::Fixed(0);
+    }
+    let unloaded = bench.command(Request::new(RequestCode::Unload, 0));
+    if by_key {
+        bench.link().fsensor = FsensorMode::Auto;
+    }
+    unloaded?;
+    Ok((triggered_at - started_at - park_mm, Some(hub)))
+}
+
+/// The hub sensor's level with `slot` loaded (for thresholds alone).
+fn hub_level_loaded(bench: &mut Bench, slot: u8) -> Result<Level, String> {
+    bench.command(Request::new(RequestCode::Tool, slot))?;
+    let hub = level(bench, 0)?;
+    bench.command(Request::new(RequestCode::Unload, 0))?;
+    Ok(hub)
+}
+
+/// On and off thresholds between the levels without and with filament.
+pub fn thresholds(present: Level, absent: Level) -> Result<(u16, u16), String> {
+    let span = present.mean - absent.mean;
+    let noise = present.sigma.max(absent.sigma);
+    if span < 0.0 {
+        return Err(format!(
+            "reads lower with filament ({:.0}) than without ({:.0}): turn the magnet around",
+            present.mean, absent.mean
+        ));
+    }
+    if span < 100.0_f64.max(8.0 * noise) {
+        return Err(format!(
+            "barely changes with filament ({:.0} → {:.0}, noise {noise:.0}): bring the magnet closer to the sensor",
+            absent.mean, present.mean
+        ));
+    }
+    let at = |fraction: f64| (absent.mean + fraction * span).round().clamp(0.0, 4095.0) as u16;
+    Ok((at(0.6), at(0.4)))
+}
+
+/// Compute and write sensor `index`'s thresholds, keeping off below on at every step.
+fn save_thresholds(
+    bench: &mut Bench,
+    index: u8,
+    present: Level,
+    absent: Level,
+) -> Result<(u16, u16), String> {
+    let name = match index {
+        0 => "hub filament sensor".to_string(),
+        i => format!("slot {} filament sensor", (i - 3) / 2),
+    };
+    let (on, off) = thresholds(present, absent).map_err(|why| format!("{name}: {why}"))?;
+    let current_on = bench.read(0x90 + index)?;
+    if off < current_on {
+        bench.write(0xa0 + index, off)?;
+        bench.write(0x90 + index, on)?;
+    } else {
+        bench.write(0x90 + index, on)?;
+        bench.write(0xa0 + index, off)?;
+    }
+    bench.say(&format!(
+        "{name}: {:.0} without filament, {:.0} with (noise {:.0}): on {on}, off {off} (registers 0x{:02x}/0x{:02x})",
+        absent.mean,
+        present.mean,
+        present.sigma.max(absent.sigma),
+        0x90 + index,
+        0xa0 + index
+    ));
+    Ok((on, off))
+}
+
+/// Save the park distance for a join `merge_mm` behind the hub sensor, and preload every parked
+/// slot to check that none blocks the next.
+fn save_park(bench: &mut Bench, merge_mm: u16) -> Result<u16, String> {
+    let was = bench.read(0x41)?;
+    let park_mm = merge_mm.saturating_add(PARK_MARGIN_MM).clamp(1, 200);
+    bench.write(0x41, park_mm)?;
+    for slot in 0..bench.slots() {
+        if bench.read(0xb8 + slot)? == 1 {
+            bench
+                .command(Request::new(RequestCode::Load, slot))
+                .map_err(|e| format!("slot {slot} could not pass with the new park distance: {e}"))?;
+        }
+    }
+    bench.say(&format!(
+        "park distance: {park_mm} mm (register 0x41, was {was}); every parked slot passes"
+    ));
+    Ok(park_mm)
+}
