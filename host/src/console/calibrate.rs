@@ -43,6 +43,8 @@ const SAMPLES: usize = 8;
 const SAMPLE_GAP_MS: u64 = 20;
 /// How far the simulated user pushes an ejected filament back in, mm.
 const PUSH_BACK_MM: f32 = 5.0;
+/// Wait for the sensors' filters after filament moved by hand, ms.
+const SETTLE_MS: u64 = 300;
 /// The Bowden register's smallest value; the fast part is set to the same, so it is nothing.
 const BOWDEN_MIN_MM: u16 = 50;
 
@@ -118,8 +120,8 @@ pub struct Results {
 /// One slot's eject run.
 struct SlotRun {
     slot: u8,
-    /// Odometry from the park position to the slot sensor clearing, plus the park distance.
-    path_mm: i32,
+    /// Odometry from the park position to the slot sensor clearing, plus the park travel.
+    path_mm: f64,
     present: Level,
     absent: Level,
 }
@@ -221,6 +223,14 @@ fn odometry(bench: &mut Bench, slot: u8) -> Result<i32, String> {
     Ok(i32::from(bench.read(0xb0 + slot)? as i16))
 }
 
+/// How far the unit's odometry runs past the hub sensor clearing when it parks, mm: the park
+/// distance rounded up to whole motor revolutions (odometry moves one revolution at a time).
+fn park_travel(bench: &mut Bench) -> Result<f64, String> {
+    let park_centi = u32::from(bench.read(0x41)?) * 100;
+    let step = u32::from(bench.read(0x42)?.max(1));
+    Ok(f64::from(park_centi.div_ceil(step) * step) / 100.0)
+}
+
 /// Sensor `index`'s level now.
 fn level(bench: &mut Bench, index: u8) -> Result<Level, String> {
     let mut filtered = Vec::with_capacity(SAMPLES);
@@ -244,7 +254,7 @@ fn eject_run(bench: &mut Bench, slot: u8) -> Result<SlotRun, String> {
     park(bench, slot)?;
     let present = level(bench, slot_sensor(slot))?;
     let parked_at = odometry(bench, slot)?;
-    let park_mm = i32::from(bench.read(0x41)?);
+    let park_mm = park_travel(bench)?;
     bench.person.eject = EjectDialog::KeepIn;
     let ejected = bench.command(Request::new(RequestCode::Eject, slot));
     bench.person.eject = EjectDialog::TakeOut;
@@ -254,7 +264,7 @@ fn eject_run(bench: &mut Bench, slot: u8) -> Result<SlotRun, String> {
     put_back(bench, slot)?;
     Ok(SlotRun {
         slot,
-        path_mm: parked_at - cleared_at + park_mm,
+        path_mm: f64::from(parked_at - cleared_at) + park_mm,
         present,
         absent,
     })
@@ -279,6 +289,8 @@ fn put_back(bench: &mut Bench, slot: u8) -> Result<(), String> {
             return Err("no answer: calibration stopped".into());
         }
     }
+    // The slot sensor's filter needs a moment to see it.
+    bench.link().pause(SETTLE_MS).map_err(|e| e.to_string())?;
     bench.command(Request::new(RequestCode::Load, slot))
 }
 
@@ -288,17 +300,17 @@ fn save_mm_per_rev(bench: &mut Bench, runs: &[SlotRun], options: &CalibrateOptio
     let known = options.slot_to_hub_mm;
     let mut values = Vec::new();
     for run in runs {
-        let counted = f64::from(run.path_mm);
+        let counted = run.path_mm;
         if !(known / 3.0..=known * 3.0).contains(&counted) {
             return Err(format!(
-                "slot {}: the unit counted {counted} mm for the {known} mm from the hub sensor to the slot sensor: \
+                "slot {}: the unit counted {counted:.1} mm for the {known} mm from the hub sensor to the slot sensor: \
                  check the motor's Hall sensor thresholds and --slot-to-hub-mm",
                 run.slot
             ));
         }
         let centi = f64::from(was) * known / counted;
         bench.say(&format!(
-            "slot {}: the unit counted {counted} mm for the {known} mm from the hub sensor to the slot sensor: {:.2} mm per motor revolution",
+            "slot {}: the unit counted {counted:.1} mm for the {known} mm from the hub sensor to the slot sensor: {:.2} mm per motor revolution",
             run.slot,
             centi / 100.0
         ));
@@ -357,7 +369,7 @@ fn feed_to_fsensor(
     options: &CalibrateOptions,
 ) -> Result<(i32, Option<Level>), String> {
     let started_at = odometry(bench, slot)?;
-    let park_mm = i32::from(bench.read(0x41)?);
+    let park_mm = park_travel(bench)?;
     let speed = u64::from(bench.read(0x14)?.max(1));
     let by_key =
         bench.link().sim().is_none() && !bench.fsensor_events && bench.link().fsensor == FsensorMode::Auto;
@@ -428,7 +440,10 @@ fn feed_to_fsensor(
         bench.link().fsensor = FsensorMode::Auto;
     }
     unloaded?;
-    Ok((triggered_at - started_at - park_mm, Some(hub)))
+    Ok((
+        (f64::from(triggered_at - started_at) - park_mm).round() as i32,
+        Some(hub),
+    ))
 }
 
 /// The hub sensor's level with `slot` loaded (for thresholds alone).
@@ -507,4 +522,110 @@ fn save_park(bench: &mut Bench, merge_mm: u16) -> Result<u16, String> {
         "park distance: {park_mm} mm (register 0x41, was {was}); every parked slot passes"
     ));
     Ok(park_mm)
+}
+
+#[cfg(test)]
+mod tests {
+    use mmu_model::ModelConfig;
+    use mmu_sim::{Sim, SimLink, SimOptions};
+
+    use super::super::input::Input;
+    use super::super::link::Wire;
+    use super::*;
+
+    /// A connected bench on a simulated unit built as `model`, its settings at their defaults.
+    fn bench(model: ModelConfig) -> Bench {
+        let sim = Sim::new(SimOptions {
+            model,
+            ..SimOptions::default()
+        })
+        .unwrap();
+        let wire = Wire::Sim(SimLink::new(sim));
+        let mut bench = Bench::on_wire(wire, Default::default(), Input::Lines(Default::default()), false);
+        bench.connect().unwrap();
+        bench
+    }
+
+    /// A unit whose motors move 2.3 mm per revolution (the settings say 2.0) and whose Bowden tube
+    /// is 450 mm (the settings say 360): calibration finds both within the odometry's resolution
+    /// (one revolution, 2.3 mm, over the 95 mm slot-to-hub path: 3 %; the Bowden, in the unit's
+    /// own mm, to ±3 mm), and
+    /// thresholds between the model's levels (2048 empty, 3000 with filament).
+    #[test]
+    fn finds_the_model_s_true_values() {
+        let model = ModelConfig {
+            mm_per_rev: 2.3,
+            bowden_length_mm: 450.0,
+            extruder_gears_mm: 454.0,
+            nozzle_mm: 510.0,
+            ..ModelConfig::default()
+        };
+        let mut bench = bench(model);
+        let results = run(&mut bench, Step::All, &CalibrateOptions::default()).unwrap();
+        let centi = results.mm_per_rev_centi.unwrap();
+        assert!((223..=237).contains(&centi), "mm/rev × 100 = {centi}, truly 230");
+        assert_eq!(bench.read(0x42), Ok(centi), "saved");
+        // The unit measures the Bowden with its odometry as it will feed it: in its own mm.
+        let bowden = results.bowden_mm.unwrap();
+        let real = f64::from(bowden) * 2.3 / (f64::from(centi) / 100.0);
+        assert!(
+            (real - 450.0).abs() <= 3.0,
+            "Bowden {bowden} unit mm = {real:.1} mm, truly 450"
+        );
+        assert_eq!(bench.read(0x22), Ok(bowden), "saved");
+        assert_eq!(results.thresholds.len(), 4, "three slot sensors and the hub's");
+        for &(index, on, off) in &results.thresholds {
+            // 60 % and 40 % of the way from 2048 to 3000, give or take the noise.
+            assert!(
+                on.abs_diff(2619) <= 15 && off.abs_diff(2429) <= 15,
+                "sensor {index}: on {on} off {off}"
+            );
+            assert_eq!(bench.read(0x90 + index), Ok(on));
+            assert_eq!(bench.read(0xa0 + index), Ok(off));
+        }
+        // The unit works with what was saved: a tool change on the long Bowden.
+        bench.command(Request::new(RequestCode::Tool, 2)).unwrap();
+    }
+
+    /// A setting that is wrong by a lot is corrected in one run; the feed never went past the
+    /// bound.
+    #[test]
+    fn a_bowden_past_the_bound_is_not_searched_for() {
+        let model = ModelConfig {
+            bowden_length_mm: 700.0,
+            extruder_gears_mm: 704.0,
+            nozzle_mm: 760.0,
+            ..ModelConfig::default()
+        };
+        let mut bench = bench(model);
+        let options = CalibrateOptions {
+            max_bowden_mm: 500,
+            ..CalibrateOptions::default()
+        };
+        let error = run(&mut bench, Step::Bowden, &options).unwrap_err();
+        assert!(error.contains("not seen within 500 mm"), "{error}");
+        let tip = bench.link().sim().unwrap().model().tip_mm(0).unwrap();
+        assert!(tip < 520.0, "the tip went to {tip} mm");
+        assert_eq!(bench.read(0x22), Ok(360), "the old length is kept");
+        assert_eq!(bench.read(0x48), Ok(90), "the search bound is restored");
+    }
+
+    #[test]
+    fn thresholds_between_the_levels() {
+        let level = |mean, sigma| Level { mean, sigma };
+        assert_eq!(
+            thresholds(level(3000.0, 15.0), level(2000.0, 15.0)),
+            Ok((2600, 2400))
+        );
+        assert!(
+            thresholds(level(2000.0, 15.0), level(3000.0, 15.0))
+                .unwrap_err()
+                .contains("magnet around")
+        );
+        assert!(
+            thresholds(level(2100.0, 15.0), level(2050.0, 15.0))
+                .unwrap_err()
+                .contains("closer")
+        );
+    }
 }

@@ -117,17 +117,24 @@ impl Bench {
             version: target.expect_version,
             ..PrinterOptions::default()
         };
-        Ok(Bench {
+        let mut bench = Bench::on_wire(wire, options, input, target.verbose);
+        bench.fsensor_events = target.fsensor_events.is_some();
+        Ok(bench)
+    }
+
+    /// The unit behind `wire`, not yet connected.
+    fn on_wire(wire: Wire, options: PrinterOptions, input: Input, verbose: bool) -> Bench {
+        Bench {
             printer: Printer::new(BenchLink::new(wire), options),
             person: Person {
-                display: Console::new(false, target.verbose),
+                display: Console::new(false, verbose),
                 input,
                 eject: EjectDialog::TakeOut,
                 quit: false,
             },
             slots: 0,
-            fsensor_events: target.fsensor_events.is_some(),
-        })
+            fsensor_events: false,
+        }
     }
 
     /// Handshake, learn the slot count, and say what state the unit is in.
