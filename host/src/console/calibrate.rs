@@ -540,7 +540,7 @@ mod tests {
             ..SimOptions::default()
         })
         .unwrap();
-        let wire = Wire::Sim(SimLink::new(sim));
+        let wire = Wire::Sim(Box::new(SimLink::new(sim)));
         let mut bench = Bench::on_wire(wire, Default::default(), Input::Lines(Default::default()), false);
         bench.connect().unwrap();
         bench

@@ -6,7 +6,6 @@ use crate::codec_cli::{parse_u8, parse_u16};
 
 use super::calibrate::Step;
 use super::link::FsensorMode;
-use super::names;
 
 /// What `help` prints.
 pub const HELP: &str = "\
@@ -17,7 +16,8 @@ commands (numbers decimal or 0x hex; slots count from 0):
   eject SLOT        pull SLOT's filament out of the unit (you take it out, then Continue)
   cut SLOT          the printer's cut command (this unit has no cutter: feed to the hub, park)
   home              check the sensors against what the unit knows
-  read REG          read a register: a name (bowden, hub.filament, lane.slot0, ...) or 0x22
+  read REG          read a register: a name (bowden_mm or bowden, lane.slot0, ...) or 0x22;
+                    a sensor's or slot's name (hub.filament, slot1) reads all its registers
   set REG VALUE     write a register (write REG VALUE is the same); the unit saves it
   retry             press Retry / Continue (B1) and follow the command to its end
   button N          press button N (0 right, 1 middle = Retry, 2 left)
@@ -66,10 +66,10 @@ pub enum Command {
     Cut(u8),
     /// `H0`.
     Home,
-    /// `R<address>`.
-    Read(u8),
-    /// `W<address> <value>`.
-    Write(u8, u16),
+    /// `R` of the register(s) a name or number stands for.
+    Read(String),
+    /// `W` of the register a name or number stands for.
+    Write(String, u16),
     /// `B1`, then follow the command.
     Retry,
     /// `B<n>`.
@@ -107,9 +107,6 @@ pub fn parse(line: &str) -> Result<Option<Command>, String> {
             _ => Err(format!("usage: {what} SLOT")),
         }
     };
-    let register = |text: &str| {
-        names::resolve(text).ok_or_else(|| format!("no register named {text:?} (try a number such as 0x22)"))
-    };
     let command = match first.to_ascii_lowercase().as_str() {
         "t" | "tool" => Command::Tool(slot("t")?),
         "load" | "l" | "preload" => Command::Load(slot("load")?),
@@ -118,11 +115,11 @@ pub fn parse(line: &str) -> Result<Option<Command>, String> {
         "cut" | "k" => Command::Cut(slot("cut")?),
         "home" | "h" => Command::Home,
         "read" | "r" => match args {
-            [name] => Command::Read(register(name)?),
+            [name] => Command::Read(name.to_string()),
             _ => return Err("usage: read REGISTER".into()),
         },
         "set" | "write" | "w" => match args {
-            [name, value] => Command::Write(register(name)?, parse_u16(value)?),
+            [name, value] => Command::Write(name.to_string(), parse_u16(value)?),
             _ => return Err("usage: set REGISTER VALUE".into()),
         },
         "retry" | "continue" => Command::Retry,
@@ -177,10 +174,17 @@ mod tests {
         assert_eq!(parse("t 1"), Ok(Some(Command::Tool(1))));
         assert_eq!(parse("  "), Ok(None));
         assert_eq!(parse("# a comment"), Ok(None));
-        assert_eq!(parse("read hub.filament"), Ok(Some(Command::Read(0x08))));
-        assert_eq!(parse("read 0x22"), Ok(Some(Command::Read(0x22))));
-        assert_eq!(parse("set bowden 410"), Ok(Some(Command::Write(0x22, 410))));
-        assert_eq!(parse("write 0x22 410"), Ok(Some(Command::Write(0x22, 410))));
+        let read = |name: &str| Ok(Some(Command::Read(name.into())));
+        assert_eq!(parse("read hub.filament"), read("hub.filament"));
+        assert_eq!(parse("read 0x22"), read("0x22"));
+        assert_eq!(
+            parse("set bowden 410"),
+            Ok(Some(Command::Write("bowden".into(), 410)))
+        );
+        assert_eq!(
+            parse("write 0x22 410"),
+            Ok(Some(Command::Write("0x22".into(), 410)))
+        );
         assert_eq!(
             parse("fsensor on"),
             Ok(Some(Command::Fsensor(FsensorMode::Fixed(1))))
@@ -196,7 +200,7 @@ mod tests {
         );
         assert!(parse("t").is_err());
         assert!(parse("t 300").is_err());
-        assert!(parse("read nothing").is_err());
+        assert!(parse("set bowden x").is_err());
         assert!(parse("frobnicate").is_err());
         for word in WORDS {
             assert!(HELP.contains(word), "help lacks {word}");

@@ -161,7 +161,7 @@ mod tests {
         assert_eq!(start, 5);
         assert!(names.contains(&"hub.filament".to_string()), "{names:?}");
         let (_, names) = complete("set bow");
-        assert_eq!(names, ["bowden", "bowden_mm"]);
+        assert_eq!(names, ["bowden_mm", "bowden_slowdown_mm"]);
         assert_eq!(complete("fsensor o").1, ["on", "off"]);
     }
 }

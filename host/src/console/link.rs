@@ -19,8 +19,8 @@ pub enum FsensorMode {
 
 /// The unit behind the console.
 pub enum Wire {
-    /// The in-process simulator.
-    Sim(SimLink),
+    /// The in-process simulator (boxed: it is large).
+    Sim(Box<SimLink>),
     /// A unit (or `mmu sim --pty`) on a serial port.
     Serial(SerialLink),
 }

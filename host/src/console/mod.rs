@@ -21,7 +21,7 @@ use std::path::PathBuf;
 use mmu_protocol::{ButtonCode, ErrorCode, ParamCode, Request, RequestCode, Response, ResultCode};
 use mmu_sim::{Link, Outcome, Printer, PrinterOptions, ScheduledFault};
 
-use crate::explain::{error_meaning, register_name, request_label, response_meaning};
+use crate::explain::{error_meaning, request_label, response_meaning};
 use crate::printer_cli::console::{Console, state_text};
 use crate::printer_cli::serial::{EventsTail, FsensorSource, SerialLink};
 use crate::printer_cli::{SimTargetArgs, parse_version, sim_link};
@@ -110,7 +110,7 @@ impl Bench {
                 };
                 Wire::Serial(SerialLink::open(port, fsensor)?)
             }
-            (None, true) => Wire::Sim(sim_link(&target.sim_options)?),
+            (None, true) => Wire::Sim(Box::new(sim_link(&target.sim_options)?)),
             _ => return Err("choose the unit: --port DEV (a real one) or --sim (the simulator)".into()),
         };
         let options = PrinterOptions {
@@ -172,7 +172,10 @@ impl Bench {
         let answer = self.request(Request::new(RequestCode::Read, address))?;
         match (answer.param, answer.param_value) {
             (ParamCode::Accepted, Some(value)) => Ok(value),
-            _ => Err(format!("the unit has no register {}", register_text(address))),
+            _ => Err(format!(
+                "the unit has no register {}",
+                self.register_text(address)
+            )),
         }
     }
 
@@ -183,8 +186,8 @@ impl Bench {
             Ok(())
         } else {
             Err(format!(
-                "the unit refused {} = {value}: the register is read-only or unknown, or the value is out of its range",
-                register_text(address)
+                "the unit refused {} = {value}: the value is out of its range",
+                self.register_text(address)
             ))
         }
     }
@@ -252,6 +255,14 @@ impl Bench {
                 ));
                 Ok(())
             }
+        }
+    }
+
+    /// `bowden_mm (0x22)`, or `register 0x99` for one the table does not know.
+    fn register_text(&self, address: u8) -> String {
+        match names::name(address, self.slots) {
+            Some(name) => format!("{name} (0x{address:02x})"),
+            None => format!("register 0x{address:02x}"),
         }
     }
 
@@ -340,21 +351,33 @@ impl Bench {
                 self.command(Request::new(Cut, slot))
             }
             Command::Home => self.command(Request::new(Home, 0)),
-            Command::Read(address) => {
-                let value = self.read(address)?;
-                self.say(&format!(
-                    "{} = {value}{}",
-                    register_text(address),
-                    value_note(address, value)
-                ));
+            Command::Read(name) => {
+                let addresses = names::resolve_all(&name, self.slots);
+                if addresses.is_empty() {
+                    return Err(unknown_register(&name));
+                }
+                for address in addresses {
+                    let value = self.read(address)?;
+                    let text = format!(
+                        "{} = {value}{}",
+                        self.register_text(address),
+                        value_note(address, value)
+                    );
+                    self.say(&text);
+                }
                 Ok(())
             }
-            Command::Write(address, value) => {
+            Command::Write(name, value) => {
+                let address = names::resolve(&name, self.slots).ok_or_else(|| unknown_register(&name))?;
+                if names::writable(address, self.slots) == Some(false) {
+                    return Err(format!("{} is read only", self.register_text(address)));
+                }
                 self.write(address, value)?;
-                self.say(&format!(
+                let text = format!(
                     "{} = {value}: accepted, the unit saves it",
-                    register_text(address)
-                ));
+                    self.register_text(address)
+                );
+                self.say(&text);
                 Ok(())
             }
             Command::Retry => self.retry(ButtonCode::MIDDLE),
@@ -446,13 +469,9 @@ fn fsensor_text(state: u8) -> &'static str {
     }
 }
 
-/// `bowden (0x22)`, `Bowden_Length (0x22)` or `register 0x70`.
-fn register_text(address: u8) -> String {
-    let name = names::name(address).or_else(|| register_name(address).map(String::from));
-    match name {
-        Some(name) => format!("{name} (0x{address:02x})"),
-        None => format!("register 0x{address:02x}"),
-    }
+/// Why `name` names no register.
+fn unknown_register(name: &str) -> String {
+    format!("no register named {name:?}: tab completes the names, or give an address such as 0x22")
 }
 
 /// A note on a register value where the number alone says little.

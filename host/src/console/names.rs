@@ -1,87 +1,66 @@
-//! Register names the console accepts, until the firmware's register table
-//! (`mmu_firmware::registers::lookup`) lands: a handful of names for the bench's own settings and
-//! sensors. Addresses and numbers are always accepted too.
+//! Register names as a person types them: the firmware's register table
+//! ([`mmu_firmware::registers`]) by name or address, plus two shorthands: a name without its unit
+//! (`bowden` for `bowden_mm`, `mm_per_rev` for `mm_per_rev_centi`), and a sensor's or slot's own
+//! name (`hub.filament`, `slot1.filament`, `slot0`) for every register about it.
 
-/// Names of the bench's registers (a slot's or sensor's number is part of the name).
-const NAMES: &[(&str, u8)] = &[
-    ("hub.filament", 0x08),
-    ("fsensor", 0x09),
-    ("extra_load_mm", 0x0b),
-    ("bowden", 0x22),
-    ("bowden_mm", 0x22),
-    ("slots", 0x40),
-    ("park", 0x41),
-    ("park_mm", 0x41),
-    ("mm_per_rev", 0x42),
-    ("mm_per_rev_centi", 0x42),
-    ("raw.hub.filament", 0x60),
-    ("filtered.hub.filament", 0x70),
-    ("on.hub.filament", 0x90),
-    ("off.hub.filament", 0xa0),
-];
+use mmu_firmware::registers::{self, Register};
 
-/// Per-slot names, `NAME.slotK` → `BASE + K`.
-const SLOT_NAMES: &[(&str, u8)] = &[("odometry", 0xb0), ("lane", 0xb8)];
+/// Unit suffixes a person may leave out.
+const UNITS: &[&str] = &["_mm", "_centi", "_ms"];
 
-/// Per-sensor names of a slot's filament sensor, `NAME.slotK.filament` → `BASE + 3 + 2K`.
-const SLOT_SENSOR_NAMES: &[(&str, u8)] = &[("raw", 0x60), ("filtered", 0x70), ("on", 0x90), ("off", 0xa0)];
-
-/// The address a register name or number (decimal or `0x` hex) stands for.
-pub fn resolve(text: &str) -> Option<u8> {
+/// The address of the one register `text` names (a table name, a name without its unit, or a
+/// number in decimal or `0x` hex) on a unit with `slots` slots.
+pub fn resolve(text: &str, slots: u8) -> Option<u8> {
     if let Ok(address) = crate::codec_cli::parse_u8(text) {
         return Some(address);
     }
     let text = text.to_ascii_lowercase();
-    if let Some(&(_, address)) = NAMES.iter().find(|(name, _)| *name == text) {
-        return Some(address);
-    }
-    let (prefix, rest) = text.split_once('.')?;
-    let (slot_part, sensor) = match rest.split_once('.') {
-        Some((slot_part, sensor)) => (slot_part, Some(sensor)),
-        None => (rest, None),
-    };
-    let slot: u8 = slot_part.strip_prefix("slot")?.parse().ok().filter(|&k| k < 8)?;
-    let table = match sensor {
-        None => SLOT_NAMES,
-        Some("filament") => SLOT_SENSOR_NAMES,
-        Some(_) => return None,
-    };
-    let &(_, base) = table.iter().find(|(name, _)| *name == prefix)?;
-    Some(match sensor {
-        None => base + slot,
-        Some(_) => base + 3 + 2 * slot,
-    })
-}
-
-/// A name of register `address`, if it has one here.
-pub fn name(address: u8) -> Option<String> {
-    if let Some(&(name, _)) = NAMES.iter().find(|&&(_, a)| a == address) {
-        return Some(name.to_string());
-    }
-    (0..8u8).find_map(|slot| {
-        let slot_name = SLOT_NAMES
+    let slots = usize::from(slots);
+    registers::lookup(&text, slots).or_else(|| {
+        UNITS
             .iter()
-            .find(|&&(_, base)| base + slot == address)
-            .map(|(name, _)| format!("{name}.slot{slot}"));
-        slot_name.or_else(|| {
-            SLOT_SENSOR_NAMES
-                .iter()
-                .find(|&&(_, base)| base + 3 + 2 * slot == address)
-                .map(|(name, _)| format!("{name}.slot{slot}.filament"))
-        })
+            .find_map(|unit| registers::lookup(&format!("{text}{unit}"), slots))
     })
 }
 
-/// Every name, for tab completion (slot names for slots 0..`slots`).
+/// The registers `text` names: one register, or every register about the sensor or slot it
+/// names (`hub.filament`: raw, filtered, thresholds), in address order.
+pub fn resolve_all(text: &str, slots: u8) -> Vec<u8> {
+    if let Some(address) = resolve(text, slots) {
+        return vec![address];
+    }
+    let suffix = format!(".{}", text.to_ascii_lowercase());
+    registers::all(usize::from(slots))
+        .filter(|register| register.subject.is_some() && register.to_string().ends_with(&suffix))
+        .map(|register| register.address)
+        .collect()
+}
+
+/// The table's name of register `address`.
+pub fn name(address: u8, slots: u8) -> Option<String> {
+    registers::describe(address, usize::from(slots)).map(|register| register.to_string())
+}
+
+/// Whether register `address` can be written.
+pub fn writable(address: u8, slots: u8) -> Option<bool> {
+    registers::describe(address, usize::from(slots))
+        .map(|register| register.row.access() == registers::Access::ReadWrite)
+}
+
+/// Every name, for tab completion: the table's and the sensors' and slots' own.
 pub fn all(slots: u8) -> Vec<String> {
-    let mut names: Vec<String> = NAMES.iter().map(|(name, _)| name.to_string()).collect();
-    for slot in 0..slots {
-        names.extend(SLOT_NAMES.iter().map(|(name, _)| format!("{name}.slot{slot}")));
-        names.extend(
-            SLOT_SENSOR_NAMES
-                .iter()
-                .map(|(name, _)| format!("{name}.slot{slot}.filament")),
-        );
+    let mut names: Vec<String> = registers::all(usize::from(slots))
+        .map(|register: Register| register.to_string())
+        .collect();
+    let subjects: Vec<String> = names
+        .iter()
+        .filter_map(|name| name.split_once('.').map(|(_, subject)| subject.to_string()))
+        .filter(|subject| subject.starts_with("slot") || subject.starts_with("hub."))
+        .collect();
+    for subject in subjects {
+        if !names.contains(&subject) {
+            names.push(subject);
+        }
     }
     names
 }
@@ -92,15 +71,28 @@ mod tests {
 
     #[test]
     fn names_and_numbers() {
-        assert_eq!(resolve("0x22"), Some(0x22));
-        assert_eq!(resolve("34"), Some(0x22));
-        assert_eq!(resolve("bowden"), Some(0x22));
-        assert_eq!(resolve("hub.filament"), Some(0x08));
-        assert_eq!(resolve("lane.slot2"), Some(0xba));
-        assert_eq!(resolve("filtered.slot1.filament"), Some(0x75));
-        assert_eq!(resolve("on.slot0.filament"), Some(0x93));
-        assert_eq!(resolve("lane.slot9"), None);
-        assert_eq!(resolve("nonsense"), None);
-        assert!(all(3).iter().all(|name| resolve(name).is_some()));
+        assert_eq!(resolve("0x22", 3), Some(0x22));
+        assert_eq!(resolve("34", 3), Some(0x22));
+        assert_eq!(resolve("bowden_mm", 3), Some(0x22));
+        assert_eq!(resolve("bowden", 3), Some(0x22));
+        assert_eq!(resolve("mm_per_rev", 3), Some(0x42));
+        assert_eq!(resolve("lane.slot2", 3), Some(0xba));
+        assert_eq!(resolve("lane.slot3", 3), None, "a 3-slot unit has no slot 3");
+        assert_eq!(resolve("filtered.slot1.filament", 3), Some(0x75));
+        assert_eq!(resolve("nonsense", 3), None);
+        assert_eq!(name(0x22, 3).as_deref(), Some("bowden_mm"));
+        assert_eq!(writable(0x22, 3), Some(true));
+        assert_eq!(writable(0x70, 3), Some(false));
+    }
+
+    #[test]
+    fn a_sensor_s_name_reads_all_its_registers() {
+        assert_eq!(resolve_all("hub.filament", 3), [0x60, 0x70, 0x90, 0xa0]);
+        assert_eq!(resolve_all("bowden", 3), [0x22]);
+        assert!(resolve_all("slot1", 3).contains(&0xb9));
+        assert!(resolve_all("nonsense", 3).is_empty());
+        for name in all(3) {
+            assert!(!resolve_all(&name, 3).is_empty(), "{name}");
+        }
     }
 }
