@@ -191,7 +191,7 @@ fn the_console_drives_the_simulator_over_a_pty() {
     let path = path.trim_end();
     let output = mmu_with_script(
         &["console", "--port", path, "--fsensor-events", &events],
-        "t 1\nread lane.slot1\nunload\nquit\n",
+        "t 1\nread lane.slot1\nunload\neject 2\ncontinue\nquit\n",
     );
     let out = text(&output);
     assert!(output.status.success(), "{out}");
@@ -205,5 +205,12 @@ fn the_console_drives_the_simulator_over_a_pty() {
         out.contains("unloaded: the filament is back at its park position"),
         "{out}"
     );
+    // Nobody can pull the filament out of a unit behind a serial port but the person: asked.
+    assert!(
+        out.contains("Pull the filament out of slot 2, then press Enter"),
+        "{out}"
+    );
+    assert!(out.contains("eject> continue"), "{out}");
+    assert!(out.contains("slot 2 is ejected"), "{out}");
     assert!(!out.contains("link lost"), "{out}");
 }

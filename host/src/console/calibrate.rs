@@ -401,40 +401,16 @@ fn feed_to_fsensor(
     if answer.param != ParamCode::Accepted {
         return Err("the unit refused the tool change".into());
     }
-    let bound_ms = u64::from(options.max_bowden_mm) * 2000 / speed + 10_000;
-    let deadline = bench.link().now_ms() + bound_ms;
-    let mut next_query = 0;
-    let triggered_at = loop {
-        let triggered = match &enter {
-            Some(enter) => enter.try_recv().is_ok(),
-            None => bench.link().fsensor() != 0,
-        };
-        if triggered {
-            let at = odometry(bench, slot)?;
-            if by_key {
-                bench.link().fsensor = FsensorMode::Fixed(1);
-            }
-            let state = bench.link().fsensor();
-            bench.request(Request::new(RequestCode::FilamentSensor, state))?;
-            break at;
-        }
-        let now = bench.link().now_ms();
-        if now >= next_query {
-            next_query = now + 200;
-            let state = bench.request(Request::new(RequestCode::Query, 0))?;
-            if state.param != ParamCode::Processing {
-                bench.describe_state(&state);
-                return Err(format!(
-                    "the printer's filament sensor was not seen within {} mm",
-                    options.max_bowden_mm
-                ));
-            }
-        }
-        if now > deadline {
-            return Err("the printer's filament sensor was not seen in time".into());
-        }
-        bench.link().pause(5).map_err(|e| e.to_string())?;
-    };
+    let found = watch_fsensor(bench, slot, options, speed, enter.as_ref());
+    if let (Err(_), Some(enter)) = (&found, &enter) {
+        bench.say("Press Enter to go on.");
+        let _ = enter.recv();
+    }
+    let triggered_at = found?;
+    if by_key {
+        bench.link().fsensor = FsensorMode::Fixed(1);
+        bench.request(Request::new(RequestCode::FilamentSensor, 1))?;
+    }
     let outcome = bench
         .printer
         .follow(&mut bench.person, tool)
@@ -454,6 +430,50 @@ fn feed_to_fsensor(
         (f64::from(triggered_at - started_at) - park_mm).round() as i32,
         Some(hub),
     ))
+}
+
+/// Poll the running tool change until the printer's sensor (or the person's Enter) says the tip
+/// is there; the odometry then, read before the unit is told (it stops searching when it is).
+fn watch_fsensor(
+    bench: &mut Bench,
+    slot: u8,
+    options: &CalibrateOptions,
+    speed: u64,
+    enter: Option<&std::sync::mpsc::Receiver<String>>,
+) -> Result<i32, String> {
+    let bound_ms = u64::from(options.max_bowden_mm) * 2000 / speed + 10_000;
+    let deadline = bench.link().now_ms() + bound_ms;
+    let mut next_query = 0;
+    loop {
+        let triggered = match enter {
+            Some(enter) => enter.try_recv().is_ok(),
+            None => bench.link().fsensor() != 0,
+        };
+        if triggered {
+            let at = odometry(bench, slot)?;
+            let state = bench.link().fsensor();
+            if enter.is_none() {
+                bench.request(Request::new(RequestCode::FilamentSensor, state))?;
+            }
+            return Ok(at);
+        }
+        let now = bench.link().now_ms();
+        if now >= next_query {
+            next_query = now + 200;
+            let state = bench.request(Request::new(RequestCode::Query, 0))?;
+            if state.param != ParamCode::Processing {
+                bench.describe_state(&state);
+                return Err(format!(
+                    "the printer's filament sensor was not seen within {} mm",
+                    options.max_bowden_mm
+                ));
+            }
+        }
+        if now > deadline {
+            return Err("the printer's filament sensor was not seen in time".into());
+        }
+        bench.link().pause(5).map_err(|e| e.to_string())?;
+    }
 }
 
 /// The hub sensor's level with `slot` loaded (for thresholds alone).
@@ -618,6 +638,28 @@ mod tests {
         assert!(tip < 520.0, "the tip went to {tip} mm");
         assert_eq!(bench.read(0x22), Ok(360), "the old length is kept");
         assert_eq!(bench.read(0x48), Ok(90), "the search bound is restored");
+    }
+
+    /// The park distance follows the hub's join, and every parked slot still preloads.
+    #[test]
+    fn park_from_the_join() {
+        let mut bench = bench(ModelConfig::default());
+        let missing = run(&mut bench, Step::Park, &CalibrateOptions::default()).unwrap_err();
+        assert!(missing.contains("--merge-mm"), "{missing}");
+        for slot in 0..3 {
+            bench.command(Request::new(RequestCode::Load, slot)).unwrap();
+        }
+        let options = CalibrateOptions {
+            merge_mm: Some(8),
+            ..CalibrateOptions::default()
+        };
+        let results = run(&mut bench, Step::Park, &options).unwrap();
+        assert_eq!(results.park_mm, Some(8 + PARK_MARGIN_MM));
+        assert_eq!(bench.read(0x41), Ok(13));
+        for slot in 0..3 {
+            let tip = bench.link().sim().unwrap().model().tip_mm(slot).unwrap();
+            assert!(tip < -8.0, "slot {slot}'s tip at {tip} mm blocks the join");
+        }
     }
 
     #[test]
