@@ -295,7 +295,7 @@ fn put_back(bench: &mut Bench, slot: u8) -> Result<(), String> {
         bench.say(&format!(
             "Push slot {slot}'s filament back in by about 5 mm, until the slot sensor sees it, then press Enter."
         ));
-        if bench.person.input.line("calibrate> ").is_none() {
+        if bench.person.line("calibrate> ").is_none() {
             return Err("no answer: calibration stopped".into());
         }
     }

@@ -3,7 +3,7 @@
 
 use std::io;
 
-use mmu_sim::{Link, Sim, SimLink};
+use mmu_sim::{Link, ScheduledFault, Sim, SimLink};
 
 use crate::printer_cli::console::Target;
 use crate::printer_cli::serial::SerialLink;
@@ -113,4 +113,28 @@ impl Target for BenchLink {
             Wire::Serial(link) => link.notes(),
         }
     }
+}
+
+/// Inject the simulator fault `spec`; what happened, in words.
+pub fn sim_fault(link: &mut BenchLink, spec: &str) -> String {
+    let Some(sim) = link.sim_mut() else {
+        return "sim fault: only with --sim".into();
+    };
+    match spec.parse::<ScheduledFault>() {
+        Ok(fault) if sim.inject(fault.fault) => format!("sim: fault {spec} injected"),
+        Ok(_) => format!("sim: fault {spec} could not be injected (already active, or no such slot)"),
+        Err(error) => error.to_string(),
+    }
+}
+
+/// Clear every simulator fault.
+pub fn sim_clear(link: &mut BenchLink) -> String {
+    let Some(sim) = link.sim_mut() else {
+        return "sim clear: only with --sim".into();
+    };
+    let faults = sim.active_faults();
+    for fault in &faults {
+        sim.clear(fault.kind());
+    }
+    format!("sim: {} fault(s) cleared", faults.len())
 }

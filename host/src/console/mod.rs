@@ -14,12 +14,13 @@ mod input;
 mod link;
 mod names;
 mod person;
+mod words;
 
 use std::error::Error;
 use std::path::PathBuf;
 
 use mmu_protocol::{ButtonCode, ErrorCode, ParamCode, Request, RequestCode, Response, ResultCode};
-use mmu_sim::{Link, Outcome, Printer, PrinterOptions, ScheduledFault};
+use mmu_sim::{Link, Outcome, Printer, PrinterOptions};
 
 use crate::explain::{error_meaning, request_label, response_meaning};
 use crate::printer_cli::console::{Console, state_text};
@@ -28,8 +29,9 @@ use crate::printer_cli::{SimTargetArgs, parse_version, sim_link};
 use calibrate::{CalibrateOptions, Step};
 use commands::{Command, HELP, parse};
 use input::Input;
-use link::{BenchLink, FsensorMode, Wire};
+use link::{BenchLink, FsensorMode, Wire, sim_clear, sim_fault};
 use person::{EjectDialog, Person};
+use words::{done_text, fsensor_text, lane_text, unknown_register, value_note};
 
 /// The unit a console or calibration talks to.
 #[derive(Debug, clap::Args)]
@@ -427,95 +429,6 @@ impl Bench {
     }
 }
 
-/// What a finished command did, in words.
-fn done_text(request: &Request) -> String {
-    let slot = request.value;
-    match request.code {
-        RequestCode::Tool => format!("slot {slot} is loaded: its filament is in the printer's extruder"),
-        RequestCode::Load => {
-            format!("slot {slot} is preloaded: its filament waits at the park position before the hub")
-        }
-        RequestCode::Unload => {
-            "unloaded: the filament is back at its park position, the printer's path is free".into()
-        }
-        RequestCode::Eject => format!("slot {slot} is ejected: its filament is out of the unit's drive"),
-        RequestCode::Cut => format!("slot {slot}: fed to the hub and parked again (this unit has no cutter)"),
-        RequestCode::Home => {
-            "the sensors are healthy and agree with where the unit knows the filament".into()
-        }
-        _ => format!("{} finished", request_label(request)),
-    }
-}
-
-/// A lane register's value (MMU3 filament state) in words.
-fn lane_text(lane: u16) -> &'static str {
-    match lane {
-        0 => "empty, or not known yet",
-        1 => "parked before the hub",
-        2 => "in the hub or the Bowden tube",
-        4 => "at the printer's filament sensor",
-        8 => "loaded in the printer's extruder",
-        _ => "in an unknown state",
-    }
-}
-
-/// The printer's filament sensor state in words.
-fn fsensor_text(state: u8) -> &'static str {
-    match state {
-        0 => "no filament",
-        1 => "filament at the sensor",
-        2 => "filament in the nozzle",
-        _ => "unavailable",
-    }
-}
-
-/// Why `name` names no register.
-fn unknown_register(name: &str) -> String {
-    format!("no register named {name:?}: tab completes the names, or give an address such as 0x22")
-}
-
-/// A note on a register value where the number alone says little.
-fn value_note(address: u8, value: u16) -> String {
-    match address {
-        0x08 => format!(
-            " ({})",
-            if value != 0 {
-                "filament present"
-            } else {
-                "no filament"
-            }
-        ),
-        0x09 => format!(" ({})", fsensor_text(u8::try_from(value).unwrap_or(u8::MAX))),
-        0xb8..=0xbf => format!(" ({})", lane_text(value)),
-        0xb0..=0xb7 => format!(" ({} mm)", value as i16),
-        _ => String::new(),
-    }
-}
-
-/// Inject the simulator fault `spec`; what happened, in words.
-fn sim_fault(link: &mut BenchLink, spec: &str) -> String {
-    let Some(sim) = link.sim_mut() else {
-        return "sim fault: only with --sim".into();
-    };
-    match spec.parse::<ScheduledFault>() {
-        Ok(fault) if sim.inject(fault.fault) => format!("sim: fault {spec} injected"),
-        Ok(_) => format!("sim: fault {spec} could not be injected (already active, or no such slot)"),
-        Err(error) => error.to_string(),
-    }
-}
-
-/// Clear every simulator fault.
-fn sim_clear(link: &mut BenchLink) -> String {
-    let Some(sim) = link.sim_mut() else {
-        return "sim clear: only with --sim".into();
-    };
-    let faults = sim.active_faults();
-    for fault in &faults {
-        sim.clear(fault.kind());
-    }
-    format!("sim: {} fault(s) cleared", faults.len())
-}
-
 /// Run `mmu calibrate`: connect, calibrate, print what was saved.
 pub fn run_calibrate(args: &CalibrateArgs) -> Result<(), Box<dyn Error>> {
     if !(1.0..=1000.0).contains(&args.slot_to_hub_mm) {
@@ -546,7 +459,7 @@ pub fn run(args: &ConsoleArgs) -> Result<(), Box<dyn Error>> {
     }
     let mut failed = 0u32;
     while !bench.person.quit {
-        let Some(line) = bench.person.input.line("mmu> ") else {
+        let Some(line) = bench.person.line("mmu> ") else {
             break;
         };
         let result = match parse(&line) {

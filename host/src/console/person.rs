@@ -71,6 +71,13 @@ pub fn hint(error: ErrorCode) -> &'static str {
 }
 
 impl Person {
+    /// The person's next line after `prompt`, the spinner stopped so that it does not draw over
+    /// the line being typed.
+    pub fn line(&mut self, prompt: &str) -> Option<String> {
+        self.display.close();
+        self.input.line(prompt)
+    }
+
     /// Show that the unit stopped on `error` under `request`, and what to do.
     pub fn explain(&self, t_ms: u64, request: &Request, error: ErrorCode) {
         let label = request_label(request);
@@ -82,7 +89,7 @@ impl Person {
     /// Ask until the person answers what to do about the unit waiting on `error`.
     fn ask(&mut self, link: &mut BenchLink, prompt: &str) -> Decision {
         loop {
-            let Some(line) = self.input.line(prompt) else {
+            let Some(line) = self.line(prompt) else {
                 self.quit = true;
                 return Decision::GiveUp;
             };
@@ -99,8 +106,8 @@ impl Person {
                     link.fsensor = mode;
                     self.display.say("the printer's filament sensor is set");
                 }
-                Ok(Some(Command::SimFault(spec))) => self.display.say(&super::sim_fault(link, &spec)),
-                Ok(Some(Command::SimClear)) => self.display.say(&super::sim_clear(link)),
+                Ok(Some(Command::SimFault(spec))) => self.display.say(&super::link::sim_fault(link, &spec)),
+                Ok(Some(Command::SimClear)) => self.display.say(&super::link::sim_clear(link)),
                 _ if line.trim() == "abort" => return Decision::GiveUp,
                 _ => {
                     self.display.say(
