@@ -80,6 +80,10 @@ quit
     assert!(out.contains("T2 stopped: STALLED_PULLEY"), "{out}");
     assert!(out.contains("what to do: "), "{out}");
     assert!(
+        out.contains("the printer shows PULLEY CANNOT MOVE (prusa.io/04105) with retry (B1)"),
+        "{out}"
+    );
+    assert!(
         out.contains("error> retry"),
         "the answer comes from the script: {out}"
     );

@@ -19,7 +19,7 @@ mod words;
 use std::error::Error;
 use std::path::PathBuf;
 
-use mmu_protocol::{ButtonCode, ErrorCode, ParamCode, Request, RequestCode, Response, ResultCode};
+use mmu_protocol::{ButtonCode, ErrorCode, Family, ParamCode, Request, RequestCode, Response, ResultCode};
 use mmu_sim::{Link, Outcome, Printer, PrinterOptions};
 
 use crate::explain::{error_meaning, request_label, response_meaning};
@@ -133,6 +133,12 @@ impl Bench {
                 input,
                 eject: EjectDialog::TakeOut,
                 quit: false,
+                // Unit version 3.0.2 is what MK3S firmware expects; 3.0.3 Buddy firmware.
+                family: if options.version.2 == 2 {
+                    Family::Mk3s
+                } else {
+                    Family::Buddy
+                },
             },
             slots: 0,
             fsensor_events: false,

@@ -2,7 +2,8 @@
 //! printer tool's [`Console`]), and where the unit needs a person (take the ejected filament out,
 //! fix the cause of an error and press Retry) the console says what to do and asks.
 
-use mmu_protocol::{ButtonCode, ErrorCode, Request, RequestCode};
+use mmu_protocol::screens::screen;
+use mmu_protocol::{ButtonCode, ErrorCode, Family, Request, RequestCode};
 use mmu_sim::{Decision, Link, Operator, PrinterEvent};
 
 use crate::explain::{error_meaning, request_label};
@@ -31,6 +32,8 @@ pub struct Person {
     pub eject: EjectDialog,
     /// The person asked to end the session while the unit waited.
     pub quit: bool,
+    /// The printer the unit is set up for, whose error screens the console offers.
+    pub family: Family,
 }
 
 /// What a person can do about `error`, in words.
@@ -86,13 +89,35 @@ impl Person {
         self.display.note(t_ms, &format!("what to do: {}", hint(error)));
     }
 
-    /// Ask until the person answers what to do about the unit waiting on `error`.
-    fn ask(&mut self, link: &mut BenchLink, prompt: &str) -> Decision {
+    /// The buttons of `error`'s printer screen that reach the unit: label and `B<n>`.
+    fn buttons(&self, error: ErrorCode) -> Vec<(&'static str, ButtonCode)> {
+        screen(error, self.family)
+            .map(|screen| {
+                screen
+                    .buttons
+                    .iter()
+                    .filter_map(|button| button.sends.map(|code| (button.label, code)))
+                    .collect()
+            })
+            .unwrap_or_default()
+    }
+
+    /// Ask until the person answers what to do about the unit waiting on `error`: a button of its
+    /// screen by its label, or a console command that helps.
+    fn ask(&mut self, link: &mut BenchLink, prompt: &str, error: ErrorCode) -> Decision {
+        let buttons = self.buttons(error);
         loop {
             let Some(line) = self.line(prompt) else {
                 self.quit = true;
                 return Decision::GiveUp;
             };
+            let word = line.trim().to_ascii_lowercase();
+            if let Some(&(_, code)) = buttons
+                .iter()
+                .find(|(label, _)| !word.is_empty() && label.to_ascii_lowercase() == word)
+            {
+                return Decision::Press(code);
+            }
             match parse(&line) {
                 Ok(None) if self.input.is_script() => continue,
                 Ok(None) | Ok(Some(Command::Retry)) => return Decision::Press(ButtonCode::MIDDLE),
@@ -143,7 +168,7 @@ impl Person {
                 self.display.say(&format!(
                     "Pull the filament out of slot {slot}, then press Enter (Continue)."
                 ));
-                self.ask(link, "eject> ")
+                self.ask(link, "eject> ", ErrorCode::FILAMENT_EJECTED)
             }
         }
     }
@@ -162,8 +187,26 @@ impl Operator<BenchLink> for Person {
             return Decision::GiveUp;
         }
         self.explain(link.now_ms(), &request, error);
-        self.display
-            .say("Fix it, then type retry (or press Enter); abort leaves the unit waiting on the error.");
-        self.ask(link, "error> ")
+        let offered: Vec<String> = self
+            .buttons(error)
+            .iter()
+            .map(|(label, code)| format!("{} (B{})", label.to_ascii_lowercase(), code.0))
+            .collect();
+        if let Some(screen) = screen(error, self.family) {
+            self.display.say(&format!(
+                "the printer shows {} (prusa.io/{:05}) with {}",
+                screen.title,
+                screen.id,
+                if offered.is_empty() {
+                    "no button for the unit".to_string()
+                } else {
+                    offered.join(", ")
+                }
+            ));
+        }
+        self.display.say(
+            "Fix it, then type retry (or press Enter) or another button; abort leaves the unit waiting on the error.",
+        );
+        self.ask(link, "error> ", error)
     }
 }
