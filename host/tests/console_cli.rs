@@ -218,3 +218,34 @@ fn the_console_drives_the_simulator_over_a_pty() {
     assert!(out.contains("slot 2 is ejected"), "{out}");
     assert!(!out.contains("link lost"), "{out}");
 }
+
+/// The protocol is on USART3 (PC10/PC11), reached through a USB-serial adapter; the NUCLEO's
+/// `/dev/ttyACM0` is its ST-LINK port, which the firmware leaves free. Neither the README's
+/// examples nor the tool's help may send a user there.
+#[test]
+fn real_unit_examples_name_the_adapter_not_the_st_link_port() {
+    let readme = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("../README.md"))
+        .expect("the README is readable");
+    assert!(
+        !readme.contains("--port /dev/ttyACM0"),
+        "the README still says --port /dev/ttyACM0"
+    );
+    assert!(readme.contains("--port /dev/ttyUSB0"));
+    for command in ["printer", "console", "calibrate"] {
+        let output = Command::new(env!("CARGO_BIN_EXE_mmu"))
+            .args([command, "--help"])
+            .output()
+            .expect("the mmu binary runs");
+        let help = String::from_utf8_lossy(&output.stdout);
+        let port_help = help
+            .split("--port <DEV>")
+            .nth(1)
+            .and_then(|rest| rest.split("\n\n").next())
+            .unwrap_or_else(|| panic!("mmu {command} --help has no --port: {help}"));
+        assert!(port_help.contains("/dev/ttyUSB0"), "mmu {command}: {port_help}");
+        assert!(
+            !port_help.contains("e.g. /dev/ttyACM0"),
+            "mmu {command}: {port_help}"
+        );
+    }
+}
