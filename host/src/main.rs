@@ -5,9 +5,12 @@
 //! - `mmu decode [--json]`: explain frames or printer log lines read from stdin ([`codec_cli`]);
 //! - `mmu sim`: the simulated unit on stdin/stdout or a pseudo-terminal ([`sim_cli`]);
 //! - `mmu printer`: the printer's side against a real unit or the simulator ([`printer_cli`]);
+//! - `mmu console`: plain commands to a unit or the simulator, by hand or from a script, and
+//!   `mmu calibrate`: measure and save its distances and sensor thresholds ([`console`]);
 //! - `mmu demo`: a scripted session against the simulator ([`demo`]).
 
 mod codec_cli;
+mod console;
 mod demo;
 mod explain;
 mod printer_cli;
@@ -47,6 +50,12 @@ enum Command {
     Printer(printer_cli::PrinterArgs),
     /// A scripted session against the simulator: handshake, tool changes, preload, eject.
     Demo(demo::DemoArgs),
+    /// Plain commands (`t 1`, `read bowden`, `set bowden 410`, `retry`, `help`) to a unit on a
+    /// serial port or the simulator, typed (history, tab completion) or piped, one a line.
+    Console(console::ConsoleArgs),
+    /// Measure and save the unit's mm per motor revolution, Bowden length, sensor thresholds and
+    /// park distance.
+    Calibrate(console::CalibrateArgs),
 }
 
 fn main() -> ExitCode {
@@ -57,6 +66,8 @@ fn main() -> ExitCode {
         Command::Sim(args) => sim_cli::run(args),
         Command::Printer(args) => printer_cli::run(args),
         Command::Demo(args) => demo::run(args),
+        Command::Console(args) => console::run(args),
+        Command::Calibrate(args) => console::run_calibrate(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

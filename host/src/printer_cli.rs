@@ -39,7 +39,8 @@ Numbers are decimal or 0x hex. Faults (--fault, simulator only):";
 #[derive(Debug, clap::Args)]
 #[command(after_long_help = format!("{AFTER_HELP}\n{FAULT_HELP}"))]
 pub struct PrinterArgs {
-    /// A real unit on this serial port (115200 8N1), e.g. /dev/ttyACM0.
+    /// A real unit on this serial port (115200 8N1): a USB-serial adapter on USART3 (PC10/PC11), e.g.
+    /// /dev/ttyUSB0 (not the NUCLEO's /dev/ttyACM0, the ST-LINK port).
     #[arg(long, value_name = "DEV", conflicts_with = "sim")]
     pub port: Option<String>,
     /// The in-process simulator, in virtual time (as fast as possible unless --time-scale).
@@ -582,7 +583,7 @@ fn soak_details(report: &SoakReport, seed: u64) -> Details {
 }
 
 /// `3.0.3` → (3, 0, 3).
-fn parse_version(text: &str) -> Result<(u8, u8, u8), String> {
+pub(crate) fn parse_version(text: &str) -> Result<(u8, u8, u8), String> {
     let parts: Vec<Option<u8>> = text.split('.').map(|part| part.parse().ok()).collect();
     match parts.as_slice() {
         [Some(major), Some(minor), Some(revision)] => Ok((*major, *minor, *revision)),
