@@ -173,7 +173,7 @@ const fn is_newline(byte: u8) -> bool {
 }
 
 impl FrameDecoder {
-    const fn new(direction: Direction) -> Self {
+    const fn new(direction: Direction, state: State) -> Self {
         let fields = Fields {
             code: 0,
             value: 0,
@@ -184,7 +184,7 @@ impl FrameDecoder {
         };
         FrameDecoder {
             direction,
-            state: State::Idle,
+            state,
             fields,
         }
     }
@@ -340,9 +340,19 @@ impl Default for RequestDecoder {
 }
 
 impl RequestDecoder {
-    /// A decoder waiting for the first frame.
+    /// A decoder at a line boundary, waiting for the first frame.
     pub const fn new() -> Self {
-        RequestDecoder(FrameDecoder::new(Direction::Request))
+        RequestDecoder(FrameDecoder::new(Direction::Request, State::Idle))
+    }
+
+    /// A decoder joining a line that may be in the middle of a frame (the unit just booted while
+    /// the printer may be sending): it accepts nothing until the line falls silent, so the tail
+    /// of a frame is never taken for a frame.
+    pub const fn new_mid_line() -> Self {
+        RequestDecoder(FrameDecoder::new(
+            Direction::Request,
+            State::AwaitSilence { dropped: false },
+        ))
     }
 
     /// Feed one byte. Returns a request when a frame completes, an error when a frame is rejected,
@@ -387,9 +397,18 @@ impl Default for ResponseDecoder {
 }
 
 impl ResponseDecoder {
-    /// A decoder waiting for the first frame.
+    /// A decoder at a line boundary, waiting for the first frame.
     pub const fn new() -> Self {
-        ResponseDecoder(FrameDecoder::new(Direction::Response))
+        ResponseDecoder(FrameDecoder::new(Direction::Response, State::Idle))
+    }
+
+    /// A decoder joining a line that may be in the middle of a frame (see
+    /// [`RequestDecoder::new_mid_line`]).
+    pub const fn new_mid_line() -> Self {
+        ResponseDecoder(FrameDecoder::new(
+            Direction::Response,
+            State::AwaitSilence { dropped: false },
+        ))
     }
 
     /// Feed one byte. Returns a response when a frame completes, an error when a frame is

@@ -693,6 +693,25 @@ fn after_a_broken_frame_nothing_decodes_until_the_line_falls_silent() {
 }
 
 #[test]
+fn a_decoder_joining_mid_line_waits_for_a_silence() {
+    // The unit booted while the printer was sending `W71 beef*21`: its tail `f*21` is a valid `f0`.
+    let mut decoder = RequestDecoder::new_mid_line();
+    assert!(accepted(&mut decoder, b"f*21\nQ0*ea\n").is_empty());
+    assert_eq!(decoder.line_silent(), None);
+    assert_eq!(accepted(&mut decoder, b"Q0*ea\n"), [req('Q', 0)]);
+
+    let mut decoder = ResponseDecoder::new_mid_line();
+    assert!(
+        b"X0 F0*87\n"
+            .iter()
+            .all(|&b| decoder.feed(b).is_none_or(|r| r.is_err()))
+    );
+    assert_eq!(decoder.line_silent(), None);
+    let got: Vec<_> = b"X0 F0*87\n".iter().filter_map(|&b| decoder.feed(b)).collect();
+    assert_eq!(got, [Ok(rsp('X', 0, 'F', Some(0)))]);
+}
+
+#[test]
 fn a_line_that_never_began_a_frame_costs_nothing() {
     // Garbage that never began a frame, then a newline: the next frame decodes at once.
     for garbage in [&b"zzzz\n"[..], b"ok\r\n", b"start\n", b"\x00\xff 12*\n", b"*\n"] {
