@@ -213,8 +213,6 @@ pub const fn sensor_fault_error(sensor: SensorId) -> ErrorCode {
 #[derive(Debug, Clone, Copy)]
 pub struct PhaseRun {
     started: Instant,
-    /// Odometry when this attempt started.
-    from_centi: i32,
     /// Odometry when the phase first started, kept across Retry: distance goals count from here.
     goal_from_centi: i32,
     /// Odometry at a milestone inside the phase (the hub cleared, the printer's sensor cleared).
@@ -304,7 +302,6 @@ fn step_motion<const N: usize>(
             drive.begin(bounds.budget(config), feeder, now);
             run.insert(PhaseRun {
                 started: now,
-                from_centi: odometry,
                 goal_from_centi: resume_goal_from.unwrap_or(odometry),
                 mark_centi: None,
                 compressed_since: None,
@@ -315,11 +312,6 @@ fn step_motion<const N: usize>(
         Direction::Forward => (odometry - run.goal_from_centi) / 100,
         Direction::Reverse => (run.goal_from_centi - odometry) / 100,
     };
-    let moved_mm = |from: i32| match bounds.direction {
-        Direction::Forward => (odometry - from) / 100,
-        Direction::Reverse => (from - odometry) / 100,
-    };
-
     if let Some(fault) = [
         SensorId::MotorHall(slot),
         SensorId::HubFilament,
@@ -382,6 +374,8 @@ fn step_motion<const N: usize>(
             // behind it: after the printer's own push, or at once if that push came first.
             // Odometry alone would be fooled by a slipping drive; it decides only without a
             // tension reading.
+            // Known limit: a Bowden jam just before the gears compresses the tube the same way
+            // (README, "How the unit knows where the filament is").
             let held = match unit.hub.tension.reading() {
                 Some(tension) => compressed_for(run, tension, now, config) >= HELD_CONFIRM_MS,
                 None => toward_goal_mm >= i32::from(config.extra_load_mm),
@@ -389,7 +383,11 @@ fn step_motion<const N: usize>(
             if held { Goal::Reached } else { Goal::Follow }
         }
         Phase::UnloadToHub { .. } => {
-            if unit.fsensor_triggered() && moved_mm(run.from_centi) >= i32::from(config.unload_check_mm) {
+            // The printer's sensor must clear within the check distance of where the unload began
+            // (Retry does not start the count again), and never after the tip has left the hub:
+            // pulling on would drag the filament out of its drive gear. MMU 3.0.3 waits too.
+            let stuck = toward_goal_mm >= i32::from(config.unload_check_mm) || !hub;
+            if unit.fsensor_triggered() && stuck {
                 return Outcome::Fail(ErrorCode::FSENSOR_DIDNT_SWITCH_OFF);
             }
             if !hub && !unit.fsensor_triggered() {
@@ -466,7 +464,6 @@ fn check_sensors<const N: usize>(
         let started = run
             .get_or_insert(PhaseRun {
                 started: now,
-                from_centi: 0,
                 goal_from_centi: 0,
                 mark_centi: None,
                 compressed_since: None,

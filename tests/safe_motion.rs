@@ -96,3 +96,31 @@ fn a_slot_restored_as_loaded_does_not_move_while_the_start_up_check_reports_8008
     assert!(answers.contains("X0 E8008"), "{answers}");
     assert_eq!(ErrorCode::FINDA_VS_EEPROM_DISREPANCY.0, 0x8008);
 }
+
+#[test]
+fn retry_after_a_stuck_printer_sensor_never_pulls_the_filament_out_of_its_drive() {
+    let mut rig = Rig::<3>::new();
+    rig.boot();
+    rig.command(t(0));
+    let loaded_tip = rig.model.tip_mm(0).unwrap();
+    // The printer's sensor is stuck reporting filament.
+    rig.fsensor = common::FsensorReports::Stuck(1);
+    let unload = Request::new(RequestCode::Unload, 0);
+    let run = rig.command(unload);
+    assert_eq!(
+        run.last.param_value,
+        Some(u16::from(ErrorCode::FSENSOR_DIDNT_SWITCH_OFF.0))
+    );
+    for _ in 0..5 {
+        rig.send(Request::new(RequestCode::Button, 1));
+        rig.follow(unload, 60_000);
+    }
+    let tip = rig.model.tip_mm(0).unwrap();
+    let pulled = loaded_tip - tip;
+    let check = f32::from(rig.app.config().unload_check_mm);
+    assert!(
+        pulled <= check + 5.0,
+        "five Retries pulled {pulled} mm with the printer's sensor stuck on (check distance {check} mm)"
+    );
+    assert!(tip > 0.0, "the tip stays in the Bowden tube: {tip}");
+}
