@@ -8,7 +8,6 @@
 //! are tried.
 
 use std::error::Error;
-use std::fmt;
 use std::io::{self, BufRead, Write};
 
 use clap::{Args, Subcommand};
@@ -16,6 +15,7 @@ use mmu_protocol::{DecodeError, ParamCode, Request, RequestCode, RequestDecoder,
 use serde::Serialize;
 
 use crate::explain::{request_meaning, response_meaning};
+use crate::usage::UsageError;
 
 /// `mmu encode <request|response> ...`.
 #[derive(Debug, Subcommand)]
@@ -58,18 +58,6 @@ pub struct DecodeArgs {
     #[arg(long)]
     pub json: bool,
 }
-
-/// A usage error found after clap's parsing.
-#[derive(Debug)]
-pub struct UsageError(String);
-
-impl fmt::Display for UsageError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(&self.0)
-    }
-}
-
-impl Error for UsageError {}
 
 /// The message built by `mmu encode`, or a usage error (`VALUE2` given to, or missing from, `W`).
 pub fn build_frame(command: &EncodeCommand) -> Result<String, UsageError> {

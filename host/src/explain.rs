@@ -2,9 +2,13 @@
 //! names with the printer's error screen. Used by `mmu decode`; meant to be shared by the other
 //! host tools (simulator, printer emulator) for their logs.
 
+mod errors;
+
 use mmu_protocol::{
     ButtonCode, ErrorCode, ParamCode, ProgressCode, Request, RequestCode, Response, ResultCode,
 };
+
+pub use errors::error_help;
 
 /// Register names of the MMU3 register map (spec §4), indexed by address 0x00..=0x23.
 const REGISTER_NAMES: [&str; 36] = [
@@ -64,20 +68,33 @@ fn register_value_note(address: u8, value: u16) -> Option<String> {
     match address {
         0x05 => u8::try_from(value).ok().map(|v| ProgressCode(v).to_string()),
         0x06 => Some(ErrorCode(value).to_string()),
-        0x07 => Some(
-            match value {
-                0 => "NotLoaded",
-                1 => "AtPulley",
-                2 => "InSelector",
-                4 => "InFSensor",
-                8 => "InNozzle",
-                _ => "unknown state",
-            }
-            .to_string(),
-        ),
+        0x07 => Some(lane_state(value).to_string()),
         0x08 => Some(finda_note(value).to_string()),
         0x0a => Some(if value == 0 { "normal" } else { "stealth" }.to_string()),
+        0x1b | 0x1c => Some(slot_note(value)),
         _ => None,
+    }
+}
+
+/// Where a slot's filament is, as register 0x07 and the lane registers 0xb8+k give it (MMU3
+/// filament-state values, in this unit's words).
+pub fn lane_state(value: u16) -> &'static str {
+    match value {
+        0 => "empty or not known",
+        1 => "parked",
+        2 => "in the hub or the Bowden tube",
+        4 => "at the printer's filament sensor",
+        8 => "loaded",
+        _ => "unknown state",
+    }
+}
+
+/// A slot number as registers 0x1b and 0x1c give it: 5 means none, 255 not known.
+fn slot_note(value: u16) -> String {
+    match value {
+        5 => "none".to_string(),
+        255 => "unknown".to_string(),
+        slot => format!("slot {slot}"),
     }
 }
 

@@ -5,13 +5,19 @@
 //! - `mmu decode [--json]`: explain frames or printer log lines read from stdin ([`codec_cli`]);
 //! - `mmu sim`: the simulated unit on stdin/stdout or a pseudo-terminal ([`sim_cli`]);
 //! - `mmu printer`: the printer's side against a real unit or the simulator ([`printer_cli`]);
+//! - `mmu sensors`: every sensor of a unit live, as a table, CSV or a plotted PNG ([`sensors_cli`]);
 //! - `mmu demo`: a scripted session against the simulator ([`demo`]).
+//!
+//! Exit status: 0 success, 1 a failure (the unit stopped on an error, a port cannot be opened),
+//! 2 a usage mistake (as clap's own), 130 stopped by Ctrl-C.
 
 mod codec_cli;
 mod demo;
 mod explain;
 mod printer_cli;
+mod sensors_cli;
 mod sim_cli;
+mod usage;
 
 use std::error::Error;
 use std::process::ExitCode;
@@ -45,6 +51,10 @@ enum Command {
     /// Play the printer: handshake, commands, register access, soak runs; against a unit on a
     /// serial port or the simulator.
     Printer(printer_cli::PrinterArgs),
+    /// Every sensor of the unit live: raw and filtered readings, thresholds and state, as a table
+    /// refreshed in place, CSV rows (--csv) or a plotted trace (--plot FILE.png), to tune the
+    /// thresholds. Only reads: nothing in the unit changes.
+    Sensors(sensors_cli::SensorsArgs),
     /// A scripted session against the simulator: handshake, tool changes, preload, eject.
     Demo(demo::DemoArgs),
 }
@@ -56,13 +66,14 @@ fn main() -> ExitCode {
         Command::Decode(args) => codec_cli::decode(args),
         Command::Sim(args) => sim_cli::run(args),
         Command::Printer(args) => printer_cli::run(args),
+        Command::Sensors(args) => sensors_cli::run(args),
         Command::Demo(args) => demo::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(err) => {
             eprintln!("mmu: error: {err}");
-            ExitCode::FAILURE
+            usage::exit_code(err.as_ref())
         }
     }
 }

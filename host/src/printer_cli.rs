@@ -8,12 +8,15 @@
 //! printer (what is shown, how dialogs are answered) and [`serial`] the wire to a real unit.
 //! `mmu demo` ([`crate::demo`]) plays a script on the same [`Session`].
 
+mod bench;
 pub mod console;
 pub mod serial;
 
 use std::error::Error;
 use std::fmt;
 use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use clap::{Subcommand, ValueEnum};
 use mmu_protocol::{ErrorCode, ParamCode, Request, RequestCode, Response};
@@ -26,8 +29,12 @@ use serde_json::{Map, Value, json};
 
 use crate::codec_cli::{parse_u8, parse_u16};
 use crate::explain::{
-    error_meaning, register_name, request_label, request_meaning, response_label, response_meaning,
+    error_help, error_meaning, register_name, request_label, request_meaning, response_label,
+    response_meaning,
 };
+use crate::sim_cli::parse_slots;
+use crate::usage::{Interrupted, usage};
+pub(crate) use bench::sensor_count;
 use console::{Console, JsonLine, Target, result_name, state_text};
 use serial::{EventsTail, FsensorSource, SerialLink};
 
@@ -72,10 +79,10 @@ pub struct PrinterArgs {
 }
 
 /// The simulated unit of `--sim`.
-#[derive(Debug, clap::Args)]
+#[derive(Debug, Clone, clap::Args)]
 pub struct SimTargetArgs {
-    /// Slots of the simulated unit.
-    #[arg(long, value_name = "N", default_value_t = 3, conflicts_with = "port")]
+    /// Slots of the simulated unit, 1 to 5.
+    #[arg(long, value_name = "N", default_value_t = 3, conflicts_with = "port", value_parser = parse_slots)]
     pub slots: usize,
     /// Seed of the simulator's random draws (and of `soak` unless it has its own).
     #[arg(long, value_name = "S", default_value_t = 1, conflicts_with = "port")]
@@ -152,9 +159,33 @@ pub enum Action {
         #[arg(value_parser = parse_u8)]
         button: u8,
     },
+    /// Per-slot figures the unit keeps: tool changes, errors, metres fed, and where each slot's
+    /// filament is. Only reads.
+    Stats,
+    /// The unit's settings (distances, speeds, sensor thresholds) to a file, or back from it.
+    #[command(subcommand)]
+    Settings(SettingsAction),
     /// Many tool changes on the simulator, with random faults if asked; prints the figures and
-    /// exits non-zero when a change failed, got stuck or panicked.
+    /// exits non-zero when a change failed, got stuck or panicked. Ctrl-C stops it and prints the
+    /// figures so far.
     Soak(SoakArgs),
+}
+
+/// `mmu printer settings save|load FILE`.
+#[derive(Debug, Subcommand)]
+pub enum SettingsAction {
+    /// Read every writable setting and write them to FILE, one `ADDRESS VALUE  # name` line
+    /// each. Only reads.
+    Save {
+        /// The file to write (replaced if it exists).
+        file: PathBuf,
+    },
+    /// Write the settings of FILE (as `save` writes it; `#` starts a comment) to the unit,
+    /// each one only where it differs.
+    Load {
+        /// The file to read.
+        file: PathBuf,
+    },
 }
 
 impl Action {
@@ -172,8 +203,20 @@ impl Action {
             Action::Read { .. } => "read",
             Action::Write { .. } => "write",
             Action::Button { .. } => "button",
+            Action::Stats => "stats",
+            Action::Settings(SettingsAction::Save { .. }) => "settings save",
+            Action::Settings(SettingsAction::Load { .. }) => "settings load",
             Action::Soak(_) => "soak",
         }
+    }
+
+    /// A bench action: it talks to the unit without the printer's handshake writes (`W0b`,
+    /// `W14`) and `f` reports, so that it changes nothing but what it is asked to.
+    fn is_bench(&self) -> bool {
+        matches!(
+            self,
+            Action::Status | Action::Read { .. } | Action::Write { .. } | Action::Stats | Action::Settings(_)
+        )
     }
 }
 
@@ -229,8 +272,11 @@ impl Failure {
         let mut details = Map::new();
         details.insert("message".into(), self.message.clone().into());
         if let Some(error) = self.error {
+            let help = error_help(error);
             details.insert("error".into(), error.to_string().into());
             details.insert("screen".into(), format!("{:05}", error.printer_screen()).into());
+            details.insert("meaning".into(), help.meaning.into());
+            details.insert("check".into(), help.check.into());
         }
         details
     }
@@ -238,7 +284,12 @@ impl Failure {
 
 impl fmt::Display for Failure {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(&self.message)
+        f.write_str(&self.message)?;
+        if let Some(error) = self.error {
+            let help = error_help(error);
+            write!(f, "\n  what it means: {}\n  check: {}", help.meaning, help.check)?;
+        }
+        Ok(())
     }
 }
 
@@ -250,6 +301,42 @@ impl From<PrinterError> for Failure {
     }
 }
 
+/// The printer stopped on `error`, in plain words; a version mismatch says what the unit
+/// reports and how to talk to it anyway (`expected`: the version the printer supports).
+pub(crate) fn printer_failure(error: PrinterError, expected: (u8, u8, u8)) -> Failure {
+    let PrinterError::VersionMismatch { part, got } = error else {
+        return Failure::new(error.to_string());
+    };
+    let (major, minor, revision) = expected;
+    let want = format!("{major}.{minor}.{revision}");
+    let screen = "MMU FW UPDATE NEEDED, printer screen 04504";
+    let Some(got) = got else {
+        return Failure::new(format!(
+            "the unit answered the version request S{part} without a number; the printer expects {want} ({screen})"
+        ));
+    };
+    let mut parts = [major.to_string(), minor.to_string(), revision.to_string()];
+    if let Some(slot) = parts.get_mut(usize::from(part)) {
+        *slot = got.to_string();
+    }
+    for later in parts.iter_mut().skip(usize::from(part) + 1) {
+        *later = "?".to_string();
+    }
+    let reported = parts.join(".");
+    let mut message = format!("the unit reports version {reported}, the printer expects {want} ({screen})");
+    if part == 2 {
+        message.push_str(&format!(
+            ".\n  To talk to this unit as it is, add --expect-version {reported}.\n  To make it report {want} (register 0x52: 3 for MK4, MK3.5 and Core One, 2 for MK3S): \
+             mmu printer --port DEV --expect-version {reported} write 0x52 {revision}"
+        ));
+    } else {
+        message.push_str(&format!(
+            ".\n  Check that the unit runs this firmware; to talk to it anyway, add --expect-version {reported}"
+        ));
+    }
+    Failure::new(message)
+}
+
 /// What a successful action found: the fields of the final JSON `result` object.
 pub type Details = Map<String, Value>;
 
@@ -257,6 +344,8 @@ pub type Details = Map<String, Value>;
 pub struct Session<L: Target> {
     printer: Printer<L>,
     console: Console,
+    /// The unit version the printer supports, for the mismatch message.
+    expected_version: (u8, u8, u8),
 }
 
 impl<L: Target> Session<L> {
@@ -265,6 +354,7 @@ impl<L: Target> Session<L> {
         Session {
             printer: Printer::new(link, options),
             console,
+            expected_version: options.version,
         }
     }
 
@@ -286,7 +376,10 @@ impl<L: Target> Session<L> {
     /// Handshake; returns the unit's state (the first `Q0` answer) and says so when the unit is
     /// not at rest.
     pub fn connect(&mut self) -> Result<Response, Failure> {
-        let state = self.printer.connect(&mut self.console)?;
+        let state = self
+            .printer
+            .connect(&mut self.console)
+            .map_err(|error| self.failure(error))?;
         if state.param != ParamCode::Finished {
             let text = format!("the unit is not at rest: {}", state_text(&state));
             self.console.note(self.now_ms(), &text);
@@ -294,9 +387,17 @@ impl<L: Target> Session<L> {
         Ok(state)
     }
 
+    /// Why the printer could not go on, in plain words.
+    fn failure(&self, error: PrinterError) -> Failure {
+        printer_failure(error, self.expected_version)
+    }
+
     /// Run a command (`T L U E K H`) to its end.
     pub fn command(&mut self, request: Request) -> Result<Details, Failure> {
-        let outcome = self.printer.command(&mut self.console, request)?;
+        let outcome = self
+            .printer
+            .command(&mut self.console, request)
+            .map_err(|error| self.failure(error))?;
         let label = request_label(&request);
         match outcome {
             Outcome::Finished(result) => {
@@ -317,7 +418,11 @@ impl<L: Target> Session<L> {
                 error,
             )),
             Outcome::GaveUp(error) => Err(Failure::unit(
-                format!("{label} stopped on error {}", error_meaning(error)),
+                format!(
+                    "{label} ({}) stopped on error {}",
+                    request_meaning(&request),
+                    error_meaning(error)
+                ),
                 error,
             )),
         }
@@ -382,7 +487,10 @@ impl<L: Target> Session<L> {
 
     /// `X<value>`, then connect again; show the first `Q0` answer.
     pub fn reset(&mut self, value: u8) -> Result<Details, Failure> {
-        let state = self.printer.reset(&mut self.console, value)?;
+        let state = self
+            .printer
+            .reset(&mut self.console, value)
+            .map_err(|error| self.failure(error))?;
         self.console
             .say(&format!("after the reset, Q0: {}", state_text(&state)));
         Ok(state_details(&state))
@@ -391,7 +499,10 @@ impl<L: Target> Session<L> {
     /// A request that is not a command (`R`, `W`, `B`): its answer, or a failure when the unit
     /// refuses it.
     pub fn ask(&mut self, request: Request) -> Result<Details, Failure> {
-        let answer = self.printer.request(&mut self.console, request)?;
+        let answer = self
+            .printer
+            .request(&mut self.console, request)
+            .map_err(|error| self.failure(error))?;
         let label = request_label(&request);
         let what = request_meaning(&request);
         if (answer.code, answer.value) != (request.code, request.value) {
@@ -441,7 +552,10 @@ pub fn run(args: &PrinterArgs) -> Result<(), Box<dyn Error>> {
     if let Action::Soak(soak) = &args.action {
         return run_soak(args, soak, console);
     }
-    let options = printer_options(args);
+    let options = PrinterOptions {
+        read_only: args.action.is_bench(),
+        ..printer_options(args)
+    };
     match (&args.port, args.sim) {
         (Some(port), false) => {
             let link = SerialLink::open(port, fsensor_source(args))?;
@@ -451,9 +565,12 @@ pub fn run(args: &PrinterArgs) -> Result<(), Box<dyn Error>> {
             let link = sim_link(&args.sim_options)?;
             run_session(Session::new(link, options, console), &args.action)
         }
-        _ => Err("choose the unit: --port DEV (a real one) or --sim (the simulator)".into()),
+        _ => Err(usage(CHOOSE_THE_UNIT)),
     }
 }
+
+/// The usage mistake of naming no unit.
+pub const CHOOSE_THE_UNIT: &str = "choose the unit: --port DEV (a real one) or --sim (the simulator)";
 
 /// Connect, perform `action`, print the result line.
 fn run_session<L: Target>(mut session: Session<L>, action: &Action) -> Result<(), Box<dyn Error>> {
@@ -478,6 +595,9 @@ fn perform<L: Target>(session: &mut Session<L>, action: &Action) -> Result<Detai
         Action::Read { address } => session.ask(Request::new(Read, address)),
         Action::Write { address, value } => session.ask(Request::write(address, value)),
         Action::Button { button } => session.ask(Request::new(Button, button)),
+        Action::Stats => session.stats(),
+        Action::Settings(SettingsAction::Save { ref file }) => session.save_settings(file),
+        Action::Settings(SettingsAction::Load { ref file }) => session.load_settings(file),
         Action::Soak(_) => Err(Failure::new("soak runs on its own simulator")),
     }
 }
@@ -490,8 +610,15 @@ fn printer_options(args: &PrinterArgs) -> PrinterOptions {
     }
 }
 
-/// The simulator of `--sim`, with its faults scheduled and its pace set.
+/// The simulator of `--sim`, with its faults scheduled and its pace set. A fault naming a slot
+/// the unit lacks is a usage mistake.
 pub fn sim_link(args: &SimTargetArgs) -> Result<SimLink, Box<dyn Error>> {
+    for fault in &args.faults {
+        fault
+            .fault
+            .check_slots(args.slots)
+            .map_err(|error| usage(error.to_string()))?;
+    }
     let mut sim = Sim::new(SimOptions {
         slots: args.slots,
         seed: args.seed,
@@ -524,10 +651,12 @@ fn fsensor_source(args: &PrinterArgs) -> FsensorSource {
 /// `mmu printer soak`: the report, and a failure when it did not pass.
 fn run_soak(args: &PrinterArgs, soak: &SoakArgs, mut console: Console) -> Result<(), Box<dyn Error>> {
     if args.port.is_some() {
-        return Err("soak runs on the simulator: drop --port".into());
+        return Err(usage("soak runs on the simulator: drop --port"));
     }
     if !args.sim_options.faults.is_empty() {
-        return Err("soak injects its own faults (--faults random): drop --fault".into());
+        return Err(usage(
+            "soak injects its own faults (--faults random): drop --fault",
+        ));
     }
     let seed = soak.seed.unwrap_or(args.sim_options.seed);
     let options = SoakOptions {
@@ -542,11 +671,16 @@ fn run_soak(args: &PrinterArgs, soak: &SoakArgs, mut console: Console) -> Result
         printer: printer_options(args),
     };
     let bar = console.progress_bar(u64::from(soak.changes), "tool changes");
-    let report = mmu_sim::soak::run(&options, &mut |done| {
-        if let Some(bar) = &bar {
-            bar.set_position(u64::from(done));
-        }
-    });
+    let stop = ctrl_c_flag()?;
+    let report = mmu_sim::soak::run_until(
+        &options,
+        &mut |done| {
+            if let Some(bar) = &bar {
+                bar.set_position(u64::from(done));
+            }
+        },
+        &|| stop.load(Ordering::Relaxed),
+    );
     if let Some(bar) = bar {
         bar.finish_and_clear();
     }
@@ -560,11 +694,25 @@ fn run_soak(args: &PrinterArgs, soak: &SoakArgs, mut console: Console) -> Result
         ok: report.passed(),
         details: soak_details(&report, seed),
     });
-    if report.passed() {
+    if stop.load(Ordering::Relaxed) {
+        Err(Box::new(Interrupted(format!(
+            "soak stopped by Ctrl-C: {}",
+            report.summary_line()
+        ))))
+    } else if report.passed() {
         Ok(())
     } else {
         Err(format!("soak failed: {}", report.summary_line()).into())
     }
+}
+
+/// A flag Ctrl-C raises (instead of ending the process), for a long run to stop and report.
+pub fn ctrl_c_flag() -> Result<Arc<AtomicBool>, Box<dyn Error>> {
+    let flag = Arc::new(AtomicBool::new(false));
+    let raised = Arc::clone(&flag);
+    ctrlc::set_handler(move || raised.store(true, Ordering::Relaxed))
+        .map_err(|error| format!("cannot catch Ctrl-C: {error}"))?;
+    Ok(flag)
 }
 
 fn soak_details(report: &SoakReport, seed: u64) -> Details {
@@ -582,7 +730,7 @@ fn soak_details(report: &SoakReport, seed: u64) -> Details {
 }
 
 /// `3.0.3` → (3, 0, 3).
-fn parse_version(text: &str) -> Result<(u8, u8, u8), String> {
+pub(crate) fn parse_version(text: &str) -> Result<(u8, u8, u8), String> {
     let parts: Vec<Option<u8>> = text.split('.').map(|part| part.parse().ok()).collect();
     match parts.as_slice() {
         [Some(major), Some(minor), Some(revision)] => Ok((*major, *minor, *revision)),

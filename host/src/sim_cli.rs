@@ -8,6 +8,10 @@
 //! a unit on a UART. The protocol channel carries the unit's bytes exactly as on the wire and
 //! nothing else; notes go to stderr.
 //!
+//! Unless `--quiet`, stderr tells a person watching what is served, in words: each request and
+//! answer (`> T1  tool change slot 1`), frames the unit ignores and why (a bad CRC, an unknown
+//! code), and the simulator's events (commands, the printer's filament sensor, faults, power).
+//!
 //! The printer's filament sensor is part of the simulation, but only the printer reports it
 //! (`f`). The `--events` file makes it visible, for the printer-side program to follow: one JSON
 //! line per event, e.g. `{"t_ms":1234,"kind":"fsensor","state":2}`, written at once.
@@ -25,8 +29,12 @@ use std::thread;
 use std::time::{Duration, Instant};
 
 use clap::{ArgGroup, Args};
+use mmu_protocol::{DecodeError, Request, RequestDecoder, Response, ResponseDecoder};
 use mmu_sim::event::FaultAction;
 use mmu_sim::{Event, EventKind, FAULT_HELP, ScheduledFault, Sim, SimOptions};
+
+use crate::explain::{request_meaning, response_meaning};
+use crate::usage::usage;
 
 /// After stdin ends, the simulator runs this long more, in virtual and in wall time, so that the
 /// answer to the last request still goes out.
@@ -82,13 +90,19 @@ pub struct SimArgs {
         value_parser = parse_print_rate
     )]
     pub print_rate: f32,
-    /// Print nothing on stderr but errors.
+    /// Print nothing on stderr but errors (no log of requests, answers and events).
     #[arg(long, short)]
     pub quiet: bool,
 }
 
 /// Run `mmu sim`.
 pub fn run(args: &SimArgs) -> Result<(), Box<dyn Error>> {
+    for fault in &args.faults {
+        fault
+            .fault
+            .check_slots(args.slots)
+            .map_err(|error| usage(error.to_string()))?;
+    }
     let mut sim = Sim::new(SimOptions {
         slots: args.slots,
         seed: args.seed,
@@ -105,6 +119,7 @@ pub fn run(args: &SimArgs) -> Result<(), Box<dyn Error>> {
         sim,
         events,
         notes,
+        wire: WireLog::new(),
         time_scale: args.time_scale,
         lag_warned: false,
     };
@@ -121,6 +136,7 @@ struct Server {
     sim: Sim,
     events: Option<File>,
     notes: Notes,
+    wire: WireLog,
     time_scale: f64,
     /// The lag warning was given.
     lag_warned: bool,
@@ -172,11 +188,23 @@ impl Server {
         output: &mut dyn Write,
     ) -> Result<bool, Box<dyn Error>> {
         let mut sent = Vec::new();
+        if !self.notes.quiet && !received.is_empty() {
+            let at = self.sim.now_ms();
+            for line in self.wire.printer_sent(received) {
+                self.notes.at(at, &line);
+            }
+        }
         for _ in 0..steps {
             self.sim.step(received, &mut sent);
             received.clear();
         }
         let open = self.send(output, &sent)?;
+        if !self.notes.quiet && !sent.is_empty() {
+            let at = self.sim.now_ms();
+            for line in self.wire.unit_sent(&sent) {
+                self.notes.at(at, &line);
+            }
+        }
         self.record_events()?;
         Ok(open)
     }
@@ -229,7 +257,7 @@ impl Server {
         }
         for event in &events {
             if let Some(note) = event_note(event) {
-                self.notes.say(&note);
+                self.notes.at(event.t_ms, &note);
             }
         }
         if let Some(file) = &mut self.events {
@@ -346,6 +374,80 @@ impl Notes {
             eprintln!("mmu sim: {line}");
         }
     }
+
+    /// A line stamped with the simulator's clock.
+    fn at(&self, t_ms: u64, line: &str) {
+        self.say(&format!("{:>9.3} s  {line}", t_ms as f64 / 1000.0));
+    }
+}
+
+/// Decodes both directions of the wire for the log: what the printer asked, what the unit
+/// answered, and the frames the unit ignores with the reason.
+struct WireLog {
+    requests: RequestDecoder,
+    responses: ResponseDecoder,
+}
+
+impl WireLog {
+    fn new() -> Self {
+        WireLog {
+            requests: RequestDecoder::new(),
+            responses: ResponseDecoder::new(),
+        }
+    }
+
+    /// The log lines for bytes from the printer.
+    fn printer_sent(&mut self, bytes: &[u8]) -> Vec<String> {
+        bytes
+            .iter()
+            .filter_map(|&byte| self.requests.feed(byte))
+            .map(|decoded| match decoded {
+                Ok(request) => request_line(&request),
+                Err(error) => format!("> frame ignored: {}", ignored_reason(&error)),
+            })
+            .collect()
+    }
+
+    /// The log lines for bytes from the unit.
+    fn unit_sent(&mut self, bytes: &[u8]) -> Vec<String> {
+        bytes
+            .iter()
+            .filter_map(|&byte| self.responses.feed(byte))
+            .map(|decoded| match decoded {
+                Ok(response) => response_line(&response),
+                Err(error) => format!("< unreadable answer: {error}"),
+            })
+            .collect()
+    }
+}
+
+/// `> T1*cf  tool change slot 1`.
+fn request_line(request: &Request) -> String {
+    format!("> {}  {}", request.encode().as_str(), request_meaning(request))
+}
+
+/// `< T1 A*27  accepted`.
+fn response_line(response: &Response) -> String {
+    format!("< {}  {}", response.encode().as_str(), response_meaning(response))
+}
+
+/// Why the unit ignores a frame, in words; a bad CRC names the one it should carry.
+fn ignored_reason(error: &DecodeError<Request>) -> String {
+    match error {
+        DecodeError::BadCrc {
+            frame,
+            computed,
+            received,
+        } => {
+            let body = frame.encode();
+            let body = body.as_str().split('*').next().unwrap_or("");
+            format!(
+                "{body} ({}) has a bad CRC: it carries {received:02x}, the unit expects {computed:02x} ({body}*{computed:02x})",
+                request_meaning(frame)
+            )
+        }
+        other => other.to_string(),
+    }
 }
 
 /// What the simulator is set up with, as one line.
@@ -369,7 +471,7 @@ fn fault_spec(fault: &ScheduledFault) -> String {
     }
 }
 
-/// The stderr note for an event worth telling a person about: faults and power.
+/// The stderr note for an event worth telling a person about (not the slots' motion).
 fn event_note(event: &Event) -> Option<String> {
     let what = match &event.what {
         EventKind::Fault {
@@ -382,9 +484,20 @@ fn event_note(event: &Event) -> Option<String> {
         } => format!("fault cleared: {fault}"),
         EventKind::Power { on: false } => String::from("the unit lost power"),
         EventKind::Power { on: true } => String::from("the unit booted"),
-        _ => return None,
+        EventKind::Command { request, status } => format!("command {request}: {status}"),
+        EventKind::Fsensor { state } => format!(
+            "the printer's filament sensor: {}",
+            match state {
+                0 => "no filament",
+                1 => "filament at the sensor",
+                2 => "filament in the nozzle",
+                _ => "unknown",
+            }
+        ),
+        EventKind::Extruder { action, mm } => format!("the printer's extruder: {action} {mm:.1} mm"),
+        EventKind::Slot { .. } => return None,
     };
-    Some(format!("at {:.3} s: {what}", event.t_ms as f64 / 1000.0))
+    Some(what)
 }
 
 /// Create (or truncate) the events file.
@@ -393,7 +506,8 @@ fn create_events_file(path: &Path) -> Result<File, Box<dyn Error>> {
         .map_err(|err| format!("cannot create the events file {}: {err}", path.display()).into())
 }
 
-fn parse_slots(text: &str) -> Result<usize, String> {
+/// A slot count, 1 to the firmware's most (also for `mmu printer --slots`).
+pub(crate) fn parse_slots(text: &str) -> Result<usize, String> {
     let max = mmu_firmware::MAX_SLOTS;
     match text.parse::<usize>() {
         Ok(slots) if (1..=max).contains(&slots) => Ok(slots),

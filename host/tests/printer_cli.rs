@@ -134,7 +134,9 @@ fn a_jam_ends_in_its_named_error_after_three_automatic_retries() {
     }
     assert_eq!(text.matches("auto Retry").count(), 3, "{text}");
     assert!(
-        text.contains("mmu: error: T1 stopped on error STALLED_PULLEY (printer screen 04105)"),
+        text.contains(
+            "mmu: error: T1 (tool change slot 1) stopped on error STALLED_PULLEY (printer screen 04105)"
+        ),
         "{text}"
     );
 
@@ -189,7 +191,7 @@ fn reset_reconnects_and_shows_the_first_answer() {
 fn a_printer_expecting_another_version_stops() {
     let text = printer_fails(&["--expect-version", "3.0.2", "status"]);
     assert!(
-        text.contains("MMU FW UPDATE NEEDED (printer screen 04504)"),
+        text.contains("MMU FW UPDATE NEEDED, printer screen 04504"),
         "{text}"
     );
 }
@@ -224,4 +226,88 @@ fn the_demo_runs_its_script() {
     }
     // Commands follow each other as on a printer: the link never times out.
     assert!(!out.contains("link lost"), "{out}");
+}
+
+/// Before: `S2 answered Some(2)`, a Rust `Option` in a user message, with no way out.
+#[test]
+fn a_version_mismatch_says_what_the_unit_reports_and_what_to_do() {
+    let text = printer_fails(&["--expect-version", "3.0.2", "status"]);
+    assert!(!text.contains("Some("), "{text}");
+    assert!(text.contains("the unit reports version 3.0.3"), "{text}");
+    assert!(text.contains("--expect-version 3.0.3"), "{text}");
+    assert!(text.contains("write 0x52 2"), "{text}");
+}
+
+/// Before: `printer --slots 9` exited 1, `sim --slots 9` 2; `--fault jam:7` on 3 slots was
+/// accepted. Every usage mistake now exits 2, as clap's own do, and says why.
+#[test]
+fn usage_mistakes_exit_2_everywhere() {
+    for (args, message) in [
+        (
+            &["printer", "--sim", "--slots", "9", "status"][..],
+            "1 to 5 slots",
+        ),
+        (&["sim", "--stdio", "--slots", "9"], "1 to 5 slots"),
+        (&["printer", "status"], "--port DEV"),
+        (&["printer", "--sim", "--fault", "jam:7", "status"], "no slot 7"),
+        (&["sim", "--stdio", "--fault", "jam:7"], "no slot 7"),
+        (
+            &["sim", "--stdio", "--fault", "disconnect:motor-hall-3"],
+            "no slot 3",
+        ),
+        (
+            &[
+                "printer", "--sim", "--slots", "2", "--fault", "runout:2", "status",
+            ],
+            "no slot 2",
+        ),
+        (&["printer", "--port", "/dev/null", "soak"], "simulator"),
+        (&["encode", "request", "W", "0xb"], "VALUE2"),
+        (&["sensors"], "--port DEV"),
+    ] {
+        let output = Command::new(env!("CARGO_BIN_EXE_mmu"))
+            .args(args)
+            .stdin(std::process::Stdio::null())
+            .output()
+            .expect("the mmu binary runs");
+        let text = format!("{}{}", stdout(&output), stderr(&output));
+        assert_eq!(output.status.code(), Some(2), "{args:?}: {text}");
+        assert!(text.contains(message), "{args:?}: {text:?} lacks {message:?}");
+    }
+}
+
+/// Before: Ctrl-C during a soak lost the report.
+#[cfg(unix)]
+#[test]
+fn soak_prints_its_report_on_ctrl_c() {
+    let child = Command::new(env!("CARGO_BIN_EXE_mmu"))
+        .args(["printer", "--sim", "soak", "--changes", "1000000"])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("the mmu binary runs");
+    std::thread::sleep(std::time::Duration::from_millis(1500));
+    let status = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .expect("kill runs");
+    assert!(status.success());
+    let output = child.wait_with_output().expect("mmu finishes");
+    let out = stdout(&output);
+    assert!(out.starts_with("soak: "), "{out}{}", stderr(&output));
+    assert!(out.contains("stopped after change"), "{out}");
+    assert_eq!(output.status.code(), Some(130), "{}", stderr(&output));
+}
+
+/// Errors come with what they mean on this unit and what to check, in its own parts' words.
+#[test]
+fn errors_say_what_to_check_on_this_unit() {
+    let text = printer_fails(&["--fault", "jam:1", "tool", "1"]);
+    assert!(text.contains("slot 1"), "{text}");
+    assert!(text.contains("check"), "{text}");
+    assert!(text.contains("slot motor"), "{text}");
+    assert!(!text.contains("pulley"), "MMU3 words on this hardware: {text}");
+    let (lines, _) = printer_json(&["--fault", "jam:1", "tool", "1"]);
+    let last = lines.last().expect("some output");
+    assert!(last["check"].as_str().is_some_and(|c| !c.is_empty()), "{last}");
 }
