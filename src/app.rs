@@ -15,7 +15,8 @@ use mmu_protocol::{
 
 use crate::config::Config;
 use crate::ops::{self, Operation, Status, follow_duty};
-use crate::persist::{Counters, Snapshot};
+use crate::persist::{Counters, MAX_SETTINGS, Snapshot};
+use crate::registers;
 use crate::time::Instant;
 use crate::unit::{Lane, Unit};
 
@@ -115,6 +116,7 @@ impl<const N: usize> App<N> {
             action: None,
             status_led: false,
         };
+        self.now = now;
         self.unit.sense(samples, now, &self.config);
         for &byte in rx {
             if let Some(Ok(request)) = self.decoder.feed(byte) {
@@ -241,6 +243,53 @@ impl<const N: usize> App<N> {
                 self.counters.fed_mm[slot] = u32::try_from(self.fed_centi[slot] / 100).unwrap_or(u32::MAX);
             }
         }
+    }
+
+    /// The value of register `address`, or `None` when the unit has no such register.
+    pub fn read_register(&self, address: u8) -> Option<u16> {
+        let view = registers::View {
+            config: &self.config,
+            hub: &self.unit.hub,
+            feeders: &self.unit.feeders,
+            lanes: &self.unit.lanes,
+            fsensor: self.unit.fsensor,
+            path_slot: self.unit.active().or(self.unit.selected),
+            driving_slot: self.operation.driving_slot(),
+            status: self.operation.status(),
+            drive_errors: self.counters.drive_errors,
+            tool_changes: &self.counters.tool_changes,
+            failures: &self.counters.failures,
+            fed_mm: &self.counters.fed_mm,
+            dropped_responses: self.dropped_responses,
+            now: self.now,
+        };
+        registers::read(&view, address)
+    }
+
+    /// Write `value` to register `address`; false (answered `R`) when the register is unknown or
+    /// read-only or the value is out of range.
+    pub fn write_register(&mut self, address: u8, value: u16) -> bool {
+        let mut target = registers::Target {
+            config: &mut self.config,
+            fsensor: &mut self.unit.fsensor,
+        };
+        registers::write(&mut target, N, address, value)
+    }
+
+    /// Every writable setting that differs from its default, and its value (only what differs:
+    /// a later firmware's defaults then apply to the others).
+    fn settings(&self) -> Vec<(u8, u16), MAX_SETTINGS> {
+        let defaults = Config::default();
+        let mut settings = Vec::new();
+        for address in registers::settings(N) {
+            let value = registers::setting_value(&self.config, N, address);
+            if let Some(value) = value.filter(|&v| Some(v) != registers::setting_value(&defaults, N, address))
+            {
+                // MAX_SETTINGS holds every setting of a 5-slot unit.
+                let _ = settings.push((address, value));
+            }
+        }
+        settings
     }
 
     /// Where each slot's filament is.

@@ -1,18 +1,189 @@
-//! The register map read by `R`/`S` and written by `W`.
+//! The register map read by `R`/`S` and written by `W`, as one table.
 //!
 //! `0x00`-`0x22` follow the MMU3 map where a register means something on this hardware (the
 //! others answer `R`). The unit's own settings and diagnostics live from `0x40`; `0x80`-`0x82`
 //! stay free because the MK4 intercepts them printer-side. Writes are validated: an unknown or
 //! read-only register, or a value out of range, answers `R` and changes nothing.
+//!
+//! Every register is a row of [`REGISTERS`]: its address (a block of addresses for per-sensor and
+//! per-slot registers), its name, whether it can be written, and how it is read and written. The
+//! App answers `R`/`W` from it and the host tool names registers from it ([`describe`],
+//! [`lookup`]), so the two cannot disagree.
 
-use mmu_protocol::ErrorCode;
+use core::fmt;
 
-use crate::app::App;
+use mmu_protocol::{ErrorCode, ProgressCode};
+
 use crate::config::Config;
+use crate::feeder::Feeder;
 use crate::ops::Status;
-use crate::persist::MAX_SETTINGS;
-use crate::sensor::Thresholds;
-use crate::unit::{SensorId, Unit};
+use crate::sensor::{AnalogSensor, Thresholds};
+use crate::time::Instant;
+use crate::unit::{Hub, Lane, SensorId};
+
+/// Sensor diagnostic blocks hold up to 16 sensors (3 hub + 2 per slot, at most 13).
+const SENSOR_BLOCK: u8 = 16;
+/// Per-slot blocks hold up to 8 slots.
+const SLOT_BLOCK: u8 = 8;
+
+/// What a register read sees of the unit: plain borrowed state, the same for every slot count.
+pub struct View<'a> {
+    /// The settings in force.
+    pub config: &'a Config,
+    /// The hub's sensors.
+    pub hub: &'a Hub,
+    /// Every slot's feeding system.
+    pub feeders: &'a [Feeder],
+    /// Where each slot's filament is.
+    pub lanes: &'a [Lane],
+    /// The printer's filament sensor as last reported.
+    pub fsensor: u8,
+    /// The slot owning the hub path, or else the slot last asked for.
+    pub path_slot: Option<usize>,
+    /// The slot whose motor the running command drives.
+    pub driving_slot: Option<usize>,
+    /// Where the current command stands.
+    pub status: Status,
+    /// Errors raised since the counters were last cleared.
+    pub drive_errors: u16,
+    /// Completed tool changes per slot.
+    pub tool_changes: &'a [u16],
+    /// Errors raised while driving each slot.
+    pub failures: &'a [u16],
+    /// Filament fed or pulled by each slot, mm.
+    pub fed_mm: &'a [u32],
+    /// Responses dropped because a step's transmit buffer was full.
+    pub dropped_responses: u16,
+    /// The time of the current step.
+    pub now: Instant,
+}
+
+impl View<'_> {
+    fn sensor(&self, id: SensorId) -> Option<&AnalogSensor> {
+        crate::unit::sensor_in(self.hub, self.feeders, id)
+    }
+
+    fn sensor_count(&self) -> usize {
+        3 + 2 * self.feeders.len()
+    }
+}
+
+/// What a register write may change.
+pub struct Target<'a> {
+    /// The settings.
+    pub config: &'a mut Config,
+    /// The printer's filament sensor state (register 0x09, as `f`).
+    pub fsensor: &'a mut u8,
+}
+
+/// Whether the printer may write a register.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Access {
+    /// Read only: a write answers `R`.
+    Read,
+    /// Read and write.
+    ReadWrite,
+}
+
+/// How many addresses a row covers.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Span {
+    /// One address.
+    One,
+    /// One address per sensor, in the diagnostic order of [`SensorId::index`].
+    Sensors,
+    /// One address per slot.
+    Slots,
+}
+
+/// What one address of a block register is about.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Subject {
+    /// A sensor.
+    Sensor(SensorId),
+    /// A slot.
+    Slot(usize),
+}
+
+/// One row of the register table.
+pub struct Row {
+    /// The (first) address.
+    pub address: u8,
+    /// How many addresses the row covers.
+    pub span: Span,
+    /// The name tools show, e.g. `bowden_mm`; block registers add their subject (`raw.hub.filament`).
+    pub name: &'static str,
+    /// The values a write accepts (`None`: read only).
+    pub range: Option<(u16, u16)>,
+    read: fn(&View, usize) -> Option<u16>,
+    write: Option<fn(&mut Target, usize, u16) -> bool>,
+}
+
+impl Row {
+    /// Whether the printer may write it.
+    pub const fn access(&self) -> Access {
+        match self.write {
+            Some(_) => Access::ReadWrite,
+            None => Access::Read,
+        }
+    }
+
+    /// The index inside the block that `address` names, if it is one of this row's addresses.
+    fn index_of(&self, address: u8) -> Option<usize> {
+        let offset = address.checked_sub(self.address)?;
+        let size = match self.span {
+            Span::One => 1,
+            Span::Sensors => SENSOR_BLOCK,
+            Span::Slots => SLOT_BLOCK,
+        };
+        (offset < size).then_some(usize::from(offset))
+    }
+}
+
+/// A plain setting: a [`Config`] field and the values it accepts.
+macro_rules! setting {
+    ($address:literal, $name:literal, $min:literal..=$max:literal, $field:ident) => {
+        Row {
+            address: $address,
+            span: Span::One,
+            name: $name,
+            range: Some(($min, $max)),
+            read: |v, _| Some(v.config.$field),
+            write: Some(|t, _, value| {
+                t.config.$field = value;
+                true
+            }),
+        }
+    };
+}
+
+/// A read-only register of one address.
+macro_rules! read_only {
+    ($address:literal, $name:literal, $read:expr) => {
+        Row {
+            address: $address,
+            span: Span::One,
+            name: $name,
+            range: None,
+            read: $read,
+            write: None,
+        }
+    };
+}
+
+/// A read-only block register: one address per sensor or per slot.
+macro_rules! block {
+    ($address:expr, $span:ident, $name:literal, $read:expr) => {
+        Row {
+            address: $address,
+            span: Span::$span,
+            name: $name,
+            range: None,
+            read: $read,
+            write: None,
+        }
+    };
+}
 
 /// Extension: number of slots (read only).
 pub const SLOT_COUNT: u8 = 0x40;
@@ -20,6 +191,8 @@ pub const SLOT_COUNT: u8 = 0x40;
 pub const SENSOR_FAULTS: u8 = 0x50;
 /// Extension: responses dropped because a step's transmit buffer was full (read only).
 pub const DROPPED_RESPONSES: u8 = 0x51;
+/// Extension: the revision `S2` reports.
+pub const REPORTED_REVISION: u8 = 0x52;
 /// Extension: raw sample of sensor `i` at `RAW + i` (read only).
 pub const RAW: u8 = 0x60;
 /// Extension: filtered value of sensor `i` at `FILTERED + i` (read only).
@@ -36,74 +209,145 @@ pub const LANE: u8 = 0xb8;
 pub const TOOL_CHANGES: u8 = 0xc0;
 /// Extension: errors raised while driving slot `k` at `FAILURES + k` (read only).
 pub const FAILURES: u8 = 0xc8;
-
 /// Extension: filament speed of slot `k` from its motor Hall sensor, mm/s, at `SPEED + k` (read only).
 pub const SPEED: u8 = 0xd0;
 /// Extension: filament fed or pulled by slot `k`'s moves, whole metres, at `FED_METRES + k` (read only).
 pub const FED_METRES: u8 = 0xe0;
 
-/// Sensor diagnostic blocks hold up to 16 sensors (3 hub + 2 per slot, at most 13).
-const SENSOR_BLOCK: u8 = 16;
-/// Per-slot blocks hold up to 8 slots.
-const SLOT_BLOCK: u8 = 8;
-
-/// A plain setting: where it lives in [`Config`] and the values it accepts.
-struct Setting {
-    address: u8,
-    min: u16,
-    max: u16,
-    get: fn(&Config) -> u16,
-    set: fn(&mut Config, u16),
-}
-
-macro_rules! setting {
-    ($address:literal, $min:literal..=$max:literal, $field:ident) => {
-        Setting {
-            address: $address,
-            min: $min,
-            max: $max,
-            get: |c| c.$field,
-            set: |c, v| c.$field = v,
-        }
-    };
-}
-
-/// Every writable plain setting, MMU3 registers first.
-const SETTINGS: &[Setting] = &[
-    setting!(0x0b, 0..=255, extra_load_mm),
-    setting!(0x0c, 0..=255, unload_check_mm),
-    setting!(0x0d, 1..=1000, unload_speed),
-    setting!(0x11, 1..=1000, load_speed),
-    setting!(0x14, 1..=1000, slow_speed),
-    setting!(0x22, 50..=2000, bowden_mm),
-    setting!(0x41, 1..=200, park_mm),
-    setting!(0x42, 10..=5000, mm_per_rev_centi),
-    setting!(0x43, 100..=1000, max_duty),
-    setting!(0x44, 0..=1000, stall_min_duty),
-    setting!(0x45, 50..=10000, stall_timeout_ms),
-    setting!(0x46, 10..=2000, preload_max_mm),
-    setting!(0x47, 5..=500, hub_search_mm),
-    setting!(0x48, 10..=2000, fsensor_search_mm),
-    setting!(0x49, 10..=2000, eject_max_mm),
-    setting!(0x4a, 0..=500, bowden_slowdown_mm),
-    setting!(0x4b, 10..=2000, full_duty_speed),
-    setting!(0x4c, 0..=4095, tension_neutral),
-    setting!(0x4d, 0..=2000, tension_deadband),
-    setting!(0x4e, 0..=100, tension_gain),
-    setting!(0x4f, 0..=1000, tension_max_duty),
-    // The revision `S2` reports: 3 for Buddy firmware (MK4, MK3.5, Core One), 2 for MK3S firmware.
-    Setting {
-        address: 0x52,
-        min: 0,
-        max: 255,
-        get: |c| c.version.revision.into(),
-        set: |c, v| c.version.revision = v as u8,
+/// The register map, MMU3 registers first.
+pub const REGISTERS: &[Row] = &[
+    read_only!(0x00, "version.major", |v, _| Some(v.config.version.major.into())),
+    read_only!(0x01, "version.minor", |v, _| Some(v.config.version.minor.into())),
+    read_only!(0x02, "version.revision", |v, _| Some(
+        v.config.version.revision.into()
+    )),
+    read_only!(0x03, "version.build", |v, _| Some(v.config.version.build)),
+    read_only!(0x04, "errors", |v, _| Some(v.drive_errors)),
+    read_only!(0x05, "progress", |v, _| Some(match v.status {
+        Status::Running(progress) => progress.0.into(),
+        Status::Failed(_) => ProgressCode::ERR_WAITING_FOR_USER.0.into(),
+        Status::Finished => 0,
+    })),
+    read_only!(0x06, "error", |v, _| Some(match v.status {
+        Status::Failed(error) => error.0,
+        Status::Running(_) => ErrorCode::RUNNING.0,
+        Status::Finished => ErrorCode::OK.0,
+    })),
+    read_only!(0x07, "filament_state", |v, _| Some(
+        v.path_slot
+            .and_then(|slot| v.lanes.get(slot))
+            .map_or(0, |lane| lane.mmu3_state())
+    )),
+    read_only!(0x08, "hub.present", |v, _| Some(
+        v.hub.filament.present().unwrap_or(false).into()
+    )),
+    Row {
+        address: 0x09,
+        span: Span::One,
+        name: "fsensor",
+        range: Some((0, 255)),
+        read: |v, _| Some(u16::from(v.fsensor != 0)),
+        // The Core One reports its filament sensor this way instead of `f`.
+        write: Some(|t, _, value| match u8::try_from(value) {
+            Ok(state) => {
+                *t.fsensor = state;
+                true
+            }
+            Err(_) => false,
+        }),
     },
+    read_only!(0x0a, "motor_mode", |_, _| Some(0)),
+    setting!(0x0b, "extra_load_mm", 0..=255, extra_load_mm),
+    setting!(0x0c, "unload_check_mm", 0..=255, unload_check_mm),
+    setting!(0x0d, "unload_speed", 1..=1000, unload_speed),
+    setting!(0x11, "load_speed", 1..=1000, load_speed),
+    setting!(0x14, "slow_speed", 1..=1000, slow_speed),
+    read_only!(0x1a, "odometry", |v, _| Some(
+        v.path_slot
+            .and_then(|slot| v.feeders.get(slot))
+            .map_or(0, |f| f.odometry_mm().clamp(0, i32::from(u16::MAX)) as u16)
+    )),
+    read_only!(0x1b, "selector_slot", |v, _| Some(
+        v.path_slot.map_or(5, |slot| slot as u16)
+    )),
+    read_only!(0x1c, "idler_slot", |v, _| Some(
+        v.driving_slot.map_or(5, |slot| slot as u16)
+    )),
+    setting!(0x22, "bowden_mm", 50..=2000, bowden_mm),
+    read_only!(0x40, "slots", |v, _| Some(v.feeders.len() as u16)),
+    setting!(0x41, "park_mm", 1..=200, park_mm),
+    setting!(0x42, "mm_per_rev_centi", 10..=5000, mm_per_rev_centi),
+    setting!(0x43, "max_duty", 100..=1000, max_duty),
+    setting!(0x44, "stall_min_duty", 0..=1000, stall_min_duty),
+    setting!(0x45, "stall_timeout_ms", 50..=10000, stall_timeout_ms),
+    setting!(0x46, "preload_max_mm", 10..=2000, preload_max_mm),
+    setting!(0x47, "hub_search_mm", 5..=500, hub_search_mm),
+    setting!(0x48, "fsensor_search_mm", 10..=2000, fsensor_search_mm),
+    setting!(0x49, "eject_max_mm", 10..=2000, eject_max_mm),
+    setting!(0x4a, "bowden_slowdown_mm", 0..=500, bowden_slowdown_mm),
+    setting!(0x4b, "full_duty_speed", 10..=2000, full_duty_speed),
+    setting!(0x4c, "tension_neutral", 0..=4095, tension_neutral),
+    setting!(0x4d, "tension_deadband", 0..=2000, tension_deadband),
+    setting!(0x4e, "tension_gain", 0..=100, tension_gain),
+    setting!(0x4f, "tension_max_duty", 0..=1000, tension_max_duty),
+    read_only!(0x50, "sensor_faults", |v, _| Some(
+        (0..v.sensor_count())
+            .filter(|&i| v
+                .sensor(SensorId::from_index(i))
+                .is_some_and(|s| s.fault().is_some()))
+            .fold(0u16, |mask, i| mask | (1 << i))
+    )),
+    read_only!(0x51, "dropped_responses", |v, _| Some(v.dropped_responses)),
+    // The revision `S2` reports: 3 for Buddy firmware (MK4, MK3.5, Core One), 2 for MK3S firmware.
+    Row {
+        address: REPORTED_REVISION,
+        span: Span::One,
+        name: "reported_revision",
+        range: Some((0, 255)),
+        read: |v, _| Some(v.config.version.revision.into()),
+        write: Some(|t, _, value| {
+            t.config.version.revision = value as u8;
+            true
+        }),
+    },
+    block!(RAW, Sensors, "raw", |v, i| Some(
+        v.sensor(SensorId::from_index(i))?.raw()
+    )),
+    block!(FILTERED, Sensors, "filtered", |v, i| Some(
+        v.sensor(SensorId::from_index(i))?.filtered()
+    )),
+    Row {
+        address: THRESHOLD_ON,
+        span: Span::Sensors,
+        name: "threshold_on",
+        range: Some((0, 4095)),
+        read: |v, i| Some(thresholds(v.config, SensorId::from_index(i))?.on),
+        write: Some(|t, i, value| set_threshold(t.config, SensorId::from_index(i), |th| th.on = value)),
+    },
+    Row {
+        address: THRESHOLD_OFF,
+        span: Span::Sensors,
+        name: "threshold_off",
+        range: Some((0, 4095)),
+        read: |v, i| Some(thresholds(v.config, SensorId::from_index(i))?.off),
+        write: Some(|t, i, value| set_threshold(t.config, SensorId::from_index(i), |th| th.off = value)),
+    },
+    block!(ODOMETRY, Slots, "odometry", |v, k| Some(
+        v.feeders.get(k)?.odometry_mm() as i16 as u16
+    )),
+    block!(LANE, Slots, "lane", |v, k| Some(v.lanes.get(k)?.mmu3_state())),
+    block!(TOOL_CHANGES, Slots, "tool_changes", |v, k| v
+        .tool_changes
+        .get(k)
+        .copied()),
+    block!(FAILURES, Slots, "failures", |v, k| v.failures.get(k).copied()),
+    block!(SPEED, Slots, "speed", |v, k| Some(
+        v.feeders.get(k)?.speed_mm_s(v.now, v.config)
+    )),
+    block!(FED_METRES, Slots, "fed_metres", |v, k| Some(
+        u16::try_from(*v.fed_mm.get(k)? / 1000).unwrap_or(u16::MAX)
+    )),
 ];
-
-fn setting(address: u8) -> Option<&'static Setting> {
-    SETTINGS.iter().find(|s| s.address == address)
-}
 
 /// The thresholds of a sensor, if it has any.
 fn thresholds(config: &Config, sensor: SensorId) -> Option<Thresholds> {
@@ -115,183 +359,220 @@ fn thresholds(config: &Config, sensor: SensorId) -> Option<Thresholds> {
     }
 }
 
-/// The thresholds of a sensor, to change them.
-fn thresholds_mut(config: &mut Config, sensor: SensorId) -> Option<&mut Thresholds> {
-    match sensor {
+/// Change one threshold of a sensor; refused when the pair would not be valid (on > off).
+fn set_threshold(config: &mut Config, sensor: SensorId, change: impl FnOnce(&mut Thresholds)) -> bool {
+    let thresholds = match sensor {
         SensorId::HubFilament => Some(&mut config.hub_thresholds),
         SensorId::SlotFilament(slot) => config.slot_thresholds.get_mut(slot),
         SensorId::MotorHall(slot) => config.motor_thresholds.get_mut(slot),
         SensorId::HubTension | SensorId::HubCutter => None,
+    };
+    let Some(thresholds) = thresholds else {
+        return false;
+    };
+    let mut updated = *thresholds;
+    change(&mut updated);
+    if !updated.is_valid() {
+        return false;
     }
+    *thresholds = updated;
+    true
 }
 
-/// The sensor whose threshold register `address` is, and whether it is the "on" threshold.
-fn threshold_at<const N: usize>(address: u8) -> Option<(SensorId, bool)> {
-    match (
-        sensor_at::<N>(address, THRESHOLD_ON),
-        sensor_at::<N>(address, THRESHOLD_OFF),
-    ) {
-        (Some(sensor), _) => Some((sensor, true)),
-        (None, Some(sensor)) => Some((sensor, false)),
-        (None, None) => None,
-    }
+/// A register of a unit with `slots` slots: its row and, for a block register, the index.
+fn find(address: u8, slots: usize) -> Option<(&'static Row, usize)> {
+    let (row, index) = REGISTERS
+        .iter()
+        .find_map(|row| row.index_of(address).map(|index| (row, index)))?;
+    let exists = match row.span {
+        Span::One => true,
+        Span::Sensors => index < 3 + 2 * slots,
+        Span::Slots => index < slots,
+    };
+    exists.then_some((row, index))
 }
 
-/// The value of writable setting `address` in `config`: a plain setting or a threshold.
-fn setting_value<const N: usize>(config: &Config, address: u8) -> Option<u16> {
-    if let Some(setting) = setting(address) {
-        return Some((setting.get)(config));
-    }
-    let (sensor, on) = threshold_at::<N>(address)?;
-    let thresholds = thresholds(config, sensor)?;
-    Some(if on { thresholds.on } else { thresholds.off })
+/// The value of register `address`, or `None` when the unit has no such register.
+pub fn read(view: &View, address: u8) -> Option<u16> {
+    let (row, index) = find(address, view.feeders.len())?;
+    (row.read)(view, index)
 }
 
-/// A diagnostic block offset: `address - base` when it names one of the unit's sensors.
-fn sensor_at<const N: usize>(address: u8, base: u8) -> Option<SensorId> {
-    let index = address.checked_sub(base).filter(|&i| i < SENSOR_BLOCK)?;
-    let index = usize::from(index);
-    (index < Unit::<N>::SENSOR_COUNT).then(|| SensorId::from_index(index))
+/// Write `value` to register `address` of a unit with `slots` slots; false (answered `R`) when
+/// the register is unknown or read-only or the value is out of range.
+pub fn write(target: &mut Target, slots: usize, address: u8, value: u16) -> bool {
+    let Some((row, index)) = find(address, slots) else {
+        return false;
+    };
+    let (Some(write), Some((min, max))) = (row.write, row.range) else {
+        return false;
+    };
+    (min..=max).contains(&value) && write(target, index, value)
 }
 
-/// A per-slot block offset: `address - base` when it names one of the unit's slots.
-fn slot_at<const N: usize>(address: u8, base: u8) -> Option<usize> {
-    let slot = usize::from(address.checked_sub(base).filter(|&i| i < SLOT_BLOCK)?);
-    (slot < N).then_some(slot)
-}
-
-impl<const N: usize> App<N> {
-    /// The value of register `address`, or `None` when the unit has no such register.
-    pub fn read_register(&self, address: u8) -> Option<u16> {
-        let config = &self.config;
-        let unit = &self.unit;
-        if let Some(value) = setting_value::<N>(config, address) {
-            return Some(value);
-        }
-        let value = match address {
-            0x00 => config.version.major.into(),
-            0x01 => config.version.minor.into(),
-            0x02 => config.version.revision.into(),
-            0x03 => config.version.build,
-            0x04 => self.counters.drive_errors,
-            0x05 => match self.operation.status() {
-                Status::Running(progress) => progress.0.into(),
-                Status::Failed(_) => mmu_protocol::ProgressCode::ERR_WAITING_FOR_USER.0.into(),
-                Status::Finished => 0,
-            },
-            0x06 => match self.operation.status() {
-                Status::Failed(error) => error.0,
-                Status::Running(_) => ErrorCode::RUNNING.0,
-                Status::Finished => ErrorCode::OK.0,
-            },
-            0x07 => unit
-                .active()
-                .or(unit.selected)
-                .map_or(0, |slot| unit.lane(slot).mmu3_state()),
-            0x08 => unit.hub_present().unwrap_or(false).into(),
-            0x09 => unit.fsensor_triggered().into(),
-            0x0a => 0,
-            0x1a => unit
-                .active()
-                .or(unit.selected)
-                .and_then(|slot| unit.feeders.get(slot))
-                .map_or(0, |f| f.odometry_mm().clamp(0, i32::from(u16::MAX)) as u16),
-            0x1b => unit.active().or(unit.selected).map_or(5, |slot| slot as u16),
-            0x1c => self.operation.driving_slot().map_or(5, |slot| slot as u16),
-            SLOT_COUNT => N as u16,
-            SENSOR_FAULTS => (0..Unit::<N>::SENSOR_COUNT)
-                .filter(|&i| {
-                    unit.sensor(SensorId::from_index(i))
-                        .is_some_and(|s| s.fault().is_some())
-                })
-                .fold(0u16, |mask, i| mask | (1 << i)),
-            DROPPED_RESPONSES => self.dropped_responses,
-            a if sensor_at::<N>(a, RAW).is_some() => unit.sensor(sensor_at::<N>(a, RAW)?)?.raw(),
-            a if sensor_at::<N>(a, FILTERED).is_some() => {
-                unit.sensor(sensor_at::<N>(a, FILTERED)?)?.filtered()
-            }
-            a if slot_at::<N>(a, ODOMETRY).is_some() => {
-                unit.feeders.get(slot_at::<N>(a, ODOMETRY)?)?.odometry_mm() as i16 as u16
-            }
-            a if slot_at::<N>(a, LANE).is_some() => unit.lane(slot_at::<N>(a, LANE)?).mmu3_state(),
-            a if slot_at::<N>(a, TOOL_CHANGES).is_some() => {
-                *self.counters.tool_changes.get(slot_at::<N>(a, TOOL_CHANGES)?)?
-            }
-            a if slot_at::<N>(a, SPEED).is_some() => unit
-                .feeders
-                .get(slot_at::<N>(a, SPEED)?)?
-                .speed_mm_s(self.now, config),
-            a if slot_at::<N>(a, FAILURES).is_some() => {
-                *self.counters.failures.get(slot_at::<N>(a, FAILURES)?)?
-            }
-            a if slot_at::<N>(a, FED_METRES).is_some() => {
-                let mm = *self.counters.fed_mm.get(slot_at::<N>(a, FED_METRES)?)?;
-                u16::try_from(mm / 1000).unwrap_or(u16::MAX)
-            }
-            _ => return None,
-        };
-        Some(value)
-    }
-
-    /// Every writable setting that differs from its default, and its value: the plain settings,
-    /// then the sensors' thresholds.
-    pub(crate) fn settings(&self) -> heapless::Vec<(u8, u16), MAX_SETTINGS> {
-        let defaults = Config::default();
-        let threshold_registers =
-            (0..Unit::<N>::SENSOR_COUNT as u8).flat_map(|i| [THRESHOLD_ON + i, THRESHOLD_OFF + i]);
-        let mut settings = heapless::Vec::new();
-        for address in SETTINGS.iter().map(|s| s.address).chain(threshold_registers) {
-            let value = setting_value::<N>(&self.config, address);
-            // Only what differs from the defaults: a later firmware's defaults then apply.
-            if let Some(value) = value.filter(|&v| Some(v) != setting_value::<N>(&defaults, address)) {
-                // MAX_SETTINGS holds every setting of a 5-slot unit.
-                let _ = settings.push((address, value));
-            }
-        }
-        settings
-    }
-
-    /// Write `value` to register `address`; false (answered `R`) when the register is unknown or
-    /// read-only or the value is out of range.
-    pub fn write_register(&mut self, address: u8, value: u16) -> bool {
-        if let Some(setting) = setting(address) {
-            if !(setting.min..=setting.max).contains(&value) {
-                return false;
-            }
-            (setting.set)(&mut self.config, value);
-            return true;
-        }
-        if address == 0x09 {
-            // The Core One reports its filament sensor this way instead of `f`.
-            return match u8::try_from(value) {
-                Ok(state) => {
-                    self.unit.fsensor = state;
-                    true
-                }
-                Err(_) => false,
+/// Every writable register of a unit with `slots` slots whose value `config` holds (not the
+/// printer's sensor state), in table order.
+pub fn settings(slots: usize) -> impl Iterator<Item = u8> {
+    REGISTERS
+        .iter()
+        .filter(|row| row.write.is_some() && row.address != 0x09)
+        .flat_map(move |row| {
+            let count = match row.span {
+                Span::One => 1,
+                Span::Sensors => 3 + 2 * slots as u8,
+                Span::Slots => slots as u8,
             };
+            (0..count).map(move |i| row.address + i)
+        })
+}
+
+/// The value of setting `address` in `config`, read through the table.
+pub fn setting_value(config: &Config, slots: usize, address: u8) -> Option<u16> {
+    let (row, index) = find(address, slots)?;
+    row.write?;
+    // Settings read only the configuration.
+    let view = View {
+        config,
+        hub: &Hub::default(),
+        feeders: &[],
+        lanes: &[],
+        fsensor: 0,
+        path_slot: None,
+        driving_slot: None,
+        status: Status::Finished,
+        drive_errors: 0,
+        tool_changes: &[],
+        failures: &[],
+        fed_mm: &[],
+        dropped_responses: 0,
+        now: Instant::ZERO,
+    };
+    (row.read)(&view, index)
+}
+
+/// A register as tools show it: its row and what it is about.
+#[derive(Clone, Copy)]
+pub struct Register {
+    /// The address.
+    pub address: u8,
+    /// The table row.
+    pub row: &'static Row,
+    /// The sensor or slot of a block register.
+    pub subject: Option<Subject>,
+}
+
+impl fmt::Display for Register {
+    /// The full name: `bowden_mm`, `raw.hub.filament`, `lane.slot1`.
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.row.name)?;
+        match self.subject {
+            Some(Subject::Sensor(sensor)) => write!(f, ".{sensor}"),
+            Some(Subject::Slot(slot)) => write!(f, ".slot{slot}"),
+            None => Ok(()),
         }
-        let Some((sensor, on)) = threshold_at::<N>(address) else {
-            return false;
-        };
-        let Some(thresholds) = thresholds_mut(&mut self.config, sensor) else {
-            return false;
-        };
-        let updated = if on {
-            Thresholds {
-                on: value,
-                ..*thresholds
+    }
+}
+
+/// The register at `address` on a unit with `slots` slots.
+pub fn describe(address: u8, slots: usize) -> Option<Register> {
+    let (row, index) = find(address, slots)?;
+    let subject = match row.span {
+        Span::One => None,
+        Span::Sensors => Some(Subject::Sensor(SensorId::from_index(index))),
+        Span::Slots => Some(Subject::Slot(index)),
+    };
+    Some(Register {
+        address,
+        row,
+        subject,
+    })
+}
+
+/// Every register of a unit with `slots` slots, by address.
+pub fn all(slots: usize) -> impl Iterator<Item = Register> {
+    (0..=u8::MAX).filter_map(move |address| describe(address, slots))
+}
+
+/// The address of the register named `name` (as [`Register`] displays it) on a unit with
+/// `slots` slots.
+pub fn lookup(name: &str, slots: usize) -> Option<u8> {
+    all(slots)
+        .find(|register| NameMatch(name).matches(register))
+        .map(|r| r.address)
+}
+
+/// Compares a name with a register's display form without formatting into a buffer.
+struct NameMatch<'a>(&'a str);
+
+impl NameMatch<'_> {
+    fn matches(mut self, register: &Register) -> bool {
+        fmt::write(&mut self, format_args!("{register}")).is_ok() && self.0.is_empty()
+    }
+}
+
+impl fmt::Write for NameMatch<'_> {
+    fn write_str(&mut self, s: &str) -> fmt::Result {
+        self.0 = self.0.strip_prefix(s).ok_or(fmt::Error)?;
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    extern crate std;
+    use std::string::ToString;
+
+    use super::*;
+
+    #[test]
+    fn block_registers_are_named_by_their_sensor_or_slot() {
+        let name = |address| describe(address, 3).map(|r| r.to_string());
+        assert_eq!(name(0x22).as_deref(), Some("bowden_mm"));
+        assert_eq!(name(RAW).as_deref(), Some("raw.hub.filament"));
+        assert_eq!(name(FILTERED + 1).as_deref(), Some("filtered.hub.tension"));
+        assert_eq!(
+            name(THRESHOLD_ON + 5).as_deref(),
+            Some("threshold_on.slot1.filament")
+        );
+        assert_eq!(name(FILTERED + 8).as_deref(), Some("filtered.slot2.hall"));
+        assert_eq!(name(LANE + 2).as_deref(), Some("lane.slot2"));
+        // A 3-slot unit has nine sensors and three slots.
+        assert_eq!(name(FILTERED + 9), None);
+        assert_eq!(name(LANE + 3), None);
+        assert_eq!(name(0x80), None);
+    }
+
+    #[test]
+    fn every_name_looks_up_its_own_address() {
+        for slots in 1..=crate::MAX_SLOTS {
+            for register in all(slots) {
+                assert_eq!(
+                    lookup(&register.to_string(), slots),
+                    Some(register.address),
+                    "{register}"
+                );
             }
-        } else {
-            Thresholds {
-                off: value,
-                ..*thresholds
-            }
-        };
-        if !updated.is_valid() {
-            return false;
         }
-        *thresholds = updated;
-        true
+        assert_eq!(lookup("bowden", 3), None);
+        assert_eq!(lookup("bowden_mm.x", 3), None);
+    }
+
+    #[test]
+    fn only_settings_are_writable_and_only_within_their_range() {
+        let mut config = Config::default();
+        let mut fsensor = 0;
+        let mut target = Target {
+            config: &mut config,
+            fsensor: &mut fsensor,
+        };
+        assert!(write(&mut target, 3, 0x22, 410));
+        assert!(!write(&mut target, 3, 0x22, 49));
+        assert!(!write(&mut target, 3, 0x40, 3));
+        assert!(!write(&mut target, 3, THRESHOLD_ON + 9, 3000));
+        // The "on" threshold must stay above the "off" one.
+        assert!(!write(&mut target, 3, THRESHOLD_ON, 2000));
+        assert!(write(&mut target, 3, 0x09, 1));
+        assert_eq!(config.bowden_mm, 410);
+        assert_eq!(fsensor, 1);
     }
 }

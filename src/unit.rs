@@ -86,6 +86,30 @@ impl SensorId {
     }
 }
 
+impl core::fmt::Display for SensorId {
+    /// `hub.filament`, `hub.tension`, `hub.cutter`, `slot<k>.filament`, `slot<k>.hall`.
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            SensorId::HubFilament => f.write_str("hub.filament"),
+            SensorId::HubTension => f.write_str("hub.tension"),
+            SensorId::HubCutter => f.write_str("hub.cutter"),
+            SensorId::SlotFilament(slot) => write!(f, "slot{slot}.filament"),
+            SensorId::MotorHall(slot) => write!(f, "slot{slot}.hall"),
+        }
+    }
+}
+
+/// One analog sensor among the hub's and the slots' feeders.
+pub fn sensor_in<'a>(hub: &'a Hub, feeders: &'a [Feeder], id: SensorId) -> Option<&'a AnalogSensor> {
+    match id {
+        SensorId::HubFilament => Some(&hub.filament.analog),
+        SensorId::HubTension => Some(&hub.tension),
+        SensorId::HubCutter => Some(&hub.cutter),
+        SensorId::SlotFilament(slot) => feeders.get(slot).map(|f| &f.filament.analog),
+        SensorId::MotorHall(slot) => feeders.get(slot).map(|f| &f.hall.analog),
+    }
+}
+
 /// The Filament Hub's sensors.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct Hub {
@@ -181,13 +205,7 @@ impl<const N: usize> Unit<N> {
 
     /// One analog sensor.
     pub fn sensor(&self, id: SensorId) -> Option<&AnalogSensor> {
-        match id {
-            SensorId::HubFilament => Some(&self.hub.filament.analog),
-            SensorId::HubTension => Some(&self.hub.tension),
-            SensorId::HubCutter => Some(&self.hub.cutter),
-            SensorId::SlotFilament(slot) => self.feeders.get(slot).map(|f| &f.filament.analog),
-            SensorId::MotorHall(slot) => self.feeders.get(slot).map(|f| &f.hall.analog),
-        }
+        sensor_in(&self.hub, &self.feeders, id)
     }
 
     /// The number of analog sensors: three in the hub, two per slot.

@@ -55,11 +55,14 @@ pub fn register_name(address: u8) -> Option<&'static str> {
     REGISTER_NAMES.get(usize::from(address)).copied()
 }
 
-/// `register 0x08 FINDA_State`, or `register 0x99 (no such register)`.
+/// `register 0x08 FINDA_State` (the MMU3 name), `register 0x70 filtered.hub.filament` (this
+/// unit's own), or `register 0x99 (no such register)`.
 fn register_label(address: u8) -> String {
-    match register_name(address) {
-        Some(name) => format!("register 0x{address:02x} {name}"),
-        None => format!("register 0x{address:02x} (no such register)"),
+    let own = mmu_firmware::registers::describe(address, mmu_firmware::MAX_SLOTS);
+    match (register_name(address), own) {
+        (Some(name), _) => format!("register 0x{address:02x} {name}"),
+        (None, Some(register)) => format!("register 0x{address:02x} {register}"),
+        (None, None) => format!("register 0x{address:02x} (no such register)"),
     }
 }
 
