@@ -29,7 +29,7 @@ use serde_json::{Map, Value, json};
 
 use crate::codec_cli::{parse_u8, parse_u16};
 use crate::explain::{
-    error_help, error_meaning, register_name, request_label, request_meaning, response_label,
+    error_help, error_meaning, parse_register, register_name, request_label, request_meaning, response_label,
     response_meaning,
 };
 use crate::sim_cli::parse_slots;
@@ -138,16 +138,16 @@ pub enum Action {
         #[arg(long)]
         erase: bool,
     },
-    /// Read register ADDRESS: `R<ADDRESS>`.
+    /// Read register ADDRESS: `R<ADDRESS>`. Only reads.
     Read {
-        /// The register, e.g. 0x08.
-        #[arg(value_parser = parse_u8)]
+        /// The register: an address (0x08) or a name (bowden_mm, filtered.hub.filament).
+        #[arg(value_parser = parse_register)]
         address: u8,
     },
-    /// Write VALUE to register ADDRESS: `W<ADDRESS> <VALUE>`.
+    /// Write VALUE to register ADDRESS: `W<ADDRESS> <VALUE>`, and nothing else.
     Write {
-        /// The register, e.g. 0x0b.
-        #[arg(value_parser = parse_u8)]
+        /// The register: an address (0x0b) or a name (extra_load_mm).
+        #[arg(value_parser = parse_register)]
         address: u8,
         /// The value, 0..=65535.
         #[arg(value_parser = parse_u16)]

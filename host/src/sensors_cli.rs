@@ -14,22 +14,15 @@ use std::io::{IsTerminal, Write};
 use std::path::PathBuf;
 use std::sync::atomic::Ordering;
 
+use mmu_firmware::registers::{
+    FILTERED, RAW, SENSOR_FAULTS as STUCK, SLOT_COUNT, THRESHOLD_OFF, THRESHOLD_ON,
+};
 use mmu_protocol::{ErrorCode, ParamCode, Request, RequestCode};
 use mmu_sim::{Decision, Link, Operator, Printer, PrinterEvent, PrinterOptions};
 
 use crate::printer_cli::serial::{FsensorSource, SerialLink};
 use crate::printer_cli::{CHOOSE_THE_UNIT, SimTargetArgs, ctrl_c_flag, parse_version, sim_link};
 use crate::usage::usage;
-
-/// Raw readings, filtered values and thresholds.
-const RAW: u8 = 0x60;
-const FILTERED: u8 = 0x70;
-const THRESHOLD_ON: u8 = 0x90;
-const THRESHOLD_OFF: u8 = 0xa0;
-/// Sensors stuck at a rail, one bit each.
-const STUCK: u8 = 0x50;
-/// The number of slots.
-const SLOT_COUNT: u8 = 0x40;
 
 /// `mmu sensors` options.
 #[derive(Debug, clap::Args)]

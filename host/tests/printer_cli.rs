@@ -311,3 +311,18 @@ fn errors_say_what_to_check_on_this_unit() {
     let last = lines.last().expect("some output");
     assert!(last["check"].as_str().is_some_and(|c| !c.is_empty()), "{last}");
 }
+
+/// Registers by name, with this unit's names and values explained (register table).
+#[test]
+fn registers_by_name_with_their_values_explained() {
+    let out = printer_ok(&["read", "filtered.hub.filament"]);
+    assert!(out.contains("register 0x70 filtered.hub.filament = "), "{out}");
+    let out = printer_ok(&["read", "0xb9"]);
+    assert!(out.contains("lane.slot1 = 0 (empty or not known)"), "{out}");
+    let out = printer_ok(&["--fault", "disconnect:slot-filament-1", "read", "0x50"]);
+    assert!(out.contains("stuck at a rail: slot1.filament"), "{out}");
+    let out = printer_ok(&["write", "bowden_mm", "400"]);
+    assert!(out.contains("register 0x22"), "{out}");
+    let text = printer_fails(&["read", "elbow"]);
+    assert!(text.contains("is no register"), "{text}");
+}

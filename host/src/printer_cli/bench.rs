@@ -7,8 +7,8 @@
 //!
 //! ```text
 //! # mmu settings: unit firmware 3.0.3 build 1, 3 slots
-//! 0x22 360  # Bowden_Length
-//! 0x90 2600  # hub filament: on threshold
+//! 0x22 360  # bowden_mm (MMU3 Bowden_Length)
+//! 0x90 2600  # threshold_on.hub.filament
 //! ```
 
 use std::fmt::Write as _;
@@ -21,24 +21,8 @@ use super::console::Target;
 use super::{Details, Failure, Session};
 use crate::codec_cli::{parse_u8, parse_u16};
 use crate::explain::{lane_state, register_name};
-use crate::sensors_cli::sensor_name;
 
-/// The number of slots (read only).
-const SLOT_COUNT: u8 = 0x40;
-/// Per-slot blocks: lane state, tool changes, errors, metres fed.
-const LANE: u8 = 0xb8;
-const TOOL_CHANGES: u8 = 0xc0;
-const ERRORS: u8 = 0xc8;
-const FED_METRES: u8 = 0xe0;
-/// Sensor thresholds: on at `0x90 + i`, off at `0xa0 + i`.
-pub const THRESHOLD_ON: u8 = 0x90;
-pub const THRESHOLD_OFF: u8 = 0xa0;
-/// The plain writable settings (README "Registers", access R/W), thresholds aside. `0x09` (the
-/// printer's filament sensor) is state, not a setting.
-const PLAIN_SETTINGS: [u8; 22] = [
-    0x0b, 0x0c, 0x0d, 0x11, 0x14, 0x22, 0x41, 0x42, 0x43, 0x44, 0x45, 0x46, 0x47, 0x48, 0x49, 0x4a, 0x4b,
-    0x4c, 0x4d, 0x4e, 0x4f, 0x52,
-];
+use mmu_firmware::registers::{FAILURES as ERRORS, FED_METRES, LANE, SLOT_COUNT, TOOL_CHANGES};
 
 /// Sensors of a unit with `slots` slots: 3 in the hub, 2 per slot.
 pub fn sensor_count(slots: u8) -> u8 {
@@ -104,13 +88,12 @@ impl<L: Target> Session<L> {
         Ok(details)
     }
 
-    /// Every writable setting this unit has, with its value: the plain settings, then the
-    /// thresholds of the sensors that have them.
+    /// Every writable setting this unit has, with its value, in the register table's order
+    /// (the plain settings, then the thresholds of the sensors that have them).
     fn settings(&mut self) -> Result<Vec<(u8, u16)>, Failure> {
         let slots = self.slots()?;
-        let thresholds = (0..sensor_count(slots)).flat_map(|i| [THRESHOLD_ON + i, THRESHOLD_OFF + i]);
         let mut settings = Vec::new();
-        for address in PLAIN_SETTINGS.into_iter().chain(thresholds) {
+        for address in mmu_firmware::registers::settings(usize::from(slots)) {
             if let Some(value) = self.read_quietly(address)? {
                 settings.push((address, value));
             }
@@ -197,16 +180,15 @@ impl<L: Target> Session<L> {
     }
 }
 
-/// What setting `address` is, for the file's comments.
+/// What setting `address` is, for the file's comments: this unit's name, and the MMU3 one the
+/// printer's M707/M708 use where there is one.
 fn setting_name(address: u8) -> String {
-    match address {
-        a if (THRESHOLD_ON..THRESHOLD_ON + 16).contains(&a) => {
-            format!("{}: on threshold", sensor_name(a - THRESHOLD_ON))
-        }
-        a if (THRESHOLD_OFF..THRESHOLD_OFF + 16).contains(&a) => {
-            format!("{}: off threshold", sensor_name(a - THRESHOLD_OFF))
-        }
-        a => register_name(a).map_or_else(|| format!("register 0x{a:02x}"), str::to_string),
+    let own = mmu_firmware::registers::describe(address, mmu_firmware::MAX_SLOTS).map(|r| r.to_string());
+    match (own, register_name(address)) {
+        (Some(own), Some(mmu3)) => format!("{own} (MMU3 {mmu3})"),
+        (Some(own), None) => own,
+        (None, Some(mmu3)) => mmu3.to_string(),
+        (None, None) => format!("register 0x{address:02x}"),
     }
 }
 
@@ -245,7 +227,8 @@ mod tests {
         assert!(error.starts_with("line 2:"), "{error}");
         let error = parse_settings("0x22 70000\n").unwrap_err();
         assert!(error.contains("too large"), "{error}");
-        assert_eq!(setting_name(0x93), "slot 0 filament: on threshold");
-        assert_eq!(setting_name(0xa4), "slot 0 motor Hall: off threshold");
+        assert_eq!(setting_name(0x93), "threshold_on.slot0.filament");
+        assert_eq!(setting_name(0xa4), "threshold_off.slot0.hall");
+        assert_eq!(setting_name(0x22), "bowden_mm (MMU3 Bowden_Length)");
     }
 }
