@@ -1,11 +1,14 @@
 //! `mmu encode` and `mmu decode`: build frames exactly as on the wire, and explain frames or
 //! printer log lines.
 //!
-//! `decode` reads stdin line by line and prints one line per input line, so it can sit at the end
-//! of a pipe (`tail -f serial.log | mmu decode`). A line holds either a bare frame (`T0*a4`) or a
-//! printer log line with a direction marker (`MMU2:>T0*a4.` for a request, `MMU2:<T0 E8003*13.`
-//! for a response; the trailing `.` is the log's newline marker). Without a marker both decoders
-//! are tried.
+//! `decode` reads stdin line by line and prints one line per input line (`--frames-only`: per
+//! frame), so it can sit at the end of a pipe (`tail -f serial.log | mmu decode`). A line holds
+//! either a bare frame (`T0*a4`) or a printer log line with a direction marker (`MMU2:>T0*a4.` for
+//! a request, `MMU2:<T0 E8003*13.` for a response; the trailing `.` is the log's newline marker),
+//! after the time a logger stamped ([`log_line`]), which is kept. Without a marker both decoders
+//! are tried. A line that is no MMU frame at all is said to be one, not reported as broken.
+
+mod log_line;
 
 use std::error::Error;
 use std::io::{self, BufRead, Write};
@@ -57,6 +60,9 @@ pub struct DecodeArgs {
     /// Print one JSON object per line instead of text.
     #[arg(long)]
     pub json: bool,
+    /// Print only the lines that hold an MMU frame (or a broken one); drop the rest of the log.
+    #[arg(long)]
+    pub frames_only: bool,
 }
 
 /// The message built by `mmu encode`, or a usage error (`VALUE2` given to, or missing from, `W`).
@@ -108,15 +114,21 @@ pub fn encode(command: &EncodeCommand) -> Result<(), Box<dyn Error>> {
 pub fn decode(args: &DecodeArgs) -> Result<(), Box<dyn Error>> {
     let stdin = io::stdin();
     let stdout = io::stdout();
-    match decode_stream(stdin.lock(), stdout.lock(), args.json) {
+    match decode_stream(stdin.lock(), stdout.lock(), args.json, args.frames_only) {
         // A closed pipe (`mmu decode | head`) is the reader's choice, not an error.
         Err(err) if err.kind() == io::ErrorKind::BrokenPipe => Ok(()),
         other => Ok(other?),
     }
 }
 
-/// Explains every line of `input` on `output`, one line each.
-pub fn decode_stream(mut input: impl BufRead, mut output: impl Write, json: bool) -> io::Result<()> {
+/// Explains every line of `input` on `output`, one line each (`frames_only`: only the lines
+/// holding a frame).
+pub fn decode_stream(
+    mut input: impl BufRead,
+    mut output: impl Write,
+    json: bool,
+    frames_only: bool,
+) -> io::Result<()> {
     let mut line = Vec::new();
     loop {
         line.clear();
@@ -126,6 +138,9 @@ pub fn decode_stream(mut input: impl BufRead, mut output: impl Write, json: bool
         // Logs are ASCII; anything else is kept visible rather than refused.
         let text = String::from_utf8_lossy(&line);
         let decoded = decode_line(&text);
+        if frames_only && matches!(decoded.what, Decoded::Other { .. }) {
+            continue;
+        }
         if json {
             let object = serde_json::to_string(&decoded.to_json()).map_err(io::Error::other)?;
             writeln!(output, "{object}")?;
@@ -150,7 +165,7 @@ enum Direction {
 /// The frame text in a line, and the direction its marker gives; `None` when there is no text.
 fn extract_frame(line: &str) -> Option<(Direction, &str)> {
     let line = line.trim();
-    let marker = ["MMU2:>", "MMU2:<"]
+    let marker = ["MMU2:>", "MMU2:<", "MMU3:>", "MMU3:<"]
         .iter()
         .filter_map(|m| line.find(m).map(|at| (at, m)))
         .min_by_key(|(at, _)| *at);
@@ -246,26 +261,73 @@ enum Decoded {
         received_crc: u8,
         computed_crc: u8,
     },
-    Invalid {
-        input: String,
-        reason: String,
-    },
+    /// Looks like a frame (or is marked as one) but does not decode.
+    Invalid { input: String, reason: String },
+    /// Not an MMU frame: another device's line, G-code, a log message.
+    Other { input: String, reason: String },
 }
 
-/// Decodes one input line.
-fn decode_line(line: &str) -> Decoded {
-    let input = line.trim_end_matches(['\r', '\n']).to_string();
-    let Some((direction, text)) = extract_frame(line) else {
-        let reason = if line.trim().is_empty() {
-            "empty line"
-        } else {
-            "no frame in the line"
-        };
+/// A decoded line with the time its logger stamped on it.
+#[derive(Debug)]
+struct DecodedLine {
+    time: Option<String>,
+    what: Decoded,
+}
+
+/// Decodes one input line, keeping its time.
+fn decode_line(line: &str) -> DecodedLine {
+    let input = line.trim_end_matches(['\r', '\n']);
+    let log = log_line::split(input);
+    let other = |reason: &str| Decoded::Other {
+        input: input.to_string(),
+        reason: reason.to_string(),
+    };
+    let what = if input.trim().is_empty() {
+        other("empty line")
+    } else if log.sent_to_printer {
+        other("not an MMU line (the host's G-code to the printer)")
+    } else {
+        match decode_frame(input, log.rest) {
+            // A logged line that holds no frame is the log's own business.
+            Decoded::Invalid { .. } if log.logged && !has_marker(log.rest) => other("not an MMU line"),
+            decoded => decoded,
+        }
+    };
+    DecodedLine {
+        time: log.time.map(str::to_string),
+        what,
+    }
+}
+
+/// Whether `text` carries a printer's MMU frame marker.
+fn has_marker(text: &str) -> bool {
+    ["MMU2:>", "MMU2:<", "MMU3:>", "MMU3:<"]
+        .iter()
+        .any(|m| text.contains(m))
+}
+
+/// Decodes the frame in `text` (the line after its logger's prefix; `line` is the whole line).
+fn decode_frame(line: &str, text: &str) -> Decoded {
+    let input = line.to_string();
+    let Some((direction, text)) = extract_frame(text) else {
         return Decoded::Invalid {
+            input,
+            reason: "a frame marker without a frame".to_string(),
+        };
+    };
+    if direction == Direction::Unknown && !text.contains('*') {
+        // Every MMU frame ends in `*<crc>`; anything without one is another device's line or a
+        // log message.
+        let reason = if text.contains("MMU2:") || text.contains("MMU3:") {
+            "not a frame: an MMU log message"
+        } else {
+            "not an MMU line"
+        };
+        return Decoded::Other {
             input,
             reason: reason.to_string(),
         };
-    };
+    }
 
     let request = || {
         let mut decoder = RequestDecoder::new();
@@ -303,11 +365,11 @@ fn decode_line(line: &str) -> Decoded {
         Verdict::Rejected(reason) => Err(reason),
     };
 
-    if direction == Direction::Unknown && text.contains("MMU2:") {
+    if direction == Direction::Unknown && (text.contains("MMU2:") || text.contains("MMU3:")) {
         // A printer log line without a `>`/`<` marker is a log message, not a frame.
-        return Decoded::Invalid {
+        return Decoded::Other {
             input,
-            reason: "no frame in the line (a log line without a MMU2:> or MMU2:< marker)".to_string(),
+            reason: "not a frame: an MMU log message".to_string(),
         };
     }
 
@@ -336,8 +398,11 @@ fn decode_line(line: &str) -> Decoded {
 /// One line of `mmu decode --json`. Absent fields are left out.
 #[derive(Debug, Serialize)]
 struct JsonLine {
-    /// `request`, `response` or `invalid`.
+    /// `request`, `response`, `invalid` (a broken frame) or `other` (no MMU frame).
     kind: &'static str,
+    /// The time the logger stamped on the line, as written.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    time: Option<String>,
     #[serde(skip_serializing_if = "Option::is_none")]
     code: Option<String>,
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -366,6 +431,7 @@ impl JsonLine {
     fn empty(kind: &'static str) -> Self {
         JsonLine {
             kind,
+            time: None,
             code: None,
             value: None,
             value2: None,
@@ -426,6 +492,7 @@ impl Decoded {
                 crc_text(*received_crc, *computed_crc)
             ),
             Decoded::Invalid { reason, .. } => format!("invalid: {reason}"),
+            Decoded::Other { reason, .. } => reason.clone(),
         }
     }
 
@@ -461,6 +528,28 @@ impl Decoded {
                 input: Some(input.clone()),
                 ..JsonLine::empty("invalid")
             },
+            Decoded::Other { input, reason } => JsonLine {
+                reason: Some(reason.clone()),
+                input: Some(input.clone()),
+                ..JsonLine::empty("other")
+            },
+        }
+    }
+}
+
+impl DecodedLine {
+    /// `TIME  explanation`, or the explanation alone.
+    fn to_human(&self) -> String {
+        match &self.time {
+            Some(time) => format!("{time}  {}", self.what.to_human()),
+            None => self.what.to_human(),
+        }
+    }
+
+    fn to_json(&self) -> JsonLine {
+        JsonLine {
+            time: self.time.clone(),
+            ..self.what.to_json()
         }
     }
 }
@@ -524,6 +613,10 @@ pub(crate) fn parse_u16(text: &str) -> Result<u16, String> {
 mod tests {
     use super::*;
 
+    fn decode_line_what(line: &str) -> Decoded {
+        decode_line(line).what
+    }
+
     #[test]
     fn numbers() {
         assert_eq!(parse_u8("0"), Ok(0));
@@ -572,37 +665,43 @@ mod tests {
 
     #[test]
     fn direction_is_guessed_without_a_marker() {
-        assert!(matches!(decode_line("Wb 5*33"), Decoded::Request { .. }));
-        assert!(matches!(decode_line("Wb A*5c"), Decoded::Response { .. }));
-        assert!(matches!(decode_line("Wb R*63"), Decoded::Response { .. }));
-        assert!(matches!(decode_line("T1*cf"), Decoded::Request { .. }));
-        assert!(matches!(decode_line("T1 A*27"), Decoded::Response { .. }));
-        assert!(matches!(decode_line("hello"), Decoded::Invalid { .. }));
+        assert!(matches!(decode_line_what("Wb 5*33"), Decoded::Request { .. }));
+        assert!(matches!(decode_line_what("Wb A*5c"), Decoded::Response { .. }));
+        assert!(matches!(decode_line_what("Wb R*63"), Decoded::Response { .. }));
+        assert!(matches!(decode_line_what("T1*cf"), Decoded::Request { .. }));
+        assert!(matches!(decode_line_what("T1 A*27"), Decoded::Response { .. }));
+        assert!(matches!(decode_line_what("hello"), Decoded::Other { .. }));
         assert!(matches!(
-            decode_line("MMU2:Command rejected"),
-            Decoded::Invalid { .. }
+            decode_line_what("MMU2:Command rejected"),
+            Decoded::Other { .. }
         ));
     }
 
     #[test]
     fn a_marker_forces_the_direction() {
-        assert!(matches!(decode_line("MMU2:<T1*cf."), Decoded::Invalid { .. }));
-        assert!(matches!(decode_line("MMU2:>T1 A*27."), Decoded::Invalid { .. }));
+        assert!(matches!(
+            decode_line_what("MMU2:<T1*cf."),
+            Decoded::Invalid { .. }
+        ));
+        assert!(matches!(
+            decode_line_what("MMU2:>T1 A*27."),
+            Decoded::Invalid { .. }
+        ));
     }
 
     #[test]
     fn stream_gives_one_line_per_line() {
         let input = b"T1*cf\n\nnonsense\nMMU2:<T0 E8003*13.\n";
         let mut out = Vec::new();
-        decode_stream(&input[..], &mut out, false).expect("in-memory io");
+        decode_stream(&input[..], &mut out, false, false).expect("in-memory io");
         let text = String::from_utf8(out).expect("ascii");
         let lines: Vec<_> = text.lines().collect();
         assert_eq!(
             lines,
             [
                 "request T1 tool change slot 1, CRC ok",
-                "invalid: empty line",
-                "invalid: not a request (unknown code 'n') nor a response (unknown code 'n')",
+                "empty line",
+                "not an MMU line",
                 "response T0 E8003 FSENSOR_DIDNT_SWITCH_ON (printer screen 04103), CRC ok",
             ]
         );
