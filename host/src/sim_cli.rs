@@ -188,24 +188,35 @@ impl Server {
         output: &mut dyn Write,
     ) -> Result<bool, Box<dyn Error>> {
         let mut sent = Vec::new();
-        if !self.notes.quiet && !received.is_empty() {
+        // The log of this batch, in the simulator's time order: what the printer sent, what the
+        // unit answered (at the step it answered in), what happened.
+        let mut log: Vec<(u64, String)> = Vec::new();
+        let logging = !self.notes.quiet;
+        if logging && !received.is_empty() {
             let at = self.sim.now_ms();
-            for line in self.wire.printer_sent(received) {
-                self.notes.at(at, &line);
-            }
+            log.extend(
+                self.wire
+                    .printer_sent(received)
+                    .into_iter()
+                    .map(|line| (at, line)),
+            );
         }
         for _ in 0..steps {
+            let before = sent.len();
             self.sim.step(received, &mut sent);
             received.clear();
-        }
-        let open = self.send(output, &sent)?;
-        if !self.notes.quiet && !sent.is_empty() {
-            let at = self.sim.now_ms();
-            for line in self.wire.unit_sent(&sent) {
-                self.notes.at(at, &line);
+            if logging && sent.len() > before {
+                let at = self.sim.now_ms();
+                let lines = self.wire.unit_sent(sent.get(before..).unwrap_or(&[]));
+                log.extend(lines.into_iter().map(|line| (at, line)));
             }
         }
-        self.record_events()?;
+        let open = self.send(output, &sent)?;
+        log.extend(self.record_events()?);
+        log.sort_by_key(|(at, _)| *at);
+        for (at, line) in log {
+            self.notes.at(at, &line);
+        }
         Ok(open)
     }
 
@@ -248,24 +259,21 @@ impl Server {
         }
     }
 
-    /// Write the simulator's new events to the events file and the notable ones to stderr. The
-    /// lines go out in one write, so that a reader following the file never sees half a line.
-    fn record_events(&mut self) -> Result<(), Box<dyn Error>> {
+    /// Write the simulator's new events to the events file; returns the notes on the notable
+    /// ones for stderr. The lines go out in one write, so that a reader following the file never
+    /// sees half a line.
+    fn record_events(&mut self) -> Result<Vec<(u64, String)>, Box<dyn Error>> {
         let events = self.sim.take_events();
-        if events.is_empty() {
-            return Ok(());
-        }
-        for event in &events {
-            if let Some(note) = event_note(event) {
-                self.notes.at(event.t_ms, &note);
-            }
-        }
+        let notes = events
+            .iter()
+            .filter_map(|event| event_note(event).map(|note| (event.t_ms, note)))
+            .collect();
         if let Some(file) = &mut self.events {
             let lines: String = events.iter().map(|event| event.to_json() + "\n").collect();
             file.write_all(lines.as_bytes())
                 .map_err(|err| format!("cannot write the events file: {err}"))?;
         }
-        Ok(())
+        Ok(notes)
     }
 }
 
