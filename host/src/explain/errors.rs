@@ -97,26 +97,28 @@ pub fn error_help(error: ErrorCode) -> ErrorHelp {
 mod tests {
     use super::*;
 
+    /// Every error the firmware raises (src/ops.rs, src/app.rs).
+    const RAISED: [ErrorCode; 13] = [
+        ErrorCode::FINDA_DIDNT_SWITCH_ON,
+        ErrorCode::FINDA_DIDNT_SWITCH_OFF,
+        ErrorCode::FSENSOR_DIDNT_SWITCH_ON,
+        ErrorCode::FSENSOR_DIDNT_SWITCH_OFF,
+        ErrorCode::FILAMENT_ALREADY_LOADED,
+        ErrorCode::INVALID_TOOL,
+        ErrorCode::FINDA_VS_EEPROM_DISREPANCY,
+        ErrorCode::FSENSOR_TOO_EARLY,
+        ErrorCode::FINDA_FLICKERS,
+        ErrorCode::FILAMENT_EJECTED,
+        ErrorCode::STALLED_PULLEY,
+        ErrorCode::MOVE_PULLEY_FAILED,
+        ErrorCode::INTERNAL,
+    ];
+
     /// Every error the firmware raises has its own explanation, in this unit's words.
     #[test]
     fn every_raised_error_is_explained_in_this_units_words() {
-        let raised = [
-            ErrorCode::FINDA_DIDNT_SWITCH_ON,
-            ErrorCode::FINDA_DIDNT_SWITCH_OFF,
-            ErrorCode::FSENSOR_DIDNT_SWITCH_ON,
-            ErrorCode::FSENSOR_DIDNT_SWITCH_OFF,
-            ErrorCode::FILAMENT_ALREADY_LOADED,
-            ErrorCode::INVALID_TOOL,
-            ErrorCode::FINDA_VS_EEPROM_DISREPANCY,
-            ErrorCode::FSENSOR_TOO_EARLY,
-            ErrorCode::FINDA_FLICKERS,
-            ErrorCode::FILAMENT_EJECTED,
-            ErrorCode::STALLED_PULLEY,
-            ErrorCode::MOVE_PULLEY_FAILED,
-            ErrorCode::INTERNAL,
-        ];
         let fallback = error_help(ErrorCode::HOMING_SELECTOR_FAILED);
-        for error in raised {
+        for error in RAISED {
             let help = error_help(error);
             assert_ne!(help, fallback, "{error} is not explained");
             for words in [help.meaning, help.check] {
@@ -125,6 +127,20 @@ mod tests {
                     assert!(!lower.contains(mmu3), "{error}: {mmu3} in {words:?}");
                 }
             }
+        }
+    }
+
+    /// The README's error table says what `mmu` says: each raised error's "what to check".
+    #[test]
+    fn the_readme_error_table_says_the_same() {
+        let readme = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../README.md"))
+            .expect("the README is readable");
+        for error in RAISED {
+            let row = readme
+                .lines()
+                .find(|line| line.starts_with(&format!("| `{:04x}` {error} |", error.0)))
+                .unwrap_or_else(|| panic!("no README row for {error}"));
+            assert!(row.contains(error_help(error).check), "{error}: {row}");
         }
     }
 }
