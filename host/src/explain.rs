@@ -123,7 +123,7 @@ pub fn parse_register(text: &str) -> Result<u8, String> {
 /// filament-state values, in this unit's words).
 pub fn lane_state(value: u16) -> &'static str {
     match value {
-        0 => "empty or not known",
+        0 => "none or not known",
         1 => "parked",
         2 => "in the hub or the Bowden tube",
         4 => "at the printer's filament sensor",

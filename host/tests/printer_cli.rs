@@ -318,7 +318,7 @@ fn registers_by_name_with_their_values_explained() {
     let out = printer_ok(&["read", "filtered.hub.filament"]);
     assert!(out.contains("register 0x70 filtered.hub.filament = "), "{out}");
     let out = printer_ok(&["read", "0xb9"]);
-    assert!(out.contains("lane.slot1 = 0 (empty or not known)"), "{out}");
+    assert!(out.contains("lane.slot1 = 0 (none or not known)"), "{out}");
     let out = printer_ok(&["--fault", "disconnect:slot-filament-1", "read", "0x50"]);
     assert!(out.contains("stuck at a rail: slot1.filament"), "{out}");
     let out = printer_ok(&["write", "bowden_mm", "400"]);

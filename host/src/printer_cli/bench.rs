@@ -69,7 +69,7 @@ impl<L: Target> Session<L> {
             let lane = read(LANE)?;
             let plural = |n: u16, word: &str| format!("{n} {word}{}", if n == 1 { "" } else { "s" });
             self.console.say(&format!(
-                "slot {slot}: {}, {}, {metres} m fed, filament {}",
+                "slot {slot}: {}, {}, {metres} m fed, filament: {}",
                 plural(changes, "tool change"),
                 plural(errors, "error"),
                 lane_state(lane)
