@@ -99,7 +99,7 @@ pub struct SimTargetArgs {
 /// What `mmu printer` does, as the printer's menus and G-codes would.
 #[derive(Debug, Subcommand)]
 pub enum Action {
-    /// Connect; show the unit's version, its state (the first Q0 answer), FINDA and the polled
+    /// Connect; show the unit's version, its state (the first Q0 answer), the hub filament sensor and the polled
     /// registers.
     Status,
     /// Tool change `T<SLOT>`: the loaded slot comes out, SLOT goes to the nozzle.
@@ -116,14 +116,14 @@ pub enum Action {
     },
     /// Unload `U0`: the loaded filament goes back to its park position.
     Unload,
-    /// Eject: `U0` if FINDA sees filament, then `E<SLOT>`; the printer's FILAMENT_EJECTED dialog
+    /// Eject: `U0` if the hub filament sensor (FINDA) sees filament, then `E<SLOT>`; the printer's FILAMENT_EJECTED dialog
     /// is answered with Continue (`B1`).
     Eject {
         /// The slot.
         #[arg(value_parser = parse_u8)]
         slot: u8,
     },
-    /// Cut: `U0` if FINDA sees filament, then `K<SLOT>`.
+    /// Cut: `U0` if the hub filament sensor sees filament, then `K<SLOT>`.
     Cut {
         /// The slot.
         #[arg(value_parser = parse_u8)]
@@ -443,8 +443,10 @@ impl<L: Target> Session<L> {
 
     fn unload_if_finda(&mut self) -> Result<(), Failure> {
         if self.printer.finda() {
-            self.console
-                .note(self.now_ms(), "FINDA sees filament: the printer unloads first");
+            self.console.note(
+                self.now_ms(),
+                "the hub filament sensor (the printer's FINDA) sees filament: the printer unloads first",
+            );
             self.command(Request::new(RequestCode::Unload, 0))?;
         }
         Ok(())
@@ -464,7 +466,7 @@ impl<L: Target> Session<L> {
         details.extend(state_details(state));
         let finda = self.printer.finda();
         let seen = if finda { "filament present" } else { "no filament" };
-        self.console.say(&format!("FINDA: {seen}"));
+        self.console.say(&format!("hub filament sensor (FINDA): {seen}"));
         details.insert("finda".into(), finda.into());
         self.console.say("polled registers:");
         let mut registers = Vec::new();

@@ -310,3 +310,43 @@ fn the_simulator_log_is_silenced_by_q() {
     );
     assert!(String::from_utf8_lossy(&output.stdout).contains("S0 A3"));
 }
+
+/// `mmu sensors` on a serial port: the simulator behind a pty, as a real unit behind an adapter.
+#[test]
+fn sensors_over_a_serial_port() {
+    let sim = PtySim::spawn("sensors", &["--quiet"]);
+    let out = ok(&[
+        "sensors",
+        "--port",
+        &sim.path,
+        "--csv",
+        "--seconds",
+        "1",
+        "--every",
+        "200",
+    ]);
+    let lines: Vec<&str> = out.lines().collect();
+    assert!(
+        lines
+            .first()
+            .is_some_and(|h| h.starts_with("t_ms,hub_filament_raw")),
+        "{out}"
+    );
+    assert!(lines.len() >= 3, "a header and samples: {out}");
+    let file = temp("port.png");
+    let out = ok(&[
+        "sensors",
+        "--port",
+        &sim.path,
+        "--plot",
+        file.to_str().expect("UTF-8"),
+        "--seconds",
+        "1",
+    ]);
+    assert!(out.contains("drawn to"), "{out}");
+    assert_eq!(
+        &std::fs::read(&file).expect("the PNG was written")[..4],
+        b"\x89PNG"
+    );
+    let _ = std::fs::remove_file(file);
+}

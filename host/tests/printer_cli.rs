@@ -172,7 +172,7 @@ fn status_shows_version_state_and_registers() {
     for expected in [
         "unit firmware: 3.0.3, build 1",
         "state (Q0): X0 F0 (finished OK)",
-        "FINDA: no filament",
+        "hub filament sensor (FINDA): no filament",
         "register 0x08 FINDA_State = 0",
         "register 0x1b Selector_Slot",
     ] {
@@ -217,7 +217,7 @@ fn the_demo_runs_its_script() {
     for expected in [
         "connected: unit firmware 3.0.3",
         "T2: finished OK",
-        "FINDA sees filament: the printer unloads first",
+        "the hub filament sensor (the printer's FINDA) sees filament: the printer unloads first",
         "E1: printer dialog FILAMENT_EJECTED",
         "L1: finished OK",
         "demo: 5 tool changes (T0 ",
