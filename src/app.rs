@@ -8,15 +8,16 @@
 //! command's progress, error or result, bad frames and `F` get silence, `X` resets the board.
 
 use heapless::Vec;
-use mmu_hal_port::{Duty, MotorCommand, Samples};
+use mmu_hal_port::{MotorCommand, Samples};
 use mmu_protocol::{
     ButtonCode, ErrorCode, ParamCode, Request, RequestCode, RequestDecoder, Response, ResultCode,
 };
 
 use crate::config::Config;
-use crate::ops::{self, Operation, Status, follow_duty};
+use crate::drive::{self, Budget, Motion, follow_duty};
 use crate::persist::{Counters, MAX_SETTINGS, Snapshot};
 use crate::registers;
+use crate::runner::{Runner, Status};
 use crate::time::Instant;
 use crate::unit::{Lane, Unit};
 
@@ -56,7 +57,7 @@ pub struct Outputs<const N: usize> {
 pub struct App<const N: usize> {
     pub(crate) config: Config,
     pub(crate) unit: Unit<N>,
-    pub(crate) operation: Operation,
+    operation: Runner,
     pub(crate) counters: Counters<N>,
     /// Responses that did not fit a step's transmit buffer (not persisted).
     pub(crate) dropped_responses: u16,
@@ -81,7 +82,7 @@ impl<const N: usize> App<N> {
         App {
             config,
             unit: Unit::default(),
-            operation: Operation::new((RequestCode::Reset, 0), &[ops::Phase::CheckSensors]),
+            operation: Runner::new((RequestCode::Reset, 0), &crate::commands::start_up::plan()),
             counters: Counters::default(),
             dropped_responses: 0,
             odometry_seen: [0; N],
@@ -103,7 +104,7 @@ impl<const N: usize> App<N> {
     }
 
     /// The command being carried out (or the last one).
-    pub fn operation(&self) -> &Operation {
+    pub fn operation(&self) -> &Runner {
         &self.operation
     }
 
@@ -111,7 +112,7 @@ impl<const N: usize> App<N> {
     /// last step.
     pub fn step(&mut self, now: Instant, samples: &Samples<N>, rx: &[u8]) -> Outputs<N> {
         let mut out = Outputs {
-            motors: [MotorCommand::Coast; N],
+            motors: drive::stopped(),
             tx: Vec::new(),
             action: None,
             status_led: false,
@@ -149,8 +150,8 @@ impl<const N: usize> App<N> {
         }
         if self.operation.request.0 == RequestCode::Tool {
             self.pending_button = Some(button);
-        } else if button == ButtonCode::MIDDLE {
-            self.operation.retry(&self.config);
+        } else {
+            self.operation.press(button, &self.config);
         }
     }
 
@@ -180,9 +181,7 @@ impl<const N: usize> App<N> {
                 Response::rejected(request)
             }),
             RequestCode::Button => {
-                if request.value == ButtonCode::MIDDLE.0 {
-                    self.operation.retry(&self.config);
-                }
+                self.operation.press(ButtonCode(request.value), &self.config);
                 Some(Response::accepted(request))
             }
             RequestCode::FilamentSensor => {
@@ -224,10 +223,7 @@ impl<const N: usize> App<N> {
         {
             self.unit.selected = Some(request.value.into());
         }
-        self.operation = match ops::plan(request.code, request.value, &self.unit, &self.config) {
-            Ok(plan) => Operation::new(key, &plan),
-            Err(error) => Operation::failed(key, error),
-        };
+        self.operation = Runner::start(key, &self.unit, &self.config);
         Response::bare(request.code, request.value, ParamCode::Accepted)
     }
 
@@ -334,7 +330,7 @@ impl<const N: usize> App<N> {
                 if let Some(count) = self
                     .operation
                     .phase()
-                    .and_then(ops::Phase::slot)
+                    .and_then(crate::phases::Phase::slot)
                     .and_then(|s| self.counters.failures.get_mut(s))
                 {
                     *count = count.saturating_add(1);
@@ -358,28 +354,36 @@ impl<const N: usize> App<N> {
     fn drive_motors(&mut self, now: Instant, out: &mut Outputs<N>) {
         let driving = self.operation.driving_slot();
         let tension = self.unit.hub.tension.reading();
-        for (slot, (feeder, motor)) in self
-            .unit
-            .feeders
+        let unit = &mut self.unit;
+        for (slot, (motor, (drive, feeder))) in out
+            .motors
             .iter_mut()
-            .zip(out.motors.iter_mut())
+            .zip(unit.drives.iter_mut().zip(unit.feeders.iter()))
             .enumerate()
         {
             if Some(slot) != driving {
-                let duty = match self.unit.lanes.get(slot) {
-                    Some(Lane::Loaded) => follow_duty(0, tension, &self.config),
-                    _ => Duty::ZERO,
-                };
-                if duty == Duty::ZERO {
-                    feeder.release(now, &self.config);
+                let follows = unit.lanes.get(slot) == Some(&Lane::Loaded)
+                    && follow_duty(0, tension, &self.config).permille() > 0;
+                if follows {
+                    if !drive.is_supervising() {
+                        drive.begin(FOLLOWER, feeder, now);
+                    }
+                    let _ = drive.run(Motion::Follow { speed: 0 }, feeder, tension, now, &self.config);
                 } else {
-                    feeder.push(duty, now, &self.config);
+                    drive.release(now);
                 }
             }
-            *motor = feeder.command();
+            *motor = drive.command();
         }
     }
 }
+
+/// The tension follower's budget while printing.
+const FOLLOWER: Budget = Budget {
+    max_mm: u16::MAX,
+    max_ms: u64::MAX,
+    error: ErrorCode::STALLED_PULLEY,
+};
 
 impl<const N: usize> Default for App<N> {
     fn default() -> Self {

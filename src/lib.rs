@@ -9,11 +9,15 @@
 #![warn(missing_docs)]
 
 pub mod app;
+pub mod commands;
 pub mod config;
+pub mod control;
+pub mod drive;
 pub mod feeder;
-pub mod ops;
 pub mod persist;
+pub mod phases;
 pub mod registers;
+pub mod runner;
 pub mod sensor;
 pub mod time;
 pub mod unit;

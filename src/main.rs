@@ -36,9 +36,9 @@ use embassy_futures::block_on;
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_time::{Duration, Instant as Clock, Ticker};
+use mmu_firmware::control::{self, ControlLoop, ResetBoard, Tick};
 use mmu_firmware::persist::{Boot, Keeper, Store};
-use mmu_firmware::{App, BoardAction, Config, Instant, MotorCommand, Outputs, Samples};
-use mmu_protocol::ButtonCode;
+use mmu_firmware::{App, BoardAction, Config, Instant, Samples, drive};
 use static_cell::StaticCell;
 
 use board::SLOTS;
@@ -47,18 +47,10 @@ use board::SLOTS;
 const CONTROL_PERIOD: Duration = Duration::from_millis(1);
 /// Period of the sensor scan.
 const SAMPLE_PERIOD: Duration = Duration::from_millis(1);
-/// A step that starts later than this after its tick does not feed the watchdog.
-const ON_TIME: Duration = Duration::from_millis(2);
-/// Samples older than this do not feed the watchdog (the sampler stalled).
-const MAX_SAMPLE_AGE: Duration = Duration::from_millis(5);
 /// Most bytes handed to one step: 5x what 115200 Bd delivers per millisecond.
 const RX_CHUNK: usize = 64;
-/// The button must read the same for this long to count.
-const DEBOUNCE: Duration = Duration::from_millis(20);
 /// The longest a reset waits for the last response to leave the UART.
 const FLUSH_BEFORE_RESET: Duration = Duration::from_millis(20);
-/// Interval of the statistics log line.
-const STATS_PERIOD: Duration = Duration::from_secs(60);
 
 /// The latest sensor scan and when it was taken (`None` before the first one).
 static LATEST: Mutex<CriticalSectionRawMutex, Cell<Option<(Clock, Samples<SLOTS>)>>> =
@@ -95,12 +87,10 @@ async fn sample_task(mut sampler: board::Sampler) {
 
 #[embassy_executor::task]
 async fn control_task(mut board: board::Control, flash: board::StoreFlash) {
-    let mut app = App::<SLOTS>::new(Config::default());
-    let mut persisted = Persisted::boot(&mut app, flash);
+    let mut control = ControlLoop::new(App::<SLOTS>::new(Config::default()), millis(Clock::now()));
+    let mut persisted = Persisted::boot(control.app_mut(), flash);
     let mut ticker = Ticker::every(CONTROL_PERIOD);
     let mut deadline = Clock::now() + CONTROL_PERIOD;
-    let mut button = Debounce::new(Clock::now());
-    let mut stats = Stats::new(Clock::now());
     let mut rx = [0u8; RX_CHUNK];
     loop {
         ticker.next().await;
@@ -112,61 +102,108 @@ async fn control_task(mut board: board::Control, flash: board::StoreFlash) {
         let Some((taken, samples)) = LATEST.lock(Cell::get) else {
             continue;
         };
-        let fresh = now.saturating_duration_since(taken) <= MAX_SAMPLE_AGE;
         let received = board.receive(&mut rx);
-        if button.pressed(board.button_down(), now) {
+        let button_down = board.button_down();
+        let step = control_step(
+            &mut control,
+            &Tick {
+                now: millis(now),
+                lateness_us: lateness.as_micros(),
+                sample_age_us: now.saturating_duration_since(taken).as_micros(),
+                samples: &samples,
+                rx: &rx[..received],
+                button_down,
+            },
+        );
+        if step.button_pressed {
             info!("button: Middle");
-            app.press_button(ButtonCode::MIDDLE);
         }
-
-        let out = step(&mut app, now, &samples, &rx[..received]);
-
-        board.apply(&out.motors);
-        board.set_status_led(out.status_led);
-        if !out.tx.is_empty() && !board.send(&out.tx) {
-            stats.tx_dropped += 1;
+        board.apply(&step.out.motors);
+        board.set_status_led(step.out.status_led);
+        if !step.out.tx.is_empty() && !board.send(&step.out.tx) {
+            control.tx_dropped();
         }
-        if let Some(action) = out.action {
-            perform(action, &mut board, &mut persisted, &app).await;
+        if let Some(action) = step.out.action {
+            info!("board action: {}", action);
+            let mut resetting = Resetting {
+                board: &mut board,
+                persisted: &mut persisted,
+                app: control.app(),
+            };
+            control::reset(&mut resetting, action).await;
         }
-        if lateness <= ON_TIME && fresh {
+        if step.feed_watchdog {
             board.feed_watchdog();
-        } else {
-            stats.unfed += 1;
         }
-        stats.step(now, lateness, fresh);
+        if let Some(stats) = step.report {
+            log_stats(&stats);
+        }
 
         // Last, just after the feed: a write stalls the CPU (see `board::WatchedFlash`; a page
         // erase up to 40 ms), the motors keeping this step's commands meanwhile. The ticks it
         // missed are dropped rather than caught up in a burst of late, unfed steps.
-        if persisted.update(&app, now) {
-            stats.saves += 1;
+        if persisted.update(control.app(), now) {
+            control.saved();
             ticker.reset();
             deadline = Clock::now() + CONTROL_PERIOD;
         }
     }
 }
 
-/// One step of the unit logic. Kept out of line so that its size shows as `mmu_firmware::step` in
-/// `scripts/firmware-size.sh` rather than inside the control task's future.
-#[inline(never)]
-fn step(app: &mut App<SLOTS>, now: Clock, samples: &Samples<SLOTS>, rx: &[u8]) -> Outputs<SLOTS> {
-    app.step(Instant::from_millis(now.as_millis()), samples, rx)
+fn millis(at: Clock) -> Instant {
+    Instant::from_millis(at.as_millis())
 }
 
-/// Carries out a reset request after its response has been sent: the state is saved first
-/// (`X0`), or forgotten (`X42`: blank records, power-cut safe).
-async fn perform(
-    action: BoardAction,
-    board: &mut board::Control,
-    persisted: &mut Persisted,
-    app: &App<SLOTS>,
-) -> ! {
-    info!("board action: {}", action);
-    board.apply(&[MotorCommand::Coast; SLOTS]);
-    board.flush(FLUSH_BEFORE_RESET).await;
-    persisted.before(action, app);
-    board::reset()
+/// One step of the unit logic and its loop policy. Kept out of line so that its size shows as
+/// `mmu_firmware::control_step` in `scripts/firmware-size.sh` rather than inside the task's future.
+#[inline(never)]
+fn control_step(control: &mut ControlLoop<SLOTS>, tick: &Tick<SLOTS>) -> control::Step<SLOTS> {
+    control.step(tick)
+}
+
+/// The board's side of a reset ([`control::reset`] fixes the order).
+struct Resetting<'a> {
+    board: &'a mut board::Control,
+    persisted: &'a mut Persisted,
+    app: &'a App<SLOTS>,
+}
+
+impl ResetBoard for Resetting<'_> {
+    fn stop_motors(&mut self) {
+        self.board.apply(&drive::stopped());
+    }
+
+    async fn flush(&mut self) {
+        self.board.flush(FLUSH_BEFORE_RESET).await;
+    }
+
+    async fn persist(&mut self, action: BoardAction) {
+        self.persisted.before(action, self.app);
+    }
+
+    fn restart(&mut self) {
+        board::reset()
+    }
+}
+
+fn log_stats(stats: &control::Stats) {
+    if stats.troubled() {
+        warn!(
+            "control: {} steps, {} late (max {} us), {} with stale samples, {} watchdog feeds skipped, {} responses dropped, {} flash writes",
+            stats.steps,
+            stats.late,
+            stats.max_lateness_us,
+            stats.stale,
+            stats.unfed,
+            stats.tx_dropped,
+            stats.saves
+        );
+    } else {
+        info!(
+            "control: {} steps on time, max lateness {} us, {} flash writes",
+            stats.steps, stats.max_lateness_us, stats.saves
+        );
+    }
 }
 
 /// The App's state in flash, kept by the policy the simulator runs too ([`Keeper`]).
@@ -230,100 +267,6 @@ impl Persisted {
             Ok(()) => info!("store: {} done", action),
             Err(e) => error!("store: {} failed: {}", action, e),
         }
-    }
-}
-
-/// Turns the raw button level into one event per press.
-struct Debounce {
-    /// The level last read and since when.
-    raw: bool,
-    since: Clock,
-    /// The debounced level.
-    stable: bool,
-}
-
-impl Debounce {
-    fn new(now: Clock) -> Self {
-        Debounce {
-            raw: false,
-            since: now,
-            stable: false,
-        }
-    }
-
-    /// Feeds the current level; true once per press, when it has held for [`DEBOUNCE`].
-    fn pressed(&mut self, down: bool, now: Clock) -> bool {
-        if down != self.raw {
-            self.raw = down;
-            self.since = now;
-        }
-        if self.raw != self.stable && now.saturating_duration_since(self.since) >= DEBOUNCE {
-            self.stable = self.raw;
-            return self.stable;
-        }
-        false
-    }
-}
-
-/// What the control loop counts, logged every [`STATS_PERIOD`].
-struct Stats {
-    since: Clock,
-    steps: u32,
-    late: u32,
-    max_lateness: Duration,
-    stale: u32,
-    unfed: u32,
-    tx_dropped: u32,
-    /// Flash writes (each stalled the CPU).
-    saves: u32,
-}
-
-impl Stats {
-    fn new(now: Clock) -> Self {
-        Stats {
-            since: now,
-            steps: 0,
-            late: 0,
-            max_lateness: Duration::MIN,
-            stale: 0,
-            unfed: 0,
-            tx_dropped: 0,
-            saves: 0,
-        }
-    }
-
-    fn step(&mut self, now: Clock, lateness: Duration, fresh: bool) {
-        self.steps += 1;
-        if lateness > ON_TIME {
-            self.late += 1;
-        }
-        self.max_lateness = self.max_lateness.max(lateness);
-        if !fresh {
-            self.stale += 1;
-        }
-        if now.saturating_duration_since(self.since) < STATS_PERIOD {
-            return;
-        }
-        if self.late + self.stale + self.tx_dropped > 0 {
-            warn!(
-                "control: {} steps, {} late (max {} us), {} with stale samples, {} watchdog feeds skipped, {} responses dropped, {} flash writes",
-                self.steps,
-                self.late,
-                self.max_lateness.as_micros(),
-                self.stale,
-                self.unfed,
-                self.tx_dropped,
-                self.saves
-            );
-        } else {
-            info!(
-                "control: {} steps on time, max lateness {} us, {} flash writes",
-                self.steps,
-                self.max_lateness.as_micros(),
-                self.saves
-            );
-        }
-        *self = Stats::new(now);
     }
 }
 

@@ -16,7 +16,7 @@ use mmu_protocol::{ErrorCode, ProgressCode};
 
 use crate::config::Config;
 use crate::feeder::Feeder;
-use crate::ops::Status;
+use crate::runner::Status;
 use crate::sensor::{AnalogSensor, Thresholds};
 use crate::time::Instant;
 use crate::unit::{Hub, Lane, SensorId};

@@ -4,6 +4,7 @@
 use mmu_hal_port::Samples;
 
 use crate::config::Config;
+use crate::drive::SlotDrive;
 use crate::feeder::Feeder;
 use crate::sensor::{AnalogSensor, PresenceSensor, RailLimits};
 use crate::time::Instant;
@@ -124,8 +125,10 @@ pub struct Hub {
 /// Everything the logic knows about the hardware.
 #[derive(Debug, Clone)]
 pub struct Unit<const N: usize> {
-    /// Per slot feeding systems.
+    /// Per slot feeding systems' sensors.
     pub feeders: [Feeder; N],
+    /// Per slot motors: the only way to move one ([`crate::drive`]).
+    pub drives: [SlotDrive; N],
     /// The hub.
     pub hub: Hub,
     /// Where each slot's filament is.
@@ -141,6 +144,7 @@ impl<const N: usize> Default for Unit<N> {
     fn default() -> Self {
         Unit {
             feeders: [Feeder::default(); N],
+            drives: [SlotDrive::default(); N],
             hub: Hub::default(),
             lanes: [Lane::Unknown; N],
             fsensor: 0,
@@ -157,8 +161,14 @@ impl<const N: usize> Unit<N> {
             high: config.rail_high,
             timeout_ms: config.rail_timeout_ms,
         };
-        for (slot, (feeder, sample)) in self.feeders.iter_mut().zip(samples.slots.iter()).enumerate() {
-            feeder.sense(slot, *sample, now, config, &rails);
+        for (slot, ((feeder, sample), drive)) in self
+            .feeders
+            .iter_mut()
+            .zip(samples.slots.iter())
+            .zip(self.drives.iter())
+            .enumerate()
+        {
+            feeder.sense(slot, *sample, drive.counting(), now, config, &rails);
         }
         let hub = &samples.hub;
         self.hub.filament.update(
@@ -189,6 +199,13 @@ impl<const N: usize> Unit<N> {
     /// The slot whose filament occupies the hub path.
     pub fn active(&self) -> Option<usize> {
         self.lanes.iter().position(|lane| lane.owns_hub())
+    }
+
+    /// Brake `slot`'s motor (a slot the unit does not have: nothing).
+    pub fn brake(&mut self, slot: usize, now: Instant) {
+        if let Some(drive) = self.drives.get_mut(slot) {
+            drive.brake(now);
+        }
     }
 
     /// The lane of `slot` (`Unknown` for a slot the unit does not have).

@@ -5,7 +5,7 @@ mod common;
 
 use common::Rig;
 use common::bounds::Bench;
-use mmu_firmware::ops::Status;
+use mmu_firmware::runner::Status;
 use mmu_firmware::{HubSamples, Samples, SlotSamples};
 use mmu_model::{Fault, Rail, SensorId};
 use mmu_protocol::{Request, RequestCode};

@@ -275,65 +275,11 @@ named_codes! {
 }
 
 impl ErrorCode {
-    /// The error screen a Prusa printer shows for this code (`04103` is printed as 4103), as
-    /// Prusa-Firmware-Buddy's `PrusaErrorCodeIndex` maps it; 4900 (unknown error) when it has none.
+    /// The error screen a Buddy printer (MK4, MK3.5, Core One) shows for this code (`04103` is printed
+    /// as 4103), 4900 (unknown error) when it has none. Other families and the buttons:
+    /// [`crate::screens`].
     pub const fn printer_screen(self) -> u16 {
-        match self.0 {
-            0x8001 => 4101,
-            0x8002 => 4102,
-            0x8003 => 4103,
-            0x8004 => 4104,
-            0x8009 => 4106,
-            0x800a => 4107,
-            0x802a => 4108,
-            0x800c => 4507,
-            0x8047 | 0x804b => 4105,
-            0x8087 => 4115,
-            0x808b => 4116,
-            0x8107 => 4125,
-            0x810b => 4126,
-            0x802e => 4401,
-            0x802d => 4402,
-            0x8005 => 4501,
-            0x8006 => 4502,
-            0x802b => 4503,
-            0x802c => 4504,
-            0x802f => 4505,
-            0x8008 => 4506,
-            code => Self::tmc_screen(code),
-        }
-    }
-
-    /// TMC driver codes: the first axis bit picks the driver (pulley, selector, idler: +0, +10,
-    /// +20), then the first flag in the printer's order picks the screen.
-    const fn tmc_screen(code: u16) -> u16 {
-        let axis_offset = if code & 0x0040 != 0 {
-            0
-        } else if code & 0x0080 != 0 {
-            10
-        } else if code & 0x0100 != 0 {
-            20
-        } else {
-            return 4900;
-        };
-        let base = if code & 0xc200 == 0xc200 {
-            4305
-        } else if code & 0x0200 != 0 {
-            4301
-        } else if code & 0x0400 != 0 {
-            4302
-        } else if code & 0x0800 != 0 {
-            4303
-        } else if code & 0x1000 != 0 {
-            4304
-        } else if code & 0x2000 != 0 {
-            4201
-        } else if code & 0x4000 != 0 {
-            4202
-        } else {
-            return 4900;
-        };
-        base + axis_offset
+        crate::screens::screen_id(self, crate::screens::Family::Buddy)
     }
 }
 
@@ -456,6 +402,10 @@ named_codes! {
 }
 
 /// A button number, in both directions (`B<n>` request and `B<n>` response parameter).
+///
+/// Which screen button a printer sends as which number depends on the screen and the printer family
+/// ([`crate::screens`]): Retry is always `B1`, but FIL. ALREADY LOADED's Unload is `B0` from a Buddy
+/// printer and `B2` from an MK3S, whose Continue there is `B0`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct ButtonCode(pub u8);
@@ -464,7 +414,7 @@ named_codes! {
     ButtonCode(u8) {
         /// Right.
         RIGHT = 0 => "Right",
-        /// Middle: Retry / Continue / Done, the only one the unit acts on in error states.
+        /// Middle: Retry, and Continue/Done on single-button screens (the only one MMU 3.0.3 acts on).
         MIDDLE = 1 => "Middle",
         /// Left.
         LEFT = 2 => "Left",

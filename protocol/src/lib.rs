@@ -24,8 +24,10 @@ mod decoder;
 mod frame;
 mod hex;
 mod message;
+pub mod screens;
 
 pub use codes::{ButtonCode, ErrorCode, ParamCode, ProgressCode, RequestCode, ResultCode};
 pub use decoder::{DecodeError, RequestDecoder, ResponseDecoder};
 pub use frame::{Frame, MAX_FRAME_LEN};
 pub use message::{Request, Response};
+pub use screens::{Action, Button, Family, Screen};

@@ -6,8 +6,8 @@
 //! restart takes it back with [`UnitLogic::into_flash`] and boots a new logic on it.
 
 use embassy_futures::block_on;
-use mmu_firmware::ops::Status;
 use mmu_firmware::persist::{Keeper, Store};
+use mmu_firmware::runner::Status;
 use mmu_firmware::{App, BoardAction, Config, Instant, MAX_SLOTS, MotorCommand};
 use mmu_model::Model;
 use mmu_protocol::{ButtonCode, RequestCode};

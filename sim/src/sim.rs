@@ -10,7 +10,7 @@
 
 use std::collections::VecDeque;
 
-use mmu_firmware::ops::Status;
+use mmu_firmware::runner::Status;
 use mmu_firmware::{Config, Instant};
 use mmu_model::{Model, ModelConfig, Rng};
 use mmu_protocol::{

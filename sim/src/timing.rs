@@ -2,7 +2,7 @@
 //! ran at exactly its configured speed from its first millimetre to its last (no acceleration, no
 //! sensor filtering, no polling). A measured tool change divided by this is the logic's overhead.
 //!
-//! A tool change (`T<slot>`, see `mmu_firmware::ops`) runs these segments, positions in mm from
+//! A tool change (`T<slot>`, see `mmu_firmware::commands::tool_change`) runs these segments, positions in mm from
 //! the hub filament sensor (0), the printer's filament sensor at
 //! [`ModelConfig::bowden_length_mm`]:
 //!

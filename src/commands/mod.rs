@@ -1,0 +1,203 @@
+//! The printer's commands, one module each.
+//!
+//! A command turns a request (`T1`, `L2`, `E0`...) into a [`Plan`] of phases from the catalogue
+//! ([`crate::phases`]), or the error it fails with before anything moves, and says in its
+//! [`Recovery`] table what every button the printer may send does after each error it can raise.
+//! The runner ([`crate::runner`]) carries the plan out and reads the table; nothing else decides
+//! what a button does.
+//!
+//! | request | command | module |
+//! |---|---|---|
+//! | `T<n>` | ToolChange = UnloadFromNozzle + LoadToNozzle | [`tool_change`], [`unload_from_nozzle`], [`load_to_nozzle`] |
+//! | `L<n>` | Preload | [`preload`] |
+//! | `U0` | UnloadFromNozzle | [`unload_from_nozzle`] |
+//! | `E<n>` | Eject | [`eject`] |
+//! | `K<n>` | Cut | [`cut`] |
+//! | `H0` | Home | [`home`] |
+//! | start-up | the start-up check | [`start_up`] |
+
+pub mod cut;
+pub mod eject;
+pub mod home;
+pub mod load_to_nozzle;
+pub mod preload;
+pub mod start_up;
+pub mod tool_change;
+pub mod unload_from_nozzle;
+
+use heapless::Vec;
+use mmu_protocol::{ButtonCode, ErrorCode, RequestCode};
+
+use crate::config::Config;
+use crate::phases::{Phase, sensor_fault_error};
+use crate::unit::{Lane, SensorId, Unit};
+
+/// The longest plan: unload (2 phases) + load to nozzle (4) + eject (2) fits with room.
+pub const MAX_PHASES: usize = 8;
+
+/// The phases of one command, in order.
+pub type Plan = Vec<Phase, MAX_PHASES>;
+
+/// A printer command (or the start-up check).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Command {
+    /// The check after a restart.
+    StartUp,
+    /// `T<n>`.
+    ToolChange,
+    /// `L<n>`.
+    Preload,
+    /// `U0`.
+    UnloadFromNozzle,
+    /// `E<n>`.
+    Eject,
+    /// `K<n>`.
+    Cut,
+    /// `H0`.
+    Home,
+}
+
+/// What a button does in an error state.
+#[derive(Debug, Clone, Copy)]
+pub enum Action {
+    /// Run the failed phase again from wherever the sensors say the filament is (the user has
+    /// looked: the sensors are trusted over the known lanes).
+    RetryPhase,
+    /// The error is a question answered: go on with the next phase.
+    Continue,
+    /// Start over with the plan this function makes for the failed phase's slot.
+    Replan(fn(usize, &Config) -> Plan),
+}
+
+/// One row of a command's recovery table: after `error`, the printer's `button` does `action`.
+/// A button no row names is acknowledged and does nothing.
+#[derive(Debug, Clone, Copy)]
+pub struct Recovery {
+    /// The error shown.
+    pub error: ErrorCode,
+    /// The button sent (`B<n>`).
+    pub button: ButtonCode,
+    /// What the unit does.
+    pub action: Action,
+}
+
+/// Retry (the Middle button) after `error` runs the failed phase again.
+pub(crate) const fn retry(error: ErrorCode) -> Recovery {
+    Recovery {
+        error,
+        button: ButtonCode::MIDDLE,
+        action: Action::RetryPhase,
+    }
+}
+
+/// What every motion phase can raise: a stalled motor, a sensor stuck at a rail, a bound a
+/// drive could not keep. Retry runs the phase again once the cause is fixed.
+const MOTION: &[Recovery] = &[
+    retry(ErrorCode::STALLED_PULLEY),
+    retry(ErrorCode::FINDA_FLICKERS),
+    retry(ErrorCode::MOVE_PULLEY_FAILED),
+    retry(ErrorCode::INTERNAL),
+];
+
+impl Command {
+    /// The command a request starts, if it is one.
+    pub const fn of(code: RequestCode) -> Option<Command> {
+        Some(match code {
+            RequestCode::Tool => Command::ToolChange,
+            RequestCode::Load => Command::Preload,
+            RequestCode::Unload => Command::UnloadFromNozzle,
+            RequestCode::Eject => Command::Eject,
+            RequestCode::Cut => Command::Cut,
+            RequestCode::Home => Command::Home,
+            RequestCode::Reset => Command::StartUp,
+            _ => return None,
+        })
+    }
+
+    /// The plan for this command with argument `value` (a slot for `T L E K`), or the error it
+    /// fails with before anything moves. An empty plan finishes at once.
+    pub fn plan<const N: usize>(self, value: u8, unit: &Unit<N>, config: &Config) -> Result<Plan, ErrorCode> {
+        let slot = usize::from(value);
+        let needs_slot = matches!(
+            self,
+            Command::ToolChange | Command::Preload | Command::Eject | Command::Cut
+        );
+        if needs_slot && slot >= N {
+            return Err(ErrorCode::INVALID_TOOL);
+        }
+        match self {
+            Command::StartUp => Ok(start_up::plan()),
+            Command::ToolChange => tool_change::plan(slot, unit, config),
+            Command::Preload => preload::plan(slot, unit, config),
+            Command::UnloadFromNozzle => unload_from_nozzle::plan(unit),
+            Command::Eject => Ok(eject::plan(slot, unit)),
+            Command::Cut => cut::plan(slot, unit, config),
+            Command::Home => Ok(home::plan()),
+        }
+    }
+
+    /// The recovery tables that apply to this command, its own first.
+    const fn recovery(self) -> &'static [&'static [Recovery]] {
+        match self {
+            Command::StartUp => &[start_up::RECOVERY],
+            Command::ToolChange => &[
+                tool_change::RECOVERY,
+                unload_from_nozzle::RECOVERY,
+                load_to_nozzle::RECOVERY,
+                MOTION,
+            ],
+            Command::Preload => &[preload::RECOVERY, MOTION],
+            Command::UnloadFromNozzle => &[unload_from_nozzle::RECOVERY, MOTION],
+            Command::Eject => &[eject::RECOVERY, unload_from_nozzle::RECOVERY, MOTION],
+            Command::Cut => &[
+                cut::RECOVERY,
+                unload_from_nozzle::RECOVERY,
+                preload::RECOVERY,
+                MOTION,
+            ],
+            Command::Home => &[home::RECOVERY],
+        }
+    }
+
+    /// What `button` does after this command failed with `error`.
+    pub fn on_button(self, error: ErrorCode, button: ButtonCode) -> Option<Action> {
+        self.recovery()
+            .iter()
+            .flat_map(|table| table.iter())
+            .find(|row| row.error == error && row.button == button)
+            .map(|row| row.action)
+    }
+}
+
+/// Append as much of `phases` as fits (every plan built here fits).
+pub(crate) fn extend(plan: &mut Plan, phases: &[Phase]) {
+    for &phase in phases {
+        if plan.push(phase).is_err() {
+            return;
+        }
+    }
+}
+
+/// Whatever occupies the hub path comes out first. With filament in the hub but no slot known
+/// to own it, no motor moves on a guess.
+pub(crate) fn clear_hub<const N: usize>(plan: &mut Plan, unit: &Unit<N>) -> Result<(), ErrorCode> {
+    match (unit.active(), unit.hub_present()) {
+        (Some(active), _) => {
+            extend(plan, &unload_from_nozzle::phases(active));
+            Ok(())
+        }
+        (None, Some(false)) => Ok(()),
+        (None, Some(true)) => Err(ErrorCode::FINDA_VS_EEPROM_DISREPANCY),
+        (None, None) => Err(sensor_fault_error(SensorId::HubFilament)),
+    }
+}
+
+/// How far the hub may be from `slot`'s tip: close from the park position, a slot away from an
+/// unknown position.
+pub(crate) fn hub_search<const N: usize>(slot: usize, unit: &Unit<N>, config: &Config) -> u16 {
+    match unit.lane(slot) {
+        Lane::Parked => config.hub_search_mm,
+        _ => config.preload_max_mm,
+    }
+}

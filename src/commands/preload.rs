@@ -1,0 +1,43 @@
+//! Preload (`L<n>`): slot *n* is fed until the hub sensor sees its tip, then parked, so the next
+//! tool change starts close to the hub.
+//!
+//! `P5` then `P19`. Refused with `8005` while a slot is loaded.
+
+use mmu_protocol::ErrorCode;
+
+use super::{Plan, Recovery, clear_hub, extend, retry};
+use crate::config::Config;
+use crate::phases::Phase;
+use crate::unit::Unit;
+
+/// The plan for `L<slot>`.
+pub fn plan<const N: usize>(slot: usize, unit: &Unit<N>, config: &Config) -> Result<Plan, ErrorCode> {
+    if unit.active().is_some() {
+        return Err(ErrorCode::FILAMENT_ALREADY_LOADED);
+    }
+    let mut plan = Plan::new();
+    clear_hub(&mut plan, unit)?;
+    extend(
+        &mut plan,
+        &[
+            Phase::FeedToHub {
+                slot,
+                max_mm: config.preload_max_mm,
+            },
+            Phase::RetractToPark { slot },
+        ],
+    );
+    Ok(plan)
+}
+
+/// What each error of the preload means and what Retry does.
+pub const RECOVERY: &[Recovery] = &[
+    // `8001`: the hub sensor did not see the tip within the preload distance (or the slot is empty).
+    retry(ErrorCode::FINDA_DIDNT_SWITCH_ON),
+    // `8002`: the hub sensor still sees filament after parking.
+    retry(ErrorCode::FINDA_DIDNT_SWITCH_OFF),
+    // `8005`: a slot is loaded; Continue leaves it so.
+    retry(ErrorCode::FILAMENT_ALREADY_LOADED),
+    // `8008`: filament in the hub that no slot is known to own.
+    retry(ErrorCode::FINDA_VS_EEPROM_DISREPANCY),
+];

@@ -1,0 +1,26 @@
+//! The start-up check: after every restart, before any command, the unit checks that its
+//! sensors are healthy and that the stored lanes agree with the hub sensor. The printer sees it
+//! as the command `X0`.
+//!
+//! `P1a`. Filament in the hub that no slot owns, or a slot recorded past the park position whose
+//! tip the hub sensor does not see, is `8008` (UNLOAD MANUALLY) and no motor moves; a sensor stuck
+//! at a rail is `800a` (hub) or `804b` (slot).
+
+use mmu_protocol::ErrorCode;
+
+use super::{Plan, Recovery, extend, retry};
+use crate::phases::Phase;
+
+/// The plan of the check.
+pub fn plan() -> Plan {
+    let mut plan = Plan::new();
+    extend(&mut plan, &[Phase::CheckSensors]);
+    plan
+}
+
+/// Retry checks again, trusting what the sensors say now over the stored lanes.
+pub const RECOVERY: &[Recovery] = &[
+    retry(ErrorCode::FINDA_VS_EEPROM_DISREPANCY),
+    retry(ErrorCode::FINDA_FLICKERS),
+    retry(ErrorCode::MOVE_PULLEY_FAILED),
+];

@@ -1,0 +1,262 @@
+//! The drive owner: the only code that turns decisions into [`MotorCommand`]s.
+//!
+//! Command phases and the tension follower never set a motor themselves: they ask the slot's
+//! [`SlotDrive`] for a [`Motion`] under a [`Budget`] (distance, time, and the stall rule, which
+//! always applies). The drive turns the motion into a duty, counts the budget from where the
+//! motion began, and refuses to go on past it: the motor is braked and the budget's error is
+//! returned. So whoever asks, no motor runs unsupervised.
+
+use mmu_hal_port::{Direction, Duty, MotorCommand};
+use mmu_protocol::ErrorCode;
+
+use crate::config::Config;
+use crate::feeder::Feeder;
+use crate::time::Instant;
+
+/// How long a braked motor stays braked before it may coast, ms: long enough to stop it, so a
+/// parked tip does not drift on the motor's momentum.
+const BRAKE_HOLD_MS: u64 = 200;
+
+/// Duty added per millimetre the filament lags behind its schedule, per mille.
+const CATCH_UP_GAIN: i32 = 25;
+
+/// How far and how long a supervised motion may go, and what going past it means.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Budget {
+    /// Filament the motor may move, mm (either direction).
+    pub max_mm: u16,
+    /// Time the motor may be driven, ms.
+    pub max_ms: u64,
+    /// The error reported past either bound.
+    pub error: ErrorCode,
+}
+
+/// What a slot's motor should do this step.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Motion {
+    /// Move the filament at `speed` mm/s in `direction`; the duty follows a schedule.
+    Run {
+        /// The direction.
+        direction: Direction,
+        /// The filament speed, mm/s.
+        speed: u16,
+    },
+    /// Forward at `speed` mm/s, corrected by the Bowden tension (see [`follow_duty`]).
+    Follow {
+        /// The filament speed, mm/s (0: assist the extruder only).
+        speed: u16,
+    },
+}
+
+/// A speed-controlled move in progress.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Schedule {
+    direction: Direction,
+    speed: u16,
+    since: Instant,
+    from_centi: i32,
+}
+
+/// The budget of the motion in progress and where it began.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Lease {
+    budget: Budget,
+    started: Instant,
+    from_centi: i32,
+}
+
+/// One slot's motor.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct SlotDrive {
+    command: MotorCommand,
+    schedule: Option<Schedule>,
+    lease: Option<Lease>,
+    /// Since when the motor has been driven at or above the stall duty.
+    hard_drive_since: Option<Instant>,
+    /// The direction revolutions count in (the extruder pulls forward while the motor coasts).
+    counting: Option<Direction>,
+    /// When the motor was last braked.
+    braked_at: Instant,
+}
+
+impl SlotDrive {
+    /// Start a supervised motion under `budget`: distance and time count from here.
+    pub fn begin(&mut self, budget: Budget, feeder: &Feeder, now: Instant) {
+        self.lease = Some(Lease {
+            budget,
+            started: now,
+            from_centi: feeder.odometry_centi(),
+        });
+    }
+
+    /// Drive as `motion` this step, within the budget given to [`SlotDrive::begin`]. Past the
+    /// budget, or stalled, the motor is braked and the error returned; without a budget the motor
+    /// is braked and [`ErrorCode::INTERNAL`] returned.
+    pub fn run(
+        &mut self,
+        motion: Motion,
+        feeder: &Feeder,
+        tension: Option<u16>,
+        now: Instant,
+        config: &Config,
+    ) -> Result<(), ErrorCode> {
+        let Some(lease) = self.lease else {
+            self.brake(now);
+            return Err(ErrorCode::INTERNAL);
+        };
+        match motion {
+            Motion::Run { direction, speed } => self.follow_schedule(direction, speed, feeder, now, config),
+            Motion::Follow { speed } => {
+                self.schedule = None;
+                self.set(
+                    MotorCommand::forward(follow_duty(speed, tension, config)),
+                    now,
+                    config,
+                );
+            }
+        }
+        let verdict = if self.stalled(feeder, now, config) {
+            Err(ErrorCode::STALLED_PULLEY)
+        } else if feeder.odometry_centi().abs_diff(lease.from_centi) / 100 > u32::from(lease.budget.max_mm)
+            || now.millis_since(lease.started) > lease.budget.max_ms
+        {
+            Err(lease.budget.error)
+        } else {
+            Ok(())
+        };
+        if verdict.is_err() {
+            self.brake(now);
+        }
+        verdict
+    }
+
+    /// Hold the motor (short brake); ends the motion in progress.
+    pub fn brake(&mut self, now: Instant) {
+        self.end();
+        if self.command != MotorCommand::Brake {
+            self.braked_at = now;
+        }
+        self.command = MotorCommand::Brake;
+        self.hard_drive_since = None;
+    }
+
+    /// Let the motor go: coast, once a brake has had time to stop it. Ends the motion in progress.
+    pub fn release(&mut self, now: Instant) {
+        self.end();
+        if self.command == MotorCommand::Brake && now.millis_since(self.braked_at) < BRAKE_HOLD_MS {
+            return;
+        }
+        self.command = MotorCommand::Coast;
+        self.counting = Some(Direction::Forward);
+        self.hard_drive_since = None;
+    }
+
+    /// True while a motion under a budget is in progress.
+    pub fn is_supervising(&self) -> bool {
+        self.lease.is_some()
+    }
+
+    /// The command for the motor now.
+    pub fn command(&self) -> MotorCommand {
+        self.command
+    }
+
+    /// The direction the motor's revolutions move the filament.
+    pub fn counting(&self) -> Direction {
+        self.counting.unwrap_or(Direction::Forward)
+    }
+
+    fn end(&mut self) {
+        self.schedule = None;
+        self.lease = None;
+    }
+
+    /// The duty that keeps the odometry on a schedule of `speed` mm/s from when this move began.
+    fn follow_schedule(
+        &mut self,
+        direction: Direction,
+        speed: u16,
+        feeder: &Feeder,
+        now: Instant,
+        config: &Config,
+    ) {
+        let odometry = feeder.odometry_centi();
+        let schedule = match self.schedule {
+            Some(schedule) if schedule.direction == direction && schedule.speed == speed => schedule,
+            _ => Schedule {
+                direction,
+                speed,
+                since: now,
+                from_centi: odometry,
+            },
+        };
+        self.schedule = Some(schedule);
+        let elapsed_ms = i64::try_from(now.millis_since(schedule.since)).unwrap_or(i64::MAX / 1000);
+        let scheduled_centi = i64::from(speed).saturating_mul(elapsed_ms) / 10;
+        let moved_centi = match direction {
+            Direction::Forward => i64::from(odometry) - i64::from(schedule.from_centi),
+            Direction::Reverse => i64::from(schedule.from_centi) - i64::from(odometry),
+        };
+        let lag_mm = ((scheduled_centi - moved_centi) / 100).clamp(-1000, 1000) as i32;
+        let open_loop = i32::from(speed) * 1000 / i32::from(config.full_duty_speed.max(1));
+        let duty = (open_loop + CATCH_UP_GAIN * lag_mm).clamp(0, i32::from(config.max_duty.min(1000)));
+        self.set(
+            MotorCommand::Drive {
+                direction,
+                duty: Duty::from_permille(duty as u16),
+            },
+            now,
+            config,
+        );
+    }
+
+    fn set(&mut self, command: MotorCommand, now: Instant, config: &Config) {
+        self.command = command;
+        if let MotorCommand::Drive { direction, duty } = command {
+            self.counting = Some(direction);
+            let hard = duty.permille() >= config.stall_min_duty;
+            self.hard_drive_since = match (hard, self.hard_drive_since) {
+                (true, Some(since)) => Some(since),
+                (true, None) => Some(now),
+                (false, _) => None,
+            };
+        }
+    }
+
+    /// True when the motor is driven hard enough to turn but has not turned for the stall timeout.
+    fn stalled(&self, feeder: &Feeder, now: Instant, config: &Config) -> bool {
+        let Some(since) = self.hard_drive_since else {
+            return false;
+        };
+        let last_sign_of_life = since.max(feeder.hall.last_revolution());
+        now.millis_since(last_sign_of_life) > u64::from(config.stall_timeout_ms)
+    }
+}
+
+/// Every motor of a unit stopped (coasting): what the board applies before the logic's first
+/// step and before a reset.
+pub const fn stopped<const N: usize>() -> [MotorCommand; N] {
+    [MotorCommand::Coast; N]
+}
+
+/// Duty that moves the filament at `speed` while keeping the Bowden tube at rest: more when the
+/// extruder pulls it taut, less when it is compressed. Without a healthy tension sensor it is the
+/// open-loop duty for `speed`.
+pub fn follow_duty(speed: u16, tension: Option<u16>, config: &Config) -> Duty {
+    let open_loop = i32::from(speed) * 1000 / i32::from(config.full_duty_speed.max(1));
+    let correction = tension.map_or(0, |value| {
+        let deviation = i32::from(value) - i32::from(config.tension_neutral);
+        let deadband = i32::from(config.tension_deadband);
+        let beyond = if deviation > deadband {
+            deviation - deadband
+        } else if deviation < -deadband {
+            deviation + deadband
+        } else {
+            0
+        };
+        beyond * i32::from(config.tension_gain)
+    });
+    let limit = i32::from(config.tension_max_duty.min(config.max_duty));
+    Duty::from_permille((open_loop + correction).clamp(0, limit) as u16)
+}

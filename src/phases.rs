@@ -1,0 +1,507 @@
+//! The phase catalogue: the bounded motions and checks that commands are made of.
+//!
+//! Each [`Phase`] is one motion of one slot motor towards a goal the sensors confirm (or a check
+//! of the sensors), with the MMU3 progress code that best describes it and the [`Budget`] it may
+//! not exceed. [`step`] decides each step whether the goal is reached, asks the slot's drive for
+//! the motion otherwise, and says whether the phase goes on, is done or failed (and with which
+//! error). Commands ([`crate::commands`]) arrange phases into plans; the runner
+//! ([`crate::runner`]) steps them.
+
+use mmu_hal_port::Direction;
+use mmu_protocol::{ErrorCode, ProgressCode};
+
+use crate::config::Config;
+use crate::drive::{Budget, Motion};
+use crate::time::Instant;
+use crate::unit::{Lane, SensorId, Unit};
+
+/// How long a check may wait for the sensors to settle after start, ms.
+const SENSOR_SETTLE_MS: u64 = 1000;
+/// How long the Bowden tube must stay compressed before the extruder's gears count as holding
+/// the tip, ms (one noisy reading is not enough).
+const HELD_CONFIRM_MS: u64 = 100;
+/// Extra travel allowed to the push into the extruder beyond twice its nominal distance, mm: the
+/// printer pushes its own extra load + 2 mm, and the tube takes up some before it holds.
+const NOZZLE_PUSH_MARGIN_MM: u16 = 10;
+
+/// One bounded step of a command.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Phase {
+    /// `P5`: feed until the hub sensor sees the tip, at most `max_mm`.
+    FeedToHub {
+        /// The slot.
+        slot: usize,
+        /// Distance bound.
+        max_mm: u16,
+    },
+    /// `P19`: pull back until the hub sensor clears, then the park distance.
+    RetractToPark {
+        /// The slot.
+        slot: usize,
+    },
+    /// `P6`: fast feed through most of the Bowden tube; the printer's sensor must stay off.
+    FeedThroughBowden {
+        /// The slot.
+        slot: usize,
+    },
+    /// `P1c`: slow feed until the printer's sensor triggers; the printer co-feeds.
+    FeedToFsensor {
+        /// The slot.
+        slot: usize,
+    },
+    /// `P7`: push the extra load distance at the slow speed, following the extruder's tension.
+    FeedToNozzle {
+        /// The slot.
+        slot: usize,
+    },
+    /// `P3`: pull back until the printer's sensor and then the hub sensor clear.
+    UnloadToHub {
+        /// The slot.
+        slot: usize,
+    },
+    /// `P18`: pull back until the slot sensor clears.
+    EjectFromSlot {
+        /// The slot.
+        slot: usize,
+    },
+    /// `P1a`: the sensors must be healthy and agree with the known lanes.
+    CheckSensors,
+    /// `E800c` until the user presses Continue.
+    AwaitContinue,
+}
+
+impl Phase {
+    /// The progress code the printer sees while this phase runs.
+    pub const fn progress(self) -> ProgressCode {
+        match self {
+            Phase::FeedToHub { .. } => ProgressCode::FEEDING_TO_FINDA,
+            Phase::RetractToPark { .. } => ProgressCode::RETRACTING_FROM_FINDA,
+            Phase::FeedThroughBowden { .. } => ProgressCode::FEEDING_TO_BONDTECH,
+            Phase::FeedToFsensor { .. } => ProgressCode::FEEDING_TO_FSENSOR,
+            Phase::FeedToNozzle { .. } => ProgressCode::FEEDING_TO_NOZZLE,
+            Phase::UnloadToHub { .. } => ProgressCode::UNLOADING_TO_FINDA,
+            Phase::EjectFromSlot { .. } => ProgressCode::EJECTING_FILAMENT,
+            Phase::CheckSensors => ProgressCode::HOMING,
+            Phase::AwaitContinue => ProgressCode::ERR_WAITING_FOR_USER,
+        }
+    }
+
+    /// The slot whose motor this phase drives.
+    pub const fn slot(self) -> Option<usize> {
+        match self {
+            Phase::FeedToHub { slot, .. }
+            | Phase::RetractToPark { slot }
+            | Phase::FeedThroughBowden { slot }
+            | Phase::FeedToFsensor { slot }
+            | Phase::FeedToNozzle { slot }
+            | Phase::UnloadToHub { slot }
+            | Phase::EjectFromSlot { slot } => Some(slot),
+            Phase::CheckSensors | Phase::AwaitContinue => None,
+        }
+    }
+
+    /// Where the slot's filament is once this phase is done.
+    const fn arrival(self) -> Option<Lane> {
+        match self {
+            Phase::FeedToHub { .. } | Phase::FeedThroughBowden { .. } | Phase::UnloadToHub { .. } => {
+                Some(Lane::InHub)
+            }
+            Phase::FeedToFsensor { .. } => Some(Lane::AtFsensor),
+            Phase::FeedToNozzle { .. } => Some(Lane::Loaded),
+            Phase::RetractToPark { .. } => Some(Lane::Parked),
+            Phase::EjectFromSlot { .. } => Some(Lane::Empty),
+            Phase::CheckSensors | Phase::AwaitContinue => None,
+        }
+    }
+}
+
+/// How a motion phase moves: its direction, speed and how far it may go.
+#[derive(Debug, Clone, Copy)]
+struct Bounds {
+    direction: Direction,
+    speed: u16,
+    max_mm: u16,
+    error: ErrorCode,
+}
+
+impl Bounds {
+    /// The drive's budget: the distance, and twice the nominal duration plus slack.
+    fn budget(&self, config: &Config) -> Budget {
+        Budget {
+            max_mm: self.max_mm,
+            max_ms: u64::from(self.max_mm) * 2000 / u64::from(self.speed.max(1))
+                + u64::from(config.phase_slack_ms),
+            error: self.error,
+        }
+    }
+}
+
+fn bounds(phase: Phase, config: &Config) -> Option<Bounds> {
+    let forward = |speed, max_mm, error| {
+        Some(Bounds {
+            direction: Direction::Forward,
+            speed,
+            max_mm,
+            error,
+        })
+    };
+    let reverse = |speed, max_mm, error| {
+        Some(Bounds {
+            direction: Direction::Reverse,
+            speed,
+            max_mm,
+            error,
+        })
+    };
+    match phase {
+        Phase::FeedToHub { max_mm, .. } => {
+            forward(config.load_speed, max_mm, ErrorCode::FINDA_DIDNT_SWITCH_ON)
+        }
+        Phase::RetractToPark { .. } => reverse(
+            config.load_speed,
+            config.hub_search_mm.saturating_add(config.park_mm),
+            ErrorCode::FINDA_DIDNT_SWITCH_OFF,
+        ),
+        Phase::FeedThroughBowden { .. } => forward(
+            config.load_speed,
+            config.bowden_mm.saturating_sub(config.bowden_slowdown_mm),
+            ErrorCode::FSENSOR_DIDNT_SWITCH_ON,
+        ),
+        Phase::FeedToFsensor { .. } => forward(
+            config.slow_speed,
+            config.bowden_slowdown_mm.saturating_add(config.fsensor_search_mm),
+            ErrorCode::FSENSOR_DIDNT_SWITCH_ON,
+        ),
+        Phase::FeedToNozzle { .. } => forward(
+            config.slow_speed,
+            config
+                .extra_load_mm
+                .saturating_mul(2)
+                .saturating_add(NOZZLE_PUSH_MARGIN_MM),
+            ErrorCode::MOVE_PULLEY_FAILED,
+        ),
+        Phase::UnloadToHub { .. } => reverse(
+            config.unload_speed,
+            config
+                .bowden_mm
+                .saturating_add(config.fsensor_search_mm)
+                .saturating_add(config.hub_search_mm),
+            ErrorCode::FINDA_DIDNT_SWITCH_OFF,
+        ),
+        Phase::EjectFromSlot { .. } => reverse(
+            config.load_speed,
+            config.eject_max_mm,
+            ErrorCode::MOVE_PULLEY_FAILED,
+        ),
+        Phase::CheckSensors | Phase::AwaitContinue => None,
+    }
+}
+
+/// The error a faulty sensor raises: the hub's sensors show INSPECT FINDA, a slot's sensors
+/// show PULLEY CANNOT MOVE (the slot's drive needs a look).
+pub const fn sensor_fault_error(sensor: SensorId) -> ErrorCode {
+    match sensor {
+        SensorId::HubFilament | SensorId::HubTension | SensorId::HubCutter => ErrorCode::FINDA_FLICKERS,
+        SensorId::SlotFilament(_) | SensorId::MotorHall(_) => ErrorCode::MOVE_PULLEY_FAILED,
+    }
+}
+
+/// Bookkeeping of the running phase.
+#[derive(Debug, Clone, Copy)]
+pub struct PhaseRun {
+    started: Instant,
+    /// Odometry when this attempt started.
+    from_centi: i32,
+    /// Odometry when the phase first started, kept across Retry: distance goals count from here.
+    goal_from_centi: i32,
+    /// Odometry at a milestone inside the phase (the hub cleared, the printer's sensor cleared).
+    mark_centi: Option<i32>,
+    /// Since when the Bowden tube reads compressed.
+    compressed_since: Option<Instant>,
+}
+
+impl PhaseRun {
+    /// Where the distance goal of this phase counts from (kept for the attempt after Retry).
+    pub fn goal_from_centi(&self) -> i32 {
+        self.goal_from_centi
+    }
+}
+
+/// What phases of one command learn and pass on to the later ones.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Notes {
+    /// Set by Retry: the user has looked, trust what the sensors say now over the known lanes.
+    pub trust_sensors: bool,
+    /// Odometry of a slot when the hub sensor last saw its tip leave, so parking that follows an
+    /// unload measures from the hub and not from where the unload stopped.
+    pub hub_cleared: Option<(usize, i32)>,
+}
+
+/// What a phase did in one step.
+pub enum Outcome {
+    /// Still on its way.
+    Continue,
+    /// Done: the next phase may start in the same step.
+    Done,
+    /// Stopped on an error.
+    Fail(ErrorCode),
+}
+
+/// Where a motion phase stands against its goal.
+enum Goal {
+    Reached,
+    Drive,
+    /// Drive at the slow speed, corrected by the Bowden tension.
+    Follow,
+}
+
+/// Advance `phase` by one step. `run` is its bookkeeping (`None` when it starts, or starts again
+/// after Retry with its distance goal counting from `resume_goal_from`).
+pub fn step<const N: usize>(
+    phase: Phase,
+    run: &mut Option<PhaseRun>,
+    resume_goal_from: Option<i32>,
+    notes: &mut Notes,
+    unit: &mut Unit<N>,
+    now: Instant,
+    config: &Config,
+) -> Outcome {
+    let outcome = match phase.slot() {
+        Some(slot) => step_motion(phase, slot, run, resume_goal_from, notes, unit, now, config),
+        None if phase == Phase::AwaitContinue => Outcome::Fail(ErrorCode::FILAMENT_EJECTED),
+        None => check_sensors(run, notes, unit, now),
+    };
+    if let (Outcome::Done, Some(slot), Some(lane)) = (&outcome, phase.slot(), phase.arrival()) {
+        unit.set_lane(slot, lane);
+    }
+    outcome
+}
+
+#[allow(clippy::too_many_arguments)]
+fn step_motion<const N: usize>(
+    phase: Phase,
+    slot: usize,
+    run: &mut Option<PhaseRun>,
+    resume_goal_from: Option<i32>,
+    notes: &mut Notes,
+    unit: &mut Unit<N>,
+    now: Instant,
+    config: &Config,
+) -> Outcome {
+    let Some(bounds) = bounds(phase, config) else {
+        return Outcome::Fail(ErrorCode::INTERNAL);
+    };
+    let (Some(feeder), Some(drive)) = (unit.feeders.get(slot), unit.drives.get_mut(slot)) else {
+        return Outcome::Fail(ErrorCode::INVALID_TOOL);
+    };
+    let odometry = feeder.odometry_centi();
+    let run = match run {
+        Some(run) => run,
+        None => {
+            drive.begin(bounds.budget(config), feeder, now);
+            run.insert(PhaseRun {
+                started: now,
+                from_centi: odometry,
+                goal_from_centi: resume_goal_from.unwrap_or(odometry),
+                mark_centi: None,
+                compressed_since: None,
+            })
+        }
+    };
+    let toward_goal_mm = match bounds.direction {
+        Direction::Forward => (odometry - run.goal_from_centi) / 100,
+        Direction::Reverse => (run.goal_from_centi - odometry) / 100,
+    };
+    let moved_mm = |from: i32| match bounds.direction {
+        Direction::Forward => (odometry - from) / 100,
+        Direction::Reverse => (from - odometry) / 100,
+    };
+
+    if let Some(fault) = [
+        SensorId::MotorHall(slot),
+        SensorId::HubFilament,
+        SensorId::SlotFilament(slot),
+    ]
+    .into_iter()
+    .find(|&id| unit.sensor(id).is_some_and(|s| s.fault().is_some()))
+    {
+        return Outcome::Fail(sensor_fault_error(fault));
+    }
+    let Some(hub) = unit.hub_present() else {
+        return Outcome::Continue;
+    };
+    let Some(slot_sees) = unit.feeders.get(slot).and_then(|f| f.filament.present()) else {
+        return Outcome::Continue;
+    };
+
+    let goal = match phase {
+        Phase::FeedToHub { .. } => {
+            if hub {
+                Goal::Reached
+            } else if !slot_sees {
+                // An empty slot: nothing to feed.
+                return Outcome::Fail(ErrorCode::FINDA_DIDNT_SWITCH_ON);
+            } else {
+                // Known (and persisted) before the tip leaves the park position, so a restart
+                // mid-way knows whose filament may be in the hub path.
+                unit.set_lane(slot, Lane::InHub);
+                Goal::Drive
+            }
+        }
+        Phase::RetractToPark { .. } => match (hub, run.mark_centi.or(hub_mark(notes, slot))) {
+            (true, _) => Goal::Drive,
+            (false, None) => {
+                run.mark_centi = Some(odometry);
+                Goal::Drive
+            }
+            (false, Some(mark)) if (mark - odometry) / 100 >= i32::from(config.park_mm) => Goal::Reached,
+            (false, Some(_)) => Goal::Drive,
+        },
+        Phase::FeedThroughBowden { .. } => {
+            if unit.fsensor_triggered() {
+                return Outcome::Fail(ErrorCode::FSENSOR_TOO_EARLY);
+            }
+            if toward_goal_mm >= i32::from(bounds.max_mm) {
+                Goal::Reached
+            } else {
+                Goal::Drive
+            }
+        }
+        Phase::FeedToFsensor { .. } => {
+            if unit.fsensor_triggered() {
+                Goal::Reached
+            } else {
+                Goal::Drive
+            }
+        }
+        Phase::FeedToNozzle { .. } => {
+            // The extruder has the filament when its gears hold the tip and the tube fills up
+            // behind it: after the printer's own push, or at once if that push came first.
+            // Odometry alone would be fooled by a slipping drive; it decides only without a
+            // tension reading.
+            let held = match unit.hub.tension.reading() {
+                Some(tension) => compressed_for(run, tension, now, config) >= HELD_CONFIRM_MS,
+                None => toward_goal_mm >= i32::from(config.extra_load_mm),
+            };
+            if held { Goal::Reached } else { Goal::Follow }
+        }
+        Phase::UnloadToHub { .. } => {
+            if unit.fsensor_triggered() && moved_mm(run.from_centi) >= i32::from(config.unload_check_mm) {
+                return Outcome::Fail(ErrorCode::FSENSOR_DIDNT_SWITCH_OFF);
+            }
+            if !hub && !unit.fsensor_triggered() {
+                notes.hub_cleared = Some((slot, odometry));
+                Goal::Reached
+            } else {
+                Goal::Drive
+            }
+        }
+        Phase::EjectFromSlot { .. } => {
+            if slot_sees {
+                Goal::Drive
+            } else {
+                Goal::Reached
+            }
+        }
+        Phase::CheckSensors | Phase::AwaitContinue => Goal::Reached,
+    };
+
+    let tension = unit.hub.tension.reading();
+    let (Some(feeder), Some(drive)) = (unit.feeders.get(slot), unit.drives.get_mut(slot)) else {
+        return Outcome::Fail(ErrorCode::INTERNAL);
+    };
+    let motion = match goal {
+        Goal::Reached => {
+            drive.brake(now);
+            return Outcome::Done;
+        }
+        Goal::Drive => Motion::Run {
+            direction: bounds.direction,
+            speed: bounds.speed,
+        },
+        Goal::Follow => Motion::Follow {
+            speed: config.slow_speed,
+        },
+    };
+    match drive.run(motion, feeder, tension, now, config) {
+        Ok(()) => Outcome::Continue,
+        Err(error) => Outcome::Fail(error),
+    }
+}
+
+/// How long the Bowden tube has read compressed past the follower's deadband (where
+/// [`crate::drive::follow_duty`] backs off, so the tube settles there when the tip is held), ms.
+fn compressed_for(run: &mut PhaseRun, tension: u16, now: Instant, config: &Config) -> u64 {
+    let compressed =
+        u32::from(tension) + u32::from(config.tension_deadband) < u32::from(config.tension_neutral);
+    run.compressed_since = if compressed {
+        run.compressed_since.or(Some(now))
+    } else {
+        None
+    };
+    run.compressed_since.map_or(0, |since| now.millis_since(since))
+}
+
+fn hub_mark(notes: &Notes, slot: usize) -> Option<i32> {
+    notes
+        .hub_cleared
+        .filter(|&(cleared, _)| cleared == slot)
+        .map(|(_, odometry)| odometry)
+}
+
+/// `P1a`: every sensor healthy, and the hub sensor agrees with the known lanes.
+fn check_sensors<const N: usize>(
+    run: &mut Option<PhaseRun>,
+    notes: &Notes,
+    unit: &mut Unit<N>,
+    now: Instant,
+) -> Outcome {
+    if let Some(fault) = unit.first_fault() {
+        return Outcome::Fail(sensor_fault_error(fault));
+    }
+    let Some(hub) = unit.hub_present() else {
+        let started = run
+            .get_or_insert(PhaseRun {
+                started: now,
+                from_centi: 0,
+                goal_from_centi: 0,
+                mark_centi: None,
+                compressed_since: None,
+            })
+            .started;
+        if now.millis_since(started) > SENSOR_SETTLE_MS {
+            return Outcome::Fail(ErrorCode::FINDA_FLICKERS);
+        }
+        return Outcome::Continue;
+    };
+    // At most one slot can be past its park position: stored lanes that say otherwise are
+    // not to be believed. After Retry they are forgotten and the hub sensor decides.
+    if (0..N).filter(|&slot| unit.lane(slot).owns_hub()).count() > 1 {
+        if !notes.trust_sensors {
+            return Outcome::Fail(ErrorCode::FINDA_VS_EEPROM_DISREPANCY);
+        }
+        for slot in 0..N {
+            if unit.lane(slot).owns_hub() {
+                unit.set_lane(slot, Lane::Unknown);
+            }
+        }
+    }
+    match (hub, unit.active()) {
+        (true, None) => return Outcome::Fail(ErrorCode::FINDA_VS_EEPROM_DISREPANCY),
+        // The user has looked: the slot's tip is somewhere before the hub sensor. It keeps the
+        // path until the next command parks it from there.
+        (false, Some(slot)) if notes.trust_sensors => unit.set_lane(slot, Lane::InHub),
+        (false, Some(_)) => return Outcome::Fail(ErrorCode::FINDA_VS_EEPROM_DISREPANCY),
+        _ => {}
+    }
+    for slot in 0..N {
+        let sees = unit.feeders.get(slot).and_then(|f| f.filament.present());
+        match (unit.lane(slot), sees) {
+            (Lane::Unknown | Lane::Parked, Some(false)) => unit.set_lane(slot, Lane::Empty),
+            (Lane::Empty, Some(true)) => unit.set_lane(slot, Lane::Unknown),
+            _ => {}
+        }
+    }
+    Outcome::Done
+}
