@@ -14,10 +14,12 @@ use std::error::Error;
 use std::io::{self, BufRead, Write};
 
 use clap::{Args, Subcommand};
-use mmu_protocol::{DecodeError, ParamCode, Request, RequestCode, RequestDecoder, Response, ResponseDecoder};
+use mmu_protocol::{
+    DecodeError, ErrorCode, ParamCode, Request, RequestCode, RequestDecoder, Response, ResponseDecoder,
+};
 use serde::Serialize;
 
-use crate::explain::{request_meaning, response_meaning};
+use crate::explain::{error_help, request_meaning, response_meaning};
 use crate::usage::UsageError;
 
 /// `mmu encode <request|response> ...`.
@@ -421,6 +423,11 @@ struct JsonLine {
     crc_ok: Option<bool>,
     #[serde(skip_serializing_if = "Option::is_none")]
     meaning: Option<String>,
+    /// An error answer: what it means on this unit, and what to check.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    error_meaning: Option<&'static str>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    check: Option<&'static str>,
     #[serde(skip_serializing_if = "Option::is_none")]
     reason: Option<String>,
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -441,6 +448,8 @@ impl JsonLine {
             crc_expected: None,
             crc_ok: None,
             meaning: None,
+            error_meaning: None,
+            check: None,
             reason: None,
             input: None,
         }
@@ -520,6 +529,8 @@ impl Decoded {
                 param: Some(response.param.to_string()),
                 param_value: response.param_value,
                 meaning: Some(response_meaning(response)),
+                error_meaning: error_of(response).map(|e| error_help(e).meaning),
+                check: error_of(response).map(|e| error_help(e).check),
                 ..JsonLine::empty("response")
             }
             .with_crc(*received_crc, *computed_crc),
@@ -535,6 +546,14 @@ impl Decoded {
             },
         }
     }
+}
+
+/// The error an `E` answer carries.
+fn error_of(response: &Response) -> Option<ErrorCode> {
+    (response.param == ParamCode::Error)
+        .then_some(response.param_value)
+        .flatten()
+        .map(ErrorCode)
 }
 
 impl DecodedLine {

@@ -331,3 +331,21 @@ fn decode_names_special_values() {
     let output = mmu(&["decode"], &stdout(&frame));
     assert!(stdout(&output).contains("(unknown)"), "{}", stdout(&output));
 }
+
+/// An error answer in a log carries what it means on this unit and what to check.
+#[test]
+fn decode_json_explains_errors() {
+    let frame = mmu(&["encode", "response", "T", "1", "E", "0x8047"], "");
+    let objects = decode_json(&stdout(&frame));
+    let error = &objects[0];
+    assert!(
+        error["error_meaning"]
+            .as_str()
+            .is_some_and(|m| m.contains("slot motor")),
+        "{error}"
+    );
+    assert!(
+        error["check"].as_str().is_some_and(|c| c.contains("mmu sensors")),
+        "{error}"
+    );
+}
