@@ -10,18 +10,16 @@
 
 mod bench;
 pub mod console;
+mod failure;
 pub mod serial;
+mod soak;
 
 use std::error::Error;
-use std::fmt;
 use std::path::PathBuf;
-use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
 
-use clap::{Subcommand, ValueEnum};
+use clap::Subcommand;
 use mmu_protocol::{ErrorCode, ParamCode, Request, RequestCode, Response};
 use mmu_sim::printer::POLLED_REGISTERS;
-use mmu_sim::soak::{SoakOptions, SoakReport};
 use mmu_sim::{
     FAULT_HELP, Outcome, Printer, PrinterError, PrinterOptions, ScheduledFault, Sim, SimLink, SimOptions,
 };
@@ -29,14 +27,18 @@ use serde_json::{Map, Value, json};
 
 use crate::codec_cli::{parse_u8, parse_u16};
 use crate::explain::{
-    error_help, error_meaning, parse_register, register_name, request_label, request_meaning, response_label,
+    error_meaning, parse_register, register_name, request_label, request_meaning, response_label,
     response_meaning,
 };
 use crate::sim_cli::parse_slots;
-use crate::usage::{Interrupted, usage};
+use crate::usage::usage;
 pub(crate) use bench::sensor_count;
 use console::{Console, JsonLine, Target, result_name, state_text};
+pub use failure::Failure;
+pub(crate) use failure::printer_failure;
 use serial::{EventsTail, FsensorSource, SerialLink};
+use soak::run_soak;
+pub use soak::{SoakArgs, ctrl_c_flag};
 
 /// Shown after `mmu printer --help`.
 const AFTER_HELP: &str = "\
@@ -46,7 +48,8 @@ Numbers are decimal or 0x hex. Faults (--fault, simulator only):";
 #[derive(Debug, clap::Args)]
 #[command(after_long_help = format!("{AFTER_HELP}\n{FAULT_HELP}"))]
 pub struct PrinterArgs {
-    /// A real unit on this serial port (115200 8N1), e.g. /dev/ttyACM0.
+    /// A real unit on this serial port (115200 8N1), e.g. /dev/ttyUSB0: a 3.3 V USB-serial
+    /// adapter on the unit's PC10 (TX) / PC11 (RX), not the ST-LINK's port.
     #[arg(long, value_name = "DEV", conflicts_with = "sim")]
     pub port: Option<String>,
     /// The in-process simulator, in virtual time (as fast as possible unless --time-scale).
@@ -218,123 +221,6 @@ impl Action {
             Action::Status | Action::Read { .. } | Action::Write { .. } | Action::Stats | Action::Settings(_)
         )
     }
-}
-
-/// `mmu printer soak` options.
-#[derive(Debug, clap::Args)]
-pub struct SoakArgs {
-    /// Tool changes to run.
-    #[arg(long, value_name = "N", default_value_t = 100)]
-    pub changes: u32,
-    /// Faults to inject.
-    #[arg(long, value_enum, default_value_t = Faults::None)]
-    pub faults: Faults,
-    /// Seed of the run (default: the simulator's --seed).
-    #[arg(long, value_name = "S")]
-    pub seed: Option<u64>,
-}
-
-/// Faults of a soak run.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum Faults {
-    /// None: every change must simply work.
-    None,
-    /// Random faults, injected and later cleared.
-    Random,
-}
-
-/// Why an action failed, with the unit's error when it stopped on one.
-#[derive(Debug)]
-pub struct Failure {
-    message: String,
-    error: Option<ErrorCode>,
-}
-
-impl Failure {
-    /// A failure with no unit error behind it.
-    pub fn new(message: impl Into<String>) -> Self {
-        Failure {
-            message: message.into(),
-            error: None,
-        }
-    }
-
-    /// A command stopped on the unit's `error`.
-    fn unit(message: String, error: ErrorCode) -> Self {
-        Failure {
-            message,
-            error: Some(error),
-        }
-    }
-
-    /// The failure as the fields of a final JSON `result` object.
-    fn details(&self) -> Map<String, Value> {
-        let mut details = Map::new();
-        details.insert("message".into(), self.message.clone().into());
-        if let Some(error) = self.error {
-            let help = error_help(error);
-            details.insert("error".into(), error.to_string().into());
-            details.insert("screen".into(), format!("{:05}", error.printer_screen()).into());
-            details.insert("meaning".into(), help.meaning.into());
-            details.insert("check".into(), help.check.into());
-        }
-        details
-    }
-}
-
-impl fmt::Display for Failure {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(&self.message)?;
-        if let Some(error) = self.error {
-            let help = error_help(error);
-            write!(f, "\n  what it means: {}\n  check: {}", help.meaning, help.check)?;
-        }
-        Ok(())
-    }
-}
-
-impl Error for Failure {}
-
-impl From<PrinterError> for Failure {
-    fn from(error: PrinterError) -> Self {
-        Failure::new(error.to_string())
-    }
-}
-
-/// The printer stopped on `error`, in plain words; a version mismatch says what the unit
-/// reports and how to talk to it anyway (`expected`: the version the printer supports).
-pub(crate) fn printer_failure(error: PrinterError, expected: (u8, u8, u8)) -> Failure {
-    let PrinterError::VersionMismatch { part, got } = error else {
-        return Failure::new(error.to_string());
-    };
-    let (major, minor, revision) = expected;
-    let want = format!("{major}.{minor}.{revision}");
-    let screen = "MMU FW UPDATE NEEDED, printer screen 04504";
-    let Some(got) = got else {
-        return Failure::new(format!(
-            "the unit answered the version request S{part} without a number; the printer expects {want} ({screen})"
-        ));
-    };
-    let mut parts = [major.to_string(), minor.to_string(), revision.to_string()];
-    if let Some(slot) = parts.get_mut(usize::from(part)) {
-        *slot = got.to_string();
-    }
-    for later in parts.iter_mut().skip(usize::from(part) + 1) {
-        *later = "?".to_string();
-    }
-    let reported = parts.join(".");
-    let mut message = format!("the unit reports version {reported}, the printer expects {want} ({screen})");
-    if part == 2 {
-        message.push_str(&format!(
-            ".\n  To talk to this unit as it is, add --expect-version {reported}.\n  To make it report {want} (register 0x52: 3 for MK4, MK3.5 and Core One, 2 for MK3S): \
-             mmu printer --port DEV --expect-version {reported} write 0x52 {revision}"
-        ));
-    } else {
-        message.push_str(&format!(
-            ".\n  Check that the unit runs this firmware; to talk to it anyway, add --expect-version {reported}"
-        ));
-    }
-    Failure::new(message)
 }
 
 /// What a successful action found: the fields of the final JSON `result` object.
@@ -648,87 +534,6 @@ fn fsensor_source(args: &PrinterArgs) -> FsensorSource {
         }
         None => FsensorSource::Fixed(args.fsensor.unwrap_or(0)),
     }
-}
-
-/// `mmu printer soak`: the report, and a failure when it did not pass.
-fn run_soak(args: &PrinterArgs, soak: &SoakArgs, mut console: Console) -> Result<(), Box<dyn Error>> {
-    if args.port.is_some() {
-        return Err(usage("soak runs on the simulator: drop --port"));
-    }
-    if !args.sim_options.faults.is_empty() {
-        return Err(usage(
-            "soak injects its own faults (--faults random): drop --fault",
-        ));
-    }
-    let seed = soak.seed.unwrap_or(args.sim_options.seed);
-    let options = SoakOptions {
-        changes: soak.changes,
-        random_faults: soak.faults == Faults::Random,
-        seed,
-        sim: SimOptions {
-            slots: args.sim_options.slots,
-            seed,
-            ..SimOptions::default()
-        },
-        printer: printer_options(args),
-    };
-    let bar = console.progress_bar(u64::from(soak.changes), "tool changes");
-    let stop = ctrl_c_flag()?;
-    let report = mmu_sim::soak::run_until(
-        &options,
-        &mut |done| {
-            if let Some(bar) = &bar {
-                bar.set_position(u64::from(done));
-            }
-        },
-        &|| stop.load(Ordering::Relaxed),
-    );
-    if let Some(bar) = bar {
-        bar.finish_and_clear();
-    }
-    console.close();
-    console.say(&report.to_string());
-    for note in &report.notes {
-        console.say(note);
-    }
-    console.emit(&JsonLine::Result {
-        action: "soak",
-        ok: report.passed(),
-        details: soak_details(&report, seed),
-    });
-    if stop.load(Ordering::Relaxed) {
-        Err(Box::new(Interrupted(format!(
-            "soak stopped by Ctrl-C: {}",
-            report.summary_line()
-        ))))
-    } else if report.passed() {
-        Ok(())
-    } else {
-        Err(format!("soak failed: {}", report.summary_line()).into())
-    }
-}
-
-/// A flag Ctrl-C raises (instead of ending the process), for a long run to stop and report.
-pub fn ctrl_c_flag() -> Result<Arc<AtomicBool>, Box<dyn Error>> {
-    let flag = Arc::new(AtomicBool::new(false));
-    let raised = Arc::clone(&flag);
-    ctrlc::set_handler(move || raised.store(true, Ordering::Relaxed))
-        .map_err(|error| format!("cannot catch Ctrl-C: {error}"))?;
-    Ok(flag)
-}
-
-fn soak_details(report: &SoakReport, seed: u64) -> Details {
-    let mut details = Details::new();
-    details.insert("seed".into(), seed.into());
-    details.insert("summary".into(), report.summary_line().into());
-    details.insert("report".into(), report.to_string().into());
-    details.insert("changes".into(), report.changes.into());
-    details.insert("faults_injected".into(), report.faults_injected.into());
-    details.insert("recovered".into(), report.recovered.into());
-    details.insert("unrecovered".into(), report.unrecovered.into());
-    details.insert("stuck".into(), report.stuck.into());
-    details.insert("panics".into(), report.panics.into());
-    details
 }
 
 /// `3.0.3` → (3, 0, 3).
