@@ -2,7 +2,8 @@
 //!
 //! Subcommands live in sibling modules; this file only parses the command line and dispatches:
 //! - `mmu encode request|response ...`: print a frame exactly as on the wire ([`codec_cli`]);
-//! - `mmu decode [--json]`: explain frames or printer log lines read from stdin ([`codec_cli`]);
+//! - `mmu decode [--json] [--frames-only]`: explain frames or printer log lines read from stdin
+//!   ([`codec_cli::decode`]);
 //! - `mmu sim`: the simulated unit on stdin/stdout or a pseudo-terminal ([`sim_cli`]);
 //! - `mmu printer`: the printer's side against a real unit or the simulator ([`printer_cli`]);
 //! - `mmu sensors`: every sensor of a unit live, as a table, CSV or a plotted PNG ([`sensors_cli`]);
@@ -42,8 +43,9 @@ enum Command {
     /// Print a frame exactly as on the wire, without the newline. Numbers are decimal or 0x hex.
     #[command(subcommand)]
     Encode(codec_cli::EncodeCommand),
-    /// Explain frames read from stdin, one output line per input line. A line is a bare frame
-    /// (`T0*a4`) or a printer log line (`MMU2:>T0*a4.` request, `MMU2:<T0 E8003*13.` response).
+    /// Explain frames read from stdin, one output line per input line (--frames-only: per
+    /// frame), keeping the time a logger stamped on it. A line is a bare frame (`T0*a4`) or a
+    /// printer log line (`MMU2:>T0*a4.` request, `MMU2:<T0 E8003*13.` response).
     Decode(codec_cli::DecodeArgs),
     /// Serve the simulated unit (the unit logic on a physical model) on stdin/stdout or a
     /// pseudo-terminal, bytes exactly as on the UART.

@@ -4,8 +4,9 @@
 //! The protocol logic (handshake, `Q0` heartbeat, `f` reports, register poll, automatic Retry,
 //! re-handshake after a link timeout) is [`mmu_sim::Printer`]. This module adds the printer's
 //! menu actions on top of it ([`Session`]: status, tool change, preload, unload, eject, cut,
-//! home, reset, register access, buttons) and soak runs; [`console`] is the person at the
-//! printer (what is shown, how dialogs are answered) and [`serial`] the wire to a real unit.
+//! home, reset, register access, buttons), the bench actions ([`bench`]: stats, settings) and
+//! soak runs ([`soak`]); [`console`] is the person at the printer (what is shown, how dialogs are
+//! answered), [`serial`] the wire to a real unit, [`failure`] why an action failed.
 //! `mmu demo` ([`crate::demo`]) plays a script on the same [`Session`].
 
 mod bench;
