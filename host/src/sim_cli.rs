@@ -20,6 +20,7 @@
 //! channel; the main loop feeds each chunk to the step after its arrival, writes what the unit
 //! answers at once, and waits for input or the next millisecond whenever it is not behind.
 
+use std::collections::HashMap;
 use std::error::Error;
 use std::fs::File;
 use std::io::{self, Read, Write};
@@ -29,7 +30,7 @@ use std::thread;
 use std::time::{Duration, Instant};
 
 use clap::{ArgGroup, Args};
-use mmu_protocol::{DecodeError, Request, RequestDecoder, Response, ResponseDecoder};
+use mmu_protocol::{DecodeError, Request, RequestCode, RequestDecoder, Response, ResponseDecoder};
 use mmu_sim::event::FaultAction;
 use mmu_sim::{Event, EventKind, FAULT_HELP, ScheduledFault, Sim, SimOptions};
 
@@ -48,6 +49,8 @@ const IDLE_WAIT: Duration = Duration::from_millis(1);
 const MAX_STEPS_PER_BATCH: u64 = 100;
 /// Falling this far behind the wall clock earns one warning.
 const LAG_WARNING: Duration = Duration::from_secs(1);
+/// A poll answered as the time before, at most this long before, is a printer's routine poll.
+const POLL_REPEAT_MS: u64 = 3000;
 /// Bytes the reader thread takes from the input at once.
 const READ_CHUNK: usize = 256;
 
@@ -91,8 +94,11 @@ pub struct SimArgs {
     )]
     pub print_rate: f32,
     /// Print nothing on stderr but errors (no log of requests, answers and events).
-    #[arg(long, short)]
+    #[arg(long, short, conflicts_with = "verbose")]
     pub quiet: bool,
+    /// Log every exchange, also the printer's polls (`Q0`, `R`) answered as the time before.
+    #[arg(long, short)]
+    pub verbose: bool,
 }
 
 /// Run `mmu sim`.
@@ -119,7 +125,7 @@ pub fn run(args: &SimArgs) -> Result<(), Box<dyn Error>> {
         sim,
         events,
         notes,
-        wire: WireLog::new(),
+        wire: WireLog::new(args.verbose),
         time_scale: args.time_scale,
         lag_warned: false,
     };
@@ -194,12 +200,7 @@ impl Server {
         let logging = !self.notes.quiet;
         if logging && !received.is_empty() {
             let at = self.sim.now_ms();
-            log.extend(
-                self.wire
-                    .printer_sent(received)
-                    .into_iter()
-                    .map(|line| (at, line)),
-            );
+            log.extend(self.wire.printer_sent(at, received));
         }
         for _ in 0..steps {
             let before = sent.len();
@@ -207,8 +208,7 @@ impl Server {
             received.clear();
             if logging && sent.len() > before {
                 let at = self.sim.now_ms();
-                let lines = self.wire.unit_sent(sent.get(before..).unwrap_or(&[]));
-                log.extend(lines.into_iter().map(|line| (at, line)));
+                log.extend(self.wire.unit_sent(at, sent.get(before..).unwrap_or(&[])));
             }
         }
         let open = self.send(output, &sent)?;
@@ -390,42 +390,118 @@ impl Notes {
 }
 
 /// Decodes both directions of the wire for the log: what the printer asked, what the unit
-/// answered, and the frames the unit ignores with the reason.
+/// answered, and the frames the unit ignores with the reason. A printer polls `Q0` and five
+/// registers every second; unless `every`, a poll answered as the last time, less than
+/// [`POLL_REPEAT_MS`] before, is left out (and counted), so that what changes stands out, while a
+/// person typing a read sees every answer.
 struct WireLog {
     requests: RequestDecoder,
     responses: ResponseDecoder,
+    every: bool,
+    /// A poll request waiting for its answer, with its time and line.
+    pending: Option<(u64, Request, String)>,
+    /// The last answer to each poll request, and when.
+    last: HashMap<(RequestCode, u8), (Response, u64)>,
+    /// Polls left out since the last line shown.
+    hidden: u32,
 }
 
+/// A log line and the simulator's time it belongs to.
+type LogLine = (u64, String);
+
 impl WireLog {
-    fn new() -> Self {
+    fn new(every: bool) -> Self {
         WireLog {
             requests: RequestDecoder::new(),
             responses: ResponseDecoder::new(),
+            every,
+            pending: None,
+            last: HashMap::new(),
+            hidden: 0,
         }
     }
 
-    /// The log lines for bytes from the printer.
-    fn printer_sent(&mut self, bytes: &[u8]) -> Vec<String> {
-        bytes
-            .iter()
-            .filter_map(|&byte| self.requests.feed(byte))
-            .map(|decoded| match decoded {
-                Ok(request) => request_line(&request),
-                Err(error) => format!("> frame ignored: {}", ignored_reason(&error)),
-            })
-            .collect()
+    /// Show `line`, after saying how many unchanged polls were left out before it.
+    fn show(&mut self, into: &mut Vec<LogLine>, at: u64, line: String) {
+        if self.hidden > 0 {
+            let polls = self.hidden;
+            self.hidden = 0;
+            into.push((
+                at,
+                format!("({polls} polls answered as before not shown; -v shows them)"),
+            ));
+        }
+        into.push((at, line));
     }
 
-    /// The log lines for bytes from the unit.
-    fn unit_sent(&mut self, bytes: &[u8]) -> Vec<String> {
-        bytes
+    fn flush_pending(&mut self, into: &mut Vec<LogLine>) {
+        if let Some((at, _, line)) = self.pending.take() {
+            self.show(into, at, line);
+        }
+    }
+
+    /// The log lines for bytes the printer sent at `at`.
+    fn printer_sent(&mut self, at: u64, bytes: &[u8]) -> Vec<LogLine> {
+        let mut lines = Vec::new();
+        let decoded: Vec<_> = bytes
+            .iter()
+            .filter_map(|&byte| self.requests.feed(byte))
+            .collect();
+        for frame in decoded {
+            self.flush_pending(&mut lines);
+            match frame {
+                Ok(request)
+                    if !self.every && matches!(request.code, RequestCode::Query | RequestCode::Read) =>
+                {
+                    self.pending = Some((at, request, request_line(&request)));
+                }
+                Ok(request) => self.show(&mut lines, at, request_line(&request)),
+                Err(error) => self.show(
+                    &mut lines,
+                    at,
+                    format!("> frame ignored: {}", ignored_reason(&error)),
+                ),
+            }
+        }
+        lines
+    }
+
+    /// The log lines for bytes the unit sent at `at`.
+    fn unit_sent(&mut self, at: u64, bytes: &[u8]) -> Vec<LogLine> {
+        let mut lines = Vec::new();
+        let decoded: Vec<_> = bytes
             .iter()
             .filter_map(|&byte| self.responses.feed(byte))
-            .map(|decoded| match decoded {
-                Ok(response) => response_line(&response),
-                Err(error) => format!("< unreadable answer: {error}"),
-            })
-            .collect()
+            .collect();
+        for frame in decoded {
+            let response = match frame {
+                Ok(response) => response,
+                Err(error) => {
+                    self.flush_pending(&mut lines);
+                    self.show(&mut lines, at, format!("< unreadable answer: {error}"));
+                    continue;
+                }
+            };
+            let key = (response.code, response.value);
+            let answers_pending = self
+                .pending
+                .as_ref()
+                .is_some_and(|(_, request, _)| (request.code, request.value) == key);
+            let repeated = self.last.get(&key).is_some_and(|&(last, last_at)| {
+                last == response && at.saturating_sub(last_at) < POLL_REPEAT_MS
+            });
+            if answers_pending {
+                self.last.insert(key, (response, at));
+            }
+            if answers_pending && repeated {
+                self.pending = None;
+                self.hidden += 1;
+                continue;
+            }
+            self.flush_pending(&mut lines);
+            self.show(&mut lines, at, response_line(&response));
+        }
+        lines
     }
 }
 

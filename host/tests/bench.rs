@@ -361,3 +361,37 @@ fn sensors_over_a_serial_port() {
     );
     let _ = std::fs::remove_file(file);
 }
+
+/// A printer polls every second: polls answered as the time before are left out of the log
+/// (and counted) unless `-v`; what changes stands out.
+#[test]
+fn the_simulator_log_leaves_out_unchanged_polls_unless_verbose() {
+    let run = |verbose: bool| {
+        let mut args = vec!["sim", "--stdio", "--time-scale", "5"];
+        if verbose {
+            args.push("-v");
+        }
+        let mut child = Command::new(env!("CARGO_BIN_EXE_mmu"))
+            .args(&args)
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("mmu sim runs");
+        let mut stdin = child.stdin.take().expect("piped");
+        for _ in 0..3 {
+            stdin.write_all(b"R1b*9e\n").expect("write");
+            thread::sleep(Duration::from_millis(30));
+        }
+        stdin.write_all(b"S0*c6\n").expect("write");
+        drop(stdin);
+        let output = child.wait_with_output().expect("mmu sim ends");
+        String::from_utf8_lossy(&output.stderr).into_owned()
+    };
+    let log = run(false);
+    assert_eq!(log.matches("< R1b A5").count(), 1, "{log}");
+    assert!(log.contains("(2 polls answered as before not shown"), "{log}");
+    assert!(log.contains("< S0 A3"), "{log}");
+    let log = run(true);
+    assert_eq!(log.matches("< R1b A5").count(), 3, "{log}");
+}
