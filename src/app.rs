@@ -14,7 +14,8 @@ use mmu_protocol::{
 };
 
 use crate::config::Config;
-use crate::drive::{self, Budget, Motion, follow_duty};
+use crate::drive;
+use crate::follower;
 use crate::persist::{Counters, MAX_SETTINGS, Snapshot};
 use crate::registers;
 use crate::runner::{Runner, Status};
@@ -350,40 +351,19 @@ impl<const N: usize> App<N> {
     }
 
     /// The running phase drives its slot; a loaded slot follows the extruder through the tension
-    /// sensor; every other motor coasts.
+    /// sensor ([`follower`]); every other motor coasts.
     fn drive_motors(&mut self, now: Instant, out: &mut Outputs<N>) {
+        let allowed = !matches!(self.operation.status(), Status::Failed(_));
         let driving = self.operation.driving_slot();
-        let tension = self.unit.hub.tension.reading();
-        let unit = &mut self.unit;
-        for (slot, (motor, (drive, feeder))) in out
-            .motors
-            .iter_mut()
-            .zip(unit.drives.iter_mut().zip(unit.feeders.iter()))
-            .enumerate()
-        {
-            if Some(slot) != driving {
-                let follows = unit.lanes.get(slot) == Some(&Lane::Loaded)
-                    && follow_duty(0, tension, &self.config).permille() > 0;
-                if follows {
-                    if !drive.is_supervising() {
-                        drive.begin(FOLLOWER, feeder, now);
-                    }
-                    let _ = drive.run(Motion::Follow { speed: 0 }, feeder, tension, now, &self.config);
-                } else {
-                    drive.release(now);
-                }
-            }
+        if let Some(error) = follower::follow(&mut self.unit, driving, allowed, now, &self.config) {
+            self.operation.interrupt(error);
+            self.counters.drive_errors = self.counters.drive_errors.saturating_add(1);
+        }
+        for (motor, drive) in out.motors.iter_mut().zip(self.unit.drives.iter()) {
             *motor = drive.command();
         }
     }
 }
-
-/// The tension follower's budget while printing.
-const FOLLOWER: Budget = Budget {
-    max_mm: u16::MAX,
-    max_ms: u64::MAX,
-    error: ErrorCode::STALLED_PULLEY,
-};
 
 impl<const N: usize> Default for App<N> {
     fn default() -> Self {

@@ -28,7 +28,10 @@ pub struct Budget {
     pub max_mm: u16,
     /// Time the motor may be driven, ms.
     pub max_ms: u64,
-    /// The error reported past either bound.
+    /// The longest the motor may be driven, at any duty, without a revolution, ms: a motor too
+    /// weakly driven to count as stalled still has to move the filament.
+    pub max_still_ms: u64,
+    /// The error reported past any bound.
     pub error: ErrorCode,
 }
 
@@ -116,11 +119,15 @@ impl SlotDrive {
                 );
             }
         }
+        let still_since = lease.started.max(feeder.hall.last_revolution());
+        let still_too_long =
+            self.command.is_driving() && now.millis_since(still_since) > lease.budget.max_still_ms;
+        let too_far =
+            feeder.odometry_centi().abs_diff(lease.from_centi) / 100 > u32::from(lease.budget.max_mm);
+        let too_long = now.millis_since(lease.started) > lease.budget.max_ms;
         let verdict = if self.stalled(feeder, now, config) {
             Err(ErrorCode::STALLED_PULLEY)
-        } else if feeder.odometry_centi().abs_diff(lease.from_centi) / 100 > u32::from(lease.budget.max_mm)
-            || now.millis_since(lease.started) > lease.budget.max_ms
-        {
+        } else if still_too_long || too_far || too_long {
             Err(lease.budget.error)
         } else {
             Ok(())

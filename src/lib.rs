@@ -14,6 +14,7 @@ pub mod config;
 pub mod control;
 pub mod drive;
 pub mod feeder;
+pub mod follower;
 pub mod persist;
 pub mod phases;
 pub mod registers;

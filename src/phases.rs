@@ -128,10 +128,12 @@ struct Bounds {
 impl Bounds {
     /// The drive's budget: the distance, and twice the nominal duration plus slack.
     fn budget(&self, config: &Config) -> Budget {
+        let max_ms =
+            u64::from(self.max_mm) * 2000 / u64::from(self.speed.max(1)) + u64::from(config.phase_slack_ms);
         Budget {
             max_mm: self.max_mm,
-            max_ms: u64::from(self.max_mm) * 2000 / u64::from(self.speed.max(1))
-                + u64::from(config.phase_slack_ms),
+            max_ms,
+            max_still_ms: max_ms,
             error: self.error,
         }
     }

@@ -136,6 +136,17 @@ impl Runner {
         }
     }
 
+    /// Something went wrong outside the plan (the follower could not follow while printing): the
+    /// command reports `error` until a button the recovery table names for it. An error already
+    /// shown stays.
+    pub fn interrupt(&mut self, error: ErrorCode) {
+        if !matches!(self.status, Status::Failed(_)) {
+            self.index = self.plan.len();
+            self.run = None;
+            self.status = Status::Failed(error);
+        }
+    }
+
     fn advance(&mut self) {
         self.index += 1;
         self.run = None;

@@ -6,6 +6,12 @@
 //! so a reading near one of them cannot flicker. A reading stuck at a supply rail means a
 //! disconnected or shorted sensor: it is never fed to the filter, and after a short time the
 //! sensor is reported faulty instead of being believed.
+//!
+//! Every sensor is filtered in every 1 ms step on a core without a divider (Cortex-M0+), where
+//! a division is a library call of about a hundred instructions: the filters divide by
+//! multiplying with precomputed reciprocals ([`div1000`], [`Window::mean`]), skip the smoothing
+//! when it is off, and compute the filtered value once per sample. The results are exactly those
+//! of the divisions they replace (see the tests).
 
 use crate::time::Instant;
 
@@ -91,11 +97,48 @@ impl Window {
         sorted.get(sorted.len() / 2).copied().unwrap_or(0)
     }
 
+    /// The mean, rounded down.
     fn mean(&self) -> u16 {
         let values = self.filled();
         let sum: u32 = values.iter().map(|&v| u32::from(v)).sum();
-        (sum / values.len().max(1) as u32) as u16
+        divide_small(sum, values.len()) as u16
     }
+}
+
+/// `⌈2³² / d⌉` for every window length `d` from 2 to [`MAX_WINDOW`] (index `d`).
+const RECIPROCALS: [u32; MAX_WINDOW + 1] = {
+    let mut table = [0; MAX_WINDOW + 1];
+    let mut d = 2;
+    while d <= MAX_WINDOW {
+        table[d] = u32::MAX / d as u32 + 1;
+        d += 1;
+    }
+    table
+};
+
+/// `sum / len` for a sum of at most [`MAX_WINDOW`] `u16` values, without a division: exact for
+/// `sum < 2³² / MAX_WINDOW`, which such a sum always is (`len` 0 counts as 1).
+fn divide_small(sum: u32, len: usize) -> u32 {
+    match RECIPROCALS.get(len) {
+        Some(&reciprocal) if len >= 2 => mul_high(sum, reciprocal),
+        _ => sum,
+    }
+}
+
+/// The high 32 bits of the 64-bit product `a × b`, from 16-bit halves: four single-cycle
+/// multiplications on the Cortex-M0+ instead of the 64-bit multiplication routine
+/// (`__aeabi_lmul`), which LLVM would otherwise turn this back into (hence the `black_box`).
+fn mul_high(a: u32, b: u32) -> u32 {
+    let (a0, a1) = (a & 0xffff, a >> 16);
+    let (b0, b1) = (b & 0xffff, core::hint::black_box(b >> 16));
+    let (low, cross1, cross2) = (a0 * b0, a0 * b1, a1 * b0);
+    let carry = ((low >> 16) + (cross1 & 0xffff) + (cross2 & 0xffff)) >> 16;
+    a1 * b1 + (cross1 >> 16) + (cross2 >> 16) + carry
+}
+
+/// `x / 1000` for any `u32`, without a division (the multiplier is `⌈2³⁸ / 1000⌉`).
+pub fn div1000(x: u32) -> u32 {
+    mul_high(x, 0x1062_4dd3) >> 6
 }
 
 /// Sliding median, then moving average, then exponential smoothing.
@@ -105,6 +148,8 @@ pub struct Filter {
     averages: Window,
     /// The smoothed value in 1/1000 counts.
     smoothed_milli: Option<u32>,
+    /// The smoothed value rounded to counts (0 before the first sample).
+    value: u16,
 }
 
 impl Default for Filter {
@@ -120,6 +165,7 @@ impl Filter {
             medians: Window::new(),
             averages: Window::new(),
             smoothed_milli: None,
+            value: 0,
         }
     }
 
@@ -127,20 +173,21 @@ impl Filter {
     pub fn push(&mut self, raw: u16, config: &FilterConfig) -> u16 {
         self.medians.push(raw, config.median.into());
         self.averages.push(self.medians.median(), config.average.into());
-        let averaged = u32::from(self.averages.mean()) * 1000;
+        let mean = u32::from(self.averages.mean());
         let weight = u32::from(config.smoothing_permille.clamp(1, 1000));
+        // (previous × (1000 − w) + mean × 1000 × w) / 1000, with the exact part taken out.
         let smoothed = match self.smoothed_milli {
-            None => averaged,
-            Some(previous) => (previous * (1000 - weight) + averaged * weight) / 1000,
+            Some(previous) if weight < 1000 => mean * weight + div1000(previous * (1000 - weight)),
+            _ => mean * 1000,
         };
         self.smoothed_milli = Some(smoothed);
-        self.value()
+        self.value = div1000(smoothed + 500) as u16;
+        self.value
     }
 
     /// The current filtered value (0 before the first sample).
     pub fn value(&self) -> u16 {
-        self.smoothed_milli
-            .map_or(0, |milli| ((milli + 500) / 1000) as u16)
+        self.value
     }
 
     /// Forget every sample.
@@ -373,6 +420,83 @@ mod tests {
             filter.push(3000, &config);
         }
         assert_eq!(filter.value(), 3000);
+    }
+
+    #[test]
+    fn reciprocal_divisions_equal_the_divisions_they_replace() {
+        // Every sum a window of up to MAX_WINDOW u16 samples can have, by every length.
+        for len in 0..=MAX_WINDOW {
+            for sum in 0..=MAX_WINDOW as u32 * u32::from(u16::MAX) {
+                assert_eq!(divide_small(sum, len), sum / len.max(1) as u32, "{sum} / {len}");
+            }
+        }
+        // Every u32 near the multiples of 1000 and the ends, and a dense sweep of the rest.
+        let mut x: u32 = 0;
+        loop {
+            for probe in [x, x.saturating_add(1), x.saturating_sub(1)] {
+                assert_eq!(div1000(probe), probe / 1000, "{probe} / 1000");
+            }
+            match x.checked_add(997) {
+                Some(next) => x = next,
+                None => break,
+            }
+        }
+        for probe in [u32::MAX, u32::MAX - 1, 4_294_967_000, 4_294_966_999] {
+            assert_eq!(div1000(probe), probe / 1000);
+        }
+    }
+
+    /// The pipeline as it was, with divisions: the reference for the division-free one.
+    struct DividingFilter {
+        medians: Window,
+        averages: Window,
+        smoothed: Option<u32>,
+    }
+
+    impl DividingFilter {
+        fn push(&mut self, raw: u16, config: &FilterConfig) -> u16 {
+            self.medians.push(raw, config.median.into());
+            self.averages.push(self.medians.median(), config.average.into());
+            let values = self.averages.filled();
+            let sum: u32 = values.iter().map(|&v| u32::from(v)).sum();
+            let averaged = sum / values.len().max(1) as u32 * 1000;
+            let weight = u32::from(config.smoothing_permille.clamp(1, 1000));
+            let next = match self.smoothed {
+                None => averaged,
+                Some(previous) => (previous * (1000 - weight) + averaged * weight) / 1000,
+            };
+            self.smoothed = Some(next);
+            ((next + 500) / 1000) as u16
+        }
+    }
+
+    #[test]
+    fn the_filter_computes_what_the_divisions_did() {
+        for (median, average, permille) in [(5, 4, 500), (3, 1, 1000), (1, 1, 1), (9, 9, 333), (2, 7, 999)] {
+            let config = FilterConfig {
+                median,
+                average,
+                smoothing_permille: permille,
+            };
+            let mut filter = Filter::new();
+            let mut reference = DividingFilter {
+                medians: Window::new(),
+                averages: Window::new(),
+                smoothed: None,
+            };
+            // Noisy levels switching between off and on, over the 12-bit ADC range.
+            let mut seed: u32 = 7;
+            for i in 0..4000u32 {
+                seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                let noise = (seed >> 20) as u16 % 400;
+                let raw = if i % 500 < 250 { 1800 + noise } else { 3600 + noise };
+                assert_eq!(
+                    filter.push(raw, &config),
+                    reference.push(raw, &config),
+                    "{config:?} at {i}"
+                );
+            }
+        }
     }
 
     #[test]

@@ -7,12 +7,15 @@
 //! - `mmu sim`: the simulated unit on stdin/stdout or a pseudo-terminal ([`sim_cli`]);
 //! - `mmu printer`: the printer's side against a real unit or the simulator ([`printer_cli`]);
 //! - `mmu sensors`: every sensor of a unit live, as a table, CSV or a plotted PNG ([`sensors_cli`]);
+//! - `mmu console`: plain commands to a unit or the simulator, by hand or from a script, and
+//!   `mmu calibrate`: measure and save its distances and sensor thresholds ([`console`]);
 //! - `mmu demo`: a scripted session against the simulator ([`demo`]).
 //!
 //! Exit status: 0 success, 1 a failure (the unit stopped on an error, a port cannot be opened),
 //! 2 a usage mistake (as clap's own), 130 stopped by Ctrl-C.
 
 mod codec_cli;
+mod console;
 mod demo;
 mod explain;
 mod printer_cli;
@@ -59,6 +62,12 @@ enum Command {
     Sensors(sensors_cli::SensorsArgs),
     /// A scripted session against the simulator: handshake, tool changes, preload, eject.
     Demo(demo::DemoArgs),
+    /// Plain commands (`t 1`, `read bowden`, `set bowden 410`, `retry`, `help`) to a unit on a
+    /// serial port or the simulator, typed (history, tab completion) or piped, one a line.
+    Console(console::ConsoleArgs),
+    /// Measure and save the unit's mm per motor revolution, Bowden length, sensor thresholds and
+    /// park distance.
+    Calibrate(console::CalibrateArgs),
 }
 
 fn main() -> ExitCode {
@@ -70,6 +79,8 @@ fn main() -> ExitCode {
         Command::Printer(args) => printer_cli::run(args),
         Command::Sensors(args) => sensors_cli::run(args),
         Command::Demo(args) => demo::run(args),
+        Command::Console(args) => console::run(args),
+        Command::Calibrate(args) => console::run_calibrate(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

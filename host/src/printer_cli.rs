@@ -49,8 +49,8 @@ Numbers are decimal or 0x hex. Faults (--fault, simulator only):";
 #[derive(Debug, clap::Args)]
 #[command(after_long_help = format!("{AFTER_HELP}\n{FAULT_HELP}"))]
 pub struct PrinterArgs {
-    /// A real unit on this serial port (115200 8N1), e.g. /dev/ttyUSB0: a 3.3 V USB-serial
-    /// adapter on the unit's PC10 (TX) / PC11 (RX), not the ST-LINK's port.
+    /// A real unit on this serial port (115200 8N1): a USB-serial adapter on USART3 (PC10/PC11), e.g.
+    /// /dev/ttyUSB0 (not the NUCLEO's /dev/ttyACM0, the ST-LINK port).
     #[arg(long, value_name = "DEV", conflicts_with = "sim")]
     pub port: Option<String>,
     /// The in-process simulator, in virtual time (as fast as possible unless --time-scale).

@@ -27,7 +27,8 @@ use crate::usage::usage;
 /// `mmu sensors` options.
 #[derive(Debug, clap::Args)]
 pub struct SensorsArgs {
-    /// A real unit on this serial port (115200 8N1), e.g. a USB-serial adapter on PC10/PC11.
+    /// A real unit on this serial port (115200 8N1): a USB-serial adapter on USART3 (PC10/PC11),
+    /// e.g. /dev/ttyUSB0 (not the NUCLEO's /dev/ttyACM0, the ST-LINK port).
     #[arg(long, value_name = "DEV", conflicts_with = "sim")]
     pub port: Option<String>,
     /// The in-process simulator (real time for the table; as fast as possible with --seconds

@@ -579,7 +579,8 @@ fn event_note(event: &Event) -> Option<String> {
             }
         ),
         EventKind::Extruder { action, mm } => format!("the printer's extruder: {action} {mm:.1} mm"),
-        EventKind::Slot { .. } => return None,
+        // Motion: many per second; the events file has them.
+        EventKind::Slot { .. } | EventKind::Motor { .. } => return None,
     };
     Some(what)
 }

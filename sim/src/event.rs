@@ -50,6 +50,15 @@ pub enum EventKind {
         /// `running <progress>`, `error <code>` or `finished`.
         status: String,
     },
+    /// A slot's motor command changed (every change, so external tools see all motion).
+    Motor {
+        /// The slot.
+        slot: usize,
+        /// `forward`, `reverse`, `brake` or `coast`.
+        state: &'static str,
+        /// Duty, per mille (0 unless driven).
+        duty: u16,
+    },
     /// The printer's extruder started a move of its own.
     Extruder {
         /// Why: `co-feed`, `extra-load`, `load-to-nozzle`, `unload-help`, `ramming`.

@@ -52,12 +52,16 @@ pub trait UnitLogic: Send {
 
     /// How much the flash has been worn so far.
     fn flash_wear(&mut self) -> FlashWear;
+
+    /// The motor commands of the last step, per slot.
+    fn motors(&self) -> Vec<MotorCommand>;
 }
 
 /// An App with its store, kept by the firmware's own policy ([`Keeper`]).
 struct PersistentApp<const N: usize> {
     app: App<N>,
     keeper: Keeper<UnitFlash, N>,
+    motors: [MotorCommand; N],
 }
 
 impl<const N: usize> PersistentApp<N> {
@@ -67,7 +71,11 @@ impl<const N: usize> PersistentApp<N> {
         let store = Store::new(flash, range).unwrap_or_else(|_| unreachable!("a valid region"));
         let mut app = App::new(config);
         let (keeper, _) = block_on(Keeper::boot(store, &mut app));
-        PersistentApp { app, keeper }
+        PersistentApp {
+            app,
+            keeper,
+            motors: mmu_firmware::drive::stopped(),
+        }
     }
 }
 
@@ -94,6 +102,7 @@ impl<const N: usize> UnitLogic for PersistentApp<N> {
             out.motors
         };
         model.step(dt_ms, &motors);
+        self.motors = motors;
         out.action
     }
 
@@ -116,6 +125,10 @@ impl<const N: usize> UnitLogic for PersistentApp<N> {
 
     fn flash_wear(&mut self) -> FlashWear {
         self.keeper.store().flash().wear()
+    }
+
+    fn motors(&self) -> Vec<MotorCommand> {
+        self.motors.to_vec()
     }
 }
 

@@ -418,6 +418,28 @@ impl<L: Link> Printer<L> {
                 Err(Fault::Fatal(error)) => return Err(error),
             }
         }
+        self.follow_run(op, request, started)
+    }
+
+    /// Follow a command the unit already runs (the person pressed Retry on its error by hand, or
+    /// it was found running at connect) to its end, as [`Printer::command`] does once the unit
+    /// accepted it; a command the unit restarted under is sent again.
+    pub fn follow(&mut self, op: &mut impl Operator<L>, request: Request) -> Result<Outcome, PrinterError> {
+        let started = self.link.now_ms();
+        match self.follow_run(op, request, started)? {
+            Some(outcome) => Ok(outcome),
+            None => self.command(op, request),
+        }
+    }
+
+    /// Poll an accepted command (started at `started`, printer clock) to its end; `None` when
+    /// the unit restarted under it.
+    fn follow_run(
+        &mut self,
+        op: &mut impl Operator<L>,
+        request: Request,
+        started: u64,
+    ) -> Result<Option<Outcome>, PrinterError> {
         let mut retries_left = AUTO_RETRIES;
         let mut shown: Option<Response> = None;
         loop {

@@ -11,7 +11,7 @@
 use std::collections::VecDeque;
 
 use mmu_firmware::runner::Status;
-use mmu_firmware::{Config, Instant};
+use mmu_firmware::{Config, Direction, Instant, MotorCommand};
 use mmu_model::{Model, ModelConfig, Rng};
 use mmu_protocol::{
     ParamCode, ProgressCode, Request, RequestCode, RequestDecoder, Response, ResponseDecoder,
@@ -147,6 +147,8 @@ pub struct Sim {
     events: Vec<Event>,
     last_fsensor: u8,
     last_slot_report: Vec<(Option<f32>, u64)>,
+    /// Each slot's motor command as last reported.
+    last_motors: Vec<MotorCommand>,
     last_command: ((RequestCode, u8), Status),
     running: Option<CommandRecord>,
     finished: Vec<CommandRecord>,
@@ -177,6 +179,7 @@ impl Sim {
         Ok(Sim {
             rng: Rng::new(options.seed ^ 0x5541_5254), // "UART": independent of the model's noise
             last_slot_report: (0..options.slots).map(|slot| (model.tip_mm(slot), 0)).collect(),
+            last_motors: vec![MotorCommand::Coast; options.slots],
             options,
             logic,
             model,
@@ -586,6 +589,28 @@ impl Sim {
                     slot,
                     tip_mm: tip.map(|t| (t * 10.0).round() / 10.0),
                 });
+            }
+        }
+        let motors = if self.is_powered() {
+            self.logic.motors()
+        } else {
+            vec![MotorCommand::Coast; self.last_motors.len()]
+        };
+        for (slot, &motor) in motors.iter().enumerate() {
+            if self.last_motors.get(slot).is_some_and(|&last| last != motor) {
+                self.last_motors[slot] = motor;
+                let (state, duty) = match motor {
+                    MotorCommand::Drive { direction, duty } => (
+                        match direction {
+                            Direction::Forward => "forward",
+                            Direction::Reverse => "reverse",
+                        },
+                        duty.permille(),
+                    ),
+                    MotorCommand::Brake => ("brake", 0),
+                    MotorCommand::Coast => ("coast", 0),
+                };
+                self.event(EventKind::Motor { slot, state, duty });
             }
         }
         if self.is_powered() {

@@ -186,3 +186,32 @@ fn a_tool_change_reports_the_printer_sensor_and_slot_motion() {
     assert!(slot0 > 20, "slot 0 moved about 380 mm: {slot0} reports");
     assert!(events.windows(2).all(|w| w[0].t_ms <= w[1].t_ms));
 }
+
+#[test]
+fn every_change_of_a_motor_command_is_an_event() {
+    let mut wire = Wire::new();
+    wire.idle(300);
+    wire.command(Request::new(RequestCode::Tool, 1));
+    wire.idle(500);
+    let motor: Vec<String> = wire
+        .sim
+        .take_events()
+        .iter()
+        .filter(|e| matches!(e.what, EventKind::Motor { .. }))
+        .map(|e| e.to_json())
+        .collect();
+    let first = motor.first().expect("the tool change drove a motor");
+    assert!(
+        first.contains(r#""kind":"motor","slot":1,"state":"forward","duty":"#),
+        "{first}"
+    );
+    assert!(
+        motor.iter().all(|line| line.contains(r#""slot":1"#)),
+        "only slot 1 moved"
+    );
+    let last = motor.last().unwrap();
+    assert!(
+        last.ends_with(r#""state":"coast","duty":0}"#),
+        "it rests at the end: {last}"
+    );
+}

@@ -140,7 +140,7 @@ impl Command {
     /// The recovery tables that apply to this command, its own first.
     const fn recovery(self) -> &'static [&'static [Recovery]] {
         match self {
-            Command::StartUp => &[start_up::RECOVERY],
+            Command::StartUp => &[start_up::RECOVERY, MOTION],
             Command::ToolChange => &[
                 tool_change::RECOVERY,
                 unload_from_nozzle::RECOVERY,
@@ -156,7 +156,7 @@ impl Command {
                 preload::RECOVERY,
                 MOTION,
             ],
-            Command::Home => &[home::RECOVERY],
+            Command::Home => &[home::RECOVERY, MOTION],
         }
     }
 

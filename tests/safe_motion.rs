@@ -1,0 +1,98 @@
+//! No motion on a wrong belief: every drive is supervised, the tension follower included, and no
+//! motor moves while the unit holds an error.
+
+mod common;
+
+use common::Rig;
+use mmu_firmware::persist::Snapshot;
+use mmu_firmware::unit::Lane;
+use mmu_firmware::{App, Config, HubSamples, Instant, Samples, SlotSamples};
+use mmu_model::Fault;
+use mmu_protocol::{ErrorCode, ParamCode, Request, RequestCode};
+
+fn t(slot: u8) -> Request {
+    Request::new(RequestCode::Tool, slot)
+}
+
+/// The last time (ms) slot `slot`'s motor was driven, from the rig's motor log.
+fn last_driven(rig: &Rig<3>, slot: usize) -> Option<u64> {
+    rig.motor_log
+        .iter()
+        .rposition(|motors| motors[slot].is_driving())
+        .map(|step| step as u64)
+}
+
+#[test]
+fn a_jam_while_printing_stops_the_motor_within_5_s_and_retry_resumes() {
+    let mut rig = Rig::<3>::new();
+    rig.boot();
+    rig.command(t(0));
+    rig.model.set_printing(Some(4.0));
+    rig.idle(5_000);
+
+    rig.inject(Fault::Jam { slot: 0 });
+    let jammed_at = rig.now;
+    rig.idle(60_000);
+    let stopped_at = last_driven(&rig, 0).expect("the motor helped against the jam");
+    assert!(stopped_at > jammed_at, "the tube went taut and the motor helped");
+    assert!(
+        stopped_at < jammed_at + 5_000,
+        "the motor was driven {} ms after the jam",
+        stopped_at - jammed_at
+    );
+    let answer = rig.query();
+    assert_eq!(
+        (answer.code, answer.value, answer.param),
+        (RequestCode::Tool, 0, ParamCode::Error)
+    );
+
+    // The user clears the jam and presses Retry: printing goes on, the motor assists again.
+    assert!(rig.model.clear(mmu_model::FaultKind::Jam(0)));
+    rig.send(Request::new(RequestCode::Button, 1));
+    let tail = rig.model.tail_mm(0).unwrap();
+    rig.idle(10_000);
+    assert_eq!(rig.query().param, ParamCode::Finished);
+    let fed = rig.model.tail_mm(0).unwrap() - tail;
+    assert!(fed > 30.0, "printing goes on: {fed} mm fed in 10 s at 4 mm/s");
+    assert!(last_driven(&rig, 0) > Some(stopped_at), "the follower is back");
+}
+
+/// Raw readings: every sensor mid-scale (healthy) but the ones given.
+fn samples(hub_filament: u16, tension: u16) -> Samples<3> {
+    Samples {
+        slots: [SlotSamples {
+            motor_hall: 2048,
+            filament: 3000,
+        }; 3],
+        hub: HubSamples {
+            filament: hub_filament,
+            tension,
+            cutter: 2048,
+        },
+    }
+}
+
+#[test]
+fn a_slot_restored_as_loaded_does_not_move_while_the_start_up_check_reports_8008() {
+    let mut app = App::<3>::new(Config::default());
+    app.restore(&Snapshot {
+        lanes: [Lane::Loaded, Lane::Parked, Lane::Parked],
+        ..Snapshot::default()
+    });
+    // The hub sensor sees nothing, the Bowden tube reads taut (as if an extruder pulled).
+    let taut = samples(1000, 2048 + 400);
+    let mut answers = Vec::new();
+    for ms in 0..3000 {
+        let rx: &[u8] = if ms % 500 == 499 { b"Q0*ea\n" } else { b"" };
+        let out = app.step(Instant::from_millis(ms), &taut, rx);
+        assert!(
+            out.motors.iter().all(|m| !m.is_driving()),
+            "motor driven at {ms} ms: {:?}",
+            out.motors
+        );
+        answers.extend_from_slice(&out.tx);
+    }
+    let answers = String::from_utf8(answers).unwrap();
+    assert!(answers.contains("X0 E8008"), "{answers}");
+    assert_eq!(ErrorCode::FINDA_VS_EEPROM_DISREPANCY.0, 0x8008);
+}
