@@ -264,6 +264,8 @@ fn usage_mistakes_exit_2_everywhere() {
         (&["printer", "--port", "/dev/null", "soak"], "simulator"),
         (&["encode", "request", "W", "0xb"], "VALUE2"),
         (&["sensors"], "--port DEV"),
+        (&["console"], "--port DEV"),
+        (&["calibrate"], "--port DEV"),
     ] {
         let output = Command::new(env!("CARGO_BIN_EXE_mmu"))
             .args(args)
