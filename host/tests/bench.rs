@@ -395,3 +395,28 @@ fn the_simulator_log_leaves_out_unchanged_polls_unless_verbose() {
     let log = run(true);
     assert_eq!(log.matches("< R1b A5").count(), 3, "{log}");
 }
+
+/// A sensor stuck at a rail is flagged in the CSV and in the table, with what to check.
+#[test]
+fn sensors_flag_a_stuck_sensor() {
+    let fault = ["--fault", "disconnect:slot-filament-1:high@500"];
+    let mut args = vec!["sensors", "--sim", "--csv", "--seconds", "2"];
+    args.extend_from_slice(&fault);
+    let out = ok(&args);
+    let mut lines = out.lines();
+    let header: Vec<&str> = lines.next().expect("a header").split(',').collect();
+    let stuck = header
+        .iter()
+        .position(|c| *c == "slot1_filament_stuck")
+        .expect("a stuck column");
+    let last: Vec<&str> = lines.last().expect("rows").split(',').collect();
+    assert_eq!(last[stuck], "1", "{out}");
+    let mut args = vec!["sensors", "--sim", "--seconds", "2"];
+    args.extend_from_slice(&fault);
+    let out = ok(&args);
+    let row = out
+        .lines()
+        .find(|l| l.contains("slot 1 filament"))
+        .expect("a row");
+    assert!(row.contains("STUCK AT A RAIL: check its wiring"), "{out}");
+}

@@ -95,9 +95,17 @@ where
     // Room around the traces, within the ADC's range.
     let margin = ((high.saturating_sub(low)) / 10).max(50);
     let (y_low, y_high) = (low.saturating_sub(margin), high.saturating_add(margin).min(4095));
-    let name = sensor_name(u8::try_from(index).unwrap_or(u8::MAX));
+    let mut name = sensor_name(u8::try_from(index).unwrap_or(u8::MAX));
+    // The unit stops believing a sensor stuck at a rail: say so where the trace shows it.
+    if let Some(first) = samples.iter().find(|s| reading(s).is_some_and(|r| r.stuck)) {
+        name.push_str(&format!(
+            ": STUCK AT A RAIL from {:.1} s, check its wiring",
+            first.t_ms as f64 / 1000.0
+        ));
+    }
+    let caption_color = if name.contains("STUCK") { ON } else { BLACK };
     let mut chart = ChartBuilder::on(panel)
-        .caption(&name, (FONT, 20))
+        .caption(&name, (FONT, 20).into_font().color(&caption_color))
         .margin(10)
         .x_label_area_size(30)
         .y_label_area_size(55)
