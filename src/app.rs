@@ -276,16 +276,9 @@ impl<const N: usize> App<N> {
     /// Every writable setting that differs from its default, and its value (only what differs:
     /// a later firmware's defaults then apply to the others).
     fn settings(&self) -> Vec<(u8, u16), MAX_SETTINGS> {
-        let defaults = Config::default();
         let mut settings = Vec::new();
-        for address in registers::settings(N) {
-            let value = registers::setting_value(&self.config, N, address);
-            if let Some(value) = value.filter(|&v| Some(v) != registers::setting_value(&defaults, N, address))
-            {
-                // MAX_SETTINGS holds every setting of a 5-slot unit.
-                let _ = settings.push((address, value));
-            }
-        }
+        // MAX_SETTINGS holds every setting of a 5-slot unit.
+        registers::changed_settings(&self.config, &Config::default(), N, &mut settings);
         settings
     }
 

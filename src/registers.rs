@@ -410,30 +410,19 @@ pub fn write(target: &mut Target, slots: usize, address: u8, value: u16) -> bool
     (min..=max).contains(&value) && write(target, index, value)
 }
 
-/// Every writable register of a unit with `slots` slots whose value `config` holds (not the
-/// printer's sensor state), in table order.
-pub fn settings(slots: usize) -> impl Iterator<Item = u8> {
-    REGISTERS
-        .iter()
-        .filter(|row| row.write.is_some() && row.address != 0x09)
-        .flat_map(move |row| {
-            let count = match row.span {
-                Span::One => 1,
-                Span::Sensors => 3 + 2 * slots as u8,
-                Span::Slots => slots as u8,
-            };
-            (0..count).map(move |i| row.address + i)
-        })
-}
-
-/// The value of setting `address` in `config`, read through the table.
-pub fn setting_value(config: &Config, slots: usize, address: u8) -> Option<u16> {
-    let (row, index) = find(address, slots)?;
-    row.write?;
-    // Settings read only the configuration.
-    let view = View {
+/// Every setting register of a unit with `slots` slots (writable, held in [`Config`]; not the
+/// printer's sensor state) whose value in `config` differs from `defaults`, in table order, as
+/// many as fit `settings`.
+pub fn changed_settings<const CAP: usize>(
+    config: &Config,
+    defaults: &Config,
+    slots: usize,
+    settings: &mut heapless::Vec<(u8, u16), CAP>,
+) {
+    let hub = Hub::default();
+    let view = |config| View {
         config,
-        hub: &Hub::default(),
+        hub: &hub,
         feeders: &[],
         lanes: &[],
         fsensor: 0,
@@ -447,7 +436,23 @@ pub fn setting_value(config: &Config, slots: usize, address: u8) -> Option<u16> 
         dropped_responses: 0,
         now: Instant::ZERO,
     };
-    (row.read)(&view, index)
+    let (ours, theirs) = (view(config), view(defaults));
+    for row in REGISTERS
+        .iter()
+        .filter(|row| row.write.is_some() && row.address != 0x09)
+    {
+        let count = match row.span {
+            Span::One => 1,
+            Span::Sensors => 3 + 2 * slots,
+            Span::Slots => slots,
+        };
+        for index in 0..count {
+            let value = (row.read)(&ours, index);
+            if let Some(value) = value.filter(|&v| Some(v) != (row.read)(&theirs, index)) {
+                let _ = settings.push((row.address.wrapping_add(index as u8), value));
+            }
+        }
+    }
 }
 
 /// A register as tools show it: its row and what it is about.

@@ -1,10 +1,22 @@
 //! Streaming decoders, fed one byte at a time with bounded memory.
 //!
 //! One state machine serves both directions; only the part after the echoed value differs
-//! (`W`'s second value in a request, the parameter letter in a response). Compared with Prusa's
-//! decoder it accepts the same frames but recovers sooner: any error ends at the next newline, a
-//! bare CR or LF between frames is ignored, and a request letter arriving where it cannot belong
-//! starts a new frame.
+//! (`W`'s second value in a request, the parameter letter in a response).
+//!
+//! A frame may begin only at a line boundary, never inside a broken frame, so noise cannot turn
+//! the tail of one frame into another:
+//! - a byte that breaks a frame rejects the whole line, even a request letter (`W0 97E*d5`, one
+//!   bit away from a write, is not `E0`). Prusa's decoder does the same (the MMU's
+//!   `Protocol::DecodeRequest`, prusa3d/Prusa-Firmware-MMU `src/modules/protocol.cpp`);
+//! - after a frame broken or cut short by a newline, nothing is accepted until the line falls
+//!   silent: the bytes after that newline may be the same frame's tail (`W71 bee` + an inserted
+//!   newline + `f*21` would be `f0`; `f` is both a hex digit and a request letter). The printer
+//!   sends nothing after a frame the unit left unanswered until its 2 s timeout, so this costs nothing;
+//! - lines that never began a frame (`ok`, `zzzz`), frames with a bad CRC, blank lines and CRLF
+//!   end at their newline, and the next frame decodes at once;
+//! - the caller reports a silence ([`RequestDecoder::line_silent`], after [`SILENCE_MS`] without a
+//!   byte): it ends any broken line, with or without its newline, so stray bytes (such as the
+//!   MK4's bootloader probe: `S` and `E` with no newline) do not cost the frame after them.
 
 use core::fmt;
 
@@ -23,8 +35,10 @@ pub enum DecodeError<F> {
     UnexpectedByte(u8),
     /// The line ended before the `*<crc>` part.
     Incomplete,
-    /// A new frame began before this one ended.
+    /// The line fell silent before the frame ended (reported by `line_silent`).
     Interrupted,
+    /// A line that followed a broken frame with no silence between: it may be that frame's tail.
+    AfterBrokenFrame,
     /// The frame is well formed but its CRC does not match; its fields are kept for logs.
     BadCrc {
         /// The frame as decoded.
@@ -42,7 +56,10 @@ impl<F> fmt::Display for DecodeError<F> {
             DecodeError::UnknownCode(byte) => write!(f, "unknown code {:?}", char::from(*byte)),
             DecodeError::UnexpectedByte(byte) => write!(f, "unexpected byte {:?}", char::from(*byte)),
             DecodeError::Incomplete => f.write_str("line ended before the CRC"),
-            DecodeError::Interrupted => f.write_str("a new frame began before this one ended"),
+            DecodeError::Interrupted => f.write_str("the line fell silent before the frame ended"),
+            DecodeError::AfterBrokenFrame => {
+                f.write_str("a line right after a broken frame, before the line fell silent")
+            }
             DecodeError::BadCrc {
                 computed, received, ..
             } => {
@@ -55,6 +72,19 @@ impl<F> fmt::Display for DecodeError<F> {
     }
 }
 
+/// How long the line must stay silent, in ms, before the caller reports it with
+/// [`RequestDecoder::line_silent`] (or [`ResponseDecoder::line_silent`]).
+///
+/// A printer never pauses inside a frame: Buddy writes each frame with one `uart->write`
+/// (`ProtocolLogic::SendMsg` in prusa3d/Prusa-Firmware-Buddy
+/// `lib/Marlin/Marlin/src/feature/prusa/MMU2/protocol_logic.cpp`), the MK3S byte after byte
+/// with only interrupt handlers between them (`MMU2Serial::write`, prusa3d/Prusa-Firmware
+/// `Firmware/mmu2_serial.cpp`); a whole 13-byte frame takes 1.1 ms at 115200 Bd. The MK4's
+/// bootloader probe sends its `S` and `E` bytes 500 ms apart and waits 1 s before the first
+/// `S0` (prusa3d/Prusa-Firmware-Buddy `src/mmu2/mmu2_bootloader.cpp`), and the printer re-sends
+/// a request only after 2 s without an answer (`linkLayerTimeout`). 10 ms is well clear of both.
+pub const SILENCE_MS: u32 = 10;
+
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Direction {
     Request,
@@ -63,7 +93,7 @@ enum Direction {
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum State {
-    /// Between frames: newlines are skipped, a code letter starts a frame.
+    /// At a line boundary: newlines are skipped, a code letter starts a frame.
     Idle,
     Value,
     /// `W`'s written value, after the space.
@@ -74,6 +104,11 @@ enum State {
     Crc,
     /// A rejected line: everything up to the newline is dropped, then this reason is reported.
     Discard(Rejection),
+    /// After a broken frame: everything is dropped until the line falls silent; `dropped` says
+    /// whether the current line held anything (it is reported at its newline).
+    AwaitSilence {
+        dropped: bool,
+    },
 }
 
 /// A rejection before any field is complete, so it carries no frame.
@@ -83,6 +118,7 @@ enum Rejection {
     UnexpectedByte(u8),
     Incomplete,
     Interrupted,
+    AfterBrokenFrame,
 }
 
 impl Rejection {
@@ -92,6 +128,17 @@ impl Rejection {
             Rejection::UnexpectedByte(byte) => DecodeError::UnexpectedByte(byte),
             Rejection::Incomplete => DecodeError::Incomplete,
             Rejection::Interrupted => DecodeError::Interrupted,
+            Rejection::AfterBrokenFrame => DecodeError::AfterBrokenFrame,
+        }
+    }
+
+    /// Where the line goes after this rejection's newline. A line that began as a frame and broke
+    /// may continue after a newline that noise put there, so it waits for a silence; a line that
+    /// never began a frame cannot.
+    const fn next_state(self) -> State {
+        match self {
+            Rejection::UnknownCode(_) => State::Idle,
+            _ => State::AwaitSilence { dropped: false },
         }
     }
 }
@@ -126,7 +173,7 @@ const fn is_newline(byte: u8) -> bool {
 }
 
 impl FrameDecoder {
-    const fn new(direction: Direction) -> Self {
+    const fn new(direction: Direction, state: State) -> Self {
         let fields = Fields {
             code: 0,
             value: 0,
@@ -137,7 +184,7 @@ impl FrameDecoder {
         };
         FrameDecoder {
             direction,
-            state: State::Idle,
+            state,
             fields,
         }
     }
@@ -149,8 +196,17 @@ impl FrameDecoder {
             (State::Idle, _) => self.start(byte),
             (State::Discard(rejection), _) => {
                 if is_newline(byte) {
-                    self.state = State::Idle;
+                    self.state = rejection.next_state();
                     Step::Rejected(rejection)
+                } else {
+                    Step::Pending
+                }
+            }
+            (State::AwaitSilence { dropped }, _) => {
+                let newline = is_newline(byte);
+                self.state = State::AwaitSilence { dropped: !newline };
+                if newline && dropped {
+                    Step::Rejected(Rejection::AfterBrokenFrame)
                 } else {
                     Step::Pending
                 }
@@ -195,20 +251,28 @@ impl FrameDecoder {
                 Step::Pending
             }
             (_, _) if is_newline(byte) => {
-                self.state = State::Idle;
+                self.state = Rejection::Incomplete.next_state();
                 Step::Rejected(Rejection::Incomplete)
             }
-            (_, _) if RequestCode::from_byte(byte).is_some() => {
-                // A frame letter where none belongs: the sender gave up on the last frame (or it was
-                // noise, such as the MK4's bootloader probe); the new frame is not lost with it.
-                self.start(byte);
-                Step::Rejected(Rejection::Interrupted)
-            }
             (_, _) => {
+                // Even a request letter: a frame never begins inside a broken line.
                 self.state = State::Discard(Rejection::UnexpectedByte(byte));
                 Step::Pending
             }
         }
+    }
+
+    /// The line fell silent: whatever was not finished is rejected, and the next byte may begin
+    /// a frame.
+    fn line_silent(&mut self) -> Option<Rejection> {
+        let rejection = match self.state {
+            State::Idle | State::AwaitSilence { dropped: false } => None,
+            State::AwaitSilence { dropped: true } => Some(Rejection::AfterBrokenFrame),
+            State::Discard(rejection) => Some(rejection),
+            _ => Some(Rejection::Interrupted),
+        };
+        self.state = State::Idle;
+        rejection
     }
 
     fn start(&mut self, byte: u8) -> Step {
@@ -276,9 +340,19 @@ impl Default for RequestDecoder {
 }
 
 impl RequestDecoder {
-    /// A decoder waiting for the first frame.
+    /// A decoder at a line boundary, waiting for the first frame.
     pub const fn new() -> Self {
-        RequestDecoder(FrameDecoder::new(Direction::Request))
+        RequestDecoder(FrameDecoder::new(Direction::Request, State::Idle))
+    }
+
+    /// A decoder joining a line that may be in the middle of a frame (the unit just booted while
+    /// the printer may be sending): it accepts nothing until the line falls silent, so the tail
+    /// of a frame is never taken for a frame.
+    pub const fn new_mid_line() -> Self {
+        RequestDecoder(FrameDecoder::new(
+            Direction::Request,
+            State::AwaitSilence { dropped: false },
+        ))
     }
 
     /// Feed one byte. Returns a request when a frame completes, an error when a frame is rejected,
@@ -296,7 +370,17 @@ impl RequestDecoder {
         })
     }
 
-    /// Forget any partial frame.
+    /// Tell the decoder that no byte arrived for [`SILENCE_MS`] (or longer): a frame the printer
+    /// sends never pauses that long, so a frame left unfinished is rejected (returned, for logs)
+    /// and the next byte may begin a new one. Calling it again while the line stays silent does
+    /// nothing.
+    pub fn line_silent(&mut self) -> Option<DecodeError<Request>> {
+        self.0.line_silent().map(Rejection::into_error)
+    }
+
+    /// Forget any partial frame: the next byte may begin a new one. For a caller that knows a
+    /// frame boundary by other means (a link just opened); noise is handled by [`Self::feed`]
+    /// and [`Self::line_silent`].
     pub fn reset(&mut self) {
         self.0.state = State::Idle;
     }
@@ -313,9 +397,18 @@ impl Default for ResponseDecoder {
 }
 
 impl ResponseDecoder {
-    /// A decoder waiting for the first frame.
+    /// A decoder at a line boundary, waiting for the first frame.
     pub const fn new() -> Self {
-        ResponseDecoder(FrameDecoder::new(Direction::Response))
+        ResponseDecoder(FrameDecoder::new(Direction::Response, State::Idle))
+    }
+
+    /// A decoder joining a line that may be in the middle of a frame (see
+    /// [`RequestDecoder::new_mid_line`]).
+    pub const fn new_mid_line() -> Self {
+        ResponseDecoder(FrameDecoder::new(
+            Direction::Response,
+            State::AwaitSilence { dropped: false },
+        ))
     }
 
     /// Feed one byte. Returns a response when a frame completes, an error when a frame is
@@ -334,7 +427,14 @@ impl ResponseDecoder {
         })
     }
 
-    /// Forget any partial frame.
+    /// Tell the decoder that no byte arrived for [`SILENCE_MS`] (or longer); see
+    /// [`RequestDecoder::line_silent`].
+    pub fn line_silent(&mut self) -> Option<DecodeError<Response>> {
+        self.0.line_silent().map(Rejection::into_error)
+    }
+
+    /// Forget any partial frame: the next byte may begin a new one (see
+    /// [`RequestDecoder::reset`]).
     pub fn reset(&mut self) {
         self.0.state = State::Idle;
     }

@@ -503,11 +503,12 @@ fn spec_8_3_24_uppercase_hex_is_rejected() {
     let decoded = decode_requests(b"Q0*EA\n");
     assert!(!decoded.is_empty());
     assert!(decoded.iter().all(Result::is_err), "{decoded:?}");
-    // ... and the next frame still decodes.
-    assert_eq!(
-        ok_requests(b"Q0*EA\nQ0*ea\n"),
-        vec![Request::new(RequestCode::Query, 0)]
-    );
+    // ... and the next frame decodes once the line has been silent (a frame broken by a wrong
+    // byte may go on after its newline, so nothing right after it is believed).
+    let mut decoder = RequestDecoder::new();
+    assert!(accepted(&mut decoder, b"Q0*EA\nQ0*ea\n").is_empty());
+    assert_eq!(decoder.line_silent(), None);
+    assert_eq!(accepted(&mut decoder, b"Q0*ea\n"), [req('Q', 0)]);
     // Uppercase in a value or a response is no better.
     assert!(ok_requests(b"R1B*9e\n").is_empty());
     assert!(ok_responses(b"T0 PA*45\n").is_empty());
@@ -601,31 +602,150 @@ fn spec_8_3_30_old_firmware_greetings_are_rejected() {
 // Our own recovery rules
 // ---------------------------------------------------------------------------------------------
 
+/// Feeds `bytes` to `decoder` and keeps what it accepted.
+fn accepted(decoder: &mut RequestDecoder, bytes: &[u8]) -> Vec<Request> {
+    bytes.iter().filter_map(|&b| decoder.feed(b)?.ok()).collect()
+}
+
 #[test]
-fn bootloader_probe_does_not_cost_the_first_frame() {
-    // §5.1: the MK4 sends bare `S` and `E` bytes (no newline) before the protocol starts.
-    let decoded = decode_requests(b"SSSES0*c6\n");
-    assert_eq!(decoded.last(), Some(&Ok(Request::new(RequestCode::Version, 0))));
-    assert!(
-        decoded[..decoded.len() - 1]
-            .iter()
-            .all(|r| *r == Err(DecodeError::Interrupted)),
-        "{decoded:?}"
-    );
+fn bootloader_probe_then_a_silence_does_not_cost_the_first_frame() {
+    // §5.1: the MK4 probes for a bootloader with bare `S` (20 times) and `E` (4 times), 500 ms
+    // apart and without a newline, then waits 1 s and sends `S0` (Buddy's
+    // `src/mmu2/mmu2_bootloader.cpp`). Each pause is a silence on the line.
+    let mut decoder = RequestDecoder::new();
+    for &probe in [b'S'; 20].iter().chain(&[b'E'; 4]) {
+        assert_eq!(decoder.feed(probe), None);
+        assert_eq!(decoder.line_silent(), Some(DecodeError::Interrupted));
+    }
     assert_eq!(
-        ok_requests(b"SSSES0*c6\n"),
-        vec![Request::new(RequestCode::Version, 0)]
+        decoder.line_silent(),
+        None,
+        "a longer silence reports nothing more"
+    );
+    assert_eq!(accepted(&mut decoder, b"S0*c6\n"), [req('S', 0)]);
+
+    // The same bytes back to back and a single silence before `S0` cost nothing either.
+    let mut decoder = RequestDecoder::new();
+    let probe = [[b'S'; 20].as_slice(), &[b'E'; 4]].concat();
+    assert!(accepted(&mut decoder, &probe).is_empty());
+    assert_eq!(decoder.line_silent(), Some(DecodeError::UnexpectedByte(b'S')));
+    assert_eq!(accepted(&mut decoder, b"S0*c6\n"), [req('S', 0)]);
+}
+
+#[test]
+fn a_frame_letter_inside_a_broken_frame_starts_nothing() {
+    // The phantoms of issue 12: one flipped bit (`e`, `f`, `b` to `E`, `F`, `B`) or one inserted
+    // letter, and the old decoder read the tail as a command the printer never sent.
+    for phantom in [
+        &b"W0 97E*d5\n"[..],
+        b"Q3fX*4c\n",
+        b"Q1bT*a4\n",
+        b"W0 42F*ef\n",
+        b"T0*Q0*ea\n",
+        b"SSSES0*c6\n",
+    ] {
+        assert_eq!(ok_requests(phantom), [], "{:?}", String::from_utf8_lossy(phantom));
+    }
+    assert_eq!(
+        decode_requests(b"W0 97E*d5\n"),
+        [Err(DecodeError::UnexpectedByte(b'E'))]
+    );
+    // Responses alike: `Q6ce P*cb` with `e` flipped to `E` is not `E0 P`.
+    assert_eq!(ok_responses(b"Q6cE P*cb\n"), []);
+}
+
+#[test]
+fn after_a_broken_frame_nothing_decodes_until_the_line_falls_silent() {
+    // A newline inserted before a write's `f` digit: the tail `f*21` is a valid `f0` frame, but it
+    // is the broken frame's own tail. The printer sends nothing more before its 2 s timeout.
+    let mut decoder = RequestDecoder::new();
+    let results: Vec<_> = b"W71 bee\nf*21\nQ0*ea\n"
+        .iter()
+        .filter_map(|&b| decoder.feed(b))
+        .collect();
+    assert_eq!(
+        results,
+        [
+            Err(DecodeError::Incomplete),
+            Err(DecodeError::AfterBrokenFrame),
+            Err(DecodeError::AfterBrokenFrame),
+        ]
+    );
+    assert_eq!(decoder.line_silent(), None);
+    assert_eq!(
+        accepted(&mut decoder, b"W71 beef*21\n"),
+        [Request::write(0x71, 0xbeef)]
+    );
+
+    // A broken line without its newline ends at the silence as well.
+    let mut decoder = RequestDecoder::new();
+    assert!(accepted(&mut decoder, b"T1*cZ").is_empty());
+    assert_eq!(decoder.line_silent(), Some(DecodeError::UnexpectedByte(b'Z')));
+    assert_eq!(accepted(&mut decoder, b"T1*cf\n"), [req('T', 1)]);
+
+    let mut decoder = ResponseDecoder::new();
+    let got: Vec<_> = b"T\nf A*xx\n".iter().filter_map(|&b| decoder.feed(b)).collect();
+    assert!(got.iter().all(Result::is_err), "{got:?}");
+    assert_eq!(decoder.line_silent(), None);
+    let s0 = Request::new(RequestCode::Version, 0);
+    let got: Vec<_> = b"S0 A3*22\n".iter().filter_map(|&b| decoder.feed(b)).collect();
+    assert_eq!(got, [Ok(Response::read(&s0, 3))]);
+}
+
+#[test]
+fn a_decoder_joining_mid_line_waits_for_a_silence() {
+    // The unit booted while the printer was sending `W71 beef*21`: its tail `f*21` is a valid `f0`.
+    let mut decoder = RequestDecoder::new_mid_line();
+    assert!(accepted(&mut decoder, b"f*21\nQ0*ea\n").is_empty());
+    assert_eq!(decoder.line_silent(), None);
+    assert_eq!(accepted(&mut decoder, b"Q0*ea\n"), [req('Q', 0)]);
+
+    let mut decoder = ResponseDecoder::new_mid_line();
+    assert!(
+        b"X0 F0*87\n"
+            .iter()
+            .all(|&b| decoder.feed(b).is_none_or(|r| r.is_err()))
+    );
+    assert_eq!(decoder.line_silent(), None);
+    let got: Vec<_> = b"X0 F0*87\n".iter().filter_map(|&b| decoder.feed(b)).collect();
+    assert_eq!(got, [Ok(rsp('X', 0, 'F', Some(0)))]);
+}
+
+#[test]
+fn a_line_that_never_began_a_frame_costs_nothing() {
+    // Garbage that never began a frame, then a newline: the next frame decodes at once.
+    for garbage in [&b"zzzz\n"[..], b"ok\r\n", b"start\n", b"\x00\xff 12*\n", b"*\n"] {
+        let mut bytes = garbage.to_vec();
+        bytes.extend_from_slice(b"Q0*ea\n");
+        assert_eq!(
+            ok_requests(&bytes),
+            [req('Q', 0)],
+            "{:?}",
+            String::from_utf8_lossy(garbage)
+        );
+    }
+    // So does a frame with a bad CRC (its newline ends it: §8.3.29 for responses).
+    assert_eq!(ok_requests(b"T1*ce\nT1*cf\n"), [req('T', 1)]);
+}
+
+#[test]
+fn crlf_and_blank_lines_are_skipped() {
+    assert_eq!(
+        decode_requests(b"\r\n\r\nQ0*ea\r\n\n\nT1*cf\r\n"),
+        [Ok(req('Q', 0)), Ok(req('T', 1))]
+    );
+    let s0 = Request::new(RequestCode::Version, 0);
+    assert_eq!(
+        decode_responses(b"\r\nS0 A3*22\r\n\r\nS0 A3*22\n"),
+        [Ok(Response::read(&s0, 3)), Ok(Response::read(&s0, 3))]
     );
 }
 
 #[test]
-fn a_frame_letter_interrupts_a_broken_frame() {
+fn leading_zeros_and_an_empty_value_are_accepted_as_by_prusa() {
     assert_eq!(
-        decode_requests(b"T0*Q0*ea\n"),
-        vec![
-            Err(DecodeError::Interrupted),
-            Ok(Request::new(RequestCode::Query, 0))
-        ]
+        ok_requests(b"L00*73\nQ*ea\nW00 00ff*49\n"),
+        [req('L', 0), req('Q', 0), Request::write(0, 0xff)]
     );
 }
 

@@ -14,7 +14,7 @@ use mmu_firmware::runner::Status;
 use mmu_firmware::{Config, Direction, Instant, MotorCommand};
 use mmu_model::{Model, ModelConfig, Rng};
 use mmu_protocol::{
-    ParamCode, ProgressCode, Request, RequestCode, RequestDecoder, Response, ResponseDecoder,
+    ParamCode, ProgressCode, Request, RequestCode, RequestDecoder, Response, ResponseDecoder, SILENCE_MS,
 };
 
 use crate::event::{Event, EventKind, FaultAction};
@@ -108,11 +108,28 @@ pub struct CommandRecord {
     pub had_error: bool,
 }
 
+/// Milliseconds one direction of the line has been quiet.
+#[derive(Debug, Default)]
+struct QuietMs(u32);
+
+impl QuietMs {
+    /// One millisecond in which `bytes` crossed; true once the line has been silent for
+    /// [`SILENCE_MS`].
+    fn step(&mut self, bytes: usize) -> bool {
+        self.0 = if bytes == 0 { self.0.saturating_add(1) } else { 0 };
+        self.0 >= SILENCE_MS
+    }
+}
+
 /// The printer's mechanics, driven by the frames on the wire.
 #[derive(Debug)]
 struct PrinterMechanics {
     requests: RequestDecoder,
     responses: ResponseDecoder,
+    /// How long each direction has been quiet: its decoder learns of a silence (after a broken
+    /// frame it accepts nothing before one).
+    requests_quiet: QuietMs,
+    responses_quiet: QuietMs,
     /// The printer's copies of registers 0x0b and 0x14, as it wrote them.
     extra_load_mm: f32,
     slow_mm_s: f32,
@@ -174,6 +191,8 @@ impl Sim {
             feeding_to_fsensor: false,
             cofeeding: false,
             print_mm_s: options.print_mm_s,
+            requests_quiet: QuietMs::default(),
+            responses_quiet: QuietMs::default(),
         };
         let last_command = logic.command();
         Ok(Sim {
@@ -361,6 +380,9 @@ impl Sim {
             }
         }
         self.uart_faults(&mut from_unit);
+        if self.printer.responses_quiet.step(from_unit.len()) {
+            let _ = self.printer.responses.line_silent();
+        }
         for &byte in &from_unit {
             self.printer_hears(byte);
         }
@@ -417,6 +439,9 @@ impl Sim {
     /// unload its extruder (then they wait for it); then the UART faults strike.
     fn pass_printer_bytes(&mut self, rx: &[u8]) -> Vec<u8> {
         let mut out = Vec::new();
+        if self.printer.requests_quiet.step(rx.len()) {
+            let _ = self.printer.requests.line_silent();
+        }
         for &byte in rx {
             self.frame.push(byte);
             if let Some(Ok(request)) = self.printer.requests.feed(byte) {

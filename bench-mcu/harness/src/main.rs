@@ -15,7 +15,7 @@ use core::panic::PanicInfo;
 
 use embassy_futures::block_on;
 use embedded_storage_async::nor_flash::{ErrorType, NorFlash, NorFlashErrorKind, ReadNorFlash};
-use mmu_firmware::ops::Status;
+use mmu_firmware::runner::Status;
 use mmu_firmware::persist::{Keeper, Store};
 use mmu_firmware::{App, Config, HubSamples, Instant, Outputs, Samples, SlotSamples};
 

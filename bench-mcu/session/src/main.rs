@@ -21,7 +21,7 @@
 use std::collections::VecDeque;
 use std::error::Error;
 
-use mmu_firmware::ops::Status;
+use mmu_firmware::runner::Status;
 use mmu_firmware::persist::Snapshot;
 use mmu_firmware::{App, Config, Instant, Samples};
 use mmu_model::{Fault, FaultKind, Model, ModelConfig};
