@@ -279,7 +279,7 @@ fn usage_mistakes_exit_2_everywhere() {
 }
 
 /// Before: Ctrl-C during a soak lost the report.
-#[cfg(unix)]
+#[cfg(target_os = "linux")]
 #[test]
 fn soak_prints_its_report_on_ctrl_c() {
     let child = Command::new(env!("CARGO_BIN_EXE_mmu"))
@@ -288,7 +288,23 @@ fn soak_prints_its_report_on_ctrl_c() {
         .stderr(std::process::Stdio::piped())
         .spawn()
         .expect("the mmu binary runs");
-    std::thread::sleep(std::time::Duration::from_millis(1500));
+    // Signal only once the tool catches SIGINT (Linux shows it in /proc), whatever the load.
+    let caught = std::path::PathBuf::from(format!("/proc/{}/status", child.id()));
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(20);
+    let catches_sigint = || {
+        std::fs::read_to_string(&caught).ok().is_some_and(|status| {
+            status
+                .lines()
+                .find_map(|line| line.strip_prefix("SigCgt:"))
+                .and_then(|mask| u64::from_str_radix(mask.trim(), 16).ok())
+                .is_some_and(|mask| mask & (1 << (2 - 1)) != 0)
+        })
+    };
+    while !catches_sigint() && caught.exists() {
+        assert!(std::time::Instant::now() < deadline, "mmu never caught SIGINT");
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
+    std::thread::sleep(std::time::Duration::from_millis(300));
     let status = Command::new("kill")
         .args(["-INT", &child.id().to_string()])
         .status()
