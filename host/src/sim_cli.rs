@@ -30,7 +30,9 @@ use std::thread;
 use std::time::{Duration, Instant};
 
 use clap::{ArgGroup, Args};
-use mmu_protocol::{DecodeError, Request, RequestCode, RequestDecoder, Response, ResponseDecoder};
+use mmu_protocol::{
+    DecodeError, Request, RequestCode, RequestDecoder, Response, ResponseDecoder, SILENCE_MS,
+};
 use mmu_sim::event::FaultAction;
 use mmu_sim::{Event, EventKind, FAULT_HELP, ScheduledFault, Sim, SimOptions};
 
@@ -49,6 +51,8 @@ const IDLE_WAIT: Duration = Duration::from_millis(1);
 const MAX_STEPS_PER_BATCH: u64 = 100;
 /// Falling this far behind the wall clock earns one warning.
 const LAG_WARNING: Duration = Duration::from_secs(1);
+/// An unfinished frame is shown up to this many bytes.
+const MAX_SHOWN_LINE: usize = 40;
 /// A poll answered as the time before, at most this long before, is a printer's routine poll.
 const POLL_REPEAT_MS: u64 = 3000;
 /// Bytes the reader thread takes from the input at once.
@@ -204,11 +208,17 @@ impl Server {
         }
         for _ in 0..steps {
             let before = sent.len();
+            let heard = !received.is_empty();
             self.sim.step(received, &mut sent);
             received.clear();
-            if logging && sent.len() > before {
+            if logging {
                 let at = self.sim.now_ms();
-                log.extend(self.wire.unit_sent(at, sent.get(before..).unwrap_or(&[])));
+                if sent.len() > before {
+                    log.extend(self.wire.unit_sent(at, sent.get(before..).unwrap_or(&[])));
+                }
+                if !heard {
+                    log.extend(self.wire.printer_quiet(at));
+                }
             }
         }
         let open = self.send(output, &sent)?;
@@ -404,6 +414,10 @@ struct WireLog {
     last: HashMap<(RequestCode, u8), (Response, u64)>,
     /// Polls left out since the last line shown.
     hidden: u32,
+    /// The printer's bytes since its last newline, to show an unfinished frame.
+    line: Vec<u8>,
+    /// Milliseconds since the printer's last byte.
+    quiet_ms: u32,
 }
 
 /// A log line and the simulator's time it belongs to.
@@ -418,7 +432,30 @@ impl WireLog {
             pending: None,
             last: HashMap::new(),
             hidden: 0,
+            line: Vec::new(),
+            quiet_ms: 0,
         }
+    }
+
+    /// A millisecond without a byte from the printer: once the line has been silent for
+    /// [`SILENCE_MS`] the decoder is told, as the unit's is, and a frame left unfinished (a
+    /// person who stopped typing) is reported.
+    fn printer_quiet(&mut self, at: u64) -> Vec<LogLine> {
+        let mut lines = Vec::new();
+        self.quiet_ms = self.quiet_ms.saturating_add(1);
+        if self.quiet_ms >= SILENCE_MS && self.requests.line_silent().is_some() {
+            self.flush_pending(&mut lines);
+            let text = String::from_utf8_lossy(&self.line).into_owned();
+            self.show(
+                &mut lines,
+                at,
+                format!(
+                    "> frame ignored: {text} unfinished: the line fell silent before its *CRC and newline"
+                ),
+            );
+            self.line.clear();
+        }
+        lines
     }
 
     /// Show `line`, after saying how many unchanged polls were left out before it.
@@ -443,6 +480,14 @@ impl WireLog {
     /// The log lines for bytes the printer sent at `at`.
     fn printer_sent(&mut self, at: u64, bytes: &[u8]) -> Vec<LogLine> {
         let mut lines = Vec::new();
+        self.quiet_ms = 0;
+        for &byte in bytes {
+            if byte == b'\n' {
+                self.line.clear();
+            } else if self.line.len() < MAX_SHOWN_LINE {
+                self.line.push(byte);
+            }
+        }
         let decoded: Vec<_> = bytes
             .iter()
             .filter_map(|&byte| self.requests.feed(byte))

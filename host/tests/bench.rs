@@ -420,3 +420,27 @@ fn sensors_flag_a_stuck_sensor() {
         .expect("a row");
     assert!(row.contains("STUCK AT A RAIL: check its wiring"), "{out}");
 }
+
+/// A frame left unfinished (a person stopped typing) is reported once the line falls silent,
+/// as the unit's decoder sees it (spec: a printer never pauses inside a frame), and the next
+/// request is logged.
+#[test]
+fn the_simulator_log_reports_an_unfinished_frame_after_a_silence() {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_mmu"))
+        .args(["sim", "--stdio"])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("mmu sim runs");
+    let mut stdin = child.stdin.take().expect("piped");
+    stdin.write_all(b"T1").expect("write");
+    stdin.flush().expect("flush");
+    thread::sleep(Duration::from_millis(200));
+    stdin.write_all(b"S0*c6\n").expect("write");
+    drop(stdin);
+    let output = child.wait_with_output().expect("mmu sim ends");
+    let log = String::from_utf8_lossy(&output.stderr);
+    assert!(log.contains("> frame ignored: T1 unfinished"), "{log}");
+    assert!(log.contains("> S0*c6  version major"), "{log}");
+}
