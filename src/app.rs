@@ -66,6 +66,9 @@ pub struct App<const N: usize> {
     odometry_seen: [i32; N],
     fed_centi: [u64; N],
     decoder: RequestDecoder,
+    /// When the last byte from the printer arrived: a line silent for
+    /// [`mmu_protocol::SILENCE_MS`] may start a new frame.
+    last_rx: Instant,
     /// The time of the current step.
     pub(crate) now: Instant,
     /// A physical button press waiting for the printer to collect it with `Q0` (during `T`, the
@@ -88,7 +91,10 @@ impl<const N: usize> App<N> {
             dropped_responses: 0,
             odometry_seen: [0; N],
             fed_centi: [0; N],
-            decoder: RequestDecoder::new(),
+            // The printer may be mid-frame when the unit starts: only a newline or a silence
+            // starts the first frame.
+            decoder: RequestDecoder::new_mid_line(),
+            last_rx: Instant::ZERO,
             now: Instant::ZERO,
             pending_button: None,
         }
@@ -120,6 +126,12 @@ impl<const N: usize> App<N> {
         };
         self.now = now;
         self.unit.sense(samples, now, &self.config);
+        if !rx.is_empty() {
+            self.last_rx = now;
+        } else if now.millis_since(self.last_rx) >= u64::from(mmu_protocol::SILENCE_MS) {
+            // A silence on the line ends any frame: what was dropped is not a request.
+            let _ = self.decoder.line_silent();
+        }
         for &byte in rx {
             if let Some(Ok(request)) = self.decoder.feed(byte) {
                 self.handle(&request, &mut out);

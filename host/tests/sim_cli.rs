@@ -243,6 +243,9 @@ impl Printer {
 
     /// The printer's start-up (spec §5.2), up to the unit's start-up check having finished.
     fn handshake(&mut self) {
+        // As a printer does, let the unit boot first: it takes a frame only at the start of a
+        // quiet line (mmu_protocol::SILENCE_MS).
+        std::thread::sleep(Duration::from_millis(200));
         let versions = [(0, 3), (1, 0), (2, 3)];
         for (register, version) in versions {
             let request = Request::new(RequestCode::Version, register);

@@ -20,6 +20,8 @@ pub const LINK_TIMEOUT_MS: u64 = 2000;
 pub const HEARTBEAT_MS: u64 = 1000;
 /// Consecutive link faults before the printer reports MMU_NOT_RESPONDING (`DropOutFilter`).
 pub const MAX_DROPOUTS: u8 = 10;
+/// How long after its start the printer first talks to the unit, ms.
+const BOOT_WAIT_MS: u64 = 100;
 /// Version answers that may be wrong during one handshake (`maxRetries`).
 pub const VERSION_RETRIES: u8 = 6;
 /// Automatic Retry presses per command (`MAX_RETRIES`).
@@ -302,6 +304,15 @@ impl<L: Link> Printer<L> {
     /// starting up finish; returns the `Q0` answer (`X0 F0` for a unit at rest, an error it
     /// stopped on, or the command it is still running).
     pub fn connect(&mut self, op: &mut impl Operator<L>) -> Result<Response, PrinterError> {
+        // The printer lets a unit boot before it talks (a Buddy printer sends its bootloader probe
+        // and waits 1 s): a unit takes a frame only at the start of a quiet line.
+        let quiet_until = BOOT_WAIT_MS;
+        while self.link.now_ms() < quiet_until {
+            let wait = quiet_until - self.link.now_ms();
+            self.link
+                .receive(wait, &mut Vec::new())
+                .map_err(PrinterError::Io)?;
+        }
         let deadline = self.link.now_ms() + self.options.command_timeout_ms;
         loop {
             let mut answer = match self.handshake(op) {

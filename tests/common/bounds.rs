@@ -76,8 +76,8 @@ impl<const N: usize> Bench<N> {
     }
 
     /// One step with the printer's bytes `rx` (a reset request restarts the App), then
-    /// `hold_ms` steps with nothing sent, all with `samples`; then a `Q0` after a newline must get
-    /// exactly one well-formed answer (after garbage the decoder resynchronises there). Says what
+    /// `hold_ms` steps (at least a line silence) with nothing sent, all with `samples`; then a `Q0`
+    /// after a newline must get exactly one well-formed answer (the decoder resynchronises there). Says what
     /// went wrong.
     pub fn feed(&mut self, rx: &[u8], samples: &Samples<N>, hold_ms: u64) -> Result<(), String> {
         let out = self.app.step(Instant::from_millis(self.now), samples, rx);
@@ -86,7 +86,8 @@ impl<const N: usize> Bench<N> {
             self.app = App::new(Config::default());
             self.watch = Watch::default();
         }
-        for _ in 0..hold_ms {
+        // At least a silence: after garbage only a silent line starts a new frame.
+        for _ in 0..hold_ms.max(mmu_protocol::SILENCE_MS.into()) {
             self.now += 1;
             let out = self.app.step(Instant::from_millis(self.now), samples, &[]);
             self.watch.check(&self.app, self.now, &out.motors)?;
