@@ -274,6 +274,12 @@ impl Server {
     /// sees half a line.
     fn record_events(&mut self) -> Result<Vec<(u64, String)>, Box<dyn Error>> {
         let events = self.sim.take_events();
+        if events
+            .iter()
+            .any(|event| matches!(event.what, EventKind::Power { on: true }))
+        {
+            self.wire.unit_booted();
+        }
         let notes = events
             .iter()
             .filter_map(|event| event_note(event).map(|note| (event.t_ms, note)))
@@ -426,7 +432,8 @@ type LogLine = (u64, String);
 impl WireLog {
     fn new(every: bool) -> Self {
         WireLog {
-            requests: RequestDecoder::new(),
+            // As the unit's: it starts mid-line, taking a frame only after a silence.
+            requests: RequestDecoder::new_mid_line(),
             responses: ResponseDecoder::new(),
             every,
             pending: None,
@@ -435,6 +442,12 @@ impl WireLog {
             line: Vec::new(),
             quiet_ms: 0,
         }
+    }
+
+    /// The unit booted: its decoder starts mid-line again.
+    fn unit_booted(&mut self) {
+        self.requests = RequestDecoder::new_mid_line();
+        self.line.clear();
     }
 
     /// A millisecond without a byte from the printer: once the line has been silent for
@@ -575,6 +588,10 @@ fn ignored_reason(error: &DecodeError<Request>) -> String {
                 request_meaning(frame)
             )
         }
+        DecodeError::AfterBrokenFrame => format!(
+            "the line was not quiet for {SILENCE_MS} ms before it (the unit was starting, or a broken frame came just before): \
+             the unit takes a frame only at the start of a quiet line"
+        ),
         other => other.to_string(),
     }
 }

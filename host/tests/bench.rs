@@ -13,6 +13,9 @@ use serde_json::Value;
 
 /// Longest wait for the simulator to say something.
 const WAIT: Duration = Duration::from_secs(20);
+/// As a printer does, a client lets the unit boot before it talks: the unit takes a frame only
+/// at the start of a quiet line (`mmu_protocol::SILENCE_MS`).
+const BOOT: Duration = Duration::from_millis(200);
 
 fn mmu(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_mmu"))
@@ -285,6 +288,7 @@ fn the_simulator_logs_what_it_serves() {
         .timeout(WAIT)
         .open()
         .expect("the pty opens");
+    thread::sleep(BOOT);
     port.write_all(b"S0*c6\n").expect("write");
     let seen = sim.wait_for_log("version major = 3");
     assert!(
@@ -309,6 +313,7 @@ fn the_simulator_log_is_silenced_by_q() {
         .stderr(Stdio::piped())
         .spawn()
         .and_then(|mut child| {
+            thread::sleep(BOOT);
             child.stdin.take().expect("piped").write_all(b"S0*c6\nT1*00\n")?;
             child.wait_with_output()
         })
@@ -379,6 +384,7 @@ fn the_simulator_log_leaves_out_unchanged_polls_unless_verbose() {
             .spawn()
             .expect("mmu sim runs");
         let mut stdin = child.stdin.take().expect("piped");
+        thread::sleep(BOOT);
         for _ in 0..3 {
             stdin.write_all(b"R1b*9e\n").expect("write");
             thread::sleep(Duration::from_millis(30));
@@ -434,6 +440,7 @@ fn the_simulator_log_reports_an_unfinished_frame_after_a_silence() {
         .spawn()
         .expect("mmu sim runs");
     let mut stdin = child.stdin.take().expect("piped");
+    thread::sleep(BOOT);
     stdin.write_all(b"T1").expect("write");
     stdin.flush().expect("flush");
     thread::sleep(Duration::from_millis(200));
