@@ -83,7 +83,7 @@ fn script(session: &mut Session<SimLink>) -> Result<(), Failure> {
     }
 
     session.console().heading(&format!(
-        "3/5 eject slot {SWAP_SLOT}: FINDA sees filament, so the printer unloads first; the unit \
+        "3/5 eject slot {SWAP_SLOT}: the hub filament sensor sees filament, so the printer unloads first; the unit \
          pulls the filament out of its slot and the printer shows the Continue dialog"
     ));
     session.eject(SWAP_SLOT)?;

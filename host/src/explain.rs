@@ -2,9 +2,13 @@
 //! names with the printer's error screen. Used by `mmu decode`; meant to be shared by the other
 //! host tools (simulator, printer emulator) for their logs.
 
+mod errors;
+
 use mmu_protocol::{
     ButtonCode, ErrorCode, ParamCode, ProgressCode, Request, RequestCode, Response, ResultCode,
 };
+
+pub use errors::error_help;
 
 /// Register names of the MMU3 register map (spec §4), indexed by address 0x00..=0x23.
 const REGISTER_NAMES: [&str; 36] = [
@@ -64,23 +68,76 @@ fn register_label(address: u8) -> String {
 
 /// A note on a register value where the number alone says little.
 fn register_value_note(address: u8, value: u16) -> Option<String> {
+    use mmu_firmware::registers::{FAILURES, LANE, ODOMETRY, SENSOR_FAULTS, Subject};
     match address {
-        0x05 => u8::try_from(value).ok().map(|v| ProgressCode(v).to_string()),
-        0x06 => Some(ErrorCode(value).to_string()),
-        0x07 => Some(
-            match value {
-                0 => "NotLoaded",
-                1 => "AtPulley",
-                2 => "InSelector",
-                4 => "InFSensor",
-                8 => "InNozzle",
-                _ => "unknown state",
-            }
-            .to_string(),
-        ),
-        0x08 => Some(finda_note(value).to_string()),
-        0x0a => Some(if value == 0 { "normal" } else { "stealth" }.to_string()),
+        0x05 => return u8::try_from(value).ok().map(|v| ProgressCode(v).to_string()),
+        0x06 => return Some(ErrorCode(value).to_string()),
+        0x07 => return Some(lane_state(value).to_string()),
+        0x08 => return Some(finda_note(value).to_string()),
+        0x0a => return Some(if value == 0 { "normal" } else { "stealth" }.to_string()),
+        0x1b | 0x1c => return Some(slot_note(value)),
+        SENSOR_FAULTS => return Some(stuck_sensors(value)),
+        _ => {}
+    }
+    let register = mmu_firmware::registers::describe(address, mmu_firmware::MAX_SLOTS)?;
+    match (register.row.address, register.subject) {
+        (LANE, Some(Subject::Slot(_))) => Some(lane_state(value).to_string()),
+        // Two's complement: a slot that pulled back more than it fed.
+        (ODOMETRY, Some(Subject::Slot(_))) => Some(format!("{} mm", value as i16)),
+        (FAILURES, Some(Subject::Slot(_))) if value > 0 => Some("errors while driving this slot".to_string()),
         _ => None,
+    }
+}
+
+/// The sensors a register 0x50 mask names as stuck at a supply rail.
+fn stuck_sensors(mask: u16) -> String {
+    if mask == 0 {
+        return "no sensor stuck".to_string();
+    }
+    let stuck: Vec<String> = (0..16u8)
+        .filter(|i| mask & (1 << i) != 0)
+        .map(|i| {
+            mmu_firmware::registers::describe(mmu_firmware::registers::RAW + i, mmu_firmware::MAX_SLOTS)
+                .and_then(|r| r.subject)
+                .map_or(format!("sensor {i}"), |subject| match subject {
+                    mmu_firmware::registers::Subject::Sensor(sensor) => sensor.to_string(),
+                    mmu_firmware::registers::Subject::Slot(slot) => format!("slot {slot}"),
+                })
+        })
+        .collect();
+    format!("stuck at a rail: {}", stuck.join(", "))
+}
+
+/// A register given by address (`0x22`, `34`) or by this unit's name (`bowden_mm`,
+/// `filtered.hub.filament`).
+pub fn parse_register(text: &str) -> Result<u8, String> {
+    if text.starts_with(|c: char| c.is_ascii_digit()) {
+        return crate::codec_cli::parse_u8(text);
+    }
+    mmu_firmware::registers::lookup(text, mmu_firmware::MAX_SLOTS).ok_or_else(|| {
+        format!("{text:?} is no register: give an address (0x22) or a name such as bowden_mm or filtered.hub.filament")
+    })
+}
+
+/// Where a slot's filament is, as register 0x07 and the lane registers 0xb8+k give it (MMU3
+/// filament-state values, in this unit's words).
+pub fn lane_state(value: u16) -> &'static str {
+    match value {
+        0 => "none or not known",
+        1 => "parked",
+        2 => "in the hub or the Bowden tube",
+        4 => "at the printer's filament sensor",
+        8 => "loaded",
+        _ => "unknown state",
+    }
+}
+
+/// A slot number as registers 0x1b and 0x1c give it: 5 means none, 255 not known.
+fn slot_note(value: u16) -> String {
+    match value {
+        5 => "none".to_string(),
+        255 => "unknown".to_string(),
+        slot => format!("slot {slot}"),
     }
 }
 

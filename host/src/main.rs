@@ -2,19 +2,26 @@
 //!
 //! Subcommands live in sibling modules; this file only parses the command line and dispatches:
 //! - `mmu encode request|response ...`: print a frame exactly as on the wire ([`codec_cli`]);
-//! - `mmu decode [--json]`: explain frames or printer log lines read from stdin ([`codec_cli`]);
+//! - `mmu decode [--json] [--frames-only]`: explain frames or printer log lines read from stdin
+//!   ([`codec_cli::decode`]);
 //! - `mmu sim`: the simulated unit on stdin/stdout or a pseudo-terminal ([`sim_cli`]);
 //! - `mmu printer`: the printer's side against a real unit or the simulator ([`printer_cli`]);
+//! - `mmu sensors`: every sensor of a unit live, as a table, CSV or a plotted PNG ([`sensors_cli`]);
 //! - `mmu console`: plain commands to a unit or the simulator, by hand or from a script, and
 //!   `mmu calibrate`: measure and save its distances and sensor thresholds ([`console`]);
 //! - `mmu demo`: a scripted session against the simulator ([`demo`]).
+//!
+//! Exit status: 0 success, 1 a failure (the unit stopped on an error, a port cannot be opened),
+//! 2 a usage mistake (as clap's own), 130 stopped by Ctrl-C.
 
 mod codec_cli;
 mod console;
 mod demo;
 mod explain;
 mod printer_cli;
+mod sensors_cli;
 mod sim_cli;
+mod usage;
 
 use std::error::Error;
 use std::process::ExitCode;
@@ -39,8 +46,9 @@ enum Command {
     /// Print a frame exactly as on the wire, without the newline. Numbers are decimal or 0x hex.
     #[command(subcommand)]
     Encode(codec_cli::EncodeCommand),
-    /// Explain frames read from stdin, one output line per input line. A line is a bare frame
-    /// (`T0*a4`) or a printer log line (`MMU2:>T0*a4.` request, `MMU2:<T0 E8003*13.` response).
+    /// Explain frames read from stdin, one output line per input line (--frames-only: per
+    /// frame), keeping the time a logger stamped on it. A line is a bare frame (`T0*a4`) or a
+    /// printer log line (`MMU2:>T0*a4.` request, `MMU2:<T0 E8003*13.` response).
     Decode(codec_cli::DecodeArgs),
     /// Serve the simulated unit (the unit logic on a physical model) on stdin/stdout or a
     /// pseudo-terminal, bytes exactly as on the UART.
@@ -48,6 +56,10 @@ enum Command {
     /// Play the printer: handshake, commands, register access, soak runs; against a unit on a
     /// serial port or the simulator.
     Printer(printer_cli::PrinterArgs),
+    /// Every sensor of the unit live: raw and filtered readings, thresholds and state, as a table
+    /// refreshed in place, CSV rows (--csv) or a plotted trace (--plot FILE.png), to tune the
+    /// thresholds. Only reads: nothing in the unit changes.
+    Sensors(sensors_cli::SensorsArgs),
     /// A scripted session against the simulator: handshake, tool changes, preload, eject.
     Demo(demo::DemoArgs),
     /// Plain commands (`t 1`, `read bowden`, `set bowden 410`, `retry`, `help`) to a unit on a
@@ -65,6 +77,7 @@ fn main() -> ExitCode {
         Command::Decode(args) => codec_cli::decode(args),
         Command::Sim(args) => sim_cli::run(args),
         Command::Printer(args) => printer_cli::run(args),
+        Command::Sensors(args) => sensors_cli::run(args),
         Command::Demo(args) => demo::run(args),
         Command::Console(args) => console::run(args),
         Command::Calibrate(args) => console::run_calibrate(args),
@@ -73,7 +86,7 @@ fn main() -> ExitCode {
         Ok(()) => ExitCode::SUCCESS,
         Err(err) => {
             eprintln!("mmu: error: {err}");
-            ExitCode::FAILURE
+            usage::exit_code(err.as_ref())
         }
     }
 }

@@ -4,21 +4,23 @@
 //! The protocol logic (handshake, `Q0` heartbeat, `f` reports, register poll, automatic Retry,
 //! re-handshake after a link timeout) is [`mmu_sim::Printer`]. This module adds the printer's
 //! menu actions on top of it ([`Session`]: status, tool change, preload, unload, eject, cut,
-//! home, reset, register access, buttons) and soak runs; [`console`] is the person at the
-//! printer (what is shown, how dialogs are answered) and [`serial`] the wire to a real unit.
+//! home, reset, register access, buttons), the bench actions ([`bench`]: stats, settings) and
+//! soak runs ([`soak`]); [`console`] is the person at the printer (what is shown, how dialogs are
+//! answered), [`serial`] the wire to a real unit, [`failure`] why an action failed.
 //! `mmu demo` ([`crate::demo`]) plays a script on the same [`Session`].
 
+mod bench;
 pub mod console;
+mod failure;
 pub mod serial;
+mod soak;
 
 use std::error::Error;
-use std::fmt;
 use std::path::PathBuf;
 
-use clap::{Subcommand, ValueEnum};
+use clap::Subcommand;
 use mmu_protocol::{ErrorCode, ParamCode, Request, RequestCode, Response};
 use mmu_sim::printer::POLLED_REGISTERS;
-use mmu_sim::soak::{SoakOptions, SoakReport};
 use mmu_sim::{
     FAULT_HELP, Outcome, Printer, PrinterError, PrinterOptions, ScheduledFault, Sim, SimLink, SimOptions,
 };
@@ -26,10 +28,18 @@ use serde_json::{Map, Value, json};
 
 use crate::codec_cli::{parse_u8, parse_u16};
 use crate::explain::{
-    error_meaning, register_name, request_label, request_meaning, response_label, response_meaning,
+    error_meaning, parse_register, register_name, request_label, request_meaning, response_label,
+    response_meaning,
 };
+use crate::sim_cli::parse_slots;
+use crate::usage::usage;
+pub(crate) use bench::sensor_count;
 use console::{Console, JsonLine, Target, result_name, state_text};
+pub use failure::Failure;
+pub(crate) use failure::printer_failure;
 use serial::{EventsTail, FsensorSource, SerialLink};
+use soak::run_soak;
+pub use soak::{SoakArgs, ctrl_c_flag};
 
 /// Shown after `mmu printer --help`.
 const AFTER_HELP: &str = "\
@@ -73,10 +83,10 @@ pub struct PrinterArgs {
 }
 
 /// The simulated unit of `--sim`.
-#[derive(Debug, clap::Args)]
+#[derive(Debug, Clone, clap::Args)]
 pub struct SimTargetArgs {
-    /// Slots of the simulated unit.
-    #[arg(long, value_name = "N", default_value_t = 3, conflicts_with = "port")]
+    /// Slots of the simulated unit, 1 to 5.
+    #[arg(long, value_name = "N", default_value_t = 3, conflicts_with = "port", value_parser = parse_slots)]
     pub slots: usize,
     /// Seed of the simulator's random draws (and of `soak` unless it has its own).
     #[arg(long, value_name = "S", default_value_t = 1, conflicts_with = "port")]
@@ -93,7 +103,7 @@ pub struct SimTargetArgs {
 /// What `mmu printer` does, as the printer's menus and G-codes would.
 #[derive(Debug, Subcommand)]
 pub enum Action {
-    /// Connect; show the unit's version, its state (the first Q0 answer), FINDA and the polled
+    /// Connect; show the unit's version, its state (the first Q0 answer), the hub filament sensor and the polled
     /// registers.
     Status,
     /// Tool change `T<SLOT>`: the loaded slot comes out, SLOT goes to the nozzle.
@@ -110,14 +120,14 @@ pub enum Action {
     },
     /// Unload `U0`: the loaded filament goes back to its park position.
     Unload,
-    /// Eject: `U0` if FINDA sees filament, then `E<SLOT>`; the printer's FILAMENT_EJECTED dialog
+    /// Eject: `U0` if the hub filament sensor (FINDA) sees filament, then `E<SLOT>`; the printer's FILAMENT_EJECTED dialog
     /// is answered with Continue (`B1`).
     Eject {
         /// The slot.
         #[arg(value_parser = parse_u8)]
         slot: u8,
     },
-    /// Cut: `U0` if FINDA sees filament, then `K<SLOT>`.
+    /// Cut: `U0` if the hub filament sensor sees filament, then `K<SLOT>`.
     Cut {
         /// The slot.
         #[arg(value_parser = parse_u8)]
@@ -132,16 +142,16 @@ pub enum Action {
         #[arg(long)]
         erase: bool,
     },
-    /// Read register ADDRESS: `R<ADDRESS>`.
+    /// Read register ADDRESS: `R<ADDRESS>`. Only reads.
     Read {
-        /// The register, e.g. 0x08.
-        #[arg(value_parser = parse_u8)]
+        /// The register: an address (0x08) or a name (bowden_mm, filtered.hub.filament).
+        #[arg(value_parser = parse_register)]
         address: u8,
     },
-    /// Write VALUE to register ADDRESS: `W<ADDRESS> <VALUE>`.
+    /// Write VALUE to register ADDRESS: `W<ADDRESS> <VALUE>`, and nothing else.
     Write {
-        /// The register, e.g. 0x0b.
-        #[arg(value_parser = parse_u8)]
+        /// The register: an address (0x0b) or a name (extra_load_mm).
+        #[arg(value_parser = parse_register)]
         address: u8,
         /// The value, 0..=65535.
         #[arg(value_parser = parse_u16)]
@@ -153,9 +163,33 @@ pub enum Action {
         #[arg(value_parser = parse_u8)]
         button: u8,
     },
+    /// Per-slot figures the unit keeps: tool changes, errors, metres fed, and where each slot's
+    /// filament is. Only reads.
+    Stats,
+    /// The unit's settings (distances, speeds, sensor thresholds) to a file, or back from it.
+    #[command(subcommand)]
+    Settings(SettingsAction),
     /// Many tool changes on the simulator, with random faults if asked; prints the figures and
-    /// exits non-zero when a change failed, got stuck or panicked.
+    /// exits non-zero when a change failed, got stuck or panicked. Ctrl-C stops it and prints the
+    /// figures so far.
     Soak(SoakArgs),
+}
+
+/// `mmu printer settings save|load FILE`.
+#[derive(Debug, Subcommand)]
+pub enum SettingsAction {
+    /// Read every writable setting and write them to FILE, one `ADDRESS VALUE  # name` line
+    /// each. Only reads.
+    Save {
+        /// The file to write (replaced if it exists).
+        file: PathBuf,
+    },
+    /// Write the settings of FILE (as `save` writes it; `#` starts a comment) to the unit,
+    /// each one only where it differs.
+    Load {
+        /// The file to read.
+        file: PathBuf,
+    },
 }
 
 impl Action {
@@ -173,81 +207,20 @@ impl Action {
             Action::Read { .. } => "read",
             Action::Write { .. } => "write",
             Action::Button { .. } => "button",
+            Action::Stats => "stats",
+            Action::Settings(SettingsAction::Save { .. }) => "settings save",
+            Action::Settings(SettingsAction::Load { .. }) => "settings load",
             Action::Soak(_) => "soak",
         }
     }
-}
 
-/// `mmu printer soak` options.
-#[derive(Debug, clap::Args)]
-pub struct SoakArgs {
-    /// Tool changes to run.
-    #[arg(long, value_name = "N", default_value_t = 100)]
-    pub changes: u32,
-    /// Faults to inject.
-    #[arg(long, value_enum, default_value_t = Faults::None)]
-    pub faults: Faults,
-    /// Seed of the run (default: the simulator's --seed).
-    #[arg(long, value_name = "S")]
-    pub seed: Option<u64>,
-}
-
-/// Faults of a soak run.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum Faults {
-    /// None: every change must simply work.
-    None,
-    /// Random faults, injected and later cleared.
-    Random,
-}
-
-/// Why an action failed, with the unit's error when it stopped on one.
-#[derive(Debug)]
-pub struct Failure {
-    message: String,
-    error: Option<ErrorCode>,
-}
-
-impl Failure {
-    /// A failure with no unit error behind it.
-    pub fn new(message: impl Into<String>) -> Self {
-        Failure {
-            message: message.into(),
-            error: None,
-        }
-    }
-
-    /// A command stopped on the unit's `error`.
-    fn unit(message: String, error: ErrorCode) -> Self {
-        Failure {
-            message,
-            error: Some(error),
-        }
-    }
-
-    /// The failure as the fields of a final JSON `result` object.
-    fn details(&self) -> Map<String, Value> {
-        let mut details = Map::new();
-        details.insert("message".into(), self.message.clone().into());
-        if let Some(error) = self.error {
-            details.insert("error".into(), error.to_string().into());
-            details.insert("screen".into(), format!("{:05}", error.printer_screen()).into());
-        }
-        details
-    }
-}
-
-impl fmt::Display for Failure {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(&self.message)
-    }
-}
-
-impl Error for Failure {}
-
-impl From<PrinterError> for Failure {
-    fn from(error: PrinterError) -> Self {
-        Failure::new(error.to_string())
+    /// A bench action: it talks to the unit without the printer's handshake writes (`W0b`,
+    /// `W14`) and `f` reports, so that it changes nothing but what it is asked to.
+    fn is_bench(&self) -> bool {
+        matches!(
+            self,
+            Action::Status | Action::Read { .. } | Action::Write { .. } | Action::Stats | Action::Settings(_)
+        )
     }
 }
 
@@ -258,6 +231,8 @@ pub type Details = Map<String, Value>;
 pub struct Session<L: Target> {
     printer: Printer<L>,
     console: Console,
+    /// The unit version the printer supports, for the mismatch message.
+    expected_version: (u8, u8, u8),
 }
 
 impl<L: Target> Session<L> {
@@ -266,6 +241,7 @@ impl<L: Target> Session<L> {
         Session {
             printer: Printer::new(link, options),
             console,
+            expected_version: options.version,
         }
     }
 
@@ -287,7 +263,10 @@ impl<L: Target> Session<L> {
     /// Handshake; returns the unit's state (the first `Q0` answer) and says so when the unit is
     /// not at rest.
     pub fn connect(&mut self) -> Result<Response, Failure> {
-        let state = self.printer.connect(&mut self.console)?;
+        let state = self
+            .printer
+            .connect(&mut self.console)
+            .map_err(|error| self.failure(error))?;
         if state.param != ParamCode::Finished {
             let text = format!("the unit is not at rest: {}", state_text(&state));
             self.console.note(self.now_ms(), &text);
@@ -295,9 +274,17 @@ impl<L: Target> Session<L> {
         Ok(state)
     }
 
+    /// Why the printer could not go on, in plain words.
+    fn failure(&self, error: PrinterError) -> Failure {
+        printer_failure(error, self.expected_version)
+    }
+
     /// Run a command (`T L U E K H`) to its end.
     pub fn command(&mut self, request: Request) -> Result<Details, Failure> {
-        let outcome = self.printer.command(&mut self.console, request)?;
+        let outcome = self
+            .printer
+            .command(&mut self.console, request)
+            .map_err(|error| self.failure(error))?;
         let label = request_label(&request);
         match outcome {
             Outcome::Finished(result) => {
@@ -318,7 +305,11 @@ impl<L: Target> Session<L> {
                 error,
             )),
             Outcome::GaveUp(error) => Err(Failure::unit(
-                format!("{label} stopped on error {}", error_meaning(error)),
+                format!(
+                    "{label} ({}) stopped on error {}",
+                    request_meaning(&request),
+                    error_meaning(error)
+                ),
                 error,
             )),
         }
@@ -339,8 +330,10 @@ impl<L: Target> Session<L> {
 
     fn unload_if_finda(&mut self) -> Result<(), Failure> {
         if self.printer.finda() {
-            self.console
-                .note(self.now_ms(), "FINDA sees filament: the printer unloads first");
+            self.console.note(
+                self.now_ms(),
+                "the hub filament sensor (the printer's FINDA) sees filament: the printer unloads first",
+            );
             self.command(Request::new(RequestCode::Unload, 0))?;
         }
         Ok(())
@@ -360,7 +353,7 @@ impl<L: Target> Session<L> {
         details.extend(state_details(state));
         let finda = self.printer.finda();
         let seen = if finda { "filament present" } else { "no filament" };
-        self.console.say(&format!("FINDA: {seen}"));
+        self.console.say(&format!("hub filament sensor (FINDA): {seen}"));
         details.insert("finda".into(), finda.into());
         self.console.say("polled registers:");
         let mut registers = Vec::new();
@@ -383,7 +376,10 @@ impl<L: Target> Session<L> {
 
     /// `X<value>`, then connect again; show the first `Q0` answer.
     pub fn reset(&mut self, value: u8) -> Result<Details, Failure> {
-        let state = self.printer.reset(&mut self.console, value)?;
+        let state = self
+            .printer
+            .reset(&mut self.console, value)
+            .map_err(|error| self.failure(error))?;
         self.console
             .say(&format!("after the reset, Q0: {}", state_text(&state)));
         Ok(state_details(&state))
@@ -392,7 +388,10 @@ impl<L: Target> Session<L> {
     /// A request that is not a command (`R`, `W`, `B`): its answer, or a failure when the unit
     /// refuses it.
     pub fn ask(&mut self, request: Request) -> Result<Details, Failure> {
-        let answer = self.printer.request(&mut self.console, request)?;
+        let answer = self
+            .printer
+            .request(&mut self.console, request)
+            .map_err(|error| self.failure(error))?;
         let label = request_label(&request);
         let what = request_meaning(&request);
         if (answer.code, answer.value) != (request.code, request.value) {
@@ -442,7 +441,10 @@ pub fn run(args: &PrinterArgs) -> Result<(), Box<dyn Error>> {
     if let Action::Soak(soak) = &args.action {
         return run_soak(args, soak, console);
     }
-    let options = printer_options(args);
+    let options = PrinterOptions {
+        read_only: args.action.is_bench(),
+        ..printer_options(args)
+    };
     match (&args.port, args.sim) {
         (Some(port), false) => {
             let link = SerialLink::open(port, fsensor_source(args))?;
@@ -452,9 +454,12 @@ pub fn run(args: &PrinterArgs) -> Result<(), Box<dyn Error>> {
             let link = sim_link(&args.sim_options)?;
             run_session(Session::new(link, options, console), &args.action)
         }
-        _ => Err("choose the unit: --port DEV (a real one) or --sim (the simulator)".into()),
+        _ => Err(usage(CHOOSE_THE_UNIT)),
     }
 }
+
+/// The usage mistake of naming no unit.
+pub const CHOOSE_THE_UNIT: &str = "choose the unit: --port DEV (a real one) or --sim (the simulator)";
 
 /// Connect, perform `action`, print the result line.
 fn run_session<L: Target>(mut session: Session<L>, action: &Action) -> Result<(), Box<dyn Error>> {
@@ -479,6 +484,9 @@ fn perform<L: Target>(session: &mut Session<L>, action: &Action) -> Result<Detai
         Action::Read { address } => session.ask(Request::new(Read, address)),
         Action::Write { address, value } => session.ask(Request::write(address, value)),
         Action::Button { button } => session.ask(Request::new(Button, button)),
+        Action::Stats => session.stats(),
+        Action::Settings(SettingsAction::Save { ref file }) => session.save_settings(file),
+        Action::Settings(SettingsAction::Load { ref file }) => session.load_settings(file),
         Action::Soak(_) => Err(Failure::new("soak runs on its own simulator")),
     }
 }
@@ -491,8 +499,15 @@ fn printer_options(args: &PrinterArgs) -> PrinterOptions {
     }
 }
 
-/// The simulator of `--sim`, with its faults scheduled and its pace set.
+/// The simulator of `--sim`, with its faults scheduled and its pace set. A fault naming a slot
+/// the unit lacks is a usage mistake.
 pub fn sim_link(args: &SimTargetArgs) -> Result<SimLink, Box<dyn Error>> {
+    for fault in &args.faults {
+        fault
+            .fault
+            .check_slots(args.slots)
+            .map_err(|error| usage(error.to_string()))?;
+    }
     let mut sim = Sim::new(SimOptions {
         slots: args.slots,
         seed: args.seed,
@@ -520,66 +535,6 @@ fn fsensor_source(args: &PrinterArgs) -> FsensorSource {
         }
         None => FsensorSource::Fixed(args.fsensor.unwrap_or(0)),
     }
-}
-
-/// `mmu printer soak`: the report, and a failure when it did not pass.
-fn run_soak(args: &PrinterArgs, soak: &SoakArgs, mut console: Console) -> Result<(), Box<dyn Error>> {
-    if args.port.is_some() {
-        return Err("soak runs on the simulator: drop --port".into());
-    }
-    if !args.sim_options.faults.is_empty() {
-        return Err("soak injects its own faults (--faults random): drop --fault".into());
-    }
-    let seed = soak.seed.unwrap_or(args.sim_options.seed);
-    let options = SoakOptions {
-        changes: soak.changes,
-        random_faults: soak.faults == Faults::Random,
-        seed,
-        sim: SimOptions {
-            slots: args.sim_options.slots,
-            seed,
-            ..SimOptions::default()
-        },
-        printer: printer_options(args),
-    };
-    let bar = console.progress_bar(u64::from(soak.changes), "tool changes");
-    let report = mmu_sim::soak::run(&options, &mut |done| {
-        if let Some(bar) = &bar {
-            bar.set_position(u64::from(done));
-        }
-    });
-    if let Some(bar) = bar {
-        bar.finish_and_clear();
-    }
-    console.close();
-    console.say(&report.to_string());
-    for note in &report.notes {
-        console.say(note);
-    }
-    console.emit(&JsonLine::Result {
-        action: "soak",
-        ok: report.passed(),
-        details: soak_details(&report, seed),
-    });
-    if report.passed() {
-        Ok(())
-    } else {
-        Err(format!("soak failed: {}", report.summary_line()).into())
-    }
-}
-
-fn soak_details(report: &SoakReport, seed: u64) -> Details {
-    let mut details = Details::new();
-    details.insert("seed".into(), seed.into());
-    details.insert("summary".into(), report.summary_line().into());
-    details.insert("report".into(), report.to_string().into());
-    details.insert("changes".into(), report.changes.into());
-    details.insert("faults_injected".into(), report.faults_injected.into());
-    details.insert("recovered".into(), report.recovered.into());
-    details.insert("unrecovered".into(), report.unrecovered.into());
-    details.insert("stuck".into(), report.stuck.into());
-    details.insert("panics".into(), report.panics.into());
-    details
 }
 
 /// `3.0.3` → (3, 0, 3).

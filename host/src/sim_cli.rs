@@ -8,6 +8,10 @@
 //! a unit on a UART. The protocol channel carries the unit's bytes exactly as on the wire and
 //! nothing else; notes go to stderr.
 //!
+//! Unless `--quiet`, stderr tells a person watching what is served, in words: each request and
+//! answer (`> T1  tool change slot 1`), frames the unit ignores and why (a bad CRC, an unknown
+//! code), and the simulator's events (commands, the printer's filament sensor, faults, power).
+//!
 //! The printer's filament sensor is part of the simulation, but only the printer reports it
 //! (`f`). The `--events` file makes it visible, for the printer-side program to follow: one JSON
 //! line per event, e.g. `{"t_ms":1234,"kind":"fsensor","state":2}`, written at once.
@@ -16,6 +20,7 @@
 //! channel; the main loop feeds each chunk to the step after its arrival, writes what the unit
 //! answers at once, and waits for input or the next millisecond whenever it is not behind.
 
+use std::collections::HashMap;
 use std::error::Error;
 use std::fs::File;
 use std::io::{self, Read, Write};
@@ -25,8 +30,14 @@ use std::thread;
 use std::time::{Duration, Instant};
 
 use clap::{ArgGroup, Args};
+use mmu_protocol::{
+    DecodeError, Request, RequestCode, RequestDecoder, Response, ResponseDecoder, SILENCE_MS,
+};
 use mmu_sim::event::FaultAction;
 use mmu_sim::{Event, EventKind, FAULT_HELP, ScheduledFault, Sim, SimOptions};
+
+use crate::explain::{request_meaning, response_meaning};
+use crate::usage::usage;
 
 /// After stdin ends, the simulator runs this long more, in virtual and in wall time, so that the
 /// answer to the last request still goes out.
@@ -40,6 +51,10 @@ const IDLE_WAIT: Duration = Duration::from_millis(1);
 const MAX_STEPS_PER_BATCH: u64 = 100;
 /// Falling this far behind the wall clock earns one warning.
 const LAG_WARNING: Duration = Duration::from_secs(1);
+/// An unfinished frame is shown up to this many bytes.
+const MAX_SHOWN_LINE: usize = 40;
+/// A poll answered as the time before, at most this long before, is a printer's routine poll.
+const POLL_REPEAT_MS: u64 = 3000;
 /// Bytes the reader thread takes from the input at once.
 const READ_CHUNK: usize = 256;
 
@@ -82,13 +97,22 @@ pub struct SimArgs {
         value_parser = parse_print_rate
     )]
     pub print_rate: f32,
-    /// Print nothing on stderr but errors.
-    #[arg(long, short)]
+    /// Print nothing on stderr but errors (no log of requests, answers and events).
+    #[arg(long, short, conflicts_with = "verbose")]
     pub quiet: bool,
+    /// Log every exchange, also the printer's polls (`Q0`, `R`) answered as the time before.
+    #[arg(long, short)]
+    pub verbose: bool,
 }
 
 /// Run `mmu sim`.
 pub fn run(args: &SimArgs) -> Result<(), Box<dyn Error>> {
+    for fault in &args.faults {
+        fault
+            .fault
+            .check_slots(args.slots)
+            .map_err(|error| usage(error.to_string()))?;
+    }
     let mut sim = Sim::new(SimOptions {
         slots: args.slots,
         seed: args.seed,
@@ -105,6 +129,7 @@ pub fn run(args: &SimArgs) -> Result<(), Box<dyn Error>> {
         sim,
         events,
         notes,
+        wire: WireLog::new(args.verbose),
         time_scale: args.time_scale,
         lag_warned: false,
     };
@@ -121,6 +146,7 @@ struct Server {
     sim: Sim,
     events: Option<File>,
     notes: Notes,
+    wire: WireLog,
     time_scale: f64,
     /// The lag warning was given.
     lag_warned: bool,
@@ -172,12 +198,35 @@ impl Server {
         output: &mut dyn Write,
     ) -> Result<bool, Box<dyn Error>> {
         let mut sent = Vec::new();
+        // The log of this batch, in the simulator's time order: what the printer sent, what the
+        // unit answered (at the step it answered in), what happened.
+        let mut log: Vec<(u64, String)> = Vec::new();
+        let logging = !self.notes.quiet;
+        if logging && !received.is_empty() {
+            let at = self.sim.now_ms();
+            log.extend(self.wire.printer_sent(at, received));
+        }
         for _ in 0..steps {
+            let before = sent.len();
+            let heard = !received.is_empty();
             self.sim.step(received, &mut sent);
             received.clear();
+            if logging {
+                let at = self.sim.now_ms();
+                if sent.len() > before {
+                    log.extend(self.wire.unit_sent(at, sent.get(before..).unwrap_or(&[])));
+                }
+                if !heard {
+                    log.extend(self.wire.printer_quiet(at));
+                }
+            }
         }
         let open = self.send(output, &sent)?;
-        self.record_events()?;
+        log.extend(self.record_events()?);
+        log.sort_by_key(|(at, _)| *at);
+        for (at, line) in log {
+            self.notes.at(at, &line);
+        }
         Ok(open)
     }
 
@@ -220,24 +269,27 @@ impl Server {
         }
     }
 
-    /// Write the simulator's new events to the events file and the notable ones to stderr. The
-    /// lines go out in one write, so that a reader following the file never sees half a line.
-    fn record_events(&mut self) -> Result<(), Box<dyn Error>> {
+    /// Write the simulator's new events to the events file; returns the notes on the notable
+    /// ones for stderr. The lines go out in one write, so that a reader following the file never
+    /// sees half a line.
+    fn record_events(&mut self) -> Result<Vec<(u64, String)>, Box<dyn Error>> {
         let events = self.sim.take_events();
-        if events.is_empty() {
-            return Ok(());
+        if events
+            .iter()
+            .any(|event| matches!(event.what, EventKind::Power { on: true }))
+        {
+            self.wire.unit_booted();
         }
-        for event in &events {
-            if let Some(note) = event_note(event) {
-                self.notes.say(&note);
-            }
-        }
+        let notes = events
+            .iter()
+            .filter_map(|event| event_note(event).map(|note| (event.t_ms, note)))
+            .collect();
         if let Some(file) = &mut self.events {
             let lines: String = events.iter().map(|event| event.to_json() + "\n").collect();
             file.write_all(lines.as_bytes())
                 .map_err(|err| format!("cannot write the events file: {err}"))?;
         }
-        Ok(())
+        Ok(notes)
     }
 }
 
@@ -346,6 +398,202 @@ impl Notes {
             eprintln!("mmu sim: {line}");
         }
     }
+
+    /// A line stamped with the simulator's clock.
+    fn at(&self, t_ms: u64, line: &str) {
+        self.say(&format!("{:>9.3} s  {line}", t_ms as f64 / 1000.0));
+    }
+}
+
+/// Decodes both directions of the wire for the log: what the printer asked, what the unit
+/// answered, and the frames the unit ignores with the reason. A printer polls `Q0` and five
+/// registers every second; unless `every`, a poll answered as the last time, less than
+/// [`POLL_REPEAT_MS`] before, is left out (and counted), so that what changes stands out, while a
+/// person typing a read sees every answer.
+struct WireLog {
+    requests: RequestDecoder,
+    responses: ResponseDecoder,
+    every: bool,
+    /// A poll request waiting for its answer, with its time and line.
+    pending: Option<(u64, Request, String)>,
+    /// The last answer to each poll request, and when.
+    last: HashMap<(RequestCode, u8), (Response, u64)>,
+    /// Polls left out since the last line shown.
+    hidden: u32,
+    /// The printer's bytes since its last newline, to show an unfinished frame.
+    line: Vec<u8>,
+    /// Milliseconds since the printer's last byte.
+    quiet_ms: u32,
+}
+
+/// A log line and the simulator's time it belongs to.
+type LogLine = (u64, String);
+
+impl WireLog {
+    fn new(every: bool) -> Self {
+        WireLog {
+            // As the unit's: it starts mid-line, taking a frame only after a silence.
+            requests: RequestDecoder::new_mid_line(),
+            responses: ResponseDecoder::new(),
+            every,
+            pending: None,
+            last: HashMap::new(),
+            hidden: 0,
+            line: Vec::new(),
+            quiet_ms: 0,
+        }
+    }
+
+    /// The unit booted: its decoder starts mid-line again.
+    fn unit_booted(&mut self) {
+        self.requests = RequestDecoder::new_mid_line();
+        self.line.clear();
+    }
+
+    /// A millisecond without a byte from the printer: once the line has been silent for
+    /// [`SILENCE_MS`] the decoder is told, as the unit's is, and a frame left unfinished (a
+    /// person who stopped typing) is reported.
+    fn printer_quiet(&mut self, at: u64) -> Vec<LogLine> {
+        let mut lines = Vec::new();
+        self.quiet_ms = self.quiet_ms.saturating_add(1);
+        if self.quiet_ms >= SILENCE_MS && self.requests.line_silent().is_some() {
+            self.flush_pending(&mut lines);
+            let text = String::from_utf8_lossy(&self.line).into_owned();
+            self.show(
+                &mut lines,
+                at,
+                format!(
+                    "> frame ignored: {text} unfinished: the line fell silent before its *CRC and newline"
+                ),
+            );
+            self.line.clear();
+        }
+        lines
+    }
+
+    /// Show `line`, after saying how many unchanged polls were left out before it.
+    fn show(&mut self, into: &mut Vec<LogLine>, at: u64, line: String) {
+        if self.hidden > 0 {
+            let polls = self.hidden;
+            self.hidden = 0;
+            into.push((
+                at,
+                format!("({polls} polls answered as before not shown; -v shows them)"),
+            ));
+        }
+        into.push((at, line));
+    }
+
+    fn flush_pending(&mut self, into: &mut Vec<LogLine>) {
+        if let Some((at, _, line)) = self.pending.take() {
+            self.show(into, at, line);
+        }
+    }
+
+    /// The log lines for bytes the printer sent at `at`.
+    fn printer_sent(&mut self, at: u64, bytes: &[u8]) -> Vec<LogLine> {
+        let mut lines = Vec::new();
+        self.quiet_ms = 0;
+        for &byte in bytes {
+            if byte == b'\n' {
+                self.line.clear();
+            } else if self.line.len() < MAX_SHOWN_LINE {
+                self.line.push(byte);
+            }
+        }
+        let decoded: Vec<_> = bytes
+            .iter()
+            .filter_map(|&byte| self.requests.feed(byte))
+            .collect();
+        for frame in decoded {
+            self.flush_pending(&mut lines);
+            match frame {
+                Ok(request)
+                    if !self.every && matches!(request.code, RequestCode::Query | RequestCode::Read) =>
+                {
+                    self.pending = Some((at, request, request_line(&request)));
+                }
+                Ok(request) => self.show(&mut lines, at, request_line(&request)),
+                Err(error) => self.show(
+                    &mut lines,
+                    at,
+                    format!("> frame ignored: {}", ignored_reason(&error)),
+                ),
+            }
+        }
+        lines
+    }
+
+    /// The log lines for bytes the unit sent at `at`.
+    fn unit_sent(&mut self, at: u64, bytes: &[u8]) -> Vec<LogLine> {
+        let mut lines = Vec::new();
+        let decoded: Vec<_> = bytes
+            .iter()
+            .filter_map(|&byte| self.responses.feed(byte))
+            .collect();
+        for frame in decoded {
+            let response = match frame {
+                Ok(response) => response,
+                Err(error) => {
+                    self.flush_pending(&mut lines);
+                    self.show(&mut lines, at, format!("< unreadable answer: {error}"));
+                    continue;
+                }
+            };
+            let key = (response.code, response.value);
+            let answers_pending = self
+                .pending
+                .as_ref()
+                .is_some_and(|(_, request, _)| (request.code, request.value) == key);
+            let repeated = self.last.get(&key).is_some_and(|&(last, last_at)| {
+                last == response && at.saturating_sub(last_at) < POLL_REPEAT_MS
+            });
+            if answers_pending {
+                self.last.insert(key, (response, at));
+            }
+            if answers_pending && repeated {
+                self.pending = None;
+                self.hidden += 1;
+                continue;
+            }
+            self.flush_pending(&mut lines);
+            self.show(&mut lines, at, response_line(&response));
+        }
+        lines
+    }
+}
+
+/// `> T1*cf  tool change slot 1`.
+fn request_line(request: &Request) -> String {
+    format!("> {}  {}", request.encode().as_str(), request_meaning(request))
+}
+
+/// `< T1 A*27  accepted`.
+fn response_line(response: &Response) -> String {
+    format!("< {}  {}", response.encode().as_str(), response_meaning(response))
+}
+
+/// Why the unit ignores a frame, in words; a bad CRC names the one it should carry.
+fn ignored_reason(error: &DecodeError<Request>) -> String {
+    match error {
+        DecodeError::BadCrc {
+            frame,
+            computed,
+            received,
+        } => {
+            let body = frame.encode();
+            let body = body.as_str().split('*').next().unwrap_or("");
+            format!(
+                "{body} ({}) has a bad CRC: it carries {received:02x}, the unit expects {computed:02x} ({body}*{computed:02x})",
+                request_meaning(frame)
+            )
+        }
+        DecodeError::AfterBrokenFrame => format!(
+            "the line was not quiet for {SILENCE_MS} ms before it (the unit was starting, or a broken frame came just before): \
+             the unit takes a frame only at the start of a quiet line"
+        ),
+        other => other.to_string(),
+    }
 }
 
 /// What the simulator is set up with, as one line.
@@ -369,7 +617,7 @@ fn fault_spec(fault: &ScheduledFault) -> String {
     }
 }
 
-/// The stderr note for an event worth telling a person about: faults and power.
+/// The stderr note for an event worth telling a person about (not the slots' motion).
 fn event_note(event: &Event) -> Option<String> {
     let what = match &event.what {
         EventKind::Fault {
@@ -382,9 +630,21 @@ fn event_note(event: &Event) -> Option<String> {
         } => format!("fault cleared: {fault}"),
         EventKind::Power { on: false } => String::from("the unit lost power"),
         EventKind::Power { on: true } => String::from("the unit booted"),
-        _ => return None,
+        EventKind::Command { request, status } => format!("command {request}: {status}"),
+        EventKind::Fsensor { state } => format!(
+            "the printer's filament sensor: {}",
+            match state {
+                0 => "no filament",
+                1 => "filament at the sensor",
+                2 => "filament in the nozzle",
+                _ => "unknown",
+            }
+        ),
+        EventKind::Extruder { action, mm } => format!("the printer's extruder: {action} {mm:.1} mm"),
+        // Motion: many per second; the events file has them.
+        EventKind::Slot { .. } | EventKind::Motor { .. } => return None,
     };
-    Some(format!("at {:.3} s: {what}", event.t_ms as f64 / 1000.0))
+    Some(what)
 }
 
 /// Create (or truncate) the events file.
@@ -393,7 +653,8 @@ fn create_events_file(path: &Path) -> Result<File, Box<dyn Error>> {
         .map_err(|err| format!("cannot create the events file {}: {err}", path.display()).into())
 }
 
-fn parse_slots(text: &str) -> Result<usize, String> {
+/// A slot count, 1 to the firmware's most (also for `mmu printer --slots`).
+pub(crate) fn parse_slots(text: &str) -> Result<usize, String> {
     let max = mmu_firmware::MAX_SLOTS;
     match text.parse::<usize>() {
         Ok(slots) if (1..=max).contains(&slots) => Ok(slots),

@@ -172,9 +172,11 @@ fn decode_bad_crc_and_invalid_lines_human() {
         lines[1],
         "response X0 F0 finished OK, CRC BAD (carries 86, expected 87)"
     );
-    for line in &lines[2..] {
-        assert!(line.starts_with("invalid: "), "{line:?}");
-    }
+    // Lines that are no frame are said to be so; a broken frame is invalid.
+    assert_eq!(lines[2], "not an MMU line");
+    assert_eq!(lines[3], "empty line");
+    assert_eq!(lines[4], "not a frame: an MMU log message");
+    assert!(lines[5].starts_with("invalid: "), "{:?}", lines[5]);
 }
 
 #[test]
@@ -242,8 +244,9 @@ fn decode_json_bad_crc_keeps_fields() {
 fn decode_json_invalid_lines() {
     let objects = decode_json("hello\n\nok\nQ0*EA\nMMU2:>.\n");
     assert_eq!(objects.len(), 5);
+    let kinds: Vec<&str> = objects.iter().map(|o| o["kind"].as_str().unwrap_or("")).collect();
+    assert_eq!(kinds, ["other", "other", "other", "invalid", "invalid"]);
     for object in &objects {
-        assert_eq!(object["kind"], "invalid", "{object}");
         assert!(
             object["reason"].as_str().is_some_and(|r| !r.is_empty()),
             "{object}"
@@ -264,5 +267,85 @@ fn decode_one_line_out_per_line_in_even_for_binary_junk() {
     assert_eq!(
         text.lines().nth(2),
         Some("response S0 A3 version major = 3, CRC ok")
+    );
+}
+
+/// Real logs keep each line's time: OctoPrint's serial.log, Repetier's log, the Arduino serial
+/// monitor with timestamps; non-MMU lines are said to be so, not "invalid" for a made-up reason.
+#[test]
+fn decode_keeps_the_time_of_real_log_lines() {
+    let log = "\
+2026-11-22 10:00:00,123 - Send: N12 T1*38
+2026-11-22 10:00:00,130 - Recv: echo:MMU2:>T1*cf.
+2026-11-22 10:00:00,145 - Recv: echo:MMU2:<T1 A*27.
+2026-11-22 10:00:01,010 - Recv: ok
+10:00:02.500 : echo:MMU2:<T1 P1c*45.
+10:00:03.123 -> MMU2:<R1b A5*29.
+";
+    let output = mmu(&["decode"], log);
+    assert!(output.status.success(), "{}", stderr(&output));
+    let text = stdout(&output);
+    let lines: Vec<_> = text.lines().collect();
+    assert_eq!(lines.len(), 6, "{text}");
+    assert!(
+        lines[0].starts_with("2026-11-22 10:00:00,123  not an MMU line"),
+        "{text}"
+    );
+    assert!(
+        lines[1].starts_with("2026-11-22 10:00:00,130  request T1 tool change slot 1"),
+        "{text}"
+    );
+    assert!(
+        lines[2].starts_with("2026-11-22 10:00:00,145  response T1 A"),
+        "{text}"
+    );
+    assert_eq!(lines[3], "2026-11-22 10:00:01,010  not an MMU line");
+    assert!(lines[4].starts_with("10:00:02.500  response T1 P1c"), "{text}");
+    assert!(lines[5].starts_with("10:00:03.123  response R1b A5"), "{text}");
+    assert!(lines[5].contains("(none)"), "slot 5 means none: {text}");
+
+    let objects = decode_json(log);
+    assert_eq!(objects[1]["time"], "2026-11-22 10:00:00,130");
+    assert_eq!(objects[1]["kind"], "request");
+    assert_eq!(objects[0]["kind"], "other");
+    assert_eq!(objects[3]["reason"], "not an MMU line");
+    assert_eq!(objects[4]["time"], "10:00:02.500");
+
+    let output = mmu(&["decode", "--frames-only"], log);
+    let text = stdout(&output);
+    assert_eq!(text.lines().count(), 4, "{text}");
+    assert!(!text.contains("not an MMU line"), "{text}");
+}
+
+/// Values with a special meaning are named: slot 5 = none, 255 = unknown.
+#[test]
+fn decode_names_special_values() {
+    let r1b = "R1b A5*29";
+    let output = mmu(&["decode"], &format!("{r1b}\n"));
+    let text = stdout(&output);
+    assert!(
+        text.lines().next().is_some_and(|l| l.contains("(none)")),
+        "{text}"
+    );
+    let frame = mmu(&["encode", "response", "R", "0x1c", "A", "255"], "");
+    let output = mmu(&["decode"], &stdout(&frame));
+    assert!(stdout(&output).contains("(unknown)"), "{}", stdout(&output));
+}
+
+/// An error answer in a log carries what it means on this unit and what to check.
+#[test]
+fn decode_json_explains_errors() {
+    let frame = mmu(&["encode", "response", "T", "1", "E", "0x8047"], "");
+    let objects = decode_json(&stdout(&frame));
+    let error = &objects[0];
+    assert!(
+        error["error_meaning"]
+            .as_str()
+            .is_some_and(|m| m.contains("slot motor")),
+        "{error}"
+    );
+    assert!(
+        error["check"].as_str().is_some_and(|c| c.contains("mmu sensors")),
+        "{error}"
     );
 }

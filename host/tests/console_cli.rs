@@ -231,7 +231,7 @@ fn real_unit_examples_name_the_adapter_not_the_st_link_port() {
         "the README still says --port /dev/ttyACM0"
     );
     assert!(readme.contains("--port /dev/ttyUSB0"));
-    for command in ["printer", "console", "calibrate"] {
+    for command in ["printer", "console", "calibrate", "sensors"] {
         let output = Command::new(env!("CARGO_BIN_EXE_mmu"))
             .args([command, "--help"])
             .output()

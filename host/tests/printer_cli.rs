@@ -134,7 +134,9 @@ fn a_jam_ends_in_its_named_error_after_three_automatic_retries() {
     }
     assert_eq!(text.matches("auto Retry").count(), 3, "{text}");
     assert!(
-        text.contains("mmu: error: T1 stopped on error STALLED_PULLEY (printer screen 04105)"),
+        text.contains(
+            "mmu: error: T1 (tool change slot 1) stopped on error STALLED_PULLEY (printer screen 04105)"
+        ),
         "{text}"
     );
 
@@ -170,7 +172,7 @@ fn status_shows_version_state_and_registers() {
     for expected in [
         "unit firmware: 3.0.3, build 1",
         "state (Q0): X0 F0 (finished OK)",
-        "FINDA: no filament",
+        "hub filament sensor (FINDA): no filament",
         "register 0x08 FINDA_State = 0",
         "register 0x1b Selector_Slot",
     ] {
@@ -189,7 +191,7 @@ fn reset_reconnects_and_shows_the_first_answer() {
 fn a_printer_expecting_another_version_stops() {
     let text = printer_fails(&["--expect-version", "3.0.2", "status"]);
     assert!(
-        text.contains("MMU FW UPDATE NEEDED (printer screen 04504)"),
+        text.contains("MMU FW UPDATE NEEDED, printer screen 04504"),
         "{text}"
     );
 }
@@ -215,7 +217,7 @@ fn the_demo_runs_its_script() {
     for expected in [
         "connected: unit firmware 3.0.3",
         "T2: finished OK",
-        "FINDA sees filament: the printer unloads first",
+        "the hub filament sensor (the printer's FINDA) sees filament: the printer unloads first",
         "E1: printer dialog FILAMENT_EJECTED",
         "L1: finished OK",
         "demo: 5 tool changes (T0 ",
@@ -224,4 +226,121 @@ fn the_demo_runs_its_script() {
     }
     // Commands follow each other as on a printer: the link never times out.
     assert!(!out.contains("link lost"), "{out}");
+}
+
+/// Before: `S2 answered Some(2)`, a Rust `Option` in a user message, with no way out.
+#[test]
+fn a_version_mismatch_says_what_the_unit_reports_and_what_to_do() {
+    let text = printer_fails(&["--expect-version", "3.0.2", "status"]);
+    assert!(!text.contains("Some("), "{text}");
+    assert!(text.contains("the unit reports version 3.0.3"), "{text}");
+    assert!(text.contains("--expect-version 3.0.3"), "{text}");
+    assert!(text.contains("write 0x52 2"), "{text}");
+}
+
+/// Before: `printer --slots 9` exited 1, `sim --slots 9` 2; `--fault jam:7` on 3 slots was
+/// accepted. Every usage mistake now exits 2, as clap's own do, and says why.
+#[test]
+fn usage_mistakes_exit_2_everywhere() {
+    for (args, message) in [
+        (
+            &["printer", "--sim", "--slots", "9", "status"][..],
+            "1 to 5 slots",
+        ),
+        (&["sim", "--stdio", "--slots", "9"], "1 to 5 slots"),
+        (&["printer", "status"], "--port DEV"),
+        (&["printer", "--sim", "--fault", "jam:7", "status"], "no slot 7"),
+        (&["sim", "--stdio", "--fault", "jam:7"], "no slot 7"),
+        (
+            &["sim", "--stdio", "--fault", "disconnect:motor-hall-3"],
+            "no slot 3",
+        ),
+        (
+            &[
+                "printer", "--sim", "--slots", "2", "--fault", "runout:2", "status",
+            ],
+            "no slot 2",
+        ),
+        (&["printer", "--port", "/dev/null", "soak"], "simulator"),
+        (&["encode", "request", "W", "0xb"], "VALUE2"),
+        (&["sensors"], "--port DEV"),
+        (&["console"], "--port DEV"),
+        (&["calibrate"], "--port DEV"),
+    ] {
+        let output = Command::new(env!("CARGO_BIN_EXE_mmu"))
+            .args(args)
+            .stdin(std::process::Stdio::null())
+            .output()
+            .expect("the mmu binary runs");
+        let text = format!("{}{}", stdout(&output), stderr(&output));
+        assert_eq!(output.status.code(), Some(2), "{args:?}: {text}");
+        assert!(text.contains(message), "{args:?}: {text:?} lacks {message:?}");
+    }
+}
+
+/// Before: Ctrl-C during a soak lost the report.
+#[cfg(target_os = "linux")]
+#[test]
+fn soak_prints_its_report_on_ctrl_c() {
+    let child = Command::new(env!("CARGO_BIN_EXE_mmu"))
+        .args(["printer", "--sim", "soak", "--changes", "1000000"])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("the mmu binary runs");
+    // Signal only once the tool catches SIGINT (Linux shows it in /proc), whatever the load.
+    let caught = std::path::PathBuf::from(format!("/proc/{}/status", child.id()));
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(20);
+    let catches_sigint = || {
+        std::fs::read_to_string(&caught).ok().is_some_and(|status| {
+            status
+                .lines()
+                .find_map(|line| line.strip_prefix("SigCgt:"))
+                .and_then(|mask| u64::from_str_radix(mask.trim(), 16).ok())
+                .is_some_and(|mask| mask & (1 << (2 - 1)) != 0)
+        })
+    };
+    while !catches_sigint() && caught.exists() {
+        assert!(std::time::Instant::now() < deadline, "mmu never caught SIGINT");
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
+    std::thread::sleep(std::time::Duration::from_millis(300));
+    let status = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .expect("kill runs");
+    assert!(status.success());
+    let output = child.wait_with_output().expect("mmu finishes");
+    let out = stdout(&output);
+    assert!(out.starts_with("soak: "), "{out}{}", stderr(&output));
+    assert!(out.contains("stopped after change"), "{out}");
+    assert_eq!(output.status.code(), Some(130), "{}", stderr(&output));
+}
+
+/// Errors come with what they mean on this unit and what to check, in its own parts' words.
+#[test]
+fn errors_say_what_to_check_on_this_unit() {
+    let text = printer_fails(&["--fault", "jam:1", "tool", "1"]);
+    assert!(text.contains("slot 1"), "{text}");
+    assert!(text.contains("check"), "{text}");
+    assert!(text.contains("slot motor"), "{text}");
+    assert!(!text.contains("pulley"), "MMU3 words on this hardware: {text}");
+    let (lines, _) = printer_json(&["--fault", "jam:1", "tool", "1"]);
+    let last = lines.last().expect("some output");
+    assert!(last["check"].as_str().is_some_and(|c| !c.is_empty()), "{last}");
+}
+
+/// Registers by name, with this unit's names and values explained (register table).
+#[test]
+fn registers_by_name_with_their_values_explained() {
+    let out = printer_ok(&["read", "filtered.hub.filament"]);
+    assert!(out.contains("register 0x70 filtered.hub.filament = "), "{out}");
+    let out = printer_ok(&["read", "0xb9"]);
+    assert!(out.contains("lane.slot1 = 0 (none or not known)"), "{out}");
+    let out = printer_ok(&["--fault", "disconnect:slot-filament-1", "read", "0x50"]);
+    assert!(out.contains("stuck at a rail: slot1.filament"), "{out}");
+    let out = printer_ok(&["write", "bowden_mm", "400"]);
+    assert!(out.contains("register 0x22"), "{out}");
+    let text = printer_fails(&["read", "elbow"]);
+    assert!(text.contains("is no register"), "{text}");
 }

@@ -209,6 +209,36 @@ impl FromStr for SimFault {
     }
 }
 
+impl SimFault {
+    /// The slot this fault names (a slot's motor, spool or sensor), if any.
+    pub fn slot(&self) -> Option<usize> {
+        match *self {
+            SimFault::Model(
+                Fault::Jam { slot }
+                | Fault::Slip { slot, .. }
+                | Fault::MotorDead { slot }
+                | Fault::SpoolRunout { slot },
+            ) => Some(slot),
+            SimFault::Model(Fault::SensorDisconnected {
+                sensor: SensorId::SlotFilament(slot) | SensorId::MotorHall(slot),
+                ..
+            }) => Some(slot),
+            _ => None,
+        }
+    }
+
+    /// Refuse a fault naming a slot (or a slot's sensor) that a unit of `slots` slots lacks.
+    pub fn check_slots(&self, slots: usize) -> Result<(), FaultSpecError> {
+        match self.slot() {
+            Some(slot) if slot >= slots => Err(FaultSpecError(format!(
+                "bad fault `{self}`: the unit has no slot {slot} (it has {slots} slots, 0 to {})",
+                slots.saturating_sub(1)
+            ))),
+            _ => Ok(()),
+        }
+    }
+}
+
 impl fmt::Display for SimFault {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match *self {
@@ -320,6 +350,32 @@ mod tests {
             let error = spec.parse::<ScheduledFault>().unwrap_err().to_string();
             assert!(error.contains(why), "{spec}: {error}");
             assert!(error.contains("faults are:"), "{spec}: {error}");
+        }
+    }
+
+    #[test]
+    fn faults_naming_a_missing_slot_are_refused() {
+        for spec in [
+            "jam:3",
+            "slip:7:0.5",
+            "motor-dead:3",
+            "runout:4",
+            "disconnect:slot-filament-3",
+            "disconnect:motor-hall-9:high",
+        ] {
+            let fault: SimFault = spec.parse().unwrap();
+            let error = fault.check_slots(3).unwrap_err().to_string();
+            assert!(error.contains("the unit has no slot"), "{spec}: {error}");
+        }
+        for spec in [
+            "jam:2",
+            "disconnect:hub-filament",
+            "disconnect:motor-hall-2",
+            "noise:5",
+            "bowden-jam",
+        ] {
+            let fault: SimFault = spec.parse().unwrap();
+            assert_eq!(fault.check_slots(3), Ok(()), "{spec}");
         }
     }
 }

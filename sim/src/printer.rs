@@ -66,6 +66,9 @@ pub struct PrinterOptions {
     pub slow_feed_mm_s: u16,
     /// A command still running after this long counts as stuck, ms.
     pub command_timeout_ms: u64,
+    /// Only look: the handshake writes no register (no `W0b`, no `W14`) and no `f` report ever
+    /// goes out, so a bench tool reading a unit's settings or sensors changes nothing in it.
+    pub read_only: bool,
 }
 
 impl Default for PrinterOptions {
@@ -75,6 +78,7 @@ impl Default for PrinterOptions {
             extra_load_mm: 5,
             slow_feed_mm_s: 20,
             command_timeout_ms: 10 * 60 * 1000,
+            read_only: false,
         }
     }
 }
@@ -544,6 +548,9 @@ impl<L: Link> Printer<L> {
     }
 
     fn report_fsensor(&mut self, op: &mut impl Operator<L>) -> Result<(), Fault> {
+        if self.options.read_only {
+            return Ok(());
+        }
         let state = self.link.fsensor();
         if self.reported_fsensor != Some(state) {
             self.exchange(op, Request::new(RequestCode::FilamentSensor, state))?;
@@ -593,9 +600,11 @@ impl<L: Link> Printer<L> {
             part += 1;
         }
         self.dropouts = [0; 2];
-        // `A` or `R`: the printer does not check.
-        self.exchange(op, Request::write(0x0b, self.options.extra_load_mm))?;
-        self.exchange(op, Request::write(0x14, self.options.slow_feed_mm_s))?;
+        if !self.options.read_only {
+            // `A` or `R`: the printer does not check.
+            self.exchange(op, Request::write(0x0b, self.options.extra_load_mm))?;
+            self.exchange(op, Request::write(0x14, self.options.slow_feed_mm_s))?;
+        }
         self.reported_fsensor = None;
         self.report_fsensor(op)?;
         op.event(

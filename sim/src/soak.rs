@@ -679,6 +679,16 @@ fn panic_text(payload: &(dyn std::any::Any + Send)) -> String {
 /// Run `options.changes` tool changes as the [module documentation](self) describes; `progress`
 /// is called with the number of changes done after each one.
 pub fn run(options: &SoakOptions, progress: &mut dyn FnMut(u32)) -> SoakReport {
+    run_until(options, progress, &|| false)
+}
+
+/// [`run`], stopping early once `stop` says so (checked after each change, e.g. on Ctrl-C): the
+/// report covers the changes run and says in [`SoakReport::aborted`] that it was stopped.
+pub fn run_until(
+    options: &SoakOptions,
+    progress: &mut dyn FnMut(u32),
+    stop: &dyn Fn() -> bool,
+) -> SoakReport {
     let wall = Instant::now();
     let mut report = SoakReport::default();
     let mut rng = Rng::new(options.seed ^ SOAK_STREAM);
@@ -824,6 +834,10 @@ pub fn run(options: &SoakOptions, progress: &mut dyn FnMut(u32)) -> SoakReport {
                 .combined(current.printer.link_mut().sim_mut().flash_wear());
         }
         progress(change);
+        if stop() && change < options.changes {
+            report.aborted = Some(format!("stopped after change {change} of {}", options.changes));
+            break;
+        }
     }
 
     if let Some(current) = &mut rig {

@@ -113,7 +113,7 @@ impl Bench {
                 Wire::Serial(SerialLink::open(port, fsensor)?)
             }
             (None, true) => Wire::Sim(Box::new(sim_link(&target.sim_options)?)),
-            _ => return Err("choose the unit: --port DEV (a real one) or --sim (the simulator)".into()),
+            _ => return Err(crate::usage::usage(crate::printer_cli::CHOOSE_THE_UNIT)),
         };
         let options = PrinterOptions {
             version: target.expect_version,

@@ -1,0 +1,122 @@
+//! `mmu printer soak`: many tool changes on the simulator, with random faults if asked, and the
+//! report; Ctrl-C stops the run after the change in progress and the report covers what ran.
+
+use std::error::Error;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use clap::ValueEnum;
+use mmu_sim::SimOptions;
+use mmu_sim::soak::{SoakOptions, SoakReport};
+
+use super::console::{Console, JsonLine};
+use super::{Details, PrinterArgs, printer_options};
+use crate::usage::{Interrupted, usage};
+
+/// `mmu printer soak` options.
+#[derive(Debug, clap::Args)]
+pub struct SoakArgs {
+    /// Tool changes to run.
+    #[arg(long, value_name = "N", default_value_t = 100)]
+    pub changes: u32,
+    /// Faults to inject.
+    #[arg(long, value_enum, default_value_t = Faults::None)]
+    pub faults: Faults,
+    /// Seed of the run (default: the simulator's --seed).
+    #[arg(long, value_name = "S")]
+    pub seed: Option<u64>,
+}
+
+/// Faults of a soak run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Faults {
+    /// None: every change must simply work.
+    None,
+    /// Random faults, injected and later cleared.
+    Random,
+}
+
+/// `mmu printer soak`: the report, and a failure when it did not pass.
+pub(super) fn run_soak(
+    args: &PrinterArgs,
+    soak: &SoakArgs,
+    mut console: Console,
+) -> Result<(), Box<dyn Error>> {
+    if args.port.is_some() {
+        return Err(usage("soak runs on the simulator: drop --port"));
+    }
+    if !args.sim_options.faults.is_empty() {
+        return Err(usage(
+            "soak injects its own faults (--faults random): drop --fault",
+        ));
+    }
+    let seed = soak.seed.unwrap_or(args.sim_options.seed);
+    let options = SoakOptions {
+        changes: soak.changes,
+        random_faults: soak.faults == Faults::Random,
+        seed,
+        sim: SimOptions {
+            slots: args.sim_options.slots,
+            seed,
+            ..SimOptions::default()
+        },
+        printer: printer_options(args),
+    };
+    let bar = console.progress_bar(u64::from(soak.changes), "tool changes");
+    let stop = ctrl_c_flag()?;
+    let report = mmu_sim::soak::run_until(
+        &options,
+        &mut |done| {
+            if let Some(bar) = &bar {
+                bar.set_position(u64::from(done));
+            }
+        },
+        &|| stop.load(Ordering::Relaxed),
+    );
+    if let Some(bar) = bar {
+        bar.finish_and_clear();
+    }
+    console.close();
+    console.say(&report.to_string());
+    for note in &report.notes {
+        console.say(note);
+    }
+    console.emit(&JsonLine::Result {
+        action: "soak",
+        ok: report.passed(),
+        details: soak_details(&report, seed),
+    });
+    if stop.load(Ordering::Relaxed) {
+        Err(Box::new(Interrupted(format!(
+            "soak stopped by Ctrl-C: {}",
+            report.summary_line()
+        ))))
+    } else if report.passed() {
+        Ok(())
+    } else {
+        Err(format!("soak failed: {}", report.summary_line()).into())
+    }
+}
+
+/// A flag Ctrl-C raises (instead of ending the process), for a long run to stop and report.
+pub fn ctrl_c_flag() -> Result<Arc<AtomicBool>, Box<dyn Error>> {
+    let flag = Arc::new(AtomicBool::new(false));
+    let raised = Arc::clone(&flag);
+    ctrlc::set_handler(move || raised.store(true, Ordering::Relaxed))
+        .map_err(|error| format!("cannot catch Ctrl-C: {error}"))?;
+    Ok(flag)
+}
+
+fn soak_details(report: &SoakReport, seed: u64) -> Details {
+    let mut details = Details::new();
+    details.insert("seed".into(), seed.into());
+    details.insert("summary".into(), report.summary_line().into());
+    details.insert("report".into(), report.to_string().into());
+    details.insert("changes".into(), report.changes.into());
+    details.insert("faults_injected".into(), report.faults_injected.into());
+    details.insert("recovered".into(), report.recovered.into());
+    details.insert("unrecovered".into(), report.unrecovered.into());
+    details.insert("stuck".into(), report.stuck.into());
+    details.insert("panics".into(), report.panics.into());
+    details
+}

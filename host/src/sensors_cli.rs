@@ -1,0 +1,452 @@
+//! `mmu sensors`: every sensor of a unit live, to check the wiring at first power-on and to tune
+//! the thresholds: a table refreshed in place, CSV rows (`--csv`), or a recorded trace drawn to a
+//! PNG (`--plot FILE.png --seconds N`, in [`plot`]).
+//!
+//! It only reads (the printer's handshake without its writes, then `R` requests): raw readings
+//! at `0x60 + i`, filtered at `0x70 + i`, "on"/"off" thresholds at `0x90 + i`/`0xa0 + i` and the
+//! stuck-at-a-rail mask at `0x50`. Sensor `i`: 0 hub filament, 1 hub tension, 2 hub cutter, then
+//! slot `k`'s filament sensor at `3 + 2k` and its motor Hall sensor at `4 + 2k`.
+
+mod plot;
+
+use std::error::Error;
+use std::io::{IsTerminal, Write};
+use std::path::PathBuf;
+use std::sync::atomic::Ordering;
+
+use mmu_firmware::registers::{
+    FILTERED, RAW, SENSOR_FAULTS as STUCK, SLOT_COUNT, THRESHOLD_OFF, THRESHOLD_ON,
+};
+use mmu_protocol::{ErrorCode, ParamCode, Request, RequestCode};
+use mmu_sim::{Decision, Link, Operator, Printer, PrinterEvent, PrinterOptions};
+
+use crate::printer_cli::serial::{FsensorSource, SerialLink};
+use crate::printer_cli::{CHOOSE_THE_UNIT, SimTargetArgs, ctrl_c_flag, parse_version, sim_link};
+use crate::usage::usage;
+
+/// `mmu sensors` options.
+#[derive(Debug, clap::Args)]
+pub struct SensorsArgs {
+    /// A real unit on this serial port (115200 8N1): a USB-serial adapter on USART3 (PC10/PC11),
+    /// e.g. /dev/ttyUSB0 (not the NUCLEO's /dev/ttyACM0, the ST-LINK port).
+    #[arg(long, value_name = "DEV", conflicts_with = "sim")]
+    pub port: Option<String>,
+    /// The in-process simulator (real time for the table; as fast as possible with --seconds
+    /// and --csv or --plot, unless --time-scale).
+    #[arg(long)]
+    pub sim: bool,
+    /// The simulated unit (--sim only).
+    #[command(flatten)]
+    pub sim_options: SimTargetArgs,
+    /// Stream CSV: a header, then one row per sample, until Ctrl-C or --seconds.
+    #[arg(long, conflicts_with = "plot")]
+    pub csv: bool,
+    /// Record --seconds of samples and draw them to this PNG: per sensor, raw and filtered
+    /// readings against the thresholds.
+    #[arg(long, value_name = "FILE.png", requires = "seconds")]
+    pub plot: Option<PathBuf>,
+    /// Stop after this many seconds (the unit's clock: virtual with --sim).
+    #[arg(long, value_name = "N", value_parser = parse_seconds)]
+    pub seconds: Option<f64>,
+    /// Time between samples, ms.
+    #[arg(long, value_name = "MS", default_value_t = 100, value_parser = clap::value_parser!(u64).range(10..=60_000))]
+    pub every: u64,
+    /// The unit firmware version to expect (3.0.2 for a unit set up for an MK3S).
+    #[arg(long, value_name = "X.Y.Z", default_value = "3.0.3", value_parser = parse_version)]
+    pub expect_version: (u8, u8, u8),
+}
+
+/// One sensor's readings at one time.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Reading {
+    /// Raw ADC sample, 0..=4095.
+    pub raw: u16,
+    /// After the unit's filter.
+    pub filtered: u16,
+    /// Stuck at a supply rail (the unit no longer believes it).
+    pub stuck: bool,
+}
+
+/// All sensors at one time.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Sample {
+    /// The unit's clock since the first sample, ms.
+    pub t_ms: u64,
+    /// One per sensor.
+    pub readings: Vec<Reading>,
+}
+
+/// A sensor's thresholds; `None` for the sensors that have none (tension, cutter).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Thresholds {
+    /// Present (or high) at or above this.
+    pub on: u16,
+    /// Absent (or low) at or below this.
+    pub off: u16,
+}
+
+/// The sensor's name: `hub filament`, `slot 1 motor Hall`.
+pub fn sensor_name(index: u8) -> String {
+    match index {
+        0 => "hub filament".to_string(),
+        1 => "hub tension".to_string(),
+        2 => "hub cutter".to_string(),
+        i if i % 2 == 1 => format!("slot {} filament", (i - 3) / 2),
+        i => format!("slot {} motor Hall", (i - 4) / 2),
+    }
+}
+
+/// The sensor's CSV column prefix: `hub_filament`, `slot1_hall`.
+fn column_name(index: u8) -> String {
+    match index {
+        0 => "hub_filament".to_string(),
+        1 => "hub_tension".to_string(),
+        2 => "hub_cutter".to_string(),
+        i if i % 2 == 1 => format!("slot{}_filament", (i - 3) / 2),
+        i => format!("slot{}_hall", (i - 4) / 2),
+    }
+}
+
+/// A person's word for what a sensor reads, following the unit's hysteresis: `previous` is
+/// the state shown before (the state only changes past a threshold).
+fn state(
+    index: u8,
+    reading: &Reading,
+    thresholds: Option<Thresholds>,
+    previous: Option<bool>,
+) -> (String, Option<bool>) {
+    if reading.stuck {
+        return ("STUCK AT A RAIL: check its wiring".to_string(), previous);
+    }
+    let Some(thresholds) = thresholds else {
+        return (String::new(), None);
+    };
+    let on = if reading.filtered >= thresholds.on {
+        true
+    } else if reading.filtered <= thresholds.off {
+        false
+    } else {
+        previous.unwrap_or(false)
+    };
+    let hall = index >= 4 && index.is_multiple_of(2);
+    let word = match (hall, on) {
+        (true, true) => "high (magnet)",
+        (true, false) => "low",
+        (false, true) => "filament",
+        (false, false) => "no filament",
+    };
+    (word.to_string(), Some(on))
+}
+
+/// The person at the printer for a read-only session: sees nothing, never has to decide.
+struct Silent;
+
+impl<L> Operator<L> for Silent {
+    fn event(&mut self, _link: &mut L, _event: &PrinterEvent) {}
+
+    fn decide(&mut self, _link: &mut L, _request: Request, _error: ErrorCode) -> Decision {
+        Decision::GiveUp
+    }
+}
+
+/// Reads the sensors of a unit over a read-only printer connection.
+struct Sampler<L: Link> {
+    printer: Printer<L>,
+    sensors: u8,
+}
+
+impl<L: Link> Sampler<L> {
+    fn connect(link: L, version: (u8, u8, u8)) -> Result<Self, Box<dyn Error>> {
+        let options = PrinterOptions {
+            version,
+            read_only: true,
+            ..PrinterOptions::default()
+        };
+        let mut printer = Printer::new(link, options);
+        printer
+            .connect(&mut Silent)
+            .map_err(|error| crate::printer_cli::printer_failure(error, version))?;
+        let mut sampler = Sampler { printer, sensors: 0 };
+        let slots = sampler
+            .read(SLOT_COUNT)?
+            .ok_or("the unit does not tell its number of slots (register 0x40): is it this firmware?")?;
+        let slots = u8::try_from(slots)
+            .ok()
+            .filter(|&s| s <= 8)
+            .ok_or("the unit claims too many slots")?;
+        sampler.sensors = crate::printer_cli::sensor_count(slots);
+        Ok(sampler)
+    }
+
+    fn read(&mut self, address: u8) -> Result<Option<u16>, Box<dyn Error>> {
+        let answer = self
+            .printer
+            .request(&mut Silent, Request::new(RequestCode::Read, address))
+            .map_err(|error| error.to_string())?;
+        Ok((answer.param == ParamCode::Accepted)
+            .then_some(answer.param_value)
+            .flatten())
+    }
+
+    fn thresholds(&mut self) -> Result<Vec<Option<Thresholds>>, Box<dyn Error>> {
+        (0..self.sensors)
+            .map(|i| {
+                let on = self.read(THRESHOLD_ON + i)?;
+                let off = self.read(THRESHOLD_OFF + i)?;
+                Ok(on.zip(off).map(|(on, off)| Thresholds { on, off }))
+            })
+            .collect()
+    }
+
+    fn sample(&mut self, t_ms: u64) -> Result<Sample, Box<dyn Error>> {
+        let stuck = self.read(STUCK)?.unwrap_or(0);
+        let mut readings = Vec::with_capacity(usize::from(self.sensors));
+        for i in 0..self.sensors {
+            let missing = || format!("the unit refused to read sensor {i} ({})", sensor_name(i));
+            readings.push(Reading {
+                raw: self.read(RAW + i)?.ok_or_else(missing)?,
+                filtered: self.read(FILTERED + i)?.ok_or_else(missing)?,
+                stuck: stuck & (1 << i) != 0,
+            });
+        }
+        Ok(Sample { t_ms, readings })
+    }
+
+    fn now_ms(&self) -> u64 {
+        self.printer.link().now_ms()
+    }
+
+    /// Let time pass until the unit's clock reads `until_ms`.
+    fn wait_until(&mut self, until_ms: u64) -> Result<(), Box<dyn Error>> {
+        while self.now_ms() < until_ms {
+            let wait = until_ms - self.now_ms();
+            self.printer.link_mut().receive(wait, &mut Vec::new())?;
+        }
+        Ok(())
+    }
+}
+
+/// How the samples are shown.
+enum Output {
+    Table {
+        live: bool,
+        shown_lines: usize,
+        states: Vec<Option<bool>>,
+    },
+    Csv,
+    Plot(PathBuf),
+}
+
+/// Run `mmu sensors`.
+pub fn run(args: &SensorsArgs) -> Result<(), Box<dyn Error>> {
+    match (&args.port, args.sim) {
+        (Some(port), false) => {
+            let link = SerialLink::open(port, FsensorSource::Fixed(0))?;
+            watch(Sampler::connect(link, args.expect_version)?, args)
+        }
+        (None, true) => {
+            let mut sim = SimTargetArgs {
+                ..args.sim_options.clone()
+            };
+            if sim.time_scale.is_none() && (args.seconds.is_none() || !(args.csv || args.plot.is_some())) {
+                sim.time_scale = Some(1.0);
+            }
+            watch(Sampler::connect(sim_link(&sim)?, args.expect_version)?, args)
+        }
+        _ => Err(usage(CHOOSE_THE_UNIT)),
+    }
+}
+
+/// Sample until --seconds or Ctrl-C, showing each sample as asked.
+fn watch<L: Link>(mut sampler: Sampler<L>, args: &SensorsArgs) -> Result<(), Box<dyn Error>> {
+    let thresholds = sampler.thresholds()?;
+    let stop = ctrl_c_flag()?;
+    let mut output = match (&args.plot, args.csv) {
+        (Some(file), _) => Output::Plot(file.clone()),
+        (None, true) => Output::Csv,
+        (None, false) => Output::Table {
+            live: std::io::stdout().is_terminal(),
+            shown_lines: 0,
+            states: vec![None; usize::from(sampler.sensors)],
+        },
+    };
+    let mut out = std::io::stdout().lock();
+    if let Output::Csv = output {
+        writeln!(out, "{}", csv_header(sampler.sensors))?;
+    }
+    let start = sampler.now_ms();
+    let end = args.seconds.map(|s| start + (s * 1000.0) as u64);
+    let mut recorded = Vec::new();
+    let mut last = None;
+    let mut next = start;
+    while !stop.load(Ordering::Relaxed) && end.is_none_or(|end| next <= end) {
+        sampler.wait_until(next)?;
+        let sample = sampler.sample(sampler.now_ms() - start)?;
+        next += args.every;
+        match &mut output {
+            Output::Csv => {
+                if writeln!(out, "{}", csv_row(&sample, &thresholds)).is_err() {
+                    return Ok(()); // The reader went away (`| head`).
+                }
+                out.flush()?;
+            }
+            Output::Table {
+                live: true,
+                shown_lines,
+                states,
+            } => {
+                if *shown_lines > 0 {
+                    write!(out, "\x1b[{shown_lines}A")?;
+                }
+                let table = table(&sample, &thresholds, states, true);
+                *shown_lines = table.lines().count();
+                write!(out, "{table}")?;
+                out.flush()?;
+            }
+            Output::Table { live: false, .. } => {}
+            Output::Plot(_) => recorded.push(sample.clone()),
+        }
+        last = Some(sample);
+    }
+    match output {
+        Output::Table {
+            live: false,
+            mut states,
+            ..
+        } => {
+            if let Some(sample) = &last {
+                write!(out, "{}", table(sample, &thresholds, &mut states, false))?;
+            }
+        }
+        Output::Plot(file) => {
+            plot::draw(&file, &recorded, &thresholds)?;
+            writeln!(
+                out,
+                "{} samples of {} sensors drawn to {}",
+                recorded.len(),
+                sampler.sensors,
+                file.display()
+            )?;
+        }
+        _ => {}
+    }
+    Ok(())
+}
+
+fn csv_header(sensors: u8) -> String {
+    let mut columns = vec!["t_ms".to_string()];
+    for i in 0..sensors {
+        let name = column_name(i);
+        for field in ["raw", "filtered", "on", "off", "stuck"] {
+            columns.push(format!("{name}_{field}"));
+        }
+    }
+    columns.join(",")
+}
+
+/// A CSV row; thresholds a sensor lacks are empty.
+fn csv_row(sample: &Sample, thresholds: &[Option<Thresholds>]) -> String {
+    let mut row = vec![sample.t_ms.to_string()];
+    for (reading, limits) in sample.readings.iter().zip(thresholds) {
+        row.push(reading.raw.to_string());
+        row.push(reading.filtered.to_string());
+        row.push(limits.map_or(String::new(), |t| t.on.to_string()));
+        row.push(limits.map_or(String::new(), |t| t.off.to_string()));
+        row.push(u8::from(reading.stuck).to_string());
+    }
+    row.join(",")
+}
+
+/// The table: a header and one line per sensor; `live` lines end in "clear to the end of the
+/// line", for a terminal where the table is redrawn in place.
+fn table(
+    sample: &Sample,
+    thresholds: &[Option<Thresholds>],
+    states: &mut [Option<bool>],
+    live: bool,
+) -> String {
+    let eol = if live { "\x1b[K\n" } else { "\n" };
+    let mut text = format!(
+        "t = {:>8.1} s{}{eol}{:<3} {:<19} {:>5} {:>8} {:>5} {:>5}  state{eol}",
+        sample.t_ms as f64 / 1000.0,
+        if live { "   (Ctrl-C stops)" } else { "" },
+        "#",
+        "sensor",
+        "raw",
+        "filtered",
+        "on",
+        "off"
+    );
+    for (i, (reading, limits)) in sample.readings.iter().zip(thresholds).enumerate() {
+        let index = u8::try_from(i).unwrap_or(u8::MAX);
+        let previous = states.get(i).copied().flatten();
+        let (word, now) = state(index, reading, *limits, previous);
+        if let Some(slot) = states.get_mut(i) {
+            *slot = now;
+        }
+        let (on, off) = limits.map_or((String::from("-"), String::from("-")), |t| {
+            (t.on.to_string(), t.off.to_string())
+        });
+        text.push_str(&format!(
+            "{i:<3} {:<19} {:>5} {:>8} {on:>5} {off:>5}  {word}{eol}",
+            sensor_name(index),
+            reading.raw,
+            reading.filtered
+        ));
+    }
+    text
+}
+
+fn parse_seconds(text: &str) -> Result<f64, String> {
+    text.parse::<f64>()
+        .ok()
+        .filter(|s| s.is_finite() && *s > 0.0 && *s <= 86_400.0)
+        .ok_or_else(|| format!("{text:?} is not a number of seconds (above 0, at most a day)"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_follow_the_register_map() {
+        let names: Vec<String> = (0..9).map(sensor_name).collect();
+        assert_eq!(
+            names,
+            [
+                "hub filament",
+                "hub tension",
+                "hub cutter",
+                "slot 0 filament",
+                "slot 0 motor Hall",
+                "slot 1 filament",
+                "slot 1 motor Hall",
+                "slot 2 filament",
+                "slot 2 motor Hall"
+            ]
+        );
+        assert_eq!(column_name(8), "slot2_hall");
+    }
+
+    #[test]
+    fn the_state_follows_the_hysteresis() {
+        let limits = Some(Thresholds { on: 2600, off: 2400 });
+        let at = |filtered| Reading {
+            raw: filtered,
+            filtered,
+            stuck: false,
+        };
+        assert_eq!(state(0, &at(2700), limits, None).0, "filament");
+        assert_eq!(state(0, &at(2500), limits, Some(true)).0, "filament");
+        assert_eq!(state(0, &at(2500), limits, Some(false)).0, "no filament");
+        assert_eq!(state(0, &at(2300), limits, Some(true)).0, "no filament");
+        assert_eq!(state(4, &at(2700), limits, None).0, "high (magnet)");
+        assert_eq!(state(1, &at(2700), None, None).0, "");
+        let stuck = Reading {
+            raw: 0,
+            filtered: 0,
+            stuck: true,
+        };
+        assert!(state(0, &stuck, limits, None).0.contains("wiring"));
+    }
+}

@@ -1,0 +1,453 @@
+//! End-to-end tests of the maker's bench tools: the read-only connection, `stats`, `settings
+//! save|load`, `mmu sensors` (table, CSV, PNG plot) and the simulator's terminal log, run as a
+//! user runs them: against `mmu sim --pty` (one unit that remembers between commands) or `--sim`.
+
+use std::io::{BufRead, BufReader, Read, Write};
+use std::path::PathBuf;
+use std::process::{Child, Command, Output, Stdio};
+use std::sync::mpsc::{self, Receiver};
+use std::thread;
+use std::time::{Duration, Instant};
+
+use serde_json::Value;
+
+/// Longest wait for the simulator to say something.
+const WAIT: Duration = Duration::from_secs(20);
+/// As a printer does, a client lets the unit boot before it talks: the unit takes a frame only
+/// at the start of a quiet line (`mmu_protocol::SILENCE_MS`).
+const BOOT: Duration = Duration::from_millis(200);
+
+fn mmu(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_mmu"))
+        .args(args)
+        .output()
+        .expect("the mmu binary runs")
+}
+
+fn text(output: &Output) -> String {
+    format!(
+        "{}{}",
+        String::from_utf8_lossy(&output.stdout),
+        String::from_utf8_lossy(&output.stderr)
+    )
+}
+
+fn ok(args: &[&str]) -> String {
+    let output = mmu(args);
+    assert!(output.status.success(), "{args:?} failed:\n{}", text(&output));
+    String::from_utf8_lossy(&output.stdout).into_owned()
+}
+
+/// A path in the test's temporary directory.
+fn temp(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(format!("bench-{}-{name}", std::process::id()))
+}
+
+/// `mmu sim --pty` running, killed when dropped; its stderr lines arrive on a channel.
+struct PtySim {
+    child: Child,
+    path: String,
+    events: PathBuf,
+    stderr: Receiver<String>,
+}
+
+impl PtySim {
+    fn spawn(name: &str, extra: &[&str]) -> PtySim {
+        let events = temp(&format!("{name}-events.jsonl"));
+        let mut child = Command::new(env!("CARGO_BIN_EXE_mmu"))
+            .args(["sim", "--pty", "--time-scale", "5", "--events"])
+            .arg(&events)
+            .args(extra)
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("the mmu binary runs");
+        let mut stdout = BufReader::new(child.stdout.take().expect("stdout is piped"));
+        let mut path = String::new();
+        stdout
+            .read_line(&mut path)
+            .expect("mmu sim prints the pty's path");
+        let (lines, stderr) = mpsc::channel();
+        let pipe = child.stderr.take().expect("stderr is piped");
+        thread::spawn(move || {
+            for line in BufReader::new(pipe).lines() {
+                let Ok(line) = line else { return };
+                if lines.send(line).is_err() {
+                    return;
+                }
+            }
+        });
+        PtySim {
+            child,
+            path: path.trim_end().to_string(),
+            events,
+            stderr,
+        }
+    }
+
+    /// `mmu printer --port PTY args...` following the simulator's filament sensor, which must
+    /// succeed; its stdout.
+    fn printer(&self, args: &[&str]) -> String {
+        let events = self.events.to_str().expect("UTF-8 path");
+        let mut full = vec!["printer", "--port", &self.path, "--fsensor-events", events];
+        full.extend_from_slice(args);
+        ok(&full)
+    }
+
+    /// Wait until a stderr line contains `what`; every line seen so far.
+    fn wait_for_log(&self, what: &str) -> Vec<String> {
+        let deadline = Instant::now() + WAIT;
+        let mut seen = Vec::new();
+        while Instant::now() < deadline {
+            if let Ok(line) = self.stderr.recv_timeout(Duration::from_millis(50)) {
+                let found = line.contains(what);
+                seen.push(line);
+                if found {
+                    return seen;
+                }
+            }
+        }
+        panic!(
+            "the simulator never logged {what:?}; it logged:\n{}",
+            seen.join("\n")
+        );
+    }
+}
+
+impl Drop for PtySim {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+        let _ = std::fs::remove_file(&self.events);
+    }
+}
+
+/// Before: every `--port` action replayed the printer's handshake writes, so a setting written
+/// from the PC was overwritten by the next `read` (`write 0x0b 30`, then `read 0x0b` gave 5).
+/// A unit keeps what the bench writes; `stats` counts its tool changes; settings go to a file
+/// and come back from it.
+#[test]
+fn the_bench_reads_without_writing_counts_and_keeps_settings() {
+    let sim = PtySim::spawn("bench", &["--quiet"]);
+    sim.printer(&["write", "0x0b", "30"]);
+    let out = sim.printer(&["read", "0x0b"]);
+    assert!(
+        out.contains("= 30"),
+        "the read wrote the printer's 5 again:\n{out}"
+    );
+
+    sim.printer(&["tool", "1"]);
+    let stats = sim.printer(&["stats"]);
+    let slot1 = stats
+        .lines()
+        .find(|line| line.trim_start().starts_with("slot 1"))
+        .unwrap_or_else(|| panic!("no slot 1 line:\n{stats}"));
+    assert!(slot1.contains("1 tool change"), "{stats}");
+    assert!(slot1.contains("loaded"), "{stats}");
+    assert!(
+        stats.lines().any(|l| l.trim_start().starts_with("slot 2")),
+        "{stats}"
+    );
+
+    let file = temp("settings.txt");
+    sim.printer(&["settings", "save", file.to_str().expect("UTF-8 path")]);
+    let saved = std::fs::read_to_string(&file).expect("the settings file was written");
+    assert!(saved.contains("0x22 360"), "{saved}");
+    // `tool` is the printer's own session: its handshake wrote the printer's 5.
+    assert!(saved.contains("0x0b 5 "), "{saved}");
+    assert!(saved.contains("0x90 2600"), "the hub sensor's threshold: {saved}");
+    std::fs::write(&file, saved.replace("0x22 360", "0x22 512")).expect("the file can be edited");
+    let out = sim.printer(&["settings", "load", file.to_str().expect("UTF-8 path")]);
+    assert!(out.contains("0x22"), "{out}");
+    let out = sim.printer(&["read", "0x22"]);
+    assert!(out.contains("= 512"), "{out}");
+    let _ = std::fs::remove_file(file);
+
+    // The README's MK3S step: the unit then reports 3.0.2, and the message says how to go on.
+    sim.printer(&["write", "0x52", "2"]);
+    let output = mmu(&["printer", "--port", &sim.path, "status"]);
+    let said = text(&output);
+    assert_eq!(output.status.code(), Some(1), "{said}");
+    assert!(!said.contains("Some("), "{said}");
+    assert!(said.contains("the unit reports version 3.0.2"), "{said}");
+    assert!(said.contains("--expect-version 3.0.2"), "{said}");
+    let out = sim.printer(&["--expect-version", "3.0.2", "status"]);
+    assert!(out.contains("unit firmware: 3.0.2"), "{out}");
+}
+
+/// Status, read, stats and sensors send no write and no `f`: only `S`, `Q`, `R`.
+#[test]
+fn bench_actions_only_read() {
+    for action in [&["status"][..], &["read", "0x0b"], &["stats"]] {
+        let mut args = vec!["printer", "--sim", "--json", "-v"];
+        args.extend_from_slice(action);
+        let out = ok(&args);
+        for line in out.lines() {
+            let object: Value = serde_json::from_str(line).expect("JSON lines");
+            if object["event"] == "sent" {
+                let frame = object["frame"].as_str().expect("a frame");
+                assert!(
+                    frame.starts_with(['S', 'Q', 'R']),
+                    "{action:?} sent {frame}:\n{out}"
+                );
+            }
+        }
+    }
+}
+
+/// `--csv --seconds N` prints a header, then one row per sample with all nine sensors.
+#[test]
+fn sensors_stream_csv() {
+    let out = ok(&["sensors", "--sim", "--csv", "--seconds", "1"]);
+    let mut lines = out.lines();
+    let header = lines.next().expect("a header");
+    let columns: Vec<&str> = header.split(',').collect();
+    assert_eq!(columns[0], "t_ms");
+    for sensor in [
+        "hub_filament",
+        "hub_tension",
+        "hub_cutter",
+        "slot2_filament",
+        "slot2_hall",
+    ] {
+        for field in ["raw", "filtered"] {
+            let column = format!("{sensor}_{field}");
+            assert!(columns.contains(&column.as_str()), "{column} missing: {header}");
+        }
+    }
+    assert!(columns.contains(&"hub_filament_on"), "{header}");
+    let rows: Vec<Vec<&str>> = lines.map(|line| line.split(',').collect()).collect();
+    assert!(rows.len() >= 5, "a second holds several samples: {out}");
+    for row in &rows {
+        assert_eq!(row.len(), columns.len(), "{row:?}");
+    }
+    let last_t: u64 = rows.last().expect("rows")[0].parse().expect("t_ms is a number");
+    assert!((900..=1500).contains(&last_t), "{last_t}");
+    // The hub filament sensor reads well below its "on" threshold with nothing loaded.
+    let at = |name: &str| columns.iter().position(|c| *c == name).expect("column");
+    let filtered: u32 = rows[rows.len() - 1][at("hub_filament_filtered")]
+        .parse()
+        .expect("number");
+    let on: u32 = rows[rows.len() - 1][at("hub_filament_on")]
+        .parse()
+        .expect("number");
+    assert!(filtered < on, "{filtered} vs {on}");
+}
+
+/// `--plot FILE.png --seconds N` writes a PNG of the trace.
+#[test]
+fn sensors_plot_a_png() {
+    let file = temp("sensors.png");
+    let _ = std::fs::remove_file(&file);
+    let out = ok(&[
+        "sensors",
+        "--sim",
+        "--plot",
+        file.to_str().expect("UTF-8"),
+        "--seconds",
+        "2",
+    ]);
+    assert!(out.contains("sensors.png"), "{out}");
+    let bytes = std::fs::read(&file).expect("the PNG was written");
+    assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n", "not a PNG");
+    // IHDR: width and height, big-endian, at bytes 16..24.
+    let width = u32::from_be_bytes(bytes[16..20].try_into().expect("4 bytes"));
+    let height = u32::from_be_bytes(bytes[20..24].try_into().expect("4 bytes"));
+    assert!(width >= 800 && height >= 600, "{width}x{height}");
+    assert!(
+        bytes.len() > 20_000,
+        "a plot with text and traces: {} bytes",
+        bytes.len()
+    );
+    let _ = std::fs::remove_file(file);
+}
+
+/// The table: one row per sensor with its readings, thresholds and state.
+#[test]
+fn sensors_table_names_every_sensor() {
+    let out = ok(&["sensors", "--sim", "--seconds", "1"]);
+    for name in [
+        "hub filament",
+        "hub tension",
+        "hub cutter",
+        "slot 0 filament",
+        "slot 0 motor Hall",
+        "slot 2 motor Hall",
+    ] {
+        assert!(out.contains(name), "{name} missing:\n{out}");
+    }
+    assert!(out.contains("no filament"), "{out}");
+}
+
+/// Before: `mmu sim --pty` showed nothing while serving, even for an invalid request.
+#[test]
+fn the_simulator_logs_what_it_serves() {
+    let sim = PtySim::spawn("log", &[]);
+    let mut port = serialport::new(&sim.path, 115_200)
+        .timeout(WAIT)
+        .open()
+        .expect("the pty opens");
+    thread::sleep(BOOT);
+    port.write_all(b"S0*c6\n").expect("write");
+    let seen = sim.wait_for_log("version major = 3");
+    assert!(
+        seen.iter().any(|l| l.contains("< S0") || l.contains("S0 A3")),
+        "{seen:?}"
+    );
+    port.write_all(b"T1*00\n").expect("write");
+    let seen = sim.wait_for_log("ignored");
+    let last = seen.last().expect("a line");
+    assert!(last.contains("CRC"), "{last}");
+    let mut buffer = [0u8; 64];
+    let _ = port.read(&mut buffer);
+}
+
+/// `-q` silences the log.
+#[test]
+fn the_simulator_log_is_silenced_by_q() {
+    let output = Command::new(env!("CARGO_BIN_EXE_mmu"))
+        .args(["sim", "--stdio", "-q"])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .and_then(|mut child| {
+            thread::sleep(BOOT);
+            child.stdin.take().expect("piped").write_all(b"S0*c6\nT1*00\n")?;
+            child.wait_with_output()
+        })
+        .expect("mmu sim runs");
+    assert!(output.status.success());
+    assert!(
+        output.stderr.is_empty(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    assert!(String::from_utf8_lossy(&output.stdout).contains("S0 A3"));
+}
+
+/// `mmu sensors` on a serial port: the simulator behind a pty, as a real unit behind an adapter.
+#[test]
+fn sensors_over_a_serial_port() {
+    let sim = PtySim::spawn("sensors", &["--quiet"]);
+    let out = ok(&[
+        "sensors",
+        "--port",
+        &sim.path,
+        "--csv",
+        "--seconds",
+        "1",
+        "--every",
+        "200",
+    ]);
+    let lines: Vec<&str> = out.lines().collect();
+    assert!(
+        lines
+            .first()
+            .is_some_and(|h| h.starts_with("t_ms,hub_filament_raw")),
+        "{out}"
+    );
+    assert!(lines.len() >= 3, "a header and samples: {out}");
+    let file = temp("port.png");
+    let out = ok(&[
+        "sensors",
+        "--port",
+        &sim.path,
+        "--plot",
+        file.to_str().expect("UTF-8"),
+        "--seconds",
+        "1",
+    ]);
+    assert!(out.contains("drawn to"), "{out}");
+    assert_eq!(
+        &std::fs::read(&file).expect("the PNG was written")[..4],
+        b"\x89PNG"
+    );
+    let _ = std::fs::remove_file(file);
+}
+
+/// A printer polls every second: polls answered as the time before are left out of the log
+/// (and counted) unless `-v`; what changes stands out.
+#[test]
+fn the_simulator_log_leaves_out_unchanged_polls_unless_verbose() {
+    let run = |verbose: bool| {
+        let mut args = vec!["sim", "--stdio", "--time-scale", "5"];
+        if verbose {
+            args.push("-v");
+        }
+        let mut child = Command::new(env!("CARGO_BIN_EXE_mmu"))
+            .args(&args)
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("mmu sim runs");
+        let mut stdin = child.stdin.take().expect("piped");
+        thread::sleep(BOOT);
+        for _ in 0..3 {
+            stdin.write_all(b"R1b*9e\n").expect("write");
+            thread::sleep(Duration::from_millis(30));
+        }
+        stdin.write_all(b"S0*c6\n").expect("write");
+        drop(stdin);
+        let output = child.wait_with_output().expect("mmu sim ends");
+        String::from_utf8_lossy(&output.stderr).into_owned()
+    };
+    let log = run(false);
+    assert_eq!(log.matches("< R1b A5").count(), 1, "{log}");
+    assert!(log.contains("(2 polls answered as before not shown"), "{log}");
+    assert!(log.contains("< S0 A3"), "{log}");
+    let log = run(true);
+    assert_eq!(log.matches("< R1b A5").count(), 3, "{log}");
+}
+
+/// A sensor stuck at a rail is flagged in the CSV and in the table, with what to check.
+#[test]
+fn sensors_flag_a_stuck_sensor() {
+    let fault = ["--fault", "disconnect:slot-filament-1:high@500"];
+    let mut args = vec!["sensors", "--sim", "--csv", "--seconds", "2"];
+    args.extend_from_slice(&fault);
+    let out = ok(&args);
+    let mut lines = out.lines();
+    let header: Vec<&str> = lines.next().expect("a header").split(',').collect();
+    let stuck = header
+        .iter()
+        .position(|c| *c == "slot1_filament_stuck")
+        .expect("a stuck column");
+    let last: Vec<&str> = lines.last().expect("rows").split(',').collect();
+    assert_eq!(last[stuck], "1", "{out}");
+    let mut args = vec!["sensors", "--sim", "--seconds", "2"];
+    args.extend_from_slice(&fault);
+    let out = ok(&args);
+    let row = out
+        .lines()
+        .find(|l| l.contains("slot 1 filament"))
+        .expect("a row");
+    assert!(row.contains("STUCK AT A RAIL: check its wiring"), "{out}");
+}
+
+/// A frame left unfinished (a person stopped typing) is reported once the line falls silent,
+/// as the unit's decoder sees it (spec: a printer never pauses inside a frame), and the next
+/// request is logged.
+#[test]
+fn the_simulator_log_reports_an_unfinished_frame_after_a_silence() {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_mmu"))
+        .args(["sim", "--stdio"])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("mmu sim runs");
+    let mut stdin = child.stdin.take().expect("piped");
+    thread::sleep(BOOT);
+    stdin.write_all(b"T1").expect("write");
+    stdin.flush().expect("flush");
+    thread::sleep(Duration::from_millis(200));
+    stdin.write_all(b"S0*c6\n").expect("write");
+    drop(stdin);
+    let output = child.wait_with_output().expect("mmu sim ends");
+    let log = String::from_utf8_lossy(&output.stderr);
+    assert!(log.contains("> frame ignored: T1 unfinished"), "{log}");
+    assert!(log.contains("> S0*c6  version major"), "{log}");
+}
