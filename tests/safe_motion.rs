@@ -107,10 +107,7 @@ fn retry_after_a_stuck_printer_sensor_never_pulls_the_filament_out_of_its_drive(
     rig.fsensor = common::FsensorReports::Stuck(1);
     let unload = Request::new(RequestCode::Unload, 0);
     let run = rig.command(unload);
-    assert_eq!(
-        run.last.param_value,
-        Some(u16::from(ErrorCode::FSENSOR_DIDNT_SWITCH_OFF.0))
-    );
+    assert_eq!(run.last.param_value, Some(ErrorCode::FSENSOR_DIDNT_SWITCH_OFF.0));
     for _ in 0..5 {
         rig.send(Request::new(RequestCode::Button, 1));
         rig.follow(unload, 60_000);
