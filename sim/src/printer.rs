@@ -392,6 +392,34 @@ impl<L: Link> Printer<L> {
         Err(PrinterError::Stuck(request))
     }
 
+    /// Print for `ms` (printer clock) after a tool change, polling the unit in idle scope. An
+    /// error the unit reports meanwhile (a jam on the loaded slot) is taken up as the last
+    /// command's and retried and shown as during a command, as Prusa's `IdleStep` does on an `E`
+    /// answer (it switches to command scope). Returns how such an error ended, or `None` when the
+    /// print went on without one.
+    pub fn print(&mut self, op: &mut impl Operator<L>, ms: u64) -> Result<Option<Outcome>, PrinterError> {
+        let until = self.link.now_ms() + ms;
+        let mut ended = None;
+        while self.link.now_ms() < until {
+            let answer = match self.poll(op, false) {
+                Ok(answer) => answer,
+                Err(Fault::Link(why)) => {
+                    self.link_lost(op, why)?;
+                    self.connect(op)?
+                }
+                Err(Fault::Fatal(error)) => return Err(error),
+            };
+            if answer.param == ParamCode::Error {
+                let request = Request::new(answer.code, answer.value);
+                match self.follow_run(op, request, self.link.now_ms())? {
+                    Some(Outcome::GaveUp(error)) => return Ok(Some(Outcome::GaveUp(error))),
+                    outcome => ended = outcome.or(ended),
+                }
+            }
+        }
+        Ok(ended)
+    }
+
     /// Whether the unit's hub sensor (its FINDA, register 0x08) saw filament at the last poll.
     pub fn finda(&self) -> bool {
         self.polled(0x08).is_some_and(|v| v != 0)

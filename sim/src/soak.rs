@@ -49,6 +49,12 @@ pub const FAULT_PROBABILITY: f64 = 0.3;
 /// A fault strikes up to this long after the `T` is sent, ms (uniformly drawn, to the
 /// millisecond; a change that ends before its fault's moment runs without it).
 pub const MAX_FAULT_DELAY_MS: u64 = 8000;
+/// With random faults, the chance that a change's fault strikes while the printer prints after
+/// the change rather than during it.
+pub const PRINT_FAULT_PROBABILITY: f64 = 0.3;
+/// How long the printer prints on after a fault struck while printing, ms: long enough for the
+/// unit to notice, the printer's automatic Retries and the user's fix.
+pub const PRINT_AFTER_FAULT_MS: u64 = 30_000;
 /// Retry presses the simulated user makes on one change's errors (counted again from zero once
 /// the fault is fixed) before giving up.
 pub const USER_RETRIES: u8 = 3;
@@ -276,6 +282,33 @@ impl fmt::Display for SoakReport {
 }
 
 /// The `--fault` name of a fault's kind, without slot and parameters.
+/// A random fault that strikes while the printer prints with `loaded` loaded: a jam or a tangled
+/// spool, a seized drive, sensor noise, a lost tension sensor, a power loss or a noisy line.
+fn draw_print_fault(rng: &mut Rng, loaded: usize) -> SimFault {
+    match rng.next_u64() % 6 {
+        0 | 1 => SimFault::Model(Fault::Jam { slot: loaded }),
+        2 => SimFault::Model(Fault::MotorDead { slot: loaded }),
+        3 => SimFault::Model(Fault::SensorNoise {
+            sigma: draw(rng, 30.0, 90.0, 1.0),
+        }),
+        4 => SimFault::PowerLoss {
+            off_ms: draw(rng, 50.0, 3_000.0, 1.0) as u32,
+        },
+        _ => SimFault::UartCorrupt {
+            probability: draw(rng, 0.001, 0.01, 10_000.0),
+        },
+    }
+}
+
+/// When a planned fault strikes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Moment {
+    /// This long after the `T` is sent, ms.
+    Change(u64),
+    /// This long into the print after the change, ms.
+    Print(u64),
+}
+
 fn kind_name(fault: &SimFault) -> String {
     let name = match fault {
         SimFault::Model(Fault::Jam { .. }) => "jam",
@@ -426,8 +459,8 @@ impl Link for StrikingLink {
 struct SoakUser {
     /// The slot the change loads.
     target: u8,
-    /// The change's fault and its delay after the `T` is sent, ms, until it is armed.
-    planned: Option<(SimFault, u64)>,
+    /// The change's fault and when it strikes, until it is armed.
+    planned: Option<(SimFault, Moment)>,
     /// When the `T` was first sent, ms of virtual time.
     sent_ms: Option<u64>,
     /// The struck fault has been fixed.
@@ -439,8 +472,8 @@ struct SoakUser {
 }
 
 impl SoakUser {
-    /// Ready for a change to `target` with the fault `planned` (and its delay).
-    fn for_change(target: u8, planned: Option<(SimFault, u64)>) -> Self {
+    /// Ready for a change to `target` with the fault `planned` (and its moment).
+    fn for_change(target: u8, planned: Option<(SimFault, Moment)>) -> Self {
         SoakUser {
             target,
             planned,
@@ -479,6 +512,16 @@ impl SoakUser {
         true
     }
 
+    /// The change finished and the printer prints: arm a fault planned for the print; returns
+    /// how long to print (0 without one).
+    fn start_print(&mut self, link: &mut StrikingLink) -> u64 {
+        let Some((fault, Moment::Print(delay_ms))) = self.planned.take() else {
+            return 0;
+        };
+        link.armed = Some((fault, link.now_ms() + delay_ms));
+        delay_ms + PRINT_AFTER_FAULT_MS
+    }
+
     /// The change is over: a fault that has not struck yet never will, and one still active
     /// (it raised no error) is cleared.
     fn change_over(&mut self, link: &mut StrikingLink) {
@@ -498,10 +541,10 @@ impl Operator<StrikingLink> for SoakUser {
             {
                 let now = link.now_ms();
                 self.sent_ms = Some(now);
-                link.armed = self
-                    .planned
-                    .take()
-                    .map(|(fault, delay_ms)| (fault, now + delay_ms));
+                if let Some((fault, Moment::Change(delay_ms))) = self.planned {
+                    self.planned = None;
+                    link.armed = Some((fault, now + delay_ms));
+                }
             }
             PrinterEvent::Error(_, error) if self.errors.last() != Some(error) => self.errors.push(*error),
             _ => {}
@@ -607,7 +650,7 @@ fn tool_change(rig: &mut Rig, user: &mut SoakUser, target: u8) -> ChangeEnd {
                 }
                 Some(tip) if tip >= gears_mm - GRIP_TOLERANCE_MM && model.fsensor_state() != 0 => {
                     rig.loaded = Some(target);
-                    ChangeEnd::Done
+                    print(rig, user, target)
                 }
                 tip => ChangeEnd::Failed(format!(
                     "reported finished, but the tip stopped at {} before the extruder gears at {gears_mm} mm",
@@ -622,6 +665,27 @@ fn tool_change(rig: &mut Rig, user: &mut SoakUser, target: u8) -> ChangeEnd {
     };
     user.change_over(rig.printer.link_mut());
     end
+}
+
+/// Print after a finished change to `target` (when a fault is planned for the print): the change
+/// counts as done if the printer still prints with `target` loaded when the print ends.
+fn print(rig: &mut Rig, user: &mut SoakUser, target: u8) -> ChangeEnd {
+    let print_ms = user.start_print(rig.printer.link_mut());
+    if print_ms == 0 {
+        return ChangeEnd::Done;
+    }
+    match rig.printer.print(user, print_ms) {
+        Ok(Some(Outcome::GaveUp(error))) => ChangeEnd::Failed(format!("while printing, gave up on {error}")),
+        Ok(_) => {
+            let model = rig.sim().model();
+            if model.loaded_slot() == Some(usize::from(target)) && model.fsensor_state() != 0 {
+                ChangeEnd::Done
+            } else {
+                ChangeEnd::Failed("after printing, the filament is no longer loaded".into())
+            }
+        }
+        Err(error) => ChangeEnd::Stuck(error.to_string()),
+    }
 }
 
 /// Running sums of the fault-free tool-change times.
@@ -733,9 +797,15 @@ pub fn run_until(
             n => others[(rng.next_u64() % n as u64) as usize],
         };
         let planned = (options.random_faults && rng.uniform() < FAULT_PROBABILITY).then(|| {
-            let fault = draw_fault(&mut rng, usize::from(target));
-            (fault, rng.next_u64() % (MAX_FAULT_DELAY_MS + 1))
+            if rng.uniform() < PRINT_FAULT_PROBABILITY {
+                let fault = draw_print_fault(&mut rng, usize::from(target));
+                (fault, Moment::Print(rng.next_u64() % (MAX_FAULT_DELAY_MS + 1)))
+            } else {
+                let fault = draw_fault(&mut rng, usize::from(target));
+                (fault, Moment::Change(rng.next_u64() % (MAX_FAULT_DELAY_MS + 1)))
+            }
         });
+        let while_printing = matches!(planned, Some((_, Moment::Print(_))));
         let from = current.loaded;
         let mut user = SoakUser::for_change(target, planned);
         current.printer.link_mut().struck = None;
@@ -744,7 +814,14 @@ pub fn run_until(
         report.changes += 1;
 
         let struck = current.printer.link().struck;
-        let kind = struck.map(|strike| kind_name(&strike.fault));
+        let kind = struck.map(|strike| {
+            let name = kind_name(&strike.fault);
+            if while_printing {
+                format!("{name} (printing)")
+            } else {
+                name
+            }
+        });
         if let Some(kind) = &kind {
             report.faults_injected += 1;
             report.tally(kind.clone()).injected += 1;
