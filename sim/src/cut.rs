@@ -1,0 +1,402 @@
+//! The power-cut study: random lives of a unit (lane changes, counters, settings written by the
+//! printer, `X0`, `X42`, power losses) driven through the unit logic ([`App`]) and the save policy
+//! the firmware runs ([`Keeper`]) on a flash that behaves like the STM32G0's ([`MemFlash`]), cut by
+//! a power loss at every double-word program and every page erase under every [`CutModel`].
+//!
+//! After each cut the unit boots again on what the flash holds, and the study checks what a user
+//! would notice: every record (lanes, counters, settings) is the one the last completed save left
+//! or the one being saved, never older and never a mix; saving goes on (each later save reads back);
+//! `X42` forgets everything but the unit's identity (register 0x52); and the store never erases
+//! pages in a loop (at most [`MAX_ERASES_AFTER_CUT`] erases in the second after the restart).
+
+use embassy_futures::block_on;
+use mmu_firmware::persist::{FULL_CHECK_MS, Keeper, Snapshot, Store};
+use mmu_firmware::unit::Lane;
+use mmu_firmware::{App, BoardAction, Config, Instant, Samples};
+use mmu_model::Rng;
+use mmu_protocol::{Request, RequestCode};
+
+use crate::flash::{CutModel, G0_PAGE, MemFlash};
+
+/// Slots of the studied unit.
+pub const SLOTS: usize = 3;
+/// The flash of the study: STM32G0 pages.
+pub type Flash = MemFlash<G0_PAGE>;
+/// Page erases allowed in the 1000 steps (1 ms each) after a restart that follows a cut.
+pub const MAX_ERASES_AFTER_CUT: u64 = 20;
+/// The identity register: the revision `S2` reports.
+pub const IDENTITY: u8 = 0x52;
+
+/// Settings the printer may write, with the range each accepts.
+const SETTINGS: [(u8, u16, u16); 9] = [
+    (0x0b, 0, 255),
+    (0x0c, 0, 255),
+    (0x22, 50, 2000),
+    (0x41, 1, 200),
+    (0x46, 10, 2000),
+    (0x47, 5, 500),
+    (0x4c, 0, 4095),
+    (0x4e, 0, 100),
+    (IDENTITY, 2, 3),
+];
+
+/// One thing that happens to the unit.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Action {
+    /// Filament moved: the lanes as the unit now believes them.
+    Lanes([Lane; SLOTS]),
+    /// A tool change to this slot completed (counters), or with `true`, an error was raised.
+    Count(usize, bool),
+    /// The printer writes a setting register (`W`).
+    Write(u8, u16),
+    /// `X0`: save and restart.
+    Reset,
+    /// `X42`: forget and restart.
+    Forget,
+    /// The power goes between saves and comes back.
+    PowerCycle,
+}
+
+/// A random life of `length` actions, with the time (ms) each happens after the previous one.
+pub fn life(seed: u64, length: usize) -> Vec<(u64, Action)> {
+    let mut rng = Rng::new(seed);
+    let lanes = [
+        Lane::Unknown,
+        Lane::Empty,
+        Lane::Parked,
+        Lane::InHub,
+        Lane::AtFsensor,
+        Lane::Loaded,
+    ];
+    let mut pick = |n: u64| (rng.next_u64() % n) as usize;
+    (0..length)
+        .map(|_| {
+            let wait = [1, 40, 3_000, 12_000][pick(4)];
+            let action = match pick(100) {
+                0..=44 => Action::Lanes(core::array::from_fn(|_| lanes[pick(6)])),
+                45..=64 => Action::Count(pick(SLOTS as u64), pick(5) == 0),
+                65..=91 => {
+                    let (address, min, max) = SETTINGS[pick(SETTINGS.len() as u64)];
+                    Action::Write(address, min + pick(u64::from(max - min) + 1) as u16)
+                }
+                92..=94 => Action::Reset,
+                95..=96 => Action::Forget,
+                _ => Action::PowerCycle,
+            };
+            (wait as u64, action)
+        })
+        .collect()
+}
+
+/// The unit: its logic, its save policy and the time.
+pub struct Unit {
+    /// The unit logic.
+    pub app: App<SLOTS>,
+    /// Its save policy.
+    pub keeper: Keeper<Flash, SLOTS>,
+    /// The time of the last step.
+    pub now: Instant,
+    pages: usize,
+}
+
+fn store(flash: Flash, pages: usize) -> Store<Flash, SLOTS> {
+    Store::new(flash, 0..(pages * G0_PAGE) as u32).unwrap_or_else(|_| unreachable!("a valid region"))
+}
+
+impl Unit {
+    /// Boot on `flash`, a store of `pages` pages, at `now`.
+    pub fn boot(flash: Flash, pages: usize, now: Instant) -> Self {
+        let mut app = App::new(Config::default());
+        let (keeper, _) = block_on(Keeper::boot(store(flash, pages), &mut app));
+        Unit {
+            app,
+            keeper,
+            now,
+            pages,
+        }
+    }
+
+    /// The flash.
+    pub fn flash(&mut self) -> &mut Flash {
+        self.keeper.store().flash()
+    }
+
+    /// The power goes and comes back.
+    pub fn restart(mut self) -> Self {
+        let (now, pages) = (self.now, self.pages);
+        let flash = std::mem::replace(self.flash(), Flash::new(0));
+        Unit::boot(flash, pages, now)
+    }
+
+    /// Change the App's beliefs the way its commands do (lanes and counters).
+    fn believe(&mut self, change: impl FnOnce(&mut Snapshot<SLOTS>)) {
+        let mut snapshot = self.app.snapshot();
+        change(&mut snapshot);
+        self.app.restore(&snapshot);
+    }
+
+    /// A frame from the printer; the board action it asks for, if any.
+    fn receive(&mut self, request: Request) -> Option<BoardAction> {
+        self.ask(request).1
+    }
+
+    /// A frame from the printer, in one step: what the unit answers and the board action.
+    pub fn ask(&mut self, request: Request) -> (String, Option<BoardAction>) {
+        let frame = request.encode();
+        let out = self.app.step(self.now, &Samples::default(), frame.as_bytes());
+        (String::from_utf8_lossy(&out.tx).into_owned(), out.action)
+    }
+
+    /// Carry out `action` `wait` ms after the last one, the way the firmware's control loop does.
+    pub fn act(mut self, wait: u64, action: &Action) -> Self {
+        self.now = Instant::from_millis(self.now.as_millis() + wait);
+        let board = match *action {
+            Action::Lanes(lanes) => {
+                self.believe(|s| s.lanes = lanes);
+                None
+            }
+            Action::Count(slot, error) => {
+                self.believe(|s| {
+                    if error {
+                        s.counters.drive_errors += 1;
+                        s.counters.failures[slot] += 1;
+                    } else {
+                        s.counters.tool_changes[slot] += 1;
+                        s.counters.fed_mm[slot] += 1234;
+                    }
+                });
+                None
+            }
+            Action::Write(address, value) => self.receive(Request::write(address, value)),
+            Action::Reset => self.receive(Request::new(RequestCode::Reset, 0)),
+            Action::Forget => self.receive(Request::new(RequestCode::Reset, 42)),
+            Action::PowerCycle => return self.restart(),
+        };
+        match board {
+            Some(board) => {
+                let _ = block_on(self.keeper.before(board, &self.app));
+                self.restart()
+            }
+            None => {
+                // The control loop compares lanes every step, the rest every FULL_CHECK_MS.
+                let _ = block_on(self.keeper.update(&self.app, self.now));
+                self.now = Instant::from_millis(self.now.as_millis() + FULL_CHECK_MS);
+                let _ = block_on(self.keeper.update(&self.app, self.now));
+                self
+            }
+        }
+    }
+
+    /// What a unit booted on a copy of this flash restores.
+    fn stored(&mut self) -> Snapshot<SLOTS> {
+        let copy = self.flash().clone();
+        Unit::boot(copy, self.pages, self.now).app.snapshot()
+    }
+}
+
+/// What one seed of the study found.
+#[derive(Debug, Default)]
+pub struct CutReport {
+    /// Actions of the life.
+    pub actions: usize,
+    /// Flash operations (double-word programs and page erases) of the uncut life.
+    pub operations: u64,
+    /// Page erases of the uncut life.
+    pub erases: u64,
+    /// Cuts tried, per model ([`CutModel::ALL`] order).
+    pub cuts: [usize; 3],
+    /// What went wrong, one line each.
+    pub failures: Vec<String>,
+}
+
+/// Whether `record` of the restored snapshot is the stored one before or after the cut action.
+fn old_or_new<T: PartialEq + core::fmt::Debug>(
+    failures: &mut Vec<String>,
+    what: &str,
+    got: &T,
+    before: &T,
+    after: &T,
+) {
+    if got != before && got != after {
+        failures.push(format!("{what} {got:?}, expected {before:?} or {after:?}"));
+    }
+}
+
+/// Lanes and settings are saved in the step they change: what a copy of the flash restores.
+fn saved_now(unit: &mut Unit) -> Result<(), String> {
+    let stored = unit.stored();
+    let live = unit.app.snapshot();
+    if stored.lanes != live.lanes || stored.settings != live.settings {
+        return Err(format!(
+            "not saved: lanes {:?} settings {:?} stored, lanes {:?} settings {:?} live",
+            stored.lanes, stored.settings, live.lanes, live.settings
+        ));
+    }
+    Ok(())
+}
+
+/// Which cuts a study tries.
+#[derive(Debug, Clone)]
+pub struct Plan {
+    /// Pages of the store's region.
+    pub pages: usize,
+    /// Actions of each life.
+    pub length: usize,
+    /// Every `stride`-th flash operation is cut (1: every one).
+    pub stride: u64,
+    /// Cut page erases only.
+    pub erases_only: bool,
+    /// The cut models tried.
+    pub models: Vec<CutModel>,
+}
+
+impl Plan {
+    /// Every operation of a life of `length` actions on `pages` pages, every model.
+    pub fn every_cut(pages: usize, length: usize) -> Self {
+        Plan {
+            pages,
+            length,
+            stride: 1,
+            erases_only: false,
+            models: CutModel::ALL.to_vec(),
+        }
+    }
+}
+
+/// Run `seed`'s life as `plan` says, cut it at each chosen flash operation under each model, and
+/// check each cut.
+pub fn study(seed: u64, plan: &Plan) -> CutReport {
+    let (pages, length) = (plan.pages, plan.length);
+    let life = life(seed, length);
+    let mut report = CutReport {
+        actions: length,
+        ..CutReport::default()
+    };
+    // The uncut life: what the flash holds after each action.
+    let mut unit = Unit::boot(Flash::new(pages), pages, Instant::ZERO);
+    let mut stored = vec![unit.stored()];
+    for (wait, action) in &life {
+        unit = unit.act(*wait, action);
+        if !matches!(action, Action::PowerCycle | Action::Reset | Action::Forget) {
+            if let Err(e) = saved_now(&mut unit) {
+                report
+                    .failures
+                    .push(format!("seed {seed}, uncut, after {action:?}: {e}"));
+            }
+        }
+        stored.push(unit.stored());
+    }
+    report.operations = unit.flash().operations;
+    report.erases = unit.flash().wear().erases;
+    let cuts: Vec<u64> = if plan.erases_only {
+        unit.flash().erase_operations.clone()
+    } else {
+        (0..report.operations).collect()
+    };
+
+    for &model in &plan.models {
+        let model_index = CutModel::ALL.iter().position(|&m| m == model).unwrap_or(0);
+        for &cut in cuts.iter().step_by(plan.stride.max(1) as usize) {
+            report.cuts[model_index] += 1;
+            let place = format!("seed {seed}, {model:?} cut at operation {cut}");
+            if let Err(e) = cut_once(&life, pages, cut, model, seed ^ cut, &stored) {
+                report.failures.push(format!("{place}: {e}"));
+            }
+        }
+    }
+    report
+}
+
+/// One life cut at operation `cut`: `Err` with what went wrong.
+fn cut_once(
+    life: &[(u64, Action)],
+    pages: usize,
+    cut: u64,
+    model: CutModel,
+    seed: u64,
+    stored: &[Snapshot<SLOTS>],
+) -> Result<(), String> {
+    let mut flash = Flash::new(pages);
+    flash.cut_power_at(cut, model, seed);
+    let mut unit = Unit::boot(flash, pages, Instant::ZERO);
+    let mut failed = None;
+    for (index, (wait, action)) in life.iter().enumerate() {
+        unit = unit.act(*wait, action);
+        if unit.flash().is_cut() {
+            failed = Some(index);
+            break;
+        }
+    }
+    let Some(index) = failed else {
+        return Ok(()); // The cut falls after the life's last operation.
+    };
+    unit.flash().power_on();
+    let erases_before = unit.flash().wear().erases;
+    let mut unit = unit.restart();
+    let restored = unit.app.snapshot();
+    let (before, after) = (&stored[index], &stored[index + 1]);
+    let mut failures = Vec::new();
+    let during = &life[index].1;
+    old_or_new(
+        &mut failures,
+        "lanes",
+        &restored.lanes,
+        &before.lanes,
+        &after.lanes,
+    );
+    old_or_new(
+        &mut failures,
+        "counters",
+        &restored.counters,
+        &before.counters,
+        &after.counters,
+    );
+    old_or_new(
+        &mut failures,
+        "settings",
+        &restored.settings,
+        &before.settings,
+        &after.settings,
+    );
+    if !failures.is_empty() {
+        return Err(format!("during {during:?}: restored {}", failures.join("; ")));
+    }
+
+    // The save loop after the restart: a lane change, then a second of 1 ms steps.
+    unit.believe(|s| s.lanes = [Lane::Parked, Lane::Unknown, Lane::Empty]);
+    for _ in 0..1000 {
+        unit.now = Instant::from_millis(unit.now.as_millis() + 1);
+        let _ = block_on(unit.keeper.update(&unit.app, unit.now));
+    }
+    let erases = unit.flash().wear().erases - erases_before;
+    if erases > MAX_ERASES_AFTER_CUT {
+        return Err(format!(
+            "during {during:?}: {erases} page erases in the second after the restart"
+        ));
+    }
+    saved_now(&mut unit).map_err(|e| format!("during {during:?}, after the restart: {e}"))?;
+    // Saving goes on for the rest of the life.
+    for (wait, action) in life.iter().skip(index + 1).take(40) {
+        unit = unit.act(*wait, action);
+        if !matches!(action, Action::PowerCycle | Action::Reset | Action::Forget) {
+            saved_now(&mut unit).map_err(|e| format!("later, after {action:?}: {e}"))?;
+        }
+    }
+    // `X42` forgets everything but the identity.
+    let identity = unit
+        .app
+        .snapshot()
+        .settings
+        .into_iter()
+        .find(|&(a, _)| a == IDENTITY);
+    unit = unit.act(1, &Action::Forget);
+    let forgotten = unit.app.snapshot();
+    let expected = Snapshot::<SLOTS> {
+        settings: identity.into_iter().collect(),
+        ..Snapshot::default()
+    };
+    if forgotten != expected {
+        return Err(format!("after X42: {forgotten:?}, expected {expected:?}"));
+    }
+    Ok(())
+}
