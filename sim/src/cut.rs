@@ -23,7 +23,7 @@ pub const SLOTS: usize = 3;
 /// The flash of the study: STM32G0 pages.
 pub type Flash = MemFlash<G0_PAGE>;
 /// Page erases allowed in the 1000 steps (1 ms each) after a restart that follows a cut.
-pub const MAX_ERASES_AFTER_CUT: u64 = 20;
+pub const MAX_ERASES_AFTER_CUT: u64 = 4;
 /// The identity register: the revision `S2` reports.
 pub const IDENTITY: u8 = 0x52;
 

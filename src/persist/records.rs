@@ -1,0 +1,206 @@
+//! The bytes of each record: a format byte, an entry count, then the fields in little endian.
+//! A record that does not decode (another format, another slot count, cut short) gives `None`,
+//! and the unit starts that record from its defaults.
+
+use heapless::Vec;
+
+use super::{Counters, MAX_SETTINGS, Settings};
+use crate::unit::Lane;
+
+/// The layout version of every record: a record with another is ignored.
+const FORMAT: u8 = 1;
+/// The largest record (the settings: a 2-byte header and 3 bytes each).
+pub(super) const MAX_RECORD: usize = 2 + 3 * MAX_SETTINGS;
+
+/// The records, by their key in the store.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u8)]
+pub(super) enum Record {
+    Lanes = 1,
+    Counters = 2,
+    Settings = 3,
+    /// The registers that decide whether a printer talks to the unit: kept by `X42`.
+    Identity = 4,
+}
+
+impl Record {
+    /// Every record, in the order a full copy writes them.
+    pub(super) const ALL: [Record; 4] = [
+        Record::Identity,
+        Record::Settings,
+        Record::Counters,
+        Record::Lanes,
+    ];
+
+    pub(super) fn from_key(key: u8) -> Option<Record> {
+        Record::ALL.into_iter().find(|&r| r as u8 == key)
+    }
+
+    pub(super) fn index(self) -> usize {
+        usize::from(self as u8 - 1)
+    }
+}
+
+/// One record's bytes.
+pub(super) type Bytes = Vec<u8, MAX_RECORD>;
+
+fn lane_code(lane: Lane) -> u8 {
+    match lane {
+        Lane::Unknown => 0,
+        Lane::Empty => 1,
+        Lane::Parked => 2,
+        Lane::InHub => 3,
+        Lane::AtFsensor => 4,
+        Lane::Loaded => 5,
+    }
+}
+
+fn lane_from(code: u8) -> Option<Lane> {
+    Some(match code {
+        0 => Lane::Unknown,
+        1 => Lane::Empty,
+        2 => Lane::Parked,
+        3 => Lane::InHub,
+        4 => Lane::AtFsensor,
+        5 => Lane::Loaded,
+        _ => return None,
+    })
+}
+
+/// Reads a record's fields in order; every read past the end gives `None`.
+struct Reader<'a>(&'a [u8]);
+
+impl Reader<'_> {
+    fn u8(&mut self) -> Option<u8> {
+        let (&first, rest) = self.0.split_first()?;
+        self.0 = rest;
+        Some(first)
+    }
+
+    fn u16(&mut self) -> Option<u16> {
+        Some(u16::from_le_bytes([self.u8()?, self.u8()?]))
+    }
+
+    fn u32(&mut self) -> Option<u32> {
+        Some(u32::from(self.u16()?) | (u32::from(self.u16()?) << 16))
+    }
+}
+
+/// Append `bytes`; every record built here fits [`MAX_RECORD`].
+fn put(out: &mut Bytes, bytes: &[u8]) {
+    let _ = out.extend_from_slice(bytes);
+}
+
+fn header(entries: usize) -> Bytes {
+    let mut out = Bytes::new();
+    put(&mut out, &[FORMAT, entries as u8]);
+    out
+}
+
+pub(super) fn encode_lanes<const N: usize>(lanes: &[Lane; N]) -> Bytes {
+    let mut out = header(N);
+    for &lane in lanes {
+        put(&mut out, &[lane_code(lane)]);
+    }
+    out
+}
+
+pub(super) fn encode_counters<const N: usize>(counters: &Counters<N>) -> Bytes {
+    let mut out = header(N);
+    put(&mut out, &counters.drive_errors.to_le_bytes());
+    for slot in 0..N {
+        put(&mut out, &counters.tool_changes[slot].to_le_bytes());
+        put(&mut out, &counters.failures[slot].to_le_bytes());
+        put(&mut out, &counters.fed_mm[slot].to_le_bytes());
+    }
+    out
+}
+
+/// Settings and identity records alike: (register, value) pairs.
+pub(super) fn encode_settings(settings: &[(u8, u16)]) -> Bytes {
+    let mut out = header(settings.len());
+    for &(address, value) in settings {
+        put(&mut out, &[address]);
+        put(&mut out, &value.to_le_bytes());
+    }
+    out
+}
+
+/// A reader past the header, when the record is of this format and for `count` entries.
+fn body(bytes: &[u8], count: Option<usize>) -> Option<(Reader<'_>, usize)> {
+    let mut reader = Reader(bytes);
+    let (format, entries) = (reader.u8()?, usize::from(reader.u8()?));
+    (format == FORMAT && count.is_none_or(|n| n == entries)).then_some((reader, entries))
+}
+
+pub(super) fn decode_lanes<const N: usize>(bytes: &[u8]) -> Option<[Lane; N]> {
+    let (mut reader, _) = body(bytes, Some(N))?;
+    let mut lanes = [Lane::Unknown; N];
+    for lane in &mut lanes {
+        *lane = lane_from(reader.u8()?)?;
+    }
+    reader.0.is_empty().then_some(lanes)
+}
+
+pub(super) fn decode_counters<const N: usize>(bytes: &[u8]) -> Option<Counters<N>> {
+    let (mut reader, _) = body(bytes, Some(N))?;
+    let mut counters = Counters::<N> {
+        drive_errors: reader.u16()?,
+        ..Counters::default()
+    };
+    for slot in 0..N {
+        counters.tool_changes[slot] = reader.u16()?;
+        counters.failures[slot] = reader.u16()?;
+        counters.fed_mm[slot] = reader.u32()?;
+    }
+    reader.0.is_empty().then_some(counters)
+}
+
+pub(super) fn decode_settings(bytes: &[u8]) -> Option<Settings> {
+    let (mut reader, entries) = body(bytes, None)?;
+    let mut settings = Vec::new();
+    for _ in 0..entries {
+        settings.push((reader.u8()?, reader.u16()?)).ok()?;
+    }
+    reader.0.is_empty().then_some(settings)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn records_decode_to_what_was_encoded() {
+        let lanes = [Lane::Parked, Lane::Loaded, Lane::Empty];
+        assert_eq!(decode_lanes::<3>(&encode_lanes(&lanes)), Some(lanes));
+        let counters = Counters::<3> {
+            drive_errors: 7,
+            tool_changes: [1, 2, 65535],
+            failures: [0, 4, 0],
+            fed_mm: [0, 123_456_789, 5],
+        };
+        assert_eq!(decode_counters::<3>(&encode_counters(&counters)), Some(counters));
+        let settings = [(0x0b, 30), (0x22, 360), (0x90, 2600)];
+        assert_eq!(
+            decode_settings(&encode_settings(&settings)).as_deref(),
+            Some(&settings[..])
+        );
+        let all: Settings = (0..MAX_SETTINGS as u8).map(|a| (a, u16::MAX)).collect();
+        assert_eq!(encode_settings(&all).len(), MAX_RECORD, "the largest record fits");
+    }
+
+    #[test]
+    fn records_of_another_shape_are_refused() {
+        let lanes = encode_lanes(&[Lane::Parked; 3]);
+        assert_eq!(decode_lanes::<4>(&lanes), None, "another slot count");
+        let mut other_format = lanes.clone();
+        other_format[0] = FORMAT + 1;
+        assert_eq!(decode_lanes::<3>(&other_format), None);
+        let mut bad_lane = lanes.clone();
+        bad_lane[2] = 9;
+        assert_eq!(decode_lanes::<3>(&bad_lane), None);
+        assert_eq!(decode_lanes::<3>(&lanes[..4]), None, "cut short");
+        assert_eq!(decode_counters::<3>(&[FORMAT, 3, 1]), None);
+        assert_eq!(decode_settings(&[FORMAT, 2, 0x0b, 30, 0]), None);
+    }
+}

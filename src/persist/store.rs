@@ -1,0 +1,602 @@
+//! The records in flash: a log of entries over a ring of pages, built for what the STM32G0's flash
+//! does when the power goes (RM0444 §3.3): a double word is programmed once between erases, a
+//! program cut short leaves a double word that reads with an ECC error, and an erase cut short
+//! leaves any mix of erased, old and unreadable double words.
+//!
+//! Each entry is a header double word (record key, payload length, sequence number, header CRC),
+//! the payload, and a trailer double word (CRC-32 of both, written last). Sequence numbers grow by
+//! one per entry across the whole region, so the newest complete copy of each record wins,
+//! wherever it lies and whatever a torn erase left elsewhere. Only the page holding the newest
+//! entry is appended to, and only where it reads erased; when it is full, or damaged, the next
+//! page not holding any record's newest copy is erased and a full copy of every record opens it.
+//! So a page is only ever erased once every record in it has a newer copy, and an interrupted
+//! erase or program can only leave entries that are older than, or lose against, a complete one.
+//! A double word that does not read (ECC) costs the entry it belongs to, never the store.
+
+use crc::{CRC_16_IBM_3740, CRC_32_ISO_HDLC, Crc};
+use embedded_storage_async::nor_flash::NorFlash;
+
+use super::records::{
+    Bytes, MAX_RECORD, Record, decode_counters, decode_lanes, decode_settings, encode_counters, encode_lanes,
+    encode_settings,
+};
+use super::{Settings, Snapshot, StoreError, is_identity};
+use crate::time::Instant;
+use crate::unit::Lane;
+
+/// The STM32G0's programming unit: a 64-bit double word.
+const DOUBLE_WORD: usize = 8;
+/// The largest entry: header, the largest record padded to double words, trailer.
+const MAX_ENTRY: usize = DOUBLE_WORD + MAX_RECORD.next_multiple_of(DOUBLE_WORD) + DOUBLE_WORD;
+/// Page moves one save may try (each erases at most one page) before it gives up.
+const MOVES_PER_SAVE: usize = 2;
+/// Counters are written at most this often, ms (they change while the unit works).
+pub const SLOW_RECORD_PERIOD_MS: u64 = 10_000;
+
+const HEADER_CRC: Crc<u16> = Crc::<u16>::new(&CRC_16_IBM_3740);
+const ENTRY_CRC: Crc<u32> = Crc::<u32>::new(&CRC_32_ISO_HDLC);
+
+/// Every record as this store last wrote or read it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+struct Records<const N: usize> {
+    lanes: [Lane; N],
+    counters: super::Counters<N>,
+    settings: Settings,
+    identity: Settings,
+}
+
+impl<const N: usize> Records<N> {
+    fn blank() -> Self {
+        Records {
+            lanes: [Lane::Unknown; N],
+            counters: super::Counters::default(),
+            settings: Settings::new(),
+            identity: Settings::new(),
+        }
+    }
+
+    /// `snapshot`'s settings split into the identity and the rest.
+    fn from_snapshot(snapshot: &Snapshot<N>) -> Self {
+        let (mut settings, mut identity) = (Settings::new(), Settings::new());
+        for &(address, value) in &snapshot.settings {
+            let list = if is_identity(address) {
+                &mut identity
+            } else {
+                &mut settings
+            };
+            // Both hold every setting a snapshot can hold.
+            let _ = list.push((address, value));
+        }
+        Records {
+            lanes: snapshot.lanes,
+            counters: snapshot.counters,
+            settings,
+            identity,
+        }
+    }
+
+    fn snapshot(&self) -> Snapshot<N> {
+        let mut settings = self.settings.clone();
+        for &entry in &self.identity {
+            let _ = settings.push(entry);
+        }
+        Snapshot {
+            lanes: self.lanes,
+            counters: self.counters,
+            settings,
+        }
+    }
+
+    fn encode(&self, record: Record) -> Bytes {
+        match record {
+            Record::Lanes => encode_lanes(&self.lanes),
+            Record::Counters => encode_counters(&self.counters),
+            Record::Settings => encode_settings(&self.settings),
+            Record::Identity => encode_settings(&self.identity),
+        }
+    }
+
+    /// Take a record's newest stored bytes (`None`: it does not decode, back to its default).
+    fn decode(&mut self, record: Record, bytes: &[u8]) {
+        match record {
+            Record::Lanes => self.lanes = decode_lanes(bytes).unwrap_or([Lane::Unknown; N]),
+            Record::Counters => self.counters = decode_counters(bytes).unwrap_or_default(),
+            Record::Settings => self.settings = decode_settings(bytes).unwrap_or_default(),
+            Record::Identity => {
+                self.identity = decode_settings(bytes).unwrap_or_default();
+                self.identity.retain(|(address, _)| is_identity(*address));
+            }
+        }
+    }
+}
+
+/// Where a record's newest complete copy lies.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Newest {
+    sequence: u32,
+    page: u32,
+}
+
+/// What a load found that a healthy store does not hold.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Damage {
+    /// Double words that did not read (ECC errors) where entries were expected.
+    pub unreadable: u16,
+    /// Entries whose checks failed (a write or an erase cut short).
+    pub torn: u16,
+}
+
+impl Damage {
+    /// Whether nothing was found.
+    pub fn is_none(&self) -> bool {
+        *self == Damage::default()
+    }
+}
+
+/// The persisted state in a region of NOR flash.
+pub struct Store<F: NorFlash, const N: usize> {
+    flash: F,
+    /// The region: its first address and its pages.
+    base: u32,
+    pages: u32,
+    /// What the flash holds, as far as this store knows.
+    saved: Records<N>,
+    /// Per record ([`Record::index`]): its newest copy.
+    newest: [Option<Newest>; 4],
+    /// The page holding the newest entry, and where its next entry goes (`None`: full or
+    /// damaged, the next write opens a fresh page).
+    head: Option<(u32, Option<u32>)>,
+    next_sequence: u32,
+    /// When counters were last written.
+    slow_saved_at: Option<Instant>,
+    /// Page erases this store may still do (its owner's budget).
+    erase_allowance: u32,
+    /// Page erases done since it was made.
+    erases: u32,
+    damage: Damage,
+    buffer: [u8; MAX_ENTRY],
+}
+
+fn page_size<F: NorFlash>() -> u32 {
+    F::ERASE_SIZE as u32
+}
+
+impl<F: NorFlash, const N: usize> Store<F, N> {
+    /// A store over `range` of `flash`: page aligned, at least three pages, on a flash that
+    /// programs whole double words (or less) and reads bytes.
+    pub fn new(flash: F, range: core::ops::Range<u32>) -> Result<Self, StoreError> {
+        let page = page_size::<F>();
+        let fits = page > 0
+            && range.start.is_multiple_of(page)
+            && range.end.is_multiple_of(page)
+            && range.end >= range.start.saturating_add(3 * page)
+            && DOUBLE_WORD.is_multiple_of(F::WRITE_SIZE)
+            && DOUBLE_WORD.is_multiple_of(F::READ_SIZE)
+            && F::ERASE_SIZE.is_multiple_of(DOUBLE_WORD)
+            && F::ERASE_SIZE >= 4 * MAX_ENTRY;
+        if !fits {
+            return Err(StoreError::Layout);
+        }
+        Ok(Store {
+            flash,
+            base: range.start,
+            pages: (range.end - range.start) / page,
+            saved: Records::blank(),
+            newest: [None; 4],
+            head: None,
+            next_sequence: 0,
+            slow_saved_at: None,
+            erase_allowance: u32::MAX,
+            erases: 0,
+            damage: Damage::default(),
+            buffer: [0; MAX_ENTRY],
+        })
+    }
+
+    /// The flash, e.g. to look at it in tests.
+    pub fn flash(&mut self) -> &mut F {
+        &mut self.flash
+    }
+
+    /// Give the flash back.
+    pub fn into_flash(self) -> F {
+        self.flash
+    }
+
+    /// Page erases done since this store was made.
+    pub fn erases(&self) -> u32 {
+        self.erases
+    }
+
+    /// Allow at most `erases` more page erases: an operation that needs more fails
+    /// ([`StoreError::EraseBudget`]) without erasing.
+    pub fn set_erase_allowance(&mut self, erases: u32) {
+        self.erase_allowance = erases;
+    }
+
+    /// What the last [`Store::load`] found damaged.
+    pub fn damage(&self) -> Damage {
+        self.damage
+    }
+
+    /// Whether the records lie in more than one page (a full copy was cut short): the next save
+    /// writes them all again, so that older pages may be erased.
+    fn scattered(&self) -> bool {
+        let head = self.head.map(|(page, _)| page);
+        self.newest
+            .iter()
+            .flatten()
+            .any(|newest| Some(newest.page) != head)
+    }
+
+    fn page_address(&self, page: u32) -> u32 {
+        self.base + page * page_size::<F>()
+    }
+
+    /// What the flash holds: each record's newest complete copy, or its default (lanes unknown,
+    /// counters zero, no settings) when there is none or it does not decode. Never fails: a
+    /// double word that does not read costs only the entry it belongs to.
+    pub async fn load(&mut self) -> Snapshot<N> {
+        self.saved = Records::blank();
+        self.newest = [None; 4];
+        self.head = None;
+        self.damage = Damage::default();
+        let mut newest_entry: Option<u32> = None;
+        for page in 0..self.pages {
+            let (last, tail) = self.scan_page(page).await;
+            if let Some(sequence) = last
+                && newest_entry.is_none_or(|newest| sequence > newest)
+            {
+                newest_entry = Some(sequence);
+                self.head = Some((page, tail));
+            }
+        }
+        self.next_sequence = newest_entry.map_or(0, |s| s.wrapping_add(1));
+        // Decode each record's newest copy.
+        for record in Record::ALL {
+            let Some(newest) = self.newest[record.index()] else {
+                continue;
+            };
+            if let Some(bytes) = self.find(newest, record).await {
+                self.saved.decode(record, &bytes);
+            }
+        }
+        self.saved.snapshot()
+    }
+
+    /// Read the header double word at `address`: `Ok(None)` when erased.
+    async fn header(&mut self, address: u32) -> Result<Option<(Record, usize, u32)>, ()> {
+        let mut word = [0u8; DOUBLE_WORD];
+        self.flash.read(address, &mut word).await.map_err(drop)?;
+        if word == [0xff; DOUBLE_WORD] {
+            return Ok(None);
+        }
+        let [key, len, s0, s1, s2, s3, c0, c1] = word;
+        let record = Record::from_key(key).ok_or(())?;
+        if HEADER_CRC.checksum(&word[..6]) != u16::from_le_bytes([c0, c1]) || usize::from(len) > MAX_RECORD {
+            return Err(());
+        }
+        Ok(Some((
+            record,
+            usize::from(len),
+            u32::from_le_bytes([s0, s1, s2, s3]),
+        )))
+    }
+
+    /// Read the whole entry at `address` whose payload is `len` bytes into the buffer: whether it
+    /// is complete (it reads and its trailer matches).
+    async fn entry_complete(&mut self, address: u32, len: usize) -> bool {
+        let size = entry_size(len);
+        let Some(bytes) = self.buffer.get_mut(..size) else {
+            return false;
+        };
+        if self.flash.read(address, bytes).await.is_err() {
+            return false;
+        }
+        let body = size - DOUBLE_WORD;
+        let crc = ENTRY_CRC.checksum(&bytes[..body]);
+        bytes[body..] == trailer(crc)
+    }
+
+    /// Walk one page's entries, noting each record's newest complete copy. Returns the page's
+    /// newest sequence number and the offset where an entry may be appended (`None`: the page is
+    /// full or its walk ended on damage).
+    async fn scan_page(&mut self, page: u32) -> (Option<u32>, Option<u32>) {
+        let (start, size) = (self.page_address(page), page_size::<F>());
+        let mut offset = 0;
+        let mut last = None;
+        while offset + DOUBLE_WORD as u32 <= size {
+            let header = match self.header(start + offset).await {
+                Ok(Some(header)) => header,
+                Ok(None) => return (last, Some(offset)),
+                Err(()) => {
+                    self.note_unreadable_or_torn(start + offset).await;
+                    return (last, None);
+                }
+            };
+            let (record, len, sequence) = header;
+            let entry = entry_size(len) as u32;
+            if offset + entry > size {
+                self.damage.torn = self.damage.torn.saturating_add(1);
+                return (last, None);
+            }
+            if self.entry_complete(start + offset, len).await {
+                last = Some(last.map_or(sequence, |l: u32| l.max(sequence)));
+                let slot = &mut self.newest[record.index()];
+                if slot.is_none_or(|newest| sequence > newest.sequence) {
+                    *slot = Some(Newest { sequence, page });
+                }
+            } else {
+                self.damage.torn = self.damage.torn.saturating_add(1);
+            }
+            offset += entry;
+        }
+        (last, None)
+    }
+
+    async fn note_unreadable_or_torn(&mut self, address: u32) {
+        let mut word = [0u8; DOUBLE_WORD];
+        if self.flash.read(address, &mut word).await.is_err() {
+            self.damage.unreadable = self.damage.unreadable.saturating_add(1);
+        } else {
+            self.damage.torn = self.damage.torn.saturating_add(1);
+        }
+    }
+
+    /// The payload of `record`'s entry numbered `newest.sequence` in its page.
+    async fn find(&mut self, newest: Newest, record: Record) -> Option<Bytes> {
+        let (start, size) = (self.page_address(newest.page), page_size::<F>());
+        let mut offset = 0;
+        while offset + DOUBLE_WORD as u32 <= size {
+            let (found, len, sequence) = self.header(start + offset).await.ok()??;
+            if found == record
+                && sequence == newest.sequence
+                && self.entry_complete(start + offset, len).await
+            {
+                let payload = self.buffer.get(DOUBLE_WORD..DOUBLE_WORD + len)?;
+                return Bytes::from_slice(payload).ok();
+            }
+            offset += entry_size(len) as u32;
+        }
+        None
+    }
+
+    /// Whether [`Store::save`] would write something now.
+    pub fn save_due(&self, snapshot: &Snapshot<N>, now: Instant) -> bool {
+        !self
+            .changed(&Records::from_snapshot(snapshot), Some(now))
+            .is_empty()
+            || self.scattered()
+    }
+
+    /// The records of `next` that differ from the stored ones and are due.
+    fn changed(&self, next: &Records<N>, now: Option<Instant>) -> heapless::Vec<Record, 4> {
+        let slow_allowed = now.is_none_or(|now| {
+            self.slow_saved_at
+                .is_none_or(|at| now.millis_since(at) >= SLOW_RECORD_PERIOD_MS)
+        });
+        Record::ALL
+            .into_iter()
+            .filter(|&record| match record {
+                Record::Lanes => next.lanes != self.saved.lanes,
+                Record::Settings => next.settings != self.saved.settings,
+                Record::Identity => next.identity != self.saved.identity,
+                Record::Counters => next.counters != self.saved.counters && slow_allowed,
+            })
+            .collect()
+    }
+
+    /// Write what changed: lanes and settings at once, counters at most every
+    /// [`SLOW_RECORD_PERIOD_MS`] (`None`: now, whatever the period, e.g. before a reset).
+    /// Returns how many records were written. A save that fails leaves every record as it was
+    /// or as it was being written; the next one tries again on a fresh page.
+    pub async fn save(&mut self, snapshot: &Snapshot<N>, now: Option<Instant>) -> Result<u8, StoreError> {
+        let mut next = Records::from_snapshot(snapshot);
+        let changed = self.changed(&next, now);
+        if changed.is_empty() && !self.scattered() {
+            return Ok(0);
+        }
+        if !changed.contains(&Record::Counters) {
+            next.counters = self.saved.counters;
+        }
+        self.write(&next, &changed).await?;
+        if changed.contains(&Record::Counters) {
+            self.slow_saved_at = now;
+        }
+        Ok(changed.len() as u8)
+    }
+
+    /// Forget everything but the identity (`X42`): blank records (lanes unknown, counters zero,
+    /// no settings) written as ordinary entries, so a power cut leaves each record either as it
+    /// was or blank. (Erasing pages instead could bring old records back: a cut erase leaves old
+    /// entries behind.)
+    pub async fn forget(&mut self) -> Result<(), StoreError> {
+        let blank = Records {
+            identity: self.saved.identity.clone(),
+            ..Records::blank()
+        };
+        self.write(&blank, &[Record::Settings, Record::Counters, Record::Lanes])
+            .await
+    }
+
+    /// Erase the whole region, then write the identity this store knows (nothing before a
+    /// [`Store::load`]) and blank records. For a region that is past saving: unlike
+    /// [`Store::forget`], a cut during it can lose every record.
+    pub async fn wipe(&mut self) -> Result<(), StoreError> {
+        for page in 0..self.pages {
+            self.erase(page).await?;
+        }
+        self.newest = [None; 4];
+        self.head = None;
+        let blank = Records {
+            identity: self.saved.identity.clone(),
+            ..Records::blank()
+        };
+        self.write(&blank, &Record::ALL).await
+    }
+
+    async fn erase(&mut self, page: u32) -> Result<(), StoreError> {
+        if self.erase_allowance == 0 {
+            return Err(StoreError::EraseBudget);
+        }
+        self.erase_allowance -= 1;
+        self.erases = self.erases.saturating_add(1);
+        let start = self.page_address(page);
+        self.flash
+            .erase(start, start + page_size::<F>())
+            .await
+            .map_err(|_| StoreError::Flash)
+    }
+
+    /// Make `next` the stored records: append `records` to the head page, or open a fresh page
+    /// with a full copy when they do not fit, the head is damaged or records are scattered.
+    async fn write(&mut self, next: &Records<N>, records: &[Record]) -> Result<(), StoreError> {
+        let mut result = Err(StoreError::Flash);
+        if !self.scattered()
+            && let Some((page, Some(_))) = self.head
+        {
+            result = self.append_all(page, next, records).await;
+        }
+        for _ in 0..MOVES_PER_SAVE {
+            if result.is_ok() {
+                break;
+            }
+            result = self.open_fresh_page(next).await;
+        }
+        result
+    }
+
+    /// Append `records` to `page` at its tail.
+    async fn append_all(
+        &mut self,
+        page: u32,
+        next: &Records<N>,
+        records: &[Record],
+    ) -> Result<(), StoreError> {
+        for &record in records {
+            self.append(page, record, next).await?;
+        }
+        Ok(())
+    }
+
+    /// Erase the next page that holds no record's newest copy, and write every record there.
+    async fn open_fresh_page(&mut self, next: &Records<N>) -> Result<(), StoreError> {
+        let after = self.head.map_or(self.pages - 1, |(page, _)| page);
+        let page = (1..self.pages)
+            .map(|step| (after + step) % self.pages)
+            .find(|&page| self.newest.iter().flatten().all(|newest| newest.page != page))
+            .ok_or(StoreError::Flash)?;
+        // A torn erase or old entries: erase it; an erased page is used as it is.
+        if !self.is_erased(page).await {
+            self.head = None;
+            self.erase(page).await?;
+        }
+        self.head = Some((page, Some(0)));
+        self.append_all(page, next, &Record::ALL).await
+    }
+
+    /// Whether every double word of `page` reads erased.
+    async fn is_erased(&mut self, page: u32) -> bool {
+        let start = self.page_address(page);
+        let mut offset = 0;
+        while offset < page_size::<F>() {
+            let chunk = &mut self.buffer[..MAX_ENTRY.min((page_size::<F>() - offset) as usize)];
+            if self.flash.read(start + offset, chunk).await.is_err() || chunk.iter().any(|&b| b != 0xff) {
+                return false;
+            }
+            offset += chunk.len() as u32;
+        }
+        true
+    }
+
+    /// Append one entry of `record` (as in `next`) to the head `page`. On any failure the head is
+    /// closed, so that the next write opens a fresh page.
+    async fn append(&mut self, page: u32, record: Record, next: &Records<N>) -> Result<(), StoreError> {
+        let Some((_, Some(offset))) = self.head else {
+            return Err(StoreError::Flash);
+        };
+        self.head = Some((page, None));
+        let payload = next.encode(record);
+        let size = entry_size(payload.len());
+        if offset as usize + size > F::ERASE_SIZE {
+            return Err(StoreError::Full);
+        }
+        let address = self.page_address(page) + offset;
+        // Only where it reads erased: a double word is programmed once (PROGERR otherwise).
+        let target = &mut self.buffer[..size];
+        if self.flash.read(address, target).await.is_err() || target.iter().any(|&b| b != 0xff) {
+            return Err(StoreError::Flash);
+        }
+        let sequence = self.next_sequence;
+        let entry = build_entry(&mut self.buffer, record, sequence, &payload);
+        self.flash
+            .write(address, entry)
+            .await
+            .map_err(|_| StoreError::Flash)?;
+        self.next_sequence = sequence.wrapping_add(1);
+        self.newest[record.index()] = Some(Newest { sequence, page });
+        self.head = Some((page, Some(offset + size as u32)));
+        match record {
+            Record::Lanes => self.saved.lanes = next.lanes,
+            Record::Counters => self.saved.counters = next.counters,
+            Record::Settings => self.saved.settings = next.settings.clone(),
+            Record::Identity => self.saved.identity = next.identity.clone(),
+        }
+        Ok(())
+    }
+}
+
+/// The bytes of an entry of `len` payload bytes.
+fn entry_size(len: usize) -> usize {
+    DOUBLE_WORD + len.next_multiple_of(DOUBLE_WORD) + DOUBLE_WORD
+}
+
+/// The trailer of an entry whose header and payload have CRC `crc`: never erased, never zero.
+fn trailer(crc: u32) -> [u8; DOUBLE_WORD] {
+    let mut word = [0; DOUBLE_WORD];
+    word[..4].copy_from_slice(&crc.to_le_bytes());
+    word[4..].copy_from_slice(&(!crc).to_le_bytes());
+    word
+}
+
+/// Lay out an entry in `buffer`; the bytes to program.
+fn build_entry<'b>(
+    buffer: &'b mut [u8; MAX_ENTRY],
+    record: Record,
+    sequence: u32,
+    payload: &[u8],
+) -> &'b [u8] {
+    let size = entry_size(payload.len());
+    buffer.fill(0);
+    buffer[0] = record as u8;
+    buffer[1] = payload.len() as u8;
+    buffer[2..6].copy_from_slice(&sequence.to_le_bytes());
+    let header_crc = HEADER_CRC.checksum(&buffer[..6]);
+    buffer[6..8].copy_from_slice(&header_crc.to_le_bytes());
+    buffer[DOUBLE_WORD..DOUBLE_WORD + payload.len()].copy_from_slice(payload);
+    let body = size - DOUBLE_WORD;
+    let crc = ENTRY_CRC.checksum(&buffer[..body]);
+    buffer[body..size].copy_from_slice(&trailer(crc));
+    &buffer[..size]
+}
+
+/// The size of the largest entry, for the figures (a full copy writes one of each record).
+pub const fn max_entry_bytes() -> usize {
+    MAX_ENTRY
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_entry_lays_out_header_payload_and_trailer_in_double_words() {
+        let mut buffer = [0; MAX_ENTRY];
+        let entry = build_entry(&mut buffer, Record::Lanes, 7, &[1, 3, 2, 2, 5]);
+        assert_eq!(entry.len(), 24);
+        assert_eq!(entry[..6], [1, 5, 7, 0, 0, 0]);
+        assert_ne!(entry[16..], [0xff; 8]);
+        let all = super::super::records::encode_settings(&[(1, 2); super::super::MAX_SETTINGS]);
+        assert_eq!(entry_size(all.len()), MAX_ENTRY);
+    }
+}
