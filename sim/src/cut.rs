@@ -24,6 +24,8 @@ pub const SLOTS: usize = 3;
 pub type Flash = MemFlash<G0_PAGE>;
 /// Page erases allowed in the 1000 steps (1 ms each) after a restart that follows a cut.
 pub const MAX_ERASES_AFTER_CUT: u64 = 4;
+/// Actions of the life carried on after a cut and its restart, before the last checks.
+const LATER_ACTIONS: usize = 6;
 /// The identity register: the revision `S2` reports.
 pub const IDENTITY: u8 = 0x52;
 
@@ -89,6 +91,7 @@ pub fn life(seed: u64, length: usize) -> Vec<(u64, Action)> {
 }
 
 /// The unit: its logic, its save policy and the time.
+#[derive(Clone)]
 pub struct Unit {
     /// The unit logic.
     pub app: App<SLOTS>,
@@ -129,7 +132,7 @@ impl Unit {
     }
 
     /// Change the App's beliefs the way its commands do (lanes and counters).
-    fn believe(&mut self, change: impl FnOnce(&mut Snapshot<SLOTS>)) {
+    pub fn believe(&mut self, change: impl FnOnce(&mut Snapshot<SLOTS>)) {
         let mut snapshot = self.app.snapshot();
         change(&mut snapshot);
         self.app.restore(&snapshot);
@@ -203,6 +206,8 @@ pub struct CutReport {
     pub operations: u64,
     /// Page erases of the uncut life.
     pub erases: u64,
+    /// Page erases among the cut operations.
+    pub erases_cut: usize,
     /// Cuts tried, per model ([`CutModel::ALL`] order).
     pub cuts: [usize; 3],
     /// What went wrong, one line each.
@@ -246,6 +251,10 @@ pub struct Plan {
     pub stride: u64,
     /// Cut page erases only.
     pub erases_only: bool,
+    /// Check after every action of the uncut life that lanes and settings are saved.
+    pub check_every_save: bool,
+    /// Cuts start at this action (the ones before age the flash: the region wraps).
+    pub first_cut_action: usize,
     /// The cut models tried.
     pub models: Vec<CutModel>,
 }
@@ -258,6 +267,8 @@ impl Plan {
             length,
             stride: 1,
             erases_only: false,
+            check_every_save: true,
+            first_cut_action: 0,
             models: CutModel::ALL.to_vec(),
         }
     }
@@ -272,34 +283,40 @@ pub fn study(seed: u64, plan: &Plan) -> CutReport {
         actions: length,
         ..CutReport::default()
     };
-    // The uncut life: what the flash holds after each action.
+    // The uncut life: the unit before each action (to fork cut lives from, with the flash
+    // operations done until then), and the unit at its end.
     let mut unit = Unit::boot(Flash::new(pages), pages, Instant::ZERO);
-    let mut stored = vec![unit.stored()];
+    let mut forks = Vec::with_capacity(length + 1);
     for (wait, action) in &life {
+        forks.push((unit.flash().operations, unit.clone()));
         unit = unit.act(*wait, action);
-        if !matches!(action, Action::PowerCycle | Action::Reset | Action::Forget) {
+        if plan.check_every_save && !matches!(action, Action::PowerCycle | Action::Reset | Action::Forget) {
             if let Err(e) = saved_now(&mut unit) {
                 report
                     .failures
                     .push(format!("seed {seed}, uncut, after {action:?}: {e}"));
             }
         }
-        stored.push(unit.stored());
     }
+    forks.push((unit.flash().operations, unit.clone()));
     report.operations = unit.flash().operations;
     report.erases = unit.flash().wear().erases;
+    let first = forks.get(plan.first_cut_action).map_or(u64::MAX, |(ops, _)| *ops);
     let cuts: Vec<u64> = if plan.erases_only {
         unit.flash().erase_operations.clone()
     } else {
         (0..report.operations).collect()
     };
+    let cuts: Vec<u64> = cuts.into_iter().filter(|&op| op >= first).collect();
 
+    let erase_operations = &unit.flash().erase_operations;
+    report.erases_cut = cuts.iter().filter(|op| erase_operations.contains(op)).count();
     for &model in &plan.models {
         let model_index = CutModel::ALL.iter().position(|&m| m == model).unwrap_or(0);
         for &cut in cuts.iter().step_by(plan.stride.max(1) as usize) {
             report.cuts[model_index] += 1;
             let place = format!("seed {seed}, {model:?} cut at operation {cut}");
-            if let Err(e) = cut_once(&life, pages, cut, model, seed ^ cut, &stored) {
+            if let Err(e) = cut_once(&life, &mut forks, cut, model, seed ^ cut) {
                 report.failures.push(format!("{place}: {e}"));
             }
         }
@@ -307,34 +324,32 @@ pub fn study(seed: u64, plan: &Plan) -> CutReport {
     report
 }
 
-/// One life cut at operation `cut`: `Err` with what went wrong.
+/// One life cut at operation `cut`: `Err` with what went wrong. The life is forked from the
+/// uncut one just before the action during which the cut falls (`forks`: the unit before each
+/// action and the flash operations done until then).
 fn cut_once(
     life: &[(u64, Action)],
-    pages: usize,
+    forks: &mut [(u64, Unit)],
     cut: u64,
     model: CutModel,
     seed: u64,
-    stored: &[Snapshot<SLOTS>],
 ) -> Result<(), String> {
-    let mut flash = Flash::new(pages);
-    flash.cut_power_at(cut, model, seed);
-    let mut unit = Unit::boot(flash, pages, Instant::ZERO);
-    let mut failed = None;
-    for (index, (wait, action)) in life.iter().enumerate() {
-        unit = unit.act(*wait, action);
-        if unit.flash().is_cut() {
-            failed = Some(index);
-            break;
-        }
-    }
-    let Some(index) = failed else {
-        return Ok(()); // The cut falls after the life's last operation.
+    let index = forks.partition_point(|(ops, _)| *ops <= cut).saturating_sub(1);
+    let (Some((ops_before, fork)), Some((wait, action))) = (forks.get(index), life.get(index)) else {
+        return Ok(());
     };
+    let mut unit = fork.clone();
+    unit.flash().cut_power_at(cut - ops_before, model, seed);
+    unit = unit.act(*wait, action);
+    if !unit.flash().is_cut() {
+        return Ok(()); // The cut falls after the life's last operation.
+    }
     unit.flash().power_on();
     let erases_before = unit.flash().wear().erases;
     let mut unit = unit.restart();
     let restored = unit.app.snapshot();
-    let (before, after) = (&stored[index], &stored[index + 1]);
+    let (before, after) = (forks[index].1.stored(), forks[index + 1].1.stored());
+    let (before, after) = (&before, &after);
     let mut failures = Vec::new();
     let during = &life[index].1;
     old_or_new(
@@ -374,14 +389,11 @@ fn cut_once(
             "during {during:?}: {erases} page erases in the second after the restart"
         ));
     }
-    saved_now(&mut unit).map_err(|e| format!("during {during:?}, after the restart: {e}"))?;
     // Saving goes on for the rest of the life.
-    for (wait, action) in life.iter().skip(index + 1).take(40) {
+    for (wait, action) in life.iter().skip(index + 1).take(LATER_ACTIONS) {
         unit = unit.act(*wait, action);
-        if !matches!(action, Action::PowerCycle | Action::Reset | Action::Forget) {
-            saved_now(&mut unit).map_err(|e| format!("later, after {action:?}: {e}"))?;
-        }
     }
+    saved_now(&mut unit).map_err(|e| format!("later in the life: {e}"))?;
     // `X42` forgets everything but the identity.
     let identity = unit
         .app

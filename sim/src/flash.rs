@@ -31,7 +31,7 @@ pub enum FlashError {
     /// A read met a double word with a double-bit ECC error (its address).
     Ecc(u32),
     /// A program of a double word that is not erased (PROGERR), or a flash that has stopped
-    /// programming and erasing ([`MemFlash::break_down`]).
+    /// programming and erasing ([`MemFlash::set_broken`]).
     Program(u32),
 }
 
@@ -151,9 +151,9 @@ impl<const PAGE: usize> MemFlash<PAGE> {
         !self.powered
     }
 
-    /// From now on every program and erase fails (reads still work).
-    pub fn break_down(&mut self) {
-        self.broken = true;
+    /// From now on every program and erase fails (`true`; reads still work), or works again.
+    pub fn set_broken(&mut self, broken: bool) {
+        self.broken = broken;
     }
 
     /// The most erases any page has seen.

@@ -49,6 +49,7 @@ pub struct Health {
 }
 
 /// The save policy over a [`Store`].
+#[derive(Clone)]
 pub struct Keeper<F: NorFlash, const N: usize> {
     store: Store<F, N>,
     /// The lanes as of the last comparison with the flash.

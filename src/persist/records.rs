@@ -33,7 +33,13 @@ impl Record {
     ];
 
     pub(super) fn from_key(key: u8) -> Option<Record> {
-        Record::ALL.into_iter().find(|&r| r as u8 == key)
+        Some(match key {
+            1 => Record::Lanes,
+            2 => Record::Counters,
+            3 => Record::Settings,
+            4 => Record::Identity,
+            _ => return None,
+        })
     }
 
     pub(super) fn index(self) -> usize {

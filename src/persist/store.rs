@@ -115,6 +115,8 @@ impl<const N: usize> Records<N> {
 struct Newest {
     sequence: u32,
     page: u32,
+    /// Its offset in the page.
+    offset: u32,
 }
 
 /// What a load found that a healthy store does not hold.
@@ -134,6 +136,7 @@ impl Damage {
 }
 
 /// The persisted state in a region of NOR flash.
+#[derive(Clone)]
 pub struct Store<F: NorFlash, const N: usize> {
     flash: F,
     /// The region: its first address and its pages.
@@ -299,39 +302,100 @@ impl<F: NorFlash, const N: usize> Store<F, N> {
     }
 
     /// Walk one page's entries, noting each record's newest complete copy. Returns the page's
-    /// newest sequence number and the offset where an entry may be appended (`None`: the page is
-    /// full or its walk ended on damage).
+    /// newest sequence number (complete entry or not) and the offset where an entry may be
+    /// appended (`None`: the page is full or its walk ended on damage).
+    ///
+    /// Only headers are read on the way; the entries that would be some record's newest are then
+    /// checked whole, and only when one of them is torn is the page walked again for the
+    /// record's newest complete copy.
     async fn scan_page(&mut self, page: u32) -> (Option<u32>, Option<u32>) {
+        let mut candidates: [Option<Newest>; 4] = [None; 4];
+        let mut lengths = [0usize; 4];
+        let mut last = None;
+        let tail = self
+            .walk(page, |record, len, newest| {
+                last = Some(last.map_or(newest.sequence, |l: u32| l.max(newest.sequence)));
+                let slot = &mut candidates[record.index()];
+                if slot.is_none_or(|c| newest.sequence > c.sequence) {
+                    *slot = Some(newest);
+                    lengths[record.index()] = len;
+                }
+            })
+            .await;
+        for record in Record::ALL {
+            let (Some(candidate), len) = (candidates[record.index()], lengths[record.index()]) else {
+                continue;
+            };
+            let known = self.newest[record.index()];
+            if known.is_some_and(|known| known.sequence >= candidate.sequence) {
+                continue;
+            }
+            let address = self.page_address(page) + candidate.offset;
+            if self.entry_complete(address, len).await {
+                self.newest[record.index()] = Some(candidate);
+            } else {
+                self.damage.torn = self.damage.torn.saturating_add(1);
+                self.newest_complete_in(page, record).await;
+            }
+        }
+        (last, tail)
+    }
+
+    /// Walk `page`'s entry headers, calling `visit` with each (record, payload length, place).
+    /// Returns where an entry may be appended (`None`: full, or the walk ended on damage).
+    async fn walk(&mut self, page: u32, mut visit: impl FnMut(Record, usize, Newest)) -> Option<u32> {
         let (start, size) = (self.page_address(page), page_size::<F>());
         let mut offset = 0;
-        let mut last = None;
         while offset + DOUBLE_WORD as u32 <= size {
-            let header = match self.header(start + offset).await {
+            let (record, len, sequence) = match self.header(start + offset).await {
                 Ok(Some(header)) => header,
-                Ok(None) => return (last, Some(offset)),
+                Ok(None) => return Some(offset),
                 Err(()) => {
                     self.note_unreadable_or_torn(start + offset).await;
-                    return (last, None);
+                    return None;
                 }
             };
-            let (record, len, sequence) = header;
             let entry = entry_size(len) as u32;
             if offset + entry > size {
                 self.damage.torn = self.damage.torn.saturating_add(1);
-                return (last, None);
+                return None;
             }
-            if self.entry_complete(start + offset, len).await {
-                last = Some(last.map_or(sequence, |l: u32| l.max(sequence)));
-                let slot = &mut self.newest[record.index()];
-                if slot.is_none_or(|newest| sequence > newest.sequence) {
-                    *slot = Some(Newest { sequence, page });
-                }
-            } else {
-                self.damage.torn = self.damage.torn.saturating_add(1);
-            }
+            visit(
+                record,
+                len,
+                Newest {
+                    sequence,
+                    page,
+                    offset,
+                },
+            );
             offset += entry;
         }
-        (last, None)
+        None
+    }
+
+    /// After `record`'s newest entry in `page` turned out torn: its newest complete one there, if
+    /// newer than any known (entries follow each other in sequence order within a page).
+    async fn newest_complete_in(&mut self, page: u32, record: Record) {
+        let (start, size) = (self.page_address(page), page_size::<F>());
+        let mut offset = 0;
+        while offset + DOUBLE_WORD as u32 <= size {
+            let Ok(Some((found, len, sequence))) = self.header(start + offset).await else {
+                return;
+            };
+            let known = self.newest[record.index()];
+            if found == record
+                && known.is_none_or(|known| sequence > known.sequence)
+                && self.entry_complete(start + offset, len).await
+            {
+                self.newest[record.index()] = Some(Newest {
+                    sequence,
+                    page,
+                    offset,
+                });
+            }
+            offset += entry_size(len) as u32;
+        }
     }
 
     async fn note_unreadable_or_torn(&mut self, address: u32) {
@@ -343,22 +407,15 @@ impl<F: NorFlash, const N: usize> Store<F, N> {
         }
     }
 
-    /// The payload of `record`'s entry numbered `newest.sequence` in its page.
+    /// The payload of `record`'s newest entry.
     async fn find(&mut self, newest: Newest, record: Record) -> Option<Bytes> {
-        let (start, size) = (self.page_address(newest.page), page_size::<F>());
-        let mut offset = 0;
-        while offset + DOUBLE_WORD as u32 <= size {
-            let (found, len, sequence) = self.header(start + offset).await.ok()??;
-            if found == record
-                && sequence == newest.sequence
-                && self.entry_complete(start + offset, len).await
-            {
-                let payload = self.buffer.get(DOUBLE_WORD..DOUBLE_WORD + len)?;
-                return Bytes::from_slice(payload).ok();
-            }
-            offset += entry_size(len) as u32;
+        let address = self.page_address(newest.page) + newest.offset;
+        let (found, len, sequence) = self.header(address).await.ok()??;
+        if found != record || sequence != newest.sequence || !self.entry_complete(address, len).await {
+            return None;
         }
-        None
+        let payload = self.buffer.get(DOUBLE_WORD..DOUBLE_WORD + len)?;
+        Bytes::from_slice(payload).ok()
     }
 
     /// Whether [`Store::save`] would write something now.
@@ -534,7 +591,11 @@ impl<F: NorFlash, const N: usize> Store<F, N> {
             .await
             .map_err(|_| StoreError::Flash)?;
         self.next_sequence = sequence.wrapping_add(1);
-        self.newest[record.index()] = Some(Newest { sequence, page });
+        self.newest[record.index()] = Some(Newest {
+            sequence,
+            page,
+            offset,
+        });
         self.head = Some((page, Some(offset + size as u32)));
         match record {
             Record::Lanes => self.saved.lanes = next.lanes,
