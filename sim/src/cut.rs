@@ -290,12 +290,14 @@ pub fn study(seed: u64, plan: &Plan) -> CutReport {
     for (wait, action) in &life {
         forks.push((unit.flash().operations, unit.clone()));
         unit = unit.act(*wait, action);
-        if plan.check_every_save && !matches!(action, Action::PowerCycle | Action::Reset | Action::Forget) {
-            if let Err(e) = saved_now(&mut unit) {
-                report
-                    .failures
-                    .push(format!("seed {seed}, uncut, after {action:?}: {e}"));
-            }
+        let restarted = matches!(action, Action::PowerCycle | Action::Reset | Action::Forget);
+        if plan.check_every_save
+            && !restarted
+            && let Err(e) = saved_now(&mut unit)
+        {
+            report
+                .failures
+                .push(format!("seed {seed}, uncut, after {action:?}: {e}"));
         }
     }
     forks.push((unit.flash().operations, unit.clone()));

@@ -121,6 +121,7 @@ struct Newest {
 
 /// What a load found that a healthy store does not hold.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Damage {
     /// Double words that did not read (ECC errors) where entries were expected.
     pub unreadable: u16,
