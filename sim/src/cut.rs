@@ -29,8 +29,13 @@ const LATER_ACTIONS: usize = 6;
 /// The identity register: the revision `S2` reports.
 pub const IDENTITY: u8 = 0x52;
 
-/// Settings the printer may write, with the range each accepts.
-const SETTINGS: [(u8, u16, u16); 9] = [
+/// Settings the printer may write, with the range each accepts (a sensor's thresholds are
+/// refused when they do not make a pair: the App answers `R` and keeps the old ones).
+const SETTINGS: [(u8, u16, u16); 13] = [
+    (0x90, 100, 4000),
+    (0xa0, 100, 4000),
+    (0x91, 100, 4000),
+    (0xa1, 100, 4000),
     (0x0b, 0, 255),
     (0x0c, 0, 255),
     (0x22, 50, 2000),
@@ -100,6 +105,18 @@ pub struct Unit {
     /// The time of the last step.
     pub now: Instant,
     pages: usize,
+    /// The most double-word programs and page erases one call of the keeper has done.
+    pub worst_save: WorstSave,
+}
+
+/// The most flash work one save did: what stalls the CPU (each erase up to 40 ms, each
+/// double-word program up to 125 µs on the STM32G071).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct WorstSave {
+    /// Double-word programs.
+    pub programs: u64,
+    /// Page erases.
+    pub erases: u64,
 }
 
 fn store(flash: Flash, pages: usize) -> Store<Flash, SLOTS> {
@@ -116,7 +133,19 @@ impl Unit {
             keeper,
             now,
             pages,
+            worst_save: WorstSave::default(),
         }
+    }
+
+    /// Run one call of the keeper, noting its flash work.
+    fn measure<T>(&mut self, call: impl FnOnce(&mut Self) -> T) -> T {
+        let (operations, erases) = (self.flash().operations, self.flash().wear().erases);
+        let result = call(self);
+        let erased = self.flash().wear().erases - erases;
+        let programs = self.flash().operations - operations - erased;
+        self.worst_save.programs = self.worst_save.programs.max(programs);
+        self.worst_save.erases = self.worst_save.erases.max(erased);
+        result
     }
 
     /// The flash.
@@ -126,9 +155,12 @@ impl Unit {
 
     /// The power goes and comes back.
     pub fn restart(mut self) -> Self {
-        let (now, pages) = (self.now, self.pages);
+        let (now, pages, worst_save) = (self.now, self.pages, self.worst_save);
         let flash = std::mem::replace(self.flash(), Flash::new(0));
-        Unit::boot(flash, pages, now)
+        Unit {
+            worst_save,
+            ..Unit::boot(flash, pages, now)
+        }
     }
 
     /// Change the App's beliefs the way its commands do (lanes and counters).
@@ -177,14 +209,14 @@ impl Unit {
         };
         match board {
             Some(board) => {
-                let _ = block_on(self.keeper.before(board, &self.app));
+                let _ = self.measure(|unit| block_on(unit.keeper.before(board, &unit.app)));
                 self.restart()
             }
             None => {
                 // The control loop compares lanes every step, the rest every FULL_CHECK_MS.
-                let _ = block_on(self.keeper.update(&self.app, self.now));
+                let _ = self.measure(|unit| block_on(unit.keeper.update(&unit.app, unit.now)));
                 self.now = Instant::from_millis(self.now.as_millis() + FULL_CHECK_MS);
-                let _ = block_on(self.keeper.update(&self.app, self.now));
+                let _ = self.measure(|unit| block_on(unit.keeper.update(&unit.app, unit.now)));
                 self
             }
         }
@@ -208,6 +240,8 @@ pub struct CutReport {
     pub erases: u64,
     /// Page erases among the cut operations.
     pub erases_cut: usize,
+    /// The most flash work one save of the uncut life did.
+    pub worst_save: WorstSave,
     /// Cuts tried, per model ([`CutModel::ALL`] order).
     pub cuts: [usize; 3],
     /// What went wrong, one line each.
@@ -301,6 +335,7 @@ pub fn study(seed: u64, plan: &Plan) -> CutReport {
         }
     }
     forks.push((unit.flash().operations, unit.clone()));
+    report.worst_save = unit.worst_save;
     report.operations = unit.flash().operations;
     report.erases = unit.flash().wear().erases;
     let first = forks.get(plan.first_cut_action).map_or(u64::MAX, |(ops, _)| *ops);

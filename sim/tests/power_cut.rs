@@ -60,14 +60,17 @@ fn soak_every_cut_of_many_lives() {
         .map(|seed| study(seed, &Plan::every_cut(3, 700)))
         .collect();
     let total = |f: fn(&CutReport) -> usize| reports.iter().map(f).sum::<usize>();
+    let worst = |f: fn(&CutReport) -> u64| reports.iter().map(f).max().unwrap_or(0);
     println!(
-        "cut soak: {seeds} lives of 700 actions, {} flash operations ({} page erases); cuts: clean {}, torn {}, torn with unreadable double words {}; failures {}",
+        "cut soak: {seeds} lives of 700 actions, {} flash operations ({} page erases); cuts: clean {}, torn {}, torn with unreadable double words {}; failures {}; the largest save: {} double-word programs, {} page erases",
         total(|r| r.operations as usize),
         total(|r| r.erases_cut),
         total(|r| r.cuts[0]),
         total(|r| r.cuts[1]),
         total(|r| r.cuts[2]),
         total(|r| r.failures.len()),
+        worst(|r| r.worst_save.programs),
+        worst(|r| r.worst_save.erases),
     );
     check(&reports);
 }
