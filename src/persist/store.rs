@@ -6,12 +6,13 @@
 //! Each entry is a header double word (record key, payload length, sequence number, header CRC),
 //! the payload, and a trailer double word (CRC-32 of both, written last). Sequence numbers grow by
 //! one per entry across the whole region, so the newest complete copy of each record wins,
-//! wherever it lies and whatever a torn erase left elsewhere. Only the page holding the newest
-//! entry is appended to, and only where it reads erased; when it is full, or damaged, the next
-//! page not holding any record's newest copy is erased and a full copy of every record opens it.
-//! So a page is only ever erased once every record in it has a newer copy, and an interrupted
-//! erase or program can only leave entries that are older than, or lose against, a complete one.
-//! A double word that does not read (ECC) costs the entry it belongs to, never the store.
+//! whatever a torn erase left elsewhere. A page is opened by erasing it (unless it reads erased),
+//! writing a full copy of every record and then a commit entry; a page counts only once its commit
+//! is complete, so every record's newest copy is always in one page, the head. Entries are
+//! appended to the head only where it reads erased; when it is full or damaged, the next page is
+//! opened. So a page is only ever erased once every record in it has a newer copy, and an
+//! interrupted erase or program leaves entries that are older than, or lose against, a complete
+//! one. A double word that does not read (ECC) costs the entry it belongs to, never the store.
 
 use crc::{CRC_16_IBM_3740, CRC_32_ISO_HDLC, Crc};
 use embedded_storage_async::nor_flash::NorFlash;
@@ -30,6 +31,8 @@ const DOUBLE_WORD: usize = 8;
 const MAX_ENTRY: usize = DOUBLE_WORD + MAX_RECORD.next_multiple_of(DOUBLE_WORD) + DOUBLE_WORD;
 /// Page moves one save may try (each erases at most one page) before it gives up.
 const MOVES_PER_SAVE: usize = 2;
+/// The key of the entry that commits a fresh page's full copy (no payload).
+const COMMIT: u8 = 0x5c;
 /// Counters are written at most this often, ms (they change while the unit works).
 pub const SLOW_RECORD_PERIOD_MS: u64 = 10_000;
 
@@ -147,8 +150,9 @@ pub struct Store<F: NorFlash, const N: usize> {
     saved: Records<N>,
     /// Per record ([`Record::index`]): its newest copy.
     newest: [Option<Newest>; 4],
-    /// The page holding the newest entry, and where its next entry goes (`None`: full or
-    /// damaged, the next write opens a fresh page).
+    /// The committed page holding every record's newest copy, and where its next entry goes
+    /// (`None`: full or damaged, the next write opens a fresh page). While a fresh page is being
+    /// opened, that page.
     head: Option<(u32, Option<u32>)>,
     next_sequence: u32,
     /// When counters were last written.
@@ -223,40 +227,28 @@ impl<F: NorFlash, const N: usize> Store<F, N> {
         self.damage
     }
 
-    /// Whether the records lie in more than one page (a full copy was cut short): the next save
-    /// writes them all again, so that older pages may be erased.
-    fn scattered(&self) -> bool {
-        let head = self.head.map(|(page, _)| page);
-        self.newest
-            .iter()
-            .flatten()
-            .any(|newest| Some(newest.page) != head)
-    }
-
     fn page_address(&self, page: u32) -> u32 {
         self.base + page * page_size::<F>()
     }
 
-    /// What the flash holds: each record's newest complete copy, or its default (lanes unknown,
-    /// counters zero, no settings) when there is none or it does not decode. Never fails: a
-    /// double word that does not read costs only the entry it belongs to.
+    /// What the flash holds: each record's newest complete copy in a committed page, or its
+    /// default (lanes unknown, counters zero, no settings) when there is none or it does not
+    /// decode. Never fails: a double word that does not read costs only the entry it belongs to.
     pub async fn load(&mut self) -> Snapshot<N> {
         self.saved = Records::blank();
         self.newest = [None; 4];
         self.head = None;
         self.damage = Damage::default();
-        let mut newest_entry: Option<u32> = None;
+        let (mut newest_header, mut newest_commit) = (None::<u32>, None::<u32>);
         for page in 0..self.pages {
-            let (last, tail) = self.scan_page(page).await;
-            if let Some(sequence) = last
-                && newest_entry.is_none_or(|newest| sequence > newest)
-            {
-                newest_entry = Some(sequence);
-                self.head = Some((page, tail));
+            let scan = self.scan_page(page).await;
+            newest_header = newest_header.max(scan.newest_header);
+            if scan.committed && scan.newest_header > newest_commit {
+                newest_commit = scan.newest_header;
+                self.head = Some((page, scan.tail));
             }
         }
-        self.next_sequence = newest_entry.map_or(0, |s| s.wrapping_add(1));
-        // Decode each record's newest copy.
+        self.next_sequence = newest_header.map_or(0, |s| s.wrapping_add(1));
         for record in Record::ALL {
             let Some(newest) = self.newest[record.index()] else {
                 continue;
@@ -268,20 +260,24 @@ impl<F: NorFlash, const N: usize> Store<F, N> {
         self.saved.snapshot()
     }
 
-    /// Read the header double word at `address`: `Ok(None)` when erased.
-    async fn header(&mut self, address: u32) -> Result<Option<(Record, usize, u32)>, ()> {
+    /// Read the header double word at `address`: `Ok(None)` when erased; the key is a record's
+    /// or [`COMMIT`].
+    async fn header(&mut self, address: u32) -> Result<Option<(u8, usize, u32)>, ()> {
         let mut word = [0u8; DOUBLE_WORD];
         self.flash.read(address, &mut word).await.map_err(drop)?;
         if word == [0xff; DOUBLE_WORD] {
             return Ok(None);
         }
         let [key, len, s0, s1, s2, s3, c0, c1] = word;
-        let record = Record::from_key(key).ok_or(())?;
-        if HEADER_CRC.checksum(&word[..6]) != u16::from_le_bytes([c0, c1]) || usize::from(len) > MAX_RECORD {
+        let known = Record::from_key(key).is_some() || key == COMMIT;
+        if !known
+            || HEADER_CRC.checksum(&word[..6]) != u16::from_le_bytes([c0, c1])
+            || usize::from(len) > MAX_RECORD
+        {
             return Err(());
         }
         Ok(Some((
-            record,
+            key,
             usize::from(len),
             u32::from_le_bytes([s0, s1, s2, s3]),
         )))
@@ -302,53 +298,69 @@ impl<F: NorFlash, const N: usize> Store<F, N> {
         bytes[body..] == trailer(crc)
     }
 
-    /// Walk one page's entries, noting each record's newest complete copy. Returns the page's
-    /// newest sequence number (complete entry or not) and the offset where an entry may be
-    /// appended (`None`: the page is full or its walk ended on damage).
+    /// Walk one page's entries. In a committed page, note each record's newest complete copy.
     ///
     /// Only headers are read on the way; the entries that would be some record's newest are then
     /// checked whole, and only when one of them is torn is the page walked again for the
     /// record's newest complete copy.
-    async fn scan_page(&mut self, page: u32) -> (Option<u32>, Option<u32>) {
-        let mut candidates: [Option<Newest>; 4] = [None; 4];
-        let mut lengths = [0usize; 4];
-        let mut last = None;
+    async fn scan_page(&mut self, page: u32) -> PageScan {
+        let mut candidates: [Option<(Newest, usize)>; 4] = [None; 4];
+        let mut commit = None;
+        let mut newest_header = None;
         let tail = self
-            .walk(page, |record, len, newest| {
-                last = Some(last.map_or(newest.sequence, |l: u32| l.max(newest.sequence)));
-                let slot = &mut candidates[record.index()];
-                if slot.is_none_or(|c| newest.sequence > c.sequence) {
-                    *slot = Some(newest);
-                    lengths[record.index()] = len;
+            .walk(page, |key, len, place| {
+                newest_header = newest_header.max(Some(place.sequence));
+                if key == COMMIT {
+                    commit = Some((place, len));
+                } else if let Some(record) = Record::from_key(key) {
+                    let slot = &mut candidates[record.index()];
+                    if slot.is_none_or(|(c, _)| place.sequence > c.sequence) {
+                        *slot = Some((place, len));
+                    }
                 }
             })
             .await;
-        for record in Record::ALL {
-            let (Some(candidate), len) = (candidates[record.index()], lengths[record.index()]) else {
-                continue;
-            };
-            let known = self.newest[record.index()];
-            if known.is_some_and(|known| known.sequence >= candidate.sequence) {
-                continue;
+        let committed = match commit {
+            Some((place, len)) => {
+                self.entry_complete(self.page_address(page) + place.offset, len)
+                    .await
             }
-            let address = self.page_address(page) + candidate.offset;
-            if self.entry_complete(address, len).await {
-                self.newest[record.index()] = Some(candidate);
-            } else {
-                self.damage.torn = self.damage.torn.saturating_add(1);
-                self.newest_complete_in(page, record).await;
+            None => false,
+        };
+        if committed {
+            for record in Record::ALL {
+                let Some((candidate, len)) = candidates[record.index()] else {
+                    continue;
+                };
+                let known = self.newest[record.index()];
+                if known.is_some_and(|known| known.sequence >= candidate.sequence) {
+                    continue;
+                }
+                if self
+                    .entry_complete(self.page_address(page) + candidate.offset, len)
+                    .await
+                {
+                    self.newest[record.index()] = Some(candidate);
+                } else {
+                    self.damage.torn = self.damage.torn.saturating_add(1);
+                    self.newest_complete_in(page, record).await;
+                }
             }
         }
-        (last, tail)
+        PageScan {
+            newest_header,
+            committed,
+            tail,
+        }
     }
 
-    /// Walk `page`'s entry headers, calling `visit` with each (record, payload length, place).
+    /// Walk `page`'s entry headers, calling `visit` with each (key, payload length, place).
     /// Returns where an entry may be appended (`None`: full, or the walk ended on damage).
-    async fn walk(&mut self, page: u32, mut visit: impl FnMut(Record, usize, Newest)) -> Option<u32> {
+    async fn walk(&mut self, page: u32, mut visit: impl FnMut(u8, usize, Newest)) -> Option<u32> {
         let (start, size) = (self.page_address(page), page_size::<F>());
         let mut offset = 0;
         while offset + DOUBLE_WORD as u32 <= size {
-            let (record, len, sequence) = match self.header(start + offset).await {
+            let (key, len, sequence) = match self.header(start + offset).await {
                 Ok(Some(header)) => header,
                 Ok(None) => return Some(offset),
                 Err(()) => {
@@ -362,7 +374,7 @@ impl<F: NorFlash, const N: usize> Store<F, N> {
                 return None;
             }
             visit(
-                record,
+                key,
                 len,
                 Newest {
                     sequence,
@@ -381,11 +393,11 @@ impl<F: NorFlash, const N: usize> Store<F, N> {
         let (start, size) = (self.page_address(page), page_size::<F>());
         let mut offset = 0;
         while offset + DOUBLE_WORD as u32 <= size {
-            let Ok(Some((found, len, sequence))) = self.header(start + offset).await else {
+            let Ok(Some((key, len, sequence))) = self.header(start + offset).await else {
                 return;
             };
             let known = self.newest[record.index()];
-            if found == record
+            if key == record as u8
                 && known.is_none_or(|known| sequence > known.sequence)
                 && self.entry_complete(start + offset, len).await
             {
@@ -411,8 +423,8 @@ impl<F: NorFlash, const N: usize> Store<F, N> {
     /// The payload of `record`'s newest entry.
     async fn find(&mut self, newest: Newest, record: Record) -> Option<Bytes> {
         let address = self.page_address(newest.page) + newest.offset;
-        let (found, len, sequence) = self.header(address).await.ok()??;
-        if found != record || sequence != newest.sequence || !self.entry_complete(address, len).await {
+        let (key, len, sequence) = self.header(address).await.ok()??;
+        if key != record as u8 || sequence != newest.sequence || !self.entry_complete(address, len).await {
             return None;
         }
         let payload = self.buffer.get(DOUBLE_WORD..DOUBLE_WORD + len)?;
@@ -424,7 +436,6 @@ impl<F: NorFlash, const N: usize> Store<F, N> {
         !self
             .changed(&Records::from_snapshot(snapshot), Some(now))
             .is_empty()
-            || self.scattered()
     }
 
     /// The records of `next` that differ from the stored ones and are due.
@@ -451,7 +462,7 @@ impl<F: NorFlash, const N: usize> Store<F, N> {
     pub async fn save(&mut self, snapshot: &Snapshot<N>, now: Option<Instant>) -> Result<u8, StoreError> {
         let mut next = Records::from_snapshot(snapshot);
         let changed = self.changed(&next, now);
-        if changed.is_empty() && !self.scattered() {
+        if changed.is_empty() {
             return Ok(0);
         }
         if !changed.contains(&Record::Counters) {
@@ -490,7 +501,7 @@ impl<F: NorFlash, const N: usize> Store<F, N> {
             identity: self.saved.identity.clone(),
             ..Records::blank()
         };
-        self.write(&blank, &Record::ALL).await
+        self.open_fresh_page(&blank).await
     }
 
     async fn erase(&mut self, page: u32) -> Result<(), StoreError> {
@@ -507,50 +518,67 @@ impl<F: NorFlash, const N: usize> Store<F, N> {
     }
 
     /// Make `next` the stored records: append `records` to the head page, or open a fresh page
-    /// with a full copy when they do not fit, the head is damaged or records are scattered.
+    /// when they do not fit or the head is damaged.
     async fn write(&mut self, next: &Records<N>, records: &[Record]) -> Result<(), StoreError> {
-        let mut result = Err(StoreError::Flash);
-        if !self.scattered()
-            && let Some((page, Some(_))) = self.head
+        if let Some((page, Some(_))) = self.head
+            && self.append_to_head(page, next, records).await.is_ok()
         {
-            result = self.append_all(page, next, records).await;
+            return Ok(());
         }
+        let mut result = Err(StoreError::Flash);
         for _ in 0..MOVES_PER_SAVE {
+            result = self.open_fresh_page(next).await;
             if result.is_ok() {
                 break;
             }
-            result = self.open_fresh_page(next).await;
         }
         result
     }
 
-    /// Append `records` to `page` at its tail.
-    async fn append_all(
+    /// Append `records` (as in `next`) to the committed head `page`: each is stored once its
+    /// entry is complete.
+    async fn append_to_head(
         &mut self,
         page: u32,
         next: &Records<N>,
         records: &[Record],
     ) -> Result<(), StoreError> {
         for &record in records {
-            self.append(page, record, next).await?;
+            let place = self.append(page, record as u8, &next.encode(record)).await?;
+            self.newest[record.index()] = Some(place);
+            match record {
+                Record::Lanes => self.saved.lanes = next.lanes,
+                Record::Counters => self.saved.counters = next.counters,
+                Record::Settings => self.saved.settings = next.settings.clone(),
+                Record::Identity => self.saved.identity = next.identity.clone(),
+            }
         }
         Ok(())
     }
 
-    /// Erase the next page that holds no record's newest copy, and write every record there.
+    /// Open the next page that holds no record's newest copy: erase it, write every record of
+    /// `next` there, then the commit. Until the commit is complete the records stay where they
+    /// were (on the flash and in this store's view).
     async fn open_fresh_page(&mut self, next: &Records<N>) -> Result<(), StoreError> {
         let after = self.head.map_or(self.pages - 1, |(page, _)| page);
         let page = (1..self.pages)
             .map(|step| (after + step) % self.pages)
             .find(|&page| self.newest.iter().flatten().all(|newest| newest.page != page))
             .ok_or(StoreError::Flash)?;
-        // A torn erase or old entries: erase it; an erased page is used as it is.
+        // Whatever happens next, the page after this one is tried next.
+        self.head = Some((page, None));
         if !self.is_erased(page).await {
-            self.head = None;
             self.erase(page).await?;
         }
         self.head = Some((page, Some(0)));
-        self.append_all(page, next, &Record::ALL).await
+        let mut placed = [None; 4];
+        for record in Record::ALL {
+            placed[record.index()] = Some(self.append(page, record as u8, &next.encode(record)).await?);
+        }
+        self.append(page, COMMIT, &[]).await?;
+        self.newest = placed;
+        self.saved = next.clone();
+        Ok(())
     }
 
     /// Whether every double word of `page` reads erased.
@@ -567,14 +595,13 @@ impl<F: NorFlash, const N: usize> Store<F, N> {
         true
     }
 
-    /// Append one entry of `record` (as in `next`) to the head `page`. On any failure the head is
-    /// closed, so that the next write opens a fresh page.
-    async fn append(&mut self, page: u32, record: Record, next: &Records<N>) -> Result<(), StoreError> {
+    /// Append one entry (`key`, `payload`) at the head `page`'s tail; where it lies. On any
+    /// failure the head is closed, so that the next write opens a fresh page.
+    async fn append(&mut self, page: u32, key: u8, payload: &[u8]) -> Result<Newest, StoreError> {
         let Some((_, Some(offset))) = self.head else {
             return Err(StoreError::Flash);
         };
         self.head = Some((page, None));
-        let payload = next.encode(record);
         let size = entry_size(payload.len());
         if offset as usize + size > F::ERASE_SIZE {
             return Err(StoreError::Full);
@@ -586,26 +613,30 @@ impl<F: NorFlash, const N: usize> Store<F, N> {
             return Err(StoreError::Flash);
         }
         let sequence = self.next_sequence;
-        let entry = build_entry(&mut self.buffer, record, sequence, &payload);
+        let entry = build_entry(&mut self.buffer, key, sequence, payload);
+        // Spent even if the program fails: a torn entry must not share its number.
+        self.next_sequence = sequence.wrapping_add(1);
         self.flash
             .write(address, entry)
             .await
             .map_err(|_| StoreError::Flash)?;
-        self.next_sequence = sequence.wrapping_add(1);
-        self.newest[record.index()] = Some(Newest {
+        self.head = Some((page, Some(offset + size as u32)));
+        Ok(Newest {
             sequence,
             page,
             offset,
-        });
-        self.head = Some((page, Some(offset + size as u32)));
-        match record {
-            Record::Lanes => self.saved.lanes = next.lanes,
-            Record::Counters => self.saved.counters = next.counters,
-            Record::Settings => self.saved.settings = next.settings.clone(),
-            Record::Identity => self.saved.identity = next.identity.clone(),
-        }
-        Ok(())
+        })
     }
+}
+
+/// What one page's walk found.
+struct PageScan {
+    /// The newest sequence number of any entry header (complete entry or not).
+    newest_header: Option<u32>,
+    /// Whether the page's commit entry is complete.
+    committed: bool,
+    /// Where an entry may be appended.
+    tail: Option<u32>,
 }
 
 /// The bytes of an entry of `len` payload bytes.
@@ -622,15 +653,10 @@ fn trailer(crc: u32) -> [u8; DOUBLE_WORD] {
 }
 
 /// Lay out an entry in `buffer`; the bytes to program.
-fn build_entry<'b>(
-    buffer: &'b mut [u8; MAX_ENTRY],
-    record: Record,
-    sequence: u32,
-    payload: &[u8],
-) -> &'b [u8] {
+fn build_entry<'b>(buffer: &'b mut [u8; MAX_ENTRY], key: u8, sequence: u32, payload: &[u8]) -> &'b [u8] {
     let size = entry_size(payload.len());
     buffer.fill(0);
-    buffer[0] = record as u8;
+    buffer[0] = key;
     buffer[1] = payload.len() as u8;
     buffer[2..6].copy_from_slice(&sequence.to_le_bytes());
     let header_crc = HEADER_CRC.checksum(&buffer[..6]);
@@ -654,7 +680,7 @@ mod tests {
     #[test]
     fn an_entry_lays_out_header_payload_and_trailer_in_double_words() {
         let mut buffer = [0; MAX_ENTRY];
-        let entry = build_entry(&mut buffer, Record::Lanes, 7, &[1, 3, 2, 2, 5]);
+        let entry = build_entry(&mut buffer, Record::Lanes as u8, 7, &[1, 3, 2, 2, 5]);
         assert_eq!(entry.len(), 24);
         assert_eq!(entry[..6], [1, 5, 7, 0, 0, 0]);
         assert_ne!(entry[16..], [0xff; 8]);
