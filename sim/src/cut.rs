@@ -244,6 +244,8 @@ pub struct CutReport {
     pub worst_save: WorstSave,
     /// Cuts tried, per model ([`CutModel::ALL`] order).
     pub cuts: [usize; 3],
+    /// Second cuts tried (during the first save after a cut's restart).
+    pub second_cuts: usize,
     /// What went wrong, one line each.
     pub failures: Vec<String>,
 }
@@ -289,6 +291,9 @@ pub struct Plan {
     pub check_every_save: bool,
     /// Cuts start at this action (the ones before age the flash: the region wraps).
     pub first_cut_action: usize,
+    /// After each cut, also cut the first save after the restart at each of its first this many
+    /// operations (one life each; torn, with unreadable double words).
+    pub second_cuts: u64,
     /// The cut models tried.
     pub models: Vec<CutModel>,
 }
@@ -303,6 +308,7 @@ impl Plan {
             erases_only: false,
             check_every_save: true,
             first_cut_action: 0,
+            second_cuts: 0,
             models: CutModel::ALL.to_vec(),
         }
     }
@@ -353,8 +359,19 @@ pub fn study(seed: u64, plan: &Plan) -> CutReport {
         for &cut in cuts.iter().step_by(plan.stride.max(1) as usize) {
             report.cuts[model_index] += 1;
             let place = format!("seed {seed}, {model:?} cut at operation {cut}");
-            if let Err(e) = cut_once(&life, &mut forks, cut, model, seed ^ cut) {
+            if let Err(e) = cut_once(&life, &mut forks, cut, model, seed ^ cut, None) {
                 report.failures.push(format!("{place}: {e}"));
+            }
+            for offset in 0..plan.second_cuts {
+                let second = Some((offset, CutModel::TornUnreadable));
+                match cut_once(&life, &mut forks, cut, model, seed ^ cut, second) {
+                    Ok(true) => report.second_cuts += 1,
+                    Ok(false) => break,
+                    Err(e) => {
+                        report.second_cuts += 1;
+                        report.failures.push(format!("{place}: {e}"));
+                    }
+                }
             }
         }
     }
@@ -364,54 +381,48 @@ pub fn study(seed: u64, plan: &Plan) -> CutReport {
 /// One life cut at operation `cut`: `Err` with what went wrong. The life is forked from the
 /// uncut one just before the action during which the cut falls (`forks`: the unit before each
 /// action and the flash operations done until then).
+///
+/// With `second`, the first save after the restart is cut too, at that operation under that
+/// model; `Ok(false)` when that save has fewer operations (nothing was cut a second time).
 fn cut_once(
     life: &[(u64, Action)],
     forks: &mut [(u64, Unit)],
     cut: u64,
     model: CutModel,
     seed: u64,
-) -> Result<(), String> {
+    second: Option<(u64, CutModel)>,
+) -> Result<bool, String> {
     let index = forks.partition_point(|(ops, _)| *ops <= cut).saturating_sub(1);
     let (Some((ops_before, fork)), Some((wait, action))) = (forks.get(index), life.get(index)) else {
-        return Ok(());
+        return Ok(false);
     };
     let mut unit = fork.clone();
     unit.flash().cut_power_at(cut - ops_before, model, seed);
     unit = unit.act(*wait, action);
     if !unit.flash().is_cut() {
-        return Ok(()); // The cut falls after the life's last operation.
+        return Ok(false); // The cut falls after the life's last operation.
     }
     unit.flash().power_on();
     let erases_before = unit.flash().wear().erases;
     let mut unit = unit.restart();
-    let restored = unit.app.snapshot();
     let (before, after) = (forks[index].1.stored(), forks[index + 1].1.stored());
-    let (before, after) = (&before, &after);
-    let mut failures = Vec::new();
     let during = &life[index].1;
-    old_or_new(
-        &mut failures,
-        "lanes",
-        &restored.lanes,
-        &before.lanes,
-        &after.lanes,
-    );
-    old_or_new(
-        &mut failures,
-        "counters",
-        &restored.counters,
-        &before.counters,
-        &after.counters,
-    );
-    old_or_new(
-        &mut failures,
-        "settings",
-        &restored.settings,
-        &before.settings,
-        &after.settings,
-    );
-    if !failures.is_empty() {
-        return Err(format!("during {during:?}: restored {}", failures.join("; ")));
+    check_restored(&unit, &before, &after).map_err(|e| format!("during {during:?}: {e}"))?;
+    // A second cut, during the first save after the restart (a fresh page being opened).
+    if let Some((offset, second_model)) = second {
+        let recovery = Action::Lanes([Lane::Parked, Lane::Unknown, Lane::Empty]);
+        let before = unit.stored();
+        let after = unit.clone().act(1, &recovery).stored();
+        unit.flash()
+            .cut_power_at(offset, second_model, seed.rotate_left(17));
+        unit = unit.act(1, &recovery);
+        if !unit.flash().is_cut() {
+            return Ok(false);
+        }
+        unit.flash().power_on();
+        unit = unit.restart();
+        check_restored(&unit, &before, &after)
+            .map_err(|e| format!("second {second_model:?} cut {offset} operations after the restart: {e}"))?;
     }
 
     // The save loop after the restart: a lane change, then a second of 1 ms steps.
@@ -447,5 +458,37 @@ fn cut_once(
     if forgotten != expected {
         return Err(format!("after X42: {forgotten:?}, expected {expected:?}"));
     }
-    Ok(())
+    Ok(true)
+}
+
+/// Each record the restarted `unit` restored is the stored one before or after the cut action.
+fn check_restored(unit: &Unit, before: &Snapshot<SLOTS>, after: &Snapshot<SLOTS>) -> Result<(), String> {
+    let restored = unit.app.snapshot();
+    let mut failures = Vec::new();
+    old_or_new(
+        &mut failures,
+        "lanes",
+        &restored.lanes,
+        &before.lanes,
+        &after.lanes,
+    );
+    old_or_new(
+        &mut failures,
+        "counters",
+        &restored.counters,
+        &before.counters,
+        &after.counters,
+    );
+    old_or_new(
+        &mut failures,
+        "settings",
+        &restored.settings,
+        &before.settings,
+        &after.settings,
+    );
+    if failures.is_empty() {
+        Ok(())
+    } else {
+        Err(format!("restored {}", failures.join("; ")))
+    }
 }

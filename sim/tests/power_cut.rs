@@ -9,6 +9,7 @@
 //! `MMU_CUT_SEEDS=100 cargo test -p mmu-sim --release --test power_cut -- --ignored --nocapture`.
 
 use mmu_sim::cut::{CutReport, Plan, study};
+use mmu_sim::flash::CutModel;
 
 fn check(reports: &[CutReport]) {
     let failures: Vec<&String> = reports.iter().flat_map(|r| &r.failures).collect();
@@ -47,8 +48,25 @@ fn every_cut_of_a_random_life_leaves_old_or_new_records_and_a_working_store() {
     check(&reports);
 }
 
+/// A cut during the recovery from a cut: after each cut (every operation of the last 40 actions
+/// of a life, torn with unreadable double words), the first save after the restart (a fresh
+/// page opened when the head was torn) is cut again at each of its operations.
+#[test]
+fn a_cut_during_the_first_save_after_a_cut_leaves_old_or_new_records_too() {
+    let plan = Plan {
+        first_cut_action: 560,
+        second_cuts: 24,
+        models: vec![CutModel::TornUnreadable],
+        ..Plan::every_cut(3, 600)
+    };
+    let report = study(3, &plan);
+    assert!(report.second_cuts >= 500, "{} second cuts", report.second_cuts);
+    check(&[report]);
+}
+
 /// The soak: `MMU_CUT_SEEDS` lives (default 20) of 700 actions on 3 pages, every operation cut
-/// under every model; prints the counts the README quotes.
+/// under every model, and with `MMU_CUT_SECOND=24` each first save after a restart cut again at
+/// each of its first 24 operations; prints the counts the README quotes.
 #[test]
 #[ignore = "minutes in a debug build: run with --release"]
 fn soak_every_cut_of_many_lives() {
@@ -56,18 +74,25 @@ fn soak_every_cut_of_many_lives() {
         .ok()
         .and_then(|s| s.parse().ok())
         .unwrap_or(20);
-    let reports: Vec<CutReport> = (1..=seeds)
-        .map(|seed| study(seed, &Plan::every_cut(3, 700)))
-        .collect();
+    let second_cuts: u64 = std::env::var("MMU_CUT_SECOND")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(0);
+    let plan = Plan {
+        second_cuts,
+        ..Plan::every_cut(3, 700)
+    };
+    let reports: Vec<CutReport> = (1..=seeds).map(|seed| study(seed, &plan)).collect();
     let total = |f: fn(&CutReport) -> usize| reports.iter().map(f).sum::<usize>();
     let worst = |f: fn(&CutReport) -> u64| reports.iter().map(f).max().unwrap_or(0);
     println!(
-        "cut soak: {seeds} lives of 700 actions, {} flash operations ({} page erases); cuts: clean {}, torn {}, torn with unreadable double words {}; failures {}; the largest save: {} double-word programs, {} page erases",
+        "cut soak: {seeds} lives of 700 actions, {} flash operations ({} page erases); cuts: clean {}, torn {}, torn with unreadable double words {}; second cuts {}; failures {}; the largest save: {} double-word programs, {} page erases",
         total(|r| r.operations as usize),
         total(|r| r.erases_cut),
         total(|r| r.cuts[0]),
         total(|r| r.cuts[1]),
         total(|r| r.cuts[2]),
+        total(|r| r.second_cuts),
         total(|r| r.failures.len()),
         worst(|r| r.worst_save.programs),
         worst(|r| r.worst_save.erases),
