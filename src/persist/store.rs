@@ -21,7 +21,7 @@ use super::records::{
     Bytes, MAX_RECORD, Record, decode_counters, decode_lanes, decode_settings, encode_counters, encode_lanes,
     encode_settings,
 };
-use super::{Settings, Snapshot, StoreError, is_identity};
+use super::{IDENTITY_REGISTERS, Settings, Snapshot, StoreError, is_identity};
 use crate::time::Instant;
 use crate::unit::Lane;
 
@@ -45,8 +45,11 @@ struct Records<const N: usize> {
     lanes: [Lane; N],
     counters: super::Counters<N>,
     settings: Settings,
-    identity: Settings,
+    identity: Identity,
 }
+
+/// The identity registers and their values (at most one entry per identity register).
+type Identity = heapless::Vec<(u8, u16), { IDENTITY_REGISTERS.len() }>;
 
 impl<const N: usize> Records<N> {
     fn blank() -> Self {
@@ -54,21 +57,20 @@ impl<const N: usize> Records<N> {
             lanes: [Lane::Unknown; N],
             counters: super::Counters::default(),
             settings: Settings::new(),
-            identity: Settings::new(),
+            identity: Identity::new(),
         }
     }
 
     /// `snapshot`'s settings split into the identity and the rest.
     fn from_snapshot(snapshot: &Snapshot<N>) -> Self {
-        let (mut settings, mut identity) = (Settings::new(), Settings::new());
+        let (mut settings, mut identity) = (Settings::new(), Identity::new());
         for &(address, value) in &snapshot.settings {
-            let list = if is_identity(address) {
-                &mut identity
+            // Each holds what a snapshot can hold (a register appears once).
+            let _ = if is_identity(address) {
+                identity.push((address, value))
             } else {
-                &mut settings
+                settings.push((address, value))
             };
-            // Both hold every setting a snapshot can hold.
-            let _ = list.push((address, value));
         }
         Records {
             lanes: snapshot.lanes,
@@ -106,8 +108,12 @@ impl<const N: usize> Records<N> {
             Record::Counters => self.counters = decode_counters(bytes).unwrap_or_default(),
             Record::Settings => self.settings = decode_settings(bytes).unwrap_or_default(),
             Record::Identity => {
-                self.identity = decode_settings(bytes).unwrap_or_default();
-                self.identity.retain(|(address, _)| is_identity(*address));
+                let stored = decode_settings(bytes).unwrap_or_default();
+                self.identity = stored
+                    .into_iter()
+                    .filter(|(address, _)| is_identity(*address))
+                    .take(IDENTITY_REGISTERS.len())
+                    .collect();
             }
         }
     }
