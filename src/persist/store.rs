@@ -304,7 +304,8 @@ impl<F: NorFlash, const N: usize> Store<F, N> {
         bytes[body..] == trailer(crc)
     }
 
-    /// Walk one page's entries. In a committed page, note each record's newest complete copy.
+    /// Walk one page's entries. In a committed page, note each record's newest complete copy and
+    /// the damage found.
     ///
     /// Only headers are read on the way; the entries that would be some record's newest are then
     /// checked whole, and only when one of them is torn is the page walked again for the
@@ -313,6 +314,8 @@ impl<F: NorFlash, const N: usize> Store<F, N> {
         let mut candidates: [Option<(Newest, usize)>; 4] = [None; 4];
         let mut commit = None;
         let mut newest_header = None;
+        // Damage in a page that does not count (a torn erase's leftovers) is not reported.
+        let damage_before = self.damage;
         let tail = self
             .walk(page, |key, len, place| {
                 newest_header = newest_header.max(Some(place.sequence));
@@ -333,7 +336,9 @@ impl<F: NorFlash, const N: usize> Store<F, N> {
             }
             None => false,
         };
-        if committed {
+        if !committed {
+            self.damage = damage_before;
+        } else {
             for record in Record::ALL {
                 let Some((candidate, len)) = candidates[record.index()] else {
                     continue;
