@@ -9,6 +9,7 @@
 //! the policy the firmware and the simulator share: restore at boot, save as the App changes,
 //! recover from a flash that fails, and never erase more than [`ERASES_PER_HOUR`] (plus a burst).
 
+mod entry;
 mod keeper;
 mod records;
 mod store;
@@ -18,7 +19,7 @@ use heapless::Vec;
 use crate::unit::Lane;
 
 pub use keeper::{Boot, ERASE_BURST, ERASES_PER_HOUR, FULL_CHECK_MS, Health, Keeper, RETRY_MAX_MS};
-pub use store::{Damage, SLOW_RECORD_PERIOD_MS, Store, max_entry_bytes};
+pub use store::{Damage, SLOW_RECORD_PERIOD_MS, Store};
 
 /// Settings registers a unit has at most (plain settings and two thresholds per sensor).
 pub const MAX_SETTINGS: usize = 64;

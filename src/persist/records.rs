@@ -1,10 +1,11 @@
-//! The bytes of each record: a format byte, an entry count, then the fields in little endian.
+//! The records and their bytes: a format byte, an entry count, then the fields in little endian.
 //! A record that does not decode (another format, another slot count, cut short) gives `None`,
-//! and the unit starts that record from its defaults.
+//! and the unit starts that record from its defaults. [`Records`] is the store's view of all four,
+//! with the identity registers split from the other settings.
 
 use heapless::Vec;
 
-use super::{Counters, MAX_SETTINGS, Settings};
+use super::{Counters, IDENTITY_REGISTERS, MAX_SETTINGS, Settings, Snapshot, is_identity};
 use crate::unit::Lane;
 
 /// The layout version of every record: a record with another is ignored.
@@ -169,6 +170,86 @@ pub(super) fn decode_settings(bytes: &[u8]) -> Option<Settings> {
         settings.push((reader.u8()?, reader.u16()?)).ok()?;
     }
     reader.0.is_empty().then_some(settings)
+}
+
+/// Every record as this store last wrote or read it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub(super) struct Records<const N: usize> {
+    pub(super) lanes: [Lane; N],
+    pub(super) counters: Counters<N>,
+    pub(super) settings: Settings,
+    pub(super) identity: Identity,
+}
+
+/// The identity registers and their values (at most one entry per identity register).
+type Identity = heapless::Vec<(u8, u16), { IDENTITY_REGISTERS.len() }>;
+
+impl<const N: usize> Records<N> {
+    pub(super) fn blank() -> Self {
+        Records {
+            lanes: [Lane::Unknown; N],
+            counters: Counters::default(),
+            settings: Settings::new(),
+            identity: Identity::new(),
+        }
+    }
+
+    /// `snapshot`'s settings split into the identity and the rest.
+    pub(super) fn from_snapshot(snapshot: &Snapshot<N>) -> Self {
+        let (mut settings, mut identity) = (Settings::new(), Identity::new());
+        for &(address, value) in &snapshot.settings {
+            // Each holds what a snapshot can hold (a register appears once).
+            let _ = if is_identity(address) {
+                identity.push((address, value))
+            } else {
+                settings.push((address, value))
+            };
+        }
+        Records {
+            lanes: snapshot.lanes,
+            counters: snapshot.counters,
+            settings,
+            identity,
+        }
+    }
+
+    pub(super) fn snapshot(&self) -> Snapshot<N> {
+        let mut settings = self.settings.clone();
+        for &entry in &self.identity {
+            let _ = settings.push(entry);
+        }
+        Snapshot {
+            lanes: self.lanes,
+            counters: self.counters,
+            settings,
+        }
+    }
+
+    pub(super) fn encode(&self, record: Record) -> Bytes {
+        match record {
+            Record::Lanes => encode_lanes(&self.lanes),
+            Record::Counters => encode_counters(&self.counters),
+            Record::Settings => encode_settings(&self.settings),
+            Record::Identity => encode_settings(&self.identity),
+        }
+    }
+
+    /// Take a record's newest stored bytes (`None`: it does not decode, back to its default).
+    pub(super) fn decode(&mut self, record: Record, bytes: &[u8]) {
+        match record {
+            Record::Lanes => self.lanes = decode_lanes(bytes).unwrap_or([Lane::Unknown; N]),
+            Record::Counters => self.counters = decode_counters(bytes).unwrap_or_default(),
+            Record::Settings => self.settings = decode_settings(bytes).unwrap_or_default(),
+            Record::Identity => {
+                let stored = decode_settings(bytes).unwrap_or_default();
+                self.identity = stored
+                    .into_iter()
+                    .filter(|(address, _)| is_identity(*address))
+                    .take(IDENTITY_REGISTERS.len())
+                    .collect();
+            }
+        }
+    }
 }
 
 #[cfg(test)]

@@ -14,110 +14,17 @@
 //! interrupted erase or program leaves entries that are older than, or lose against, a complete
 //! one. A double word that does not read (ECC) costs the entry it belongs to, never the store.
 
-use crc::{CRC_16_IBM_3740, CRC_32_ISO_HDLC, Crc};
 use embedded_storage_async::nor_flash::NorFlash;
 
-use super::records::{
-    Bytes, MAX_RECORD, Record, decode_counters, decode_lanes, decode_settings, encode_counters, encode_lanes,
-    encode_settings,
-};
-use super::{IDENTITY_REGISTERS, Settings, Snapshot, StoreError, is_identity};
+use super::entry::{COMMIT, DOUBLE_WORD, MAX_ENTRY, build_entry, entry_size, is_complete, parse_header};
+use super::records::{Bytes, Record, Records};
+use super::{Snapshot, StoreError};
 use crate::time::Instant;
-use crate::unit::Lane;
 
-/// The STM32G0's programming unit: a 64-bit double word.
-const DOUBLE_WORD: usize = 8;
-/// The largest entry: header, the largest record padded to double words, trailer.
-const MAX_ENTRY: usize = DOUBLE_WORD + MAX_RECORD.next_multiple_of(DOUBLE_WORD) + DOUBLE_WORD;
 /// Page moves one save may try (each erases at most one page) before it gives up.
 const MOVES_PER_SAVE: usize = 2;
-/// The key of the entry that commits a fresh page's full copy (no payload).
-const COMMIT: u8 = 0x5c;
 /// Counters are written at most this often, ms (they change while the unit works).
 pub const SLOW_RECORD_PERIOD_MS: u64 = 10_000;
-
-const HEADER_CRC: Crc<u16> = Crc::<u16>::new(&CRC_16_IBM_3740);
-const ENTRY_CRC: Crc<u32> = Crc::<u32>::new(&CRC_32_ISO_HDLC);
-
-/// Every record as this store last wrote or read it.
-#[derive(Debug, Clone, PartialEq, Eq)]
-struct Records<const N: usize> {
-    lanes: [Lane; N],
-    counters: super::Counters<N>,
-    settings: Settings,
-    identity: Identity,
-}
-
-/// The identity registers and their values (at most one entry per identity register).
-type Identity = heapless::Vec<(u8, u16), { IDENTITY_REGISTERS.len() }>;
-
-impl<const N: usize> Records<N> {
-    fn blank() -> Self {
-        Records {
-            lanes: [Lane::Unknown; N],
-            counters: super::Counters::default(),
-            settings: Settings::new(),
-            identity: Identity::new(),
-        }
-    }
-
-    /// `snapshot`'s settings split into the identity and the rest.
-    fn from_snapshot(snapshot: &Snapshot<N>) -> Self {
-        let (mut settings, mut identity) = (Settings::new(), Identity::new());
-        for &(address, value) in &snapshot.settings {
-            // Each holds what a snapshot can hold (a register appears once).
-            let _ = if is_identity(address) {
-                identity.push((address, value))
-            } else {
-                settings.push((address, value))
-            };
-        }
-        Records {
-            lanes: snapshot.lanes,
-            counters: snapshot.counters,
-            settings,
-            identity,
-        }
-    }
-
-    fn snapshot(&self) -> Snapshot<N> {
-        let mut settings = self.settings.clone();
-        for &entry in &self.identity {
-            let _ = settings.push(entry);
-        }
-        Snapshot {
-            lanes: self.lanes,
-            counters: self.counters,
-            settings,
-        }
-    }
-
-    fn encode(&self, record: Record) -> Bytes {
-        match record {
-            Record::Lanes => encode_lanes(&self.lanes),
-            Record::Counters => encode_counters(&self.counters),
-            Record::Settings => encode_settings(&self.settings),
-            Record::Identity => encode_settings(&self.identity),
-        }
-    }
-
-    /// Take a record's newest stored bytes (`None`: it does not decode, back to its default).
-    fn decode(&mut self, record: Record, bytes: &[u8]) {
-        match record {
-            Record::Lanes => self.lanes = decode_lanes(bytes).unwrap_or([Lane::Unknown; N]),
-            Record::Counters => self.counters = decode_counters(bytes).unwrap_or_default(),
-            Record::Settings => self.settings = decode_settings(bytes).unwrap_or_default(),
-            Record::Identity => {
-                let stored = decode_settings(bytes).unwrap_or_default();
-                self.identity = stored
-                    .into_iter()
-                    .filter(|(address, _)| is_identity(*address))
-                    .take(IDENTITY_REGISTERS.len())
-                    .collect();
-            }
-        }
-    }
-}
 
 /// Where a record's newest complete copy lies.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -266,42 +173,24 @@ impl<F: NorFlash, const N: usize> Store<F, N> {
         self.saved.snapshot()
     }
 
-    /// Read the header double word at `address`: `Ok(None)` when erased; the key is a record's
-    /// or [`COMMIT`].
+    /// Read the header double word at `address`: `Ok(None)` when erased, `Err` when it does not
+    /// read or is not a header; the key is a record's or [`COMMIT`].
     async fn header(&mut self, address: u32) -> Result<Option<(u8, usize, u32)>, ()> {
         let mut word = [0u8; DOUBLE_WORD];
         self.flash.read(address, &mut word).await.map_err(drop)?;
         if word == [0xff; DOUBLE_WORD] {
             return Ok(None);
         }
-        let [key, len, s0, s1, s2, s3, c0, c1] = word;
-        let known = Record::from_key(key).is_some() || key == COMMIT;
-        if !known
-            || HEADER_CRC.checksum(&word[..6]) != u16::from_le_bytes([c0, c1])
-            || usize::from(len) > MAX_RECORD
-        {
-            return Err(());
-        }
-        Ok(Some((
-            key,
-            usize::from(len),
-            u32::from_le_bytes([s0, s1, s2, s3]),
-        )))
+        parse_header(&word).map(Some).ok_or(())
     }
 
     /// Read the whole entry at `address` whose payload is `len` bytes into the buffer: whether it
     /// is complete (it reads and its trailer matches).
     async fn entry_complete(&mut self, address: u32, len: usize) -> bool {
-        let size = entry_size(len);
-        let Some(bytes) = self.buffer.get_mut(..size) else {
+        let Some(bytes) = self.buffer.get_mut(..entry_size(len)) else {
             return false;
         };
-        if self.flash.read(address, bytes).await.is_err() {
-            return false;
-        }
-        let body = size - DOUBLE_WORD;
-        let crc = ENTRY_CRC.checksum(&bytes[..body]);
-        bytes[body..] == trailer(crc)
+        self.flash.read(address, bytes).await.is_ok() && is_complete(bytes)
     }
 
     /// Walk one page's entries. In a committed page, note each record's newest complete copy and
@@ -648,54 +537,4 @@ struct PageScan {
     committed: bool,
     /// Where an entry may be appended.
     tail: Option<u32>,
-}
-
-/// The bytes of an entry of `len` payload bytes.
-fn entry_size(len: usize) -> usize {
-    DOUBLE_WORD + len.next_multiple_of(DOUBLE_WORD) + DOUBLE_WORD
-}
-
-/// The trailer of an entry whose header and payload have CRC `crc`: never erased, never zero.
-fn trailer(crc: u32) -> [u8; DOUBLE_WORD] {
-    let mut word = [0; DOUBLE_WORD];
-    word[..4].copy_from_slice(&crc.to_le_bytes());
-    word[4..].copy_from_slice(&(!crc).to_le_bytes());
-    word
-}
-
-/// Lay out an entry in `buffer`; the bytes to program.
-fn build_entry<'b>(buffer: &'b mut [u8; MAX_ENTRY], key: u8, sequence: u32, payload: &[u8]) -> &'b [u8] {
-    let size = entry_size(payload.len());
-    buffer.fill(0);
-    buffer[0] = key;
-    buffer[1] = payload.len() as u8;
-    buffer[2..6].copy_from_slice(&sequence.to_le_bytes());
-    let header_crc = HEADER_CRC.checksum(&buffer[..6]);
-    buffer[6..8].copy_from_slice(&header_crc.to_le_bytes());
-    buffer[DOUBLE_WORD..DOUBLE_WORD + payload.len()].copy_from_slice(payload);
-    let body = size - DOUBLE_WORD;
-    let crc = ENTRY_CRC.checksum(&buffer[..body]);
-    buffer[body..size].copy_from_slice(&trailer(crc));
-    &buffer[..size]
-}
-
-/// The size of the largest entry, for the figures (a full copy writes one of each record).
-pub const fn max_entry_bytes() -> usize {
-    MAX_ENTRY
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn an_entry_lays_out_header_payload_and_trailer_in_double_words() {
-        let mut buffer = [0; MAX_ENTRY];
-        let entry = build_entry(&mut buffer, Record::Lanes as u8, 7, &[1, 3, 2, 2, 5]);
-        assert_eq!(entry.len(), 24);
-        assert_eq!(entry[..6], [1, 5, 7, 0, 0, 0]);
-        assert_ne!(entry[16..], [0xff; 8]);
-        let all = super::super::records::encode_settings(&[(1, 2); super::super::MAX_SETTINGS]);
-        assert_eq!(entry_size(all.len()), MAX_ENTRY);
-    }
 }
