@@ -54,7 +54,8 @@ pub struct Outputs<const N: usize> {
     pub status_led: bool,
 }
 
-/// The unit logic for `N` slots (1 to 5).
+/// The unit logic for `N` slots (1 to 5). `Clone` lets the power-cut study fork a unit's life.
+#[derive(Clone)]
 pub struct App<const N: usize> {
     pub(crate) config: Config,
     pub(crate) unit: Unit<N>,

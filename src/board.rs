@@ -16,6 +16,7 @@
 
 use core::convert::Infallible;
 use core::ops::Range;
+use core::sync::atomic::{AtomicBool, Ordering};
 use core::task::Poll;
 
 use embassy_embedded_hal::adapter::BlockingAsync;
@@ -234,8 +235,8 @@ pub type StoreFlash = BlockingAsync<WatchedFlash>;
 /// altogether: no task, no interrupt (the vectors are in flash too). The motors keep the last
 /// command applied; UART bytes that arrive meanwhile, past the receiver's own buffer, are lost
 /// (overrun; the printer's protocol retries); the timers and the ADC's DMA carry on. One save writes
-/// a few double words, and erases a page when the map moves to the next one; a repair after a
-/// power cut, or erasing the whole store, erases several pages in a row. Each erase is shorter
+/// a few double words, and erases a page when the store opens a fresh one (at most two per save,
+/// see `mmu_firmware::persist`); erasing the whole store erases all its pages in a row. Each erase is shorter
 /// than [`WATCHDOG_TIMEOUT_US`], so reloading before each operation keeps a long run of them from
 /// resetting the MCU, while a stall outside the flash (the control loop itself) still does.
 pub struct WatchedFlash(Flash<'static, Blocking>);
@@ -253,8 +254,19 @@ impl ErrorType for WatchedFlash {
 impl ReadNorFlash for WatchedFlash {
     const READ_SIZE: usize = <Flash<'static, Blocking> as ReadNorFlash>::READ_SIZE;
 
+    /// A double word with a double ECC error (a program cut by a power loss) makes the read
+    /// fail (see [`on_flash_double_ecc_error`]).
     fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), flash::Error> {
-        self.0.blocking_read(offset, bytes)
+        STORE_ECC_ERROR.store(false, Ordering::SeqCst);
+        self.0.blocking_read(offset, bytes)?;
+        // The NMI of a failing load is taken before the barrier completes.
+        cortex_m::asm::dsb();
+        cortex_m::asm::isb();
+        if STORE_ECC_ERROR.load(Ordering::SeqCst) {
+            STORE_ECC_ERROR.store(false, Ordering::SeqCst);
+            return Err(flash::Error::Prog);
+        }
+        Ok(())
     }
 
     fn capacity(&self) -> usize {
@@ -281,40 +293,26 @@ impl NorFlash for WatchedFlash {
     }
 }
 
-/// Set by [`on_flash_double_ecc_error`] for the next boot: erase the store instead of reading it.
-/// In `.uninit`, so it survives a system reset; after power-up it holds garbage, which matches
-/// [`ERASE_STORE_MAGIC`] with negligible odds.
-#[unsafe(link_section = ".uninit.mmu.ERASE_STORE")]
-static mut ERASE_STORE: core::mem::MaybeUninit<u32> = core::mem::MaybeUninit::uninit();
-const ERASE_STORE_MAGIC: u32 = 0x4543_4345;
+/// Set by [`on_flash_double_ecc_error`] when a read of the store met a double ECC error;
+/// [`WatchedFlash`]'s read turns it into an error, which costs the store one entry.
+static STORE_ECC_ERROR: AtomicBool = AtomicBool::new(false);
 
-/// A flash read hit a double ECC error (the NMI). On this part a double-word write cut by a power
-/// loss can leave one in the store; reading it again would raise the NMI again at every boot.
-/// So: motors off, the store marked for erasure at the next boot, the flag cleared, reset.
-pub fn on_flash_double_ecc_error() -> ! {
-    emergency_stop();
-    if pac::FLASH.eccr().read().eccd() {
-        // SAFETY: a plain word write from the NMI handler, the only writer, just before a reset.
-        unsafe {
-            core::ptr::addr_of_mut!(ERASE_STORE)
-                .cast::<u32>()
-                .write_volatile(ERASE_STORE_MAGIC)
-        };
+/// A flash read hit a double ECC error (the NMI; RM0444 §3.3.9). On this part a double-word
+/// program cut by a power loss leaves one in the store: the read that met it is in
+/// [`WatchedFlash::read`], which is told so and returns an error (the store then skips that
+/// entry, see `mmu_firmware::persist`). Anywhere else (code, constants) the MCU cannot go on:
+/// motors off, reset.
+pub fn on_flash_double_ecc_error() {
+    let eccr = pac::FLASH.eccr().read();
+    // ADDR_ECC: the failing double word's offset from the flash base, in double words.
+    let offset = u32::from(eccr.addr_ecc()) * 8;
+    if eccr.eccd() && !eccr.sysf_ecc() && STORE_RANGE.contains(&offset) {
         pac::FLASH.eccr().modify(|w| w.set_eccd(true));
+        STORE_ECC_ERROR.store(true, Ordering::SeqCst);
+        return;
     }
+    emergency_stop();
     cortex_m::peripheral::SCB::sys_reset()
-}
-
-/// Whether the last run ended on a flash double ECC error, so the store must be erased before
-/// anything reads it. Clears the request.
-pub fn take_store_erase_request() -> bool {
-    let flag = core::ptr::addr_of_mut!(ERASE_STORE).cast::<u32>();
-    // SAFETY: read and cleared once at boot, before the NMI path could run again.
-    unsafe {
-        let requested = flag.read_volatile() == ERASE_STORE_MAGIC;
-        flag.write_volatile(0);
-        requested
-    }
 }
 
 /// Stops every motor and restarts the MCU.

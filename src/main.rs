@@ -215,17 +215,11 @@ fn log_stats(stats: &control::Stats) {
 struct Persisted(Keeper<board::StoreFlash, SLOTS>);
 
 impl Persisted {
-    /// Restores into `app` what the flash holds, before its first step. After a flash ECC error
-    /// the store is wiped first; a store that cannot be read is wiped too.
+    /// Restores into `app` what the flash holds, before its first step: each record's newest
+    /// complete copy (a double word with an ECC error costs only its entry).
     #[inline(never)]
     fn boot(app: &mut App<SLOTS>, flash: board::StoreFlash) -> Self {
-        let mut store = unwrap!(Store::new(flash, board::STORE_RANGE));
-        if board::take_store_erase_request() {
-            warn!("store: a flash ECC error stopped the last run, wiping the store: the unit starts as new");
-            if let Err(e) = block_on(store.wipe()) {
-                error!("store: wipe failed: {}", e);
-            }
-        }
+        let store = unwrap!(Store::new(flash, board::STORE_RANGE));
         let (keeper, boot) = block_on(Keeper::boot(store, app));
         match boot {
             Boot::Restored => {
@@ -241,23 +235,24 @@ impl Persisted {
                     c.fed_mm
                 );
             }
-            Boot::Wiped(Ok(())) => warn!("store: unreadable, wiped: the unit starts as new"),
-            Boot::Wiped(Err(e)) => error!("store: unreadable and the wipe failed: {}", e),
+            Boot::Damaged(damage) => warn!(
+                "store: {} unreadable double words, {} torn entries (a power cut): the newest complete records are restored",
+                damage.unreadable, damage.torn
+            ),
         }
         Persisted(keeper)
     }
 
     /// Writes what changed (see [`Keeper::update`]). Returns whether it wrote, i.e. stalled the
-    /// CPU. A failed write leaves the previous record in flash; the next step tries again.
+    /// CPU. A failed write leaves the previous record in flash; the keeper tries again after a
+    /// pause, and its health is logged once per change.
     #[inline(never)]
     fn update(&mut self, app: &App<SLOTS>, now: Clock) -> bool {
-        match block_on(self.0.update(app, Instant::from_millis(now.as_millis()))) {
-            Ok(wrote) => wrote,
-            Err(e) => {
-                error!("store: save failed: {}", e);
-                true
-            }
+        let wrote = block_on(self.0.update(app, Instant::from_millis(now.as_millis())));
+        if let Some(health) = self.0.take_news() {
+            warn!("store: {}", health);
         }
+        wrote.unwrap_or(true)
     }
 
     /// Saves everything before a reset, or forgets it for `X42`.
@@ -292,9 +287,9 @@ fn panic(info: &PanicInfo) -> ! {
 }
 
 /// The NMI: on this part a double ECC error reading the flash (see
-/// `board::on_flash_double_ecc_error`: the store is erased at the next boot).
+/// `board::on_flash_double_ecc_error`: in the store it fails the read, elsewhere it resets).
 #[exception]
-unsafe fn NonMaskableInt() -> ! {
+unsafe fn NonMaskableInt() {
     board::on_flash_double_ecc_error()
 }
 

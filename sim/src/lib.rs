@@ -8,6 +8,7 @@
 //! - [`soak`]: long runs of tool changes with random faults, and the figures they give;
 //!   [`timing`]: the physical minimum a tool change is measured against.
 
+pub mod cut;
 pub mod event;
 pub mod fault;
 pub mod flash;

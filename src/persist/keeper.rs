@@ -1,0 +1,204 @@
+//! The persistence policy of a running unit, shared by the firmware and the simulator: restore at
+//! boot; then lanes and settings saved in the step they change, counters as the store allows,
+//! everything before a reset. A flash that fails is retried with a growing pause, and the page
+//! erases of any hour stay under [`ERASE_BURST`] + [`ERASES_PER_HOUR`] whatever happens (each
+//! erase stalls the CPU up to 40 ms on the STM32G0).
+
+use embedded_storage_async::nor_flash::NorFlash;
+
+use super::{Damage, Store, StoreError};
+use crate::app::{App, BoardAction};
+use crate::time::Instant;
+use crate::unit::Lane;
+
+/// [`Keeper::update`] compares counters and settings this often; lanes every step, ms.
+pub const FULL_CHECK_MS: u64 = 1000;
+/// Page erases a running unit may do per hour, on top of [`ERASE_BURST`].
+pub const ERASES_PER_HOUR: u32 = 60;
+/// Page erases a unit may do at once (its budget when it starts, and the most it saves up).
+pub const ERASE_BURST: u32 = 24;
+/// The first pause after a failed save, ms; it doubles up to [`RETRY_MAX_MS`].
+const RETRY_MIN_MS: u64 = 1000;
+/// The longest pause between two tries of a failing store, ms.
+pub const RETRY_MAX_MS: u64 = 600_000;
+/// A reset (`X0`, `X42`) may always erase this many pages (one save's page moves).
+const ERASES_BEFORE_RESET: u32 = 2;
+
+/// What [`Keeper::boot`] found in the flash.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Boot {
+    /// The stored state is restored into the App.
+    Restored,
+    /// What could be read is restored; the store held damage (a program or an erase cut short),
+    /// which the saves that follow leave behind.
+    Damaged(Damage),
+}
+
+/// How the store is doing, for a register and the log.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Health {
+    /// Times the store was found damaged at boot or recovered from failing saves.
+    pub repairs: u16,
+    /// Saves that failed (the flash refused, or the erase budget was spent).
+    pub failed_saves: u32,
+    /// Page erases since boot.
+    pub erases: u32,
+    /// Whether the last save failed: the flash holds older state than the unit.
+    pub failing: bool,
+}
+
+/// The save policy over a [`Store`].
+#[derive(Clone)]
+pub struct Keeper<F: NorFlash, const N: usize> {
+    store: Store<F, N>,
+    /// The lanes as of the last comparison with the flash.
+    lanes: [Lane; N],
+    /// When counters and settings were last compared.
+    checked_at: Option<Instant>,
+    /// Erases allowed now, and when the budget was last topped up.
+    erase_credit: u32,
+    refilled_at: Option<Instant>,
+    /// After a failed save: no new try before this, and the pause after the next failure.
+    retry_at: Option<Instant>,
+    retry_pause_ms: u64,
+    health: Health,
+    /// Something [`Keeper::take_news`] has not reported yet.
+    news: bool,
+}
+
+impl<F: NorFlash, const N: usize> Keeper<F, N> {
+    /// Restore into `app` (before its first step) what `store` holds. A store that cannot be read
+    /// in places still gives every record it can (the newest complete copy of each).
+    pub async fn boot(mut store: Store<F, N>, app: &mut App<N>) -> (Self, Boot) {
+        let snapshot = store.load().await;
+        app.restore(&snapshot);
+        let damage = store.damage();
+        let boot = if damage.is_none() {
+            Boot::Restored
+        } else {
+            Boot::Damaged(damage)
+        };
+        let keeper = Keeper {
+            store,
+            lanes: app.lanes(),
+            checked_at: None,
+            erase_credit: ERASE_BURST,
+            refilled_at: None,
+            retry_at: None,
+            retry_pause_ms: RETRY_MIN_MS,
+            health: Health {
+                repairs: u16::from(!damage.is_none()),
+                ..Health::default()
+            },
+            news: !damage.is_none(),
+        };
+        (keeper, boot)
+    }
+
+    /// After a step: save what changed. Lanes are compared every step (cheap); the full snapshot
+    /// every [`FULL_CHECK_MS`] or when lanes changed. `Ok(true)` when it wrote (the flash may
+    /// have stalled the CPU); a failed save leaves the previous records and is tried again after
+    /// a pause (1 s, doubling up to [`RETRY_MAX_MS`]).
+    pub async fn update(&mut self, app: &App<N>, now: Instant) -> Result<bool, StoreError> {
+        self.top_up(now);
+        if self.retry_at.is_some_and(|at| now.as_millis() < at.as_millis()) {
+            return Ok(false);
+        }
+        let lanes = app.lanes();
+        let full_check = self.health.failing
+            || self
+                .checked_at
+                .is_none_or(|at| now.millis_since(at) >= FULL_CHECK_MS);
+        if lanes == self.lanes && !full_check {
+            return Ok(false);
+        }
+        self.checked_at = Some(now);
+        let snapshot = app.snapshot();
+        if !self.store.save_due(&snapshot, now) {
+            self.lanes = lanes;
+            return Ok(false);
+        }
+        self.store.set_erase_allowance(self.erase_credit);
+        let result = self.store.save(&snapshot, Some(now)).await;
+        self.settle(result.map(drop), now)?;
+        self.lanes = lanes;
+        Ok(true)
+    }
+
+    /// Before the board carries out `action`: save everything (`X0`), or forget all but the
+    /// identity (`X42`).
+    pub async fn before(&mut self, action: BoardAction, app: &App<N>) -> Result<(), StoreError> {
+        let now = self.refilled_at.unwrap_or(Instant::ZERO);
+        self.store
+            .set_erase_allowance(self.erase_credit.max(ERASES_BEFORE_RESET));
+        let result = match action {
+            BoardAction::Reset => self.store.save(&app.snapshot(), None).await.map(drop),
+            BoardAction::EraseAndReset => self.store.forget().await,
+        };
+        self.settle(result, now)
+    }
+
+    /// Account for a save's erases and outcome.
+    fn settle(&mut self, result: Result<(), StoreError>, now: Instant) -> Result<(), StoreError> {
+        let erases = self.store.erases();
+        let used = erases.saturating_sub(self.health.erases);
+        self.health.erases = erases;
+        self.erase_credit = self.erase_credit.saturating_sub(used);
+        match result {
+            Ok(()) => {
+                if self.health.failing {
+                    self.health.failing = false;
+                    self.health.repairs = self.health.repairs.saturating_add(1);
+                    self.news = true;
+                }
+                self.retry_at = None;
+                self.retry_pause_ms = RETRY_MIN_MS;
+            }
+            Err(_) => {
+                self.health.failed_saves = self.health.failed_saves.saturating_add(1);
+                if !self.health.failing {
+                    self.health.failing = true;
+                    self.news = true;
+                }
+                self.retry_at = Some(Instant::from_millis(now.as_millis() + self.retry_pause_ms));
+                self.retry_pause_ms = (self.retry_pause_ms * 2).min(RETRY_MAX_MS);
+            }
+        }
+        result
+    }
+
+    /// One erase more every hour / [`ERASES_PER_HOUR`], up to [`ERASE_BURST`].
+    fn top_up(&mut self, now: Instant) {
+        const PERIOD_MS: u64 = 3_600_000 / ERASES_PER_HOUR as u64;
+        let since = *self.refilled_at.get_or_insert(now);
+        let earned = now.millis_since(since) / PERIOD_MS;
+        if self.erase_credit >= ERASE_BURST {
+            self.refilled_at = Some(now);
+        } else if earned > 0 {
+            self.erase_credit = (self.erase_credit + earned as u32).min(ERASE_BURST);
+            self.refilled_at = Some(Instant::from_millis(since.as_millis() + earned * PERIOD_MS));
+        }
+    }
+
+    /// How the store is doing.
+    pub fn health(&self) -> Health {
+        self.health
+    }
+
+    /// The health, once after each change worth a log line: damage found at boot, the first of
+    /// a run of failed saves, the recovery from it.
+    pub fn take_news(&mut self) -> Option<Health> {
+        core::mem::take(&mut self.news).then_some(self.health)
+    }
+
+    /// The store.
+    pub fn store(&mut self) -> &mut Store<F, N> {
+        &mut self.store
+    }
+
+    /// Give the store back (e.g. its flash, for the next boot in a simulation).
+    pub fn into_store(self) -> Store<F, N> {
+        self.store
+    }
+}

@@ -1,0 +1,293 @@
+//! The records and their bytes: a format byte, an entry count, then the fields in little endian.
+//! A record that does not decode (another format, another slot count, cut short) gives `None`,
+//! and the unit starts that record from its defaults. [`Records`] is the store's view of all four,
+//! with the identity registers split from the other settings.
+
+use heapless::Vec;
+
+use super::{Counters, IDENTITY_REGISTERS, MAX_SETTINGS, Settings, Snapshot, is_identity};
+use crate::unit::Lane;
+
+/// The layout version of every record: a record with another is ignored.
+const FORMAT: u8 = 1;
+/// The largest record (the settings: a 2-byte header and 3 bytes each).
+pub(super) const MAX_RECORD: usize = 2 + 3 * MAX_SETTINGS;
+
+/// The records, by their key in the store.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u8)]
+pub(super) enum Record {
+    Lanes = 1,
+    Counters = 2,
+    Settings = 3,
+    /// The registers that decide whether a printer talks to the unit: kept by `X42`.
+    Identity = 4,
+}
+
+impl Record {
+    /// Every record, in the order a full copy writes them.
+    pub(super) const ALL: [Record; 4] = [
+        Record::Identity,
+        Record::Settings,
+        Record::Counters,
+        Record::Lanes,
+    ];
+
+    pub(super) fn from_key(key: u8) -> Option<Record> {
+        Some(match key {
+            1 => Record::Lanes,
+            2 => Record::Counters,
+            3 => Record::Settings,
+            4 => Record::Identity,
+            _ => return None,
+        })
+    }
+
+    pub(super) fn index(self) -> usize {
+        usize::from(self as u8 - 1)
+    }
+}
+
+/// One record's bytes.
+pub(super) type Bytes = Vec<u8, MAX_RECORD>;
+
+fn lane_code(lane: Lane) -> u8 {
+    match lane {
+        Lane::Unknown => 0,
+        Lane::Empty => 1,
+        Lane::Parked => 2,
+        Lane::InHub => 3,
+        Lane::AtFsensor => 4,
+        Lane::Loaded => 5,
+    }
+}
+
+fn lane_from(code: u8) -> Option<Lane> {
+    Some(match code {
+        0 => Lane::Unknown,
+        1 => Lane::Empty,
+        2 => Lane::Parked,
+        3 => Lane::InHub,
+        4 => Lane::AtFsensor,
+        5 => Lane::Loaded,
+        _ => return None,
+    })
+}
+
+/// Reads a record's fields in order; every read past the end gives `None`.
+struct Reader<'a>(&'a [u8]);
+
+impl Reader<'_> {
+    fn u8(&mut self) -> Option<u8> {
+        let (&first, rest) = self.0.split_first()?;
+        self.0 = rest;
+        Some(first)
+    }
+
+    fn u16(&mut self) -> Option<u16> {
+        Some(u16::from_le_bytes([self.u8()?, self.u8()?]))
+    }
+
+    fn u32(&mut self) -> Option<u32> {
+        Some(u32::from(self.u16()?) | (u32::from(self.u16()?) << 16))
+    }
+}
+
+/// Append `bytes`; every record built here fits [`MAX_RECORD`].
+fn put(out: &mut Bytes, bytes: &[u8]) {
+    let _ = out.extend_from_slice(bytes);
+}
+
+fn header(entries: usize) -> Bytes {
+    let mut out = Bytes::new();
+    put(&mut out, &[FORMAT, entries as u8]);
+    out
+}
+
+pub(super) fn encode_lanes<const N: usize>(lanes: &[Lane; N]) -> Bytes {
+    let mut out = header(N);
+    for &lane in lanes {
+        put(&mut out, &[lane_code(lane)]);
+    }
+    out
+}
+
+pub(super) fn encode_counters<const N: usize>(counters: &Counters<N>) -> Bytes {
+    let mut out = header(N);
+    put(&mut out, &counters.drive_errors.to_le_bytes());
+    for slot in 0..N {
+        put(&mut out, &counters.tool_changes[slot].to_le_bytes());
+        put(&mut out, &counters.failures[slot].to_le_bytes());
+        put(&mut out, &counters.fed_mm[slot].to_le_bytes());
+    }
+    out
+}
+
+/// Settings and identity records alike: (register, value) pairs.
+pub(super) fn encode_settings(settings: &[(u8, u16)]) -> Bytes {
+    let mut out = header(settings.len());
+    for &(address, value) in settings {
+        put(&mut out, &[address]);
+        put(&mut out, &value.to_le_bytes());
+    }
+    out
+}
+
+/// A reader past the header, when the record is of this format and for `count` entries.
+fn body(bytes: &[u8], count: Option<usize>) -> Option<(Reader<'_>, usize)> {
+    let mut reader = Reader(bytes);
+    let (format, entries) = (reader.u8()?, usize::from(reader.u8()?));
+    (format == FORMAT && count.is_none_or(|n| n == entries)).then_some((reader, entries))
+}
+
+pub(super) fn decode_lanes<const N: usize>(bytes: &[u8]) -> Option<[Lane; N]> {
+    let (mut reader, _) = body(bytes, Some(N))?;
+    let mut lanes = [Lane::Unknown; N];
+    for lane in &mut lanes {
+        *lane = lane_from(reader.u8()?)?;
+    }
+    reader.0.is_empty().then_some(lanes)
+}
+
+pub(super) fn decode_counters<const N: usize>(bytes: &[u8]) -> Option<Counters<N>> {
+    let (mut reader, _) = body(bytes, Some(N))?;
+    let mut counters = Counters::<N> {
+        drive_errors: reader.u16()?,
+        ..Counters::default()
+    };
+    for slot in 0..N {
+        counters.tool_changes[slot] = reader.u16()?;
+        counters.failures[slot] = reader.u16()?;
+        counters.fed_mm[slot] = reader.u32()?;
+    }
+    reader.0.is_empty().then_some(counters)
+}
+
+pub(super) fn decode_settings(bytes: &[u8]) -> Option<Settings> {
+    let (mut reader, entries) = body(bytes, None)?;
+    let mut settings = Vec::new();
+    for _ in 0..entries {
+        settings.push((reader.u8()?, reader.u16()?)).ok()?;
+    }
+    reader.0.is_empty().then_some(settings)
+}
+
+/// Every record as this store last wrote or read it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub(super) struct Records<const N: usize> {
+    pub(super) lanes: [Lane; N],
+    pub(super) counters: Counters<N>,
+    pub(super) settings: Settings,
+    pub(super) identity: Identity,
+}
+
+/// The identity registers and their values (at most one entry per identity register).
+type Identity = heapless::Vec<(u8, u16), { IDENTITY_REGISTERS.len() }>;
+
+impl<const N: usize> Records<N> {
+    pub(super) fn blank() -> Self {
+        Records {
+            lanes: [Lane::Unknown; N],
+            counters: Counters::default(),
+            settings: Settings::new(),
+            identity: Identity::new(),
+        }
+    }
+
+    /// `snapshot`'s settings split into the identity and the rest.
+    pub(super) fn from_snapshot(snapshot: &Snapshot<N>) -> Self {
+        let (mut settings, mut identity) = (Settings::new(), Identity::new());
+        for &(address, value) in &snapshot.settings {
+            // Each holds what a snapshot can hold (a register appears once).
+            let _ = if is_identity(address) {
+                identity.push((address, value))
+            } else {
+                settings.push((address, value))
+            };
+        }
+        Records {
+            lanes: snapshot.lanes,
+            counters: snapshot.counters,
+            settings,
+            identity,
+        }
+    }
+
+    pub(super) fn snapshot(&self) -> Snapshot<N> {
+        let mut settings = self.settings.clone();
+        for &entry in &self.identity {
+            let _ = settings.push(entry);
+        }
+        Snapshot {
+            lanes: self.lanes,
+            counters: self.counters,
+            settings,
+        }
+    }
+
+    pub(super) fn encode(&self, record: Record) -> Bytes {
+        match record {
+            Record::Lanes => encode_lanes(&self.lanes),
+            Record::Counters => encode_counters(&self.counters),
+            Record::Settings => encode_settings(&self.settings),
+            Record::Identity => encode_settings(&self.identity),
+        }
+    }
+
+    /// Take a record's newest stored bytes (`None`: it does not decode, back to its default).
+    pub(super) fn decode(&mut self, record: Record, bytes: &[u8]) {
+        match record {
+            Record::Lanes => self.lanes = decode_lanes(bytes).unwrap_or([Lane::Unknown; N]),
+            Record::Counters => self.counters = decode_counters(bytes).unwrap_or_default(),
+            Record::Settings => self.settings = decode_settings(bytes).unwrap_or_default(),
+            Record::Identity => {
+                let stored = decode_settings(bytes).unwrap_or_default();
+                self.identity = stored
+                    .into_iter()
+                    .filter(|(address, _)| is_identity(*address))
+                    .take(IDENTITY_REGISTERS.len())
+                    .collect();
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn records_decode_to_what_was_encoded() {
+        let lanes = [Lane::Parked, Lane::Loaded, Lane::Empty];
+        assert_eq!(decode_lanes::<3>(&encode_lanes(&lanes)), Some(lanes));
+        let counters = Counters::<3> {
+            drive_errors: 7,
+            tool_changes: [1, 2, 65535],
+            failures: [0, 4, 0],
+            fed_mm: [0, 123_456_789, 5],
+        };
+        assert_eq!(decode_counters::<3>(&encode_counters(&counters)), Some(counters));
+        let settings = [(0x0b, 30), (0x22, 360), (0x90, 2600)];
+        assert_eq!(
+            decode_settings(&encode_settings(&settings)).as_deref(),
+            Some(&settings[..])
+        );
+        let all: Settings = (0..MAX_SETTINGS as u8).map(|a| (a, u16::MAX)).collect();
+        assert_eq!(encode_settings(&all).len(), MAX_RECORD, "the largest record fits");
+    }
+
+    #[test]
+    fn records_of_another_shape_are_refused() {
+        let lanes = encode_lanes(&[Lane::Parked; 3]);
+        assert_eq!(decode_lanes::<4>(&lanes), None, "another slot count");
+        let mut other_format = lanes.clone();
+        other_format[0] = FORMAT + 1;
+        assert_eq!(decode_lanes::<3>(&other_format), None);
+        let mut bad_lane = lanes.clone();
+        bad_lane[2] = 9;
+        assert_eq!(decode_lanes::<3>(&bad_lane), None);
+        assert_eq!(decode_lanes::<3>(&lanes[..4]), None, "cut short");
+        assert_eq!(decode_counters::<3>(&[FORMAT, 3, 1]), None);
+        assert_eq!(decode_settings(&[FORMAT, 2, 0x0b, 30, 0]), None);
+    }
+}
