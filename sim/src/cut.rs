@@ -177,6 +177,9 @@ impl Unit {
 
     /// A frame from the printer, in one step: what the unit answers and the board action.
     pub fn ask(&mut self, request: Request) -> (String, Option<BoardAction>) {
+        // The unit takes a frame only at the start of a quiet line.
+        self.now = self.now + u64::from(mmu_protocol::SILENCE_MS);
+        self.app.step(self.now, &Samples::default(), &[]);
         let frame = request.encode();
         let out = self.app.step(self.now, &Samples::default(), frame.as_bytes());
         (String::from_utf8_lossy(&out.tx).into_owned(), out.action)
