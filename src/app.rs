@@ -164,7 +164,7 @@ impl<const N: usize> App<N> {
         if self.operation.request.0 == RequestCode::Tool {
             self.pending_button = Some(button);
         } else {
-            self.operation.press(button, &self.config);
+            self.operation.press(button, &self.unit, &self.config);
         }
     }
 
@@ -194,7 +194,8 @@ impl<const N: usize> App<N> {
                 Response::rejected(request)
             }),
             RequestCode::Button => {
-                self.operation.press(ButtonCode(request.value), &self.config);
+                self.operation
+                    .press(ButtonCode(request.value), &self.unit, &self.config);
                 Some(Response::accepted(request))
             }
             RequestCode::FilamentSensor => {
@@ -224,11 +225,17 @@ impl<const N: usize> App<N> {
         }
     }
 
+    /// A command is refused only while another one runs. Over an error that waits for the user
+    /// it is accepted and takes the error over ([`Runner::supersede`]): Prusa's printer re-sends
+    /// a refused command at once, forever, and could never send the screen's Retry
+    /// (printer-truth §2.3, §7).
     fn start_command(&mut self, request: &Request) -> Response {
-        if self.operation.is_busy() {
-            return Response::rejected(request);
-        }
         let key = (request.code, request.value);
+        let superseded = match self.operation.status() {
+            Status::Running(_) => return Response::rejected(request),
+            Status::Failed(error) if error != ErrorCode::INVALID_TOOL => true,
+            _ => false,
+        };
         self.pending_button = None;
         if usize::from(request.value) < N
             && request.code != RequestCode::Unload
@@ -236,7 +243,11 @@ impl<const N: usize> App<N> {
         {
             self.unit.selected = Some(request.value.into());
         }
-        self.operation = Runner::start(key, &self.unit, &self.config);
+        self.operation = if superseded {
+            Runner::supersede(&self.operation, key)
+        } else {
+            Runner::start(key, &self.unit, &self.config)
+        };
         Response::bare(request.code, request.value, ParamCode::Accepted)
     }
 

@@ -1,0 +1,123 @@
+//! What Prusa's own printer code does with the unit's answers (issue 12; research notes in
+//! `printer-truth.md`): every error the printer shows has a way out, and nothing the unit answers
+//! makes the printer loop. Each test is named after the finding it reproduces.
+
+mod common;
+
+use common::Rig;
+use mmu_protocol::{ButtonCode, ErrorCode, ParamCode, Request, RequestCode, Response, ResultCode};
+
+fn t(slot: u8) -> Request {
+    Request::new(RequestCode::Tool, slot)
+}
+
+fn accepted(request: Request) -> Response {
+    Response::bare(request.code, request.value, ParamCode::Accepted)
+}
+
+fn finished(request: Request) -> Response {
+    Response::finished(request.code, request.value, ResultCode::OK)
+}
+
+fn error(request: Request, code: ErrorCode) -> Response {
+    Response::error(request.code, request.value, code)
+}
+
+fn press(rig: &mut Rig<3>, button: u8) {
+    let answer = rig.send(Request::new(RequestCode::Button, button));
+    assert_eq!(answer.map(|a| a.param), Some(ParamCode::Accepted));
+}
+
+/// No slot motor ran since the motor log had `since` entries.
+fn nothing_moved_since(rig: &Rig<3>, since: usize) -> bool {
+    rig.motor_log[since..]
+        .iter()
+        .all(|motors| motors.iter().all(|m| !m.is_driving()))
+}
+
+// ---- #10: a start-up error turns the next command into an endless reject ---------------------
+
+/// Prusa's printer re-sends a rejected command at once, forever, and can then never send the
+/// Retry of the error screen (`protocol_logic.cpp` `CommandRejected` → `CommandRestart`): the
+/// command must be accepted and fail with the waiting error, so the screen's Retry works.
+#[test]
+fn start_up_error_then_tool_change_is_accepted_and_fails_with_the_start_up_error() {
+    let mut rig = Rig::<3>::new();
+    rig.model.insert_filament(0, 30.0);
+    assert_eq!(
+        rig.boot(),
+        Response::error(RequestCode::Reset, 0, ErrorCode::FINDA_VS_EEPROM_DISREPANCY)
+    );
+    let before = rig.motor_log.len();
+    assert_eq!(rig.send(t(1)), Some(accepted(t(1))));
+    assert_eq!(rig.query(), error(t(1), ErrorCode::FINDA_VS_EEPROM_DISREPANCY));
+    // The printer's automatic Retry while the filament is still in the hub: the same error.
+    press(&mut rig, 1);
+    rig.idle(50);
+    assert_eq!(rig.query(), error(t(1), ErrorCode::FINDA_VS_EEPROM_DISREPANCY));
+    assert!(
+        nothing_moved_since(&rig, before),
+        "no motor moves before the check passes"
+    );
+    // The user pulls the filament back out of the hub and presses Retry on the screen.
+    rig.model.insert_filament(0, -15.0);
+    rig.idle(100);
+    press(&mut rig, 1);
+    let run = rig.follow(t(1), 120_000);
+    assert_eq!(run.last, finished(t(1)));
+    assert_eq!(rig.model.loaded_slot(), Some(1));
+}
+
+/// The same after the user fixed the fault without pressing Retry: still no `R`.
+#[test]
+fn start_up_error_fixed_without_retry_then_tool_change_runs_after_retry() {
+    let mut rig = Rig::<3>::new();
+    rig.model.insert_filament(0, 30.0);
+    rig.boot();
+    rig.model.insert_filament(0, -15.0);
+    rig.idle(100);
+    assert_eq!(rig.send(t(2)), Some(accepted(t(2))));
+    assert_eq!(rig.query(), error(t(2), ErrorCode::FINDA_VS_EEPROM_DISREPANCY));
+    press(&mut rig, ButtonCode::MIDDLE.0);
+    let run = rig.follow(t(2), 120_000);
+    assert_eq!(run.last, finished(t(2)));
+    assert_eq!(rig.model.loaded_slot(), Some(2));
+}
+
+/// A command sent over any other waiting error (printer-truth §2.3: the printer sends `T<m>`
+/// over a pending error) is accepted too, fails with that error before moving, and after Retry
+/// runs from where the sensors say the filament is.
+#[test]
+fn tool_change_over_a_waiting_motion_error_is_accepted_and_runs_after_retry() {
+    let mut rig = Rig::<3>::new();
+    rig.boot();
+    rig.inject(mmu_model::Fault::Jam { slot: 1 });
+    let run = rig.command(t(1));
+    assert_eq!(run.last, error(t(1), ErrorCode::STALLED_PULLEY));
+    let before = rig.motor_log.len();
+    assert_eq!(rig.send(t(2)), Some(accepted(t(2))));
+    rig.idle(50);
+    assert_eq!(rig.query(), error(t(2), ErrorCode::STALLED_PULLEY));
+    assert!(nothing_moved_since(&rig, before));
+    rig.model.clear_all();
+    press(&mut rig, 1);
+    let run = rig.follow(t(2), 120_000);
+    assert_eq!(run.last, finished(t(2)));
+    assert_eq!(rig.model.loaded_slot(), Some(2));
+}
+
+/// A command over the eject's question (`E800c`, Continue) takes the question over: Continue
+/// answers it, then the command runs.
+#[test]
+fn tool_change_over_the_eject_question_runs_after_continue() {
+    let mut rig = Rig::<3>::new();
+    rig.boot();
+    let eject = Request::new(RequestCode::Eject, 1);
+    assert_eq!(rig.command(eject).last, error(eject, ErrorCode::FILAMENT_EJECTED));
+    assert_eq!(rig.send(t(0)), Some(accepted(t(0))));
+    assert_eq!(rig.query(), error(t(0), ErrorCode::FILAMENT_EJECTED));
+    press(&mut rig, 1);
+    let run = rig.follow(t(0), 120_000);
+    assert_eq!(run.last, finished(t(0)));
+    assert_eq!(rig.model.loaded_slot(), Some(0));
+}
