@@ -121,3 +121,57 @@ fn tool_change_over_the_eject_question_runs_after_continue() {
     assert_eq!(run.last, finished(t(0)));
     assert_eq!(rig.model.loaded_slot(), Some(0));
 }
+
+// ---- #9: Retry "finishes" a command that never moved -----------------------------------------
+
+/// `>T1 <T1 E8008 >B1 <T1 F0` with nothing moved sends the printer into LOAD TO EXTR. FAILED
+/// loops; Retry after an error raised before any phase ran plans the command again.
+#[test]
+fn retry_after_a_plan_error_plans_again_instead_of_finishing() {
+    let mut rig = Rig::<3>::new();
+    rig.boot();
+    // Filament pushed into the hub by hand: no slot is known to own it.
+    rig.model.insert_filament(1, 5.0);
+    rig.idle(100);
+    assert_eq!(rig.send(t(1)), Some(accepted(t(1))));
+    assert_eq!(rig.query(), error(t(1), ErrorCode::FINDA_VS_EEPROM_DISREPANCY));
+    let before = rig.motor_log.len();
+    press(&mut rig, 1);
+    rig.idle(50);
+    assert_eq!(
+        rig.query(),
+        error(t(1), ErrorCode::FINDA_VS_EEPROM_DISREPANCY),
+        "the cause is still there"
+    );
+    assert!(nothing_moved_since(&rig, before));
+    rig.model.insert_filament(1, -15.0);
+    rig.idle(100);
+    press(&mut rig, 1);
+    let run = rig.follow(t(1), 120_000);
+    assert_eq!(run.last, finished(t(1)));
+    assert_eq!(rig.model.loaded_slot(), Some(1), "the finish is a real load");
+}
+
+/// The same with the hub sensor stuck at a rail (`800a`) when `T1` arrives.
+#[test]
+fn retry_after_a_hub_sensor_fault_at_planning_reports_the_fault_again() {
+    let mut rig = Rig::<3>::new();
+    rig.boot();
+    let hub_stuck = mmu_model::Fault::SensorDisconnected {
+        sensor: mmu_model::SensorId::HubFilament,
+        rail: mmu_model::Rail::High,
+    };
+    rig.inject(hub_stuck);
+    rig.idle(1000);
+    assert_eq!(rig.send(t(1)), Some(accepted(t(1))));
+    assert_eq!(rig.query(), error(t(1), ErrorCode::FINDA_FLICKERS));
+    press(&mut rig, 1);
+    rig.idle(50);
+    assert_eq!(rig.query(), error(t(1), ErrorCode::FINDA_FLICKERS));
+    rig.model.clear_all();
+    rig.idle(1000);
+    press(&mut rig, 1);
+    let run = rig.follow(t(1), 120_000);
+    assert_eq!(run.last, finished(t(1)));
+    assert_eq!(rig.model.loaded_slot(), Some(1));
+}
