@@ -175,3 +175,20 @@ fn retry_after_a_hub_sensor_fault_at_planning_reports_the_fault_again() {
     assert_eq!(run.last, finished(t(1)));
     assert_eq!(rig.model.loaded_slot(), Some(1));
 }
+
+// ---- #1: 8005 FIL. ALREADY LOADED ---------------------------------------------------------------
+
+/// Continue (`B1` from a Buddy printer) leaves the loaded slot as it is and finishes.
+#[test]
+fn continue_on_filament_already_loaded_finishes_the_preload() {
+    let mut rig = Rig::<3>::new();
+    rig.boot();
+    rig.command(t(0));
+    let preload = Request::new(RequestCode::Load, 1);
+    assert_eq!(rig.send(preload), Some(accepted(preload)));
+    assert_eq!(rig.query(), error(preload, ErrorCode::FILAMENT_ALREADY_LOADED));
+    press(&mut rig, 1);
+    rig.idle(5);
+    assert_eq!(rig.query(), finished(preload));
+    assert_eq!(rig.model.loaded_slot(), Some(0));
+}

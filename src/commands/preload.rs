@@ -3,9 +3,9 @@
 //!
 //! `P5` then `P19`. Refused with `8005` while a slot is loaded.
 
-use mmu_protocol::ErrorCode;
+use mmu_protocol::{ButtonCode, ErrorCode};
 
-use super::{Plan, Recovery, clear_hub, extend, retry};
+use super::{Action, Plan, Recovery, clear_hub, extend, retry};
 use crate::config::Config;
 use crate::phases::Phase;
 use crate::unit::Unit;
@@ -37,7 +37,11 @@ pub const RECOVERY: &[Recovery] = &[
     // `8002`: the hub sensor still sees filament after parking.
     retry(ErrorCode::FINDA_DIDNT_SWITCH_OFF),
     // `8005`: a slot is loaded; Continue leaves it so.
-    retry(ErrorCode::FILAMENT_ALREADY_LOADED),
+    Recovery {
+        error: ErrorCode::FILAMENT_ALREADY_LOADED,
+        button: ButtonCode::MIDDLE,
+        action: Action::Continue,
+    },
     // `8008`: filament in the hub that no slot is known to own.
     retry(ErrorCode::FINDA_VS_EEPROM_DISREPANCY),
 ];
