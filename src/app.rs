@@ -221,7 +221,15 @@ impl<const N: usize> App<N> {
         match self.operation.status() {
             Status::Running(progress) => Response::progress(code, value, progress),
             Status::Failed(error) => Response::error(code, value, error),
-            Status::Finished => Response::finished(code, value, ResultCode::OK),
+            Status::Finished => {
+                if code == RequestCode::Home {
+                    // The printer's idle check knows no `H` echo and re-handshakes on one, forever
+                    // (`protocol_logic.cpp` `IdleStep`; printer-truth §3): `H0 F0` ends the
+                    // printer's `H0` once, then the unit reports itself idle as `X0 F0`.
+                    self.operation.request = (RequestCode::Reset, 0);
+                }
+                Response::finished(code, value, ResultCode::OK)
+            }
         }
     }
 

@@ -192,3 +192,21 @@ fn continue_on_filament_already_loaded_finishes_the_preload() {
     assert_eq!(rig.query(), finished(preload));
     assert_eq!(rig.model.loaded_slot(), Some(0));
 }
+
+// ---- #2: Home loops the printer ------------------------------------------------------------------
+
+/// The printer's idle check accepts only T/L/U/E/K/M/X echoes (`protocol_logic.cpp` `IdleStep`;
+/// printer-truth §3): `H0 F0` once ends the printer's `H0`, then the unit is idle as `X0 F0`.
+#[test]
+fn home_answers_h0_f0_once_then_x0_f0() {
+    let mut rig = Rig::<3>::new();
+    rig.boot();
+    let home = Request::new(RequestCode::Home, 0);
+    let run = rig.command(home);
+    assert_eq!(run.last, finished(home));
+    for _ in 0..3 {
+        rig.idle(1000);
+        assert_eq!(rig.query().encode().as_bytes(), b"X0 F0*87\n");
+    }
+    assert_eq!(rig.command(t(0)).last, finished(t(0)));
+}
