@@ -74,13 +74,17 @@ pub struct App<const N: usize> {
     /// A physical button press waiting for the printer to collect it with `Q0` (during `T`, the
     /// printer is in charge of buttons and sends them back).
     pending_button: Option<ButtonCode>,
+    /// The start-up check after power-up has ended (passed or failed). Until then the unit
+    /// answers nothing, as MMU 3.0.3, which enables its receiver only after the check
+    /// (`main.cpp` `setup2`; printer-truth §4): an `X0 P1a` opens Buddy's Homing dialog.
+    started_up: bool,
 }
 
 impl<const N: usize> App<N> {
     const SLOTS_OK: () = assert!(N >= 1 && N <= crate::MAX_SLOTS, "a unit has 1 to 5 slots");
 
-    /// A freshly started unit: it checks its sensors (`X0` is the current command) before it
-    /// reports `X0 F0`.
+    /// A freshly started unit: it checks its sensors (`X0` is the current command), answering
+    /// nothing, before it reports `X0 F0` (or the error it found).
     pub fn new(config: Config) -> Self {
         let () = Self::SLOTS_OK;
         App {
@@ -97,6 +101,7 @@ impl<const N: usize> App<N> {
             last_rx: Instant::ZERO,
             now: Instant::ZERO,
             pending_button: None,
+            started_up: false,
         }
     }
 
@@ -108,6 +113,12 @@ impl<const N: usize> App<N> {
     /// What the unit knows about its hardware.
     pub fn unit(&self) -> &Unit<N> {
         &self.unit
+    }
+
+    /// False until the start-up check after power-up has ended: until then the unit hears and
+    /// answers nothing.
+    pub fn is_listening(&self) -> bool {
+        self.started_up
     }
 
     /// The command being carried out (or the last one).
@@ -134,6 +145,10 @@ impl<const N: usize> App<N> {
         }
         for &byte in rx {
             if let Some(Ok(request)) = self.decoder.feed(byte) {
+                if !self.started_up {
+                    // Not heard: the printer re-sends after its 2 s link timeout.
+                    continue;
+                }
                 self.handle(&request, &mut out);
                 if out.action.is_some() {
                     // The board resets: motors stay off and nothing after `X` is answered.
@@ -144,6 +159,7 @@ impl<const N: usize> App<N> {
         let before = self.operation.status();
         self.operation.step(&mut self.unit, now, &self.config);
         self.count_transition(before);
+        self.started_up |= !matches!(self.operation.status(), Status::Running(_));
         self.count_fed();
         self.drive_motors(now, &mut out);
         out.status_led = match self.operation.status() {

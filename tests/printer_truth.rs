@@ -210,3 +210,62 @@ fn home_answers_h0_f0_once_then_x0_f0() {
     }
     assert_eq!(rig.command(t(0)).last, finished(t(0)));
 }
+
+// ---- #3: the first answer after power-up ------------------------------------------------------------
+
+/// Step a freshly powered unit for `ms`, sending `Q0` every 10 ms; every answer, with its time.
+fn answers_after_power_up(rig: &mut Rig<3>, ms: u64) -> Vec<(u64, Response)> {
+    let mut answers = Vec::new();
+    while rig.now < ms {
+        let bytes = if rig.now.is_multiple_of(10) {
+            Request::new(RequestCode::Query, 0).encode().as_bytes().to_vec()
+        } else {
+            Vec::new()
+        };
+        let now = rig.now;
+        answers.extend(rig.step_with(&bytes).into_iter().map(|a| (now, a)));
+    }
+    answers
+}
+
+/// MMU 3.0.3 enables its receiver only after the start-up check (`main.cpp` `setup2`;
+/// printer-truth §4): no `X0 P1a`, which opens Buddy's Homing dialog, only silence and then the
+/// check's result, within about a second.
+#[test]
+fn first_answer_after_power_up_is_the_start_up_result_not_p1a() {
+    let mut rig = Rig::<3>::new();
+    let answers = answers_after_power_up(&mut rig, 2000);
+    let (first_at, first) = answers.first().cloned().expect("the unit answers within 2 s");
+    assert_eq!(first.encode().as_bytes(), b"X0 F0*87\n");
+    assert!(first_at <= 1000, "silent for {first_at} ms");
+    assert!(answers.iter().all(|(_, a)| a.param != ParamCode::Processing));
+}
+
+/// The same with filament in the hub at power-up: the first answer is the error.
+#[test]
+fn first_answer_after_power_up_with_a_start_up_error_is_the_error() {
+    let mut rig = Rig::<3>::new();
+    rig.model.insert_filament(0, 30.0);
+    let answers = answers_after_power_up(&mut rig, 2000);
+    let (first_at, first) = answers.first().cloned().expect("the unit answers within 2 s");
+    assert_eq!(first.encode().as_bytes(), b"X0 E8008*1b\n");
+    assert!(first_at <= 1000, "silent for {first_at} ms");
+}
+
+/// Nothing the printer sends during the check is acted on either (the board ignores `X0`).
+#[test]
+fn requests_during_the_start_up_check_get_no_answer_and_no_action() {
+    let mut rig = Rig::<3>::new();
+    let mut bytes = Vec::new();
+    for request in [
+        Request::new(RequestCode::Version, 0),
+        Request::new(RequestCode::Reset, 0),
+        t(0),
+    ] {
+        bytes.extend_from_slice(request.encode().as_bytes());
+    }
+    let samples = rig.model.samples::<3>();
+    let out = rig.app.step(mmu_firmware::Instant::ZERO, &samples, &bytes);
+    assert!(out.tx.is_empty(), "answered {:?}", out.tx);
+    assert_eq!(out.action, None);
+}
