@@ -13,7 +13,7 @@ use mmu_protocol::{
     ButtonCode, ErrorCode, ParamCode, Request, RequestCode, RequestDecoder, Response, ResultCode,
 };
 
-use crate::config::Config;
+use crate::config::{Config, offered_revision};
 use crate::drive;
 use crate::follower;
 use crate::persist::{Counters, MAX_SETTINGS, Snapshot};
@@ -78,6 +78,8 @@ pub struct App<const N: usize> {
     /// answers nothing, as MMU 3.0.3, which enables its receiver only after the check
     /// (`main.cpp` `setup2`; printer-truth §4): an `X0 P1a` opens Buddy's Homing dialog.
     started_up: bool,
+    /// `S2` requests in a row, none other between (version negotiation).
+    s2_in_a_row: u8,
 }
 
 impl<const N: usize> App<N> {
@@ -102,6 +104,7 @@ impl<const N: usize> App<N> {
             now: Instant::ZERO,
             pending_button: None,
             started_up: false,
+            s2_in_a_row: 0,
         }
     }
 
@@ -185,7 +188,18 @@ impl<const N: usize> App<N> {
     }
 
     fn handle(&mut self, request: &Request, out: &mut Outputs<N>) {
+        let asks_revision = request.code == RequestCode::Version && request.value == 2;
+        let s2_repeat = if asks_revision { self.s2_in_a_row } else { 0 };
+        self.s2_in_a_row = if asks_revision {
+            self.s2_in_a_row.saturating_add(1)
+        } else {
+            0
+        };
         let response = match request.code {
+            RequestCode::Version if asks_revision => Some(Response::read(
+                request,
+                offered_revision(self.config.version.revision, s2_repeat).into(),
+            )),
             RequestCode::Query => Some(self.query_answer()),
             code if code.is_command() => Some(self.start_command(request)),
             RequestCode::Reset => {

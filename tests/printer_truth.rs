@@ -269,3 +269,43 @@ fn requests_during_the_start_up_check_get_no_answer_and_no_action() {
     assert!(out.tx.is_empty(), "answered {:?}", out.tx);
     assert_eq!(out.action, None);
 }
+
+// ---- Any Prusa printer, no configuration: version negotiation -----------------------------------
+
+fn version(rig: &mut Rig<3>, part: u8) -> Option<u16> {
+    rig.send(Request::new(RequestCode::Version, part))
+        .and_then(|a| a.param_value)
+}
+
+/// On a version answer that does not match, Prusa's printer sends the same `S<n>` again at once,
+/// up to six mismatches per handshake (`protocol_logic.cpp` `ProcessVersionResponse`;
+/// printer-truth §5). `S2` asked again with nothing between is answered with the next
+/// wire-compatible revision: 3, 2, 1, 0 (MMU 3.0.0 to 3.0.3 speak the same wire).
+#[test]
+fn s2_asked_again_answers_the_next_wire_compatible_revision() {
+    let mut rig = Rig::<3>::new();
+    rig.idle(200);
+    assert_eq!(version(&mut rig, 0), Some(3));
+    assert_eq!(version(&mut rig, 1), Some(0));
+    let answers: Vec<_> = (0..4).map(|_| version(&mut rig, 2)).collect();
+    assert_eq!(answers, [Some(3), Some(2), Some(1), Some(0)]);
+    // Any other request starts the sequence over.
+    assert_eq!(version(&mut rig, 3), Some(1));
+    assert_eq!(version(&mut rig, 2), Some(3));
+    assert_eq!(version(&mut rig, 2), Some(2));
+    rig.query();
+    assert_eq!(version(&mut rig, 2), Some(3));
+}
+
+/// Register 0x52 stays the first answer (and the override); the other revisions follow.
+#[test]
+fn s2_negotiation_starts_from_register_0x52() {
+    let mut rig = Rig::<3>::new();
+    rig.idle(200);
+    assert_eq!(
+        rig.send(Request::write(0x52, 2)).map(|a| a.param),
+        Some(ParamCode::Accepted)
+    );
+    let answers: Vec<_> = (0..4).map(|_| version(&mut rig, 2)).collect();
+    assert_eq!(answers, [Some(2), Some(3), Some(1), Some(0)]);
+}
