@@ -10,7 +10,8 @@
 use heapless::Vec;
 use mmu_hal_port::{MotorCommand, Samples};
 use mmu_protocol::{
-    ButtonCode, ErrorCode, ParamCode, Request, RequestCode, RequestDecoder, Response, ResultCode,
+    ButtonCode, ErrorCode, MAX_FRAME_LEN, ParamCode, Request, RequestCode, RequestDecoder, Response,
+    ResultCode,
 };
 
 use crate::config::{Config, offered_revision};
@@ -187,7 +188,18 @@ impl<const N: usize> App<N> {
         }
     }
 
+    /// Act on `request` and queue its answer. A request whose answer would not fit this step's
+    /// transmit buffer is not acted on at all (and counted in register 0x51): the printer, left
+    /// without an answer, sends it again, and nothing happens that it was never told about.
     fn handle(&mut self, request: &Request, out: &mut Outputs<N>) {
+        let answered = !matches!(
+            request.code,
+            RequestCode::Reset | RequestCode::FilamentType | RequestCode::Mode
+        );
+        if answered && out.tx.capacity() - out.tx.len() < MAX_FRAME_LEN {
+            self.dropped_responses = self.dropped_responses.saturating_add(1);
+            return;
+        }
         let asks_revision = request.code == RequestCode::Version && request.value == 2;
         let s2_repeat = if asks_revision { self.s2_in_a_row } else { 0 };
         self.s2_in_a_row = if asks_revision {

@@ -309,3 +309,49 @@ fn s2_negotiation_starts_from_register_0x52() {
     let answers: Vec<_> = (0..4).map(|_| version(&mut rig, 2)).collect();
     assert_eq!(answers, [Some(2), Some(3), Some(1), Some(0)]);
 }
+
+// ---- #8: dropped answers are invisible ------------------------------------------------------------
+
+/// Requests for one step: `reads` register reads, then `last`.
+fn burst(reads: usize, last: Request) -> Vec<u8> {
+    let mut bytes = Vec::new();
+    for _ in 0..reads {
+        bytes.extend_from_slice(Request::new(RequestCode::Read, 0x08).encode().as_bytes());
+    }
+    bytes.extend_from_slice(last.encode().as_bytes());
+    bytes
+}
+
+/// A burst of requests in one step overflows the step's answers: the request whose answer does
+/// not fit is not acted on (the printer, getting no answer, sends it again) and the drop is
+/// counted in register 0x51.
+#[test]
+fn a_request_whose_answer_does_not_fit_is_not_acted_on_and_is_counted() {
+    let mut rig = Rig::<3>::new();
+    rig.boot();
+    rig.model.insert_filament(1, 5.0);
+    rig.idle(100);
+    rig.send(Request::new(RequestCode::Home, 0));
+    rig.idle(10);
+    assert_eq!(rig.query().param, ParamCode::Error);
+    rig.model.insert_filament(1, -15.0);
+    rig.idle(100);
+    let b1 = Request::new(RequestCode::Button, 1);
+    let answers = rig.step_with(&burst(10, b1));
+    assert!(answers.len() < 11, "the burst overflows one step: {answers:?}");
+    assert!(!answers.contains(&accepted(b1)));
+    rig.idle(10);
+    assert_eq!(
+        rig.query().param,
+        ParamCode::Error,
+        "the unanswered B1 was not acted on"
+    );
+    let dropped = rig
+        .send(Request::new(RequestCode::Read, 0x51))
+        .and_then(|a| a.param_value);
+    assert_eq!(dropped, Some((11 - answers.len()) as u16));
+    // The printer sends it again and it works.
+    assert_eq!(rig.send(b1), Some(accepted(b1)));
+    rig.idle(10);
+    assert_eq!(rig.query(), finished(Request::new(RequestCode::Home, 0)));
+}
