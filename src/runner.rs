@@ -14,7 +14,7 @@
 
 use mmu_protocol::{ButtonCode, ErrorCode, ProgressCode, RequestCode};
 
-use crate::commands::{Action, Command, MAX_PHASES, Plan, extend};
+use crate::commands::{Action, Command, MAX_PHASES, Plan, clear_hub, extend};
 use crate::config::Config;
 use crate::phases::{self, Notes, Outcome, Phase, PhaseRun};
 use crate::time::Instant;
@@ -162,6 +162,15 @@ impl Runner {
                 }
                 None => self.then_plan = true,
             },
+            Action::UnloadFirst => {
+                let mut unload = Plan::new();
+                if let Err(error) = clear_hub(&mut unload, unit) {
+                    self.status = Status::Failed(error);
+                    return;
+                }
+                *self = Runner::new(self.request, &unload);
+                self.then_plan = true;
+            }
         }
         self.plan_when_due(unit, config);
     }

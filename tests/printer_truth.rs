@@ -355,3 +355,34 @@ fn a_request_whose_answer_does_not_fit_is_not_acted_on_and_is_counted() {
     rig.idle(10);
     assert_eq!(rig.query(), finished(Request::new(RequestCode::Home, 0)));
 }
+
+/// `L1` while slot 0 is loaded, then the screen's Unload: `B0` from a Buddy printer, `B2` from
+/// an MK3S (printer-truth §1.2: Buddy's `ButtonAvailable` sends the first button's index, the
+/// MK3S's sends Left for Unload). The loaded slot comes out and is parked, then slot 1 is
+/// preloaded as asked.
+#[test]
+fn unload_on_filament_already_loaded_unloads_then_preloads() {
+    for unload in [ButtonCode::RIGHT.0, ButtonCode::LEFT.0] {
+        let mut rig = Rig::<3>::new();
+        rig.boot();
+        rig.command(t(0));
+        rig.idle(2000);
+        let preload = Request::new(RequestCode::Load, 1);
+        assert_eq!(rig.send(preload), Some(accepted(preload)));
+        assert_eq!(rig.query(), error(preload, ErrorCode::FILAMENT_ALREADY_LOADED));
+        // The filament is out of the extruder's gears (the printer does not pull it out for
+        // this screen: its `CheckUserInput` helps only on 8004/8009; gripped, the unload stalls).
+        rig.unload_extruder();
+        press(&mut rig, unload);
+        let run = rig.follow(preload, 120_000);
+        assert_eq!(run.last, finished(preload), "B{unload}: {:?}", run.progress);
+        assert_eq!(rig.model.loaded_slot(), None, "B{unload}");
+        for slot in [0, 1] {
+            let tip = rig.model.tip_mm(slot).unwrap();
+            assert!(
+                (tip + 15.0).abs() <= 5.0,
+                "B{unload}: slot {slot} parked, tip at {tip} mm"
+            );
+        }
+    }
+}

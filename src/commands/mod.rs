@@ -70,6 +70,9 @@ pub enum Action {
     Continue,
     /// Start over with the plan this function makes for the failed phase's slot.
     Replan(fn(usize, &Config) -> Plan),
+    /// Unload whatever owns the hub path and park it, then plan the command again (FIL. ALREADY
+    /// LOADED's Unload: "unload it first", then do what was asked).
+    UnloadFirst,
 }
 
 /// One row of a command's recovery table: after `error`, the printer's `button` does `action`.
