@@ -1,7 +1,8 @@
 //! Preload (`L<n>`): slot *n* is fed until the hub sensor sees its tip, then parked, so the next
 //! tool change starts close to the hub.
 //!
-//! `P5` then `P19`. Refused with `8005` while a slot is loaded.
+//! `P5` then `P19`. `8005` while a slot is loaded: Continue leaves it so, Unload unloads and
+//! parks it first, then preloads.
 
 use mmu_protocol::{ButtonCode, ErrorCode};
 
