@@ -213,11 +213,13 @@ fn home_answers_h0_f0_once_then_x0_f0() {
 
 // ---- #3: the first answer after power-up ------------------------------------------------------------
 
-/// Step a freshly powered unit for `ms`, sending `Q0` every 10 ms; every answer, with its time.
+/// Step a freshly powered unit for `ms`, sending `Q0` as often as the line allows (each after a
+/// quiet line); every answer, with its time.
 fn answers_after_power_up(rig: &mut Rig<3>, ms: u64) -> Vec<(u64, Response)> {
+    let period = u64::from(mmu_protocol::SILENCE_MS) + 1;
     let mut answers = Vec::new();
     while rig.now < ms {
-        let bytes = if rig.now.is_multiple_of(10) {
+        let bytes = if rig.now.is_multiple_of(period) {
             Request::new(RequestCode::Query, 0).encode().as_bytes().to_vec()
         } else {
             Vec::new()
@@ -252,22 +254,51 @@ fn first_answer_after_power_up_with_a_start_up_error_is_the_error() {
     assert!(first_at <= 1000, "silent for {first_at} ms");
 }
 
-/// Nothing the printer sends during the check is acted on either (the board ignores `X0`).
+/// Nothing the printer sends during the check is acted on either (the board ignores `X0`): whole
+/// frames after a quiet line, at every moment of the check.
 #[test]
 fn requests_during_the_start_up_check_get_no_answer_and_no_action() {
-    let mut rig = Rig::<3>::new();
+    use mmu_firmware::{App, Config, HubSamples, Instant, Samples, SlotSamples};
+    let samples = Samples::<3> {
+        slots: [SlotSamples {
+            motor_hall: 2048,
+            filament: 2048,
+        }; 3],
+        hub: HubSamples {
+            filament: 2048,
+            tension: 2048,
+            cutter: 2048,
+        },
+    };
     let mut bytes = Vec::new();
     for request in [
         Request::new(RequestCode::Version, 0),
         Request::new(RequestCode::Reset, 0),
         t(0),
+        Request::new(RequestCode::Query, 0),
     ] {
         bytes.extend_from_slice(request.encode().as_bytes());
     }
-    let samples = rig.model.samples::<3>();
-    let out = rig.app.step(mmu_firmware::Instant::ZERO, &samples, &bytes);
-    assert!(out.tx.is_empty(), "answered {:?}", out.tx);
-    assert_eq!(out.action, None);
+    let mut during_check = 0;
+    for at in u64::from(mmu_protocol::SILENCE_MS)..=40 {
+        let mut app = App::<3>::new(Config::default());
+        for ms in 0..at {
+            assert!(app.step(Instant::from_millis(ms), &samples, &[]).tx.is_empty());
+        }
+        if app.is_listening() {
+            continue;
+        }
+        during_check += 1;
+        let out = app.step(Instant::from_millis(at), &samples, &bytes);
+        assert!(out.tx.is_empty(), "at {at} ms answered {:?}", out.tx);
+        assert_eq!(out.action, None, "at {at} ms");
+        assert_eq!(
+            app.operation().request.0,
+            RequestCode::Reset,
+            "no command started"
+        );
+    }
+    assert!(during_check > 0, "the check ended before a frame could arrive");
 }
 
 // ---- Any Prusa printer, no configuration: version negotiation -----------------------------------

@@ -55,7 +55,6 @@ pub fn run(args: &DemoArgs) -> Result<(), Box<dyn Error>> {
     let mut link = SimLink::new(sim);
     let scale = (!args.fast && args.time_scale > 0.0).then_some(args.time_scale);
     link.set_time_scale(scale);
-    link.idle(crate::printer_cli::UNIT_ON_BEFORE_MS);
     let console = Console::new(args.json, args.verbose);
     let mut session = Session::new(link, PrinterOptions::default(), console);
 

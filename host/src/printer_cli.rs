@@ -518,13 +518,8 @@ pub fn sim_link(args: &SimTargetArgs) -> Result<SimLink, Box<dyn Error>> {
     }
     let mut link = SimLink::new(sim);
     link.set_time_scale(args.time_scale);
-    link.idle(UNIT_ON_BEFORE_MS);
     Ok(link)
 }
-
-/// How long the simulated unit runs before the printer starts talking: it answers nothing
-/// during its start-up check (as MMU 3.0.3), so a printer talking at once would first time out.
-pub(crate) const UNIT_ON_BEFORE_MS: u64 = 200;
 
 /// The printer's filament sensor for `--port`.
 fn fsensor_source(args: &PrinterArgs) -> FsensorSource {

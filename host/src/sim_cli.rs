@@ -122,11 +122,6 @@ pub fn run(args: &SimArgs) -> Result<(), Box<dyn Error>> {
     for fault in &args.faults {
         sim.schedule(*fault);
     }
-    // The unit is on before a printer connects: it hears nothing during its start-up check.
-    let mut silent = Vec::new();
-    for _ in 0..crate::printer_cli::UNIT_ON_BEFORE_MS {
-        sim.step(&[], &mut silent);
-    }
     let events = args.events.as_deref().map(create_events_file).transpose()?;
     let notes = Notes { quiet: args.quiet };
     notes.say(&start_line(args));

@@ -420,9 +420,6 @@ fn stdio_serves_a_printer_session() {
     printer.events().wait_for(events_before, "boot", |event| {
         event["kind"] == "power" && event["on"] == true
     });
-    // The unit hears nothing during its start-up check (a printer would re-send after its 2 s
-    // link timeout): give it half a second first (10 s of virtual time at this scale).
-    std::thread::sleep(Duration::from_millis(500));
     printer.handshake();
 
     // At the end of stdin the simulator finishes and exits cleanly.

@@ -78,9 +78,9 @@ fn power_loss_silences_the_unit_then_it_boots_fresh() {
     wire.sim.inject(SimFault::PowerLoss { off_ms: 400 });
     assert!(!wire.sim.is_powered());
     assert_eq!(wire.ask(Request::new(RequestCode::Query, 0), 350), None);
-    wire.idle(300);
+    wire.idle(100);
     assert!(wire.sim.is_powered());
-    // A fresh unit: silent while its start-up check runs, then it reports X0 F0 again.
+    // A fresh unit (its line quiet since it booted) answers for its start-up check, X0.
     let (answer, _) = wire.ask(Request::new(RequestCode::Query, 0), 10).unwrap();
     assert_eq!(answer.code, RequestCode::Reset);
     let power: Vec<bool> = wire
