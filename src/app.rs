@@ -10,10 +10,11 @@
 use heapless::Vec;
 use mmu_hal_port::{MotorCommand, Samples};
 use mmu_protocol::{
-    ButtonCode, ErrorCode, ParamCode, Request, RequestCode, RequestDecoder, Response, ResultCode,
+    ButtonCode, ErrorCode, MAX_FRAME_LEN, ParamCode, Request, RequestCode, RequestDecoder, Response,
+    ResultCode,
 };
 
-use crate::config::Config;
+use crate::config::{Config, offered_revision};
 use crate::drive;
 use crate::follower;
 use crate::persist::{Counters, MAX_SETTINGS, Snapshot};
@@ -75,13 +76,19 @@ pub struct App<const N: usize> {
     /// A physical button press waiting for the printer to collect it with `Q0` (during `T`, the
     /// printer is in charge of buttons and sends them back).
     pending_button: Option<ButtonCode>,
+    /// The start-up check after power-up has ended (passed or failed). Until then the unit
+    /// answers nothing, as MMU 3.0.3, which enables its receiver only after the check
+    /// (`main.cpp` `setup2`; printer-truth §4): an `X0 P1a` opens Buddy's Homing dialog.
+    started_up: bool,
+    /// `S2` requests in a row, none other between (version negotiation).
+    s2_in_a_row: u8,
 }
 
 impl<const N: usize> App<N> {
     const SLOTS_OK: () = assert!(N >= 1 && N <= crate::MAX_SLOTS, "a unit has 1 to 5 slots");
 
-    /// A freshly started unit: it checks its sensors (`X0` is the current command) before it
-    /// reports `X0 F0`.
+    /// A freshly started unit: it checks its sensors (`X0` is the current command), answering
+    /// nothing, before it reports `X0 F0` (or the error it found).
     pub fn new(config: Config) -> Self {
         let () = Self::SLOTS_OK;
         App {
@@ -98,6 +105,8 @@ impl<const N: usize> App<N> {
             last_rx: Instant::ZERO,
             now: Instant::ZERO,
             pending_button: None,
+            started_up: false,
+            s2_in_a_row: 0,
         }
     }
 
@@ -109,6 +118,12 @@ impl<const N: usize> App<N> {
     /// What the unit knows about its hardware.
     pub fn unit(&self) -> &Unit<N> {
         &self.unit
+    }
+
+    /// False until the start-up check after power-up has ended: until then the unit hears and
+    /// answers nothing.
+    pub fn is_listening(&self) -> bool {
+        self.started_up
     }
 
     /// The command being carried out (or the last one).
@@ -135,6 +150,10 @@ impl<const N: usize> App<N> {
         }
         for &byte in rx {
             if let Some(Ok(request)) = self.decoder.feed(byte) {
+                if !self.started_up {
+                    // Not heard: the printer re-sends after its 2 s link timeout.
+                    continue;
+                }
                 self.handle(&request, &mut out);
                 if out.action.is_some() {
                     // The board resets: motors stay off and nothing after `X` is answered.
@@ -145,6 +164,7 @@ impl<const N: usize> App<N> {
         let before = self.operation.status();
         self.operation.step(&mut self.unit, now, &self.config);
         self.count_transition(before);
+        self.started_up |= !matches!(self.operation.status(), Status::Running(_));
         self.count_fed();
         self.drive_motors(now, &mut out);
         out.status_led = match self.operation.status() {
@@ -165,12 +185,34 @@ impl<const N: usize> App<N> {
         if self.operation.request.0 == RequestCode::Tool {
             self.pending_button = Some(button);
         } else {
-            self.operation.press(button, &self.config);
+            self.operation.press(button, &self.unit, &self.config);
         }
     }
 
+    /// Act on `request` and queue its answer. A request whose answer would not fit this step's
+    /// transmit buffer is not acted on at all (and counted in register 0x51): the printer, left
+    /// without an answer, sends it again, and nothing happens that it was never told about.
     fn handle(&mut self, request: &Request, out: &mut Outputs<N>) {
+        let answered = !matches!(
+            request.code,
+            RequestCode::Reset | RequestCode::FilamentType | RequestCode::Mode
+        );
+        if answered && out.tx.capacity() - out.tx.len() < MAX_FRAME_LEN {
+            self.dropped_responses = self.dropped_responses.saturating_add(1);
+            return;
+        }
+        let asks_revision = request.code == RequestCode::Version && request.value == 2;
+        let s2_repeat = if asks_revision { self.s2_in_a_row } else { 0 };
+        self.s2_in_a_row = if asks_revision {
+            self.s2_in_a_row.saturating_add(1)
+        } else {
+            0
+        };
         let response = match request.code {
+            RequestCode::Version if asks_revision => Some(Response::read(
+                request,
+                offered_revision(self.config.version.revision, s2_repeat).into(),
+            )),
             RequestCode::Query => Some(self.query_answer()),
             code if code.is_command() => Some(self.start_command(request)),
             RequestCode::Reset => {
@@ -195,7 +237,8 @@ impl<const N: usize> App<N> {
                 Response::rejected(request)
             }),
             RequestCode::Button => {
-                self.operation.press(ButtonCode(request.value), &self.config);
+                self.operation
+                    .press(ButtonCode(request.value), &self.unit, &self.config);
                 Some(Response::accepted(request))
             }
             RequestCode::FilamentSensor => {
@@ -221,15 +264,29 @@ impl<const N: usize> App<N> {
         match self.operation.status() {
             Status::Running(progress) => Response::progress(code, value, progress),
             Status::Failed(error) => Response::error(code, value, error),
-            Status::Finished => Response::finished(code, value, ResultCode::OK),
+            Status::Finished => {
+                if code == RequestCode::Home {
+                    // The printer's idle check knows no `H` echo and re-handshakes on one, forever
+                    // (`protocol_logic.cpp` `IdleStep`; printer-truth §3): `H0 F0` ends the
+                    // printer's `H0` once, then the unit reports itself idle as `X0 F0`.
+                    self.operation.request = (RequestCode::Reset, 0);
+                }
+                Response::finished(code, value, ResultCode::OK)
+            }
         }
     }
 
+    /// A command is refused only while another one runs. Over an error that waits for the user
+    /// it is accepted and takes the error over ([`Runner::supersede`]): Prusa's printer re-sends
+    /// a refused command at once, forever, and could never send the screen's Retry
+    /// (printer-truth §2.3, §7).
     fn start_command(&mut self, request: &Request) -> Response {
-        if self.operation.is_busy() {
-            return Response::rejected(request);
-        }
         let key = (request.code, request.value);
+        let superseded = match self.operation.status() {
+            Status::Running(_) => return Response::rejected(request),
+            Status::Failed(error) if error != ErrorCode::INVALID_TOOL => true,
+            _ => false,
+        };
         self.pending_button = None;
         if usize::from(request.value) < N
             && request.code != RequestCode::Unload
@@ -237,7 +294,11 @@ impl<const N: usize> App<N> {
         {
             self.unit.selected = Some(request.value.into());
         }
-        self.operation = Runner::start(key, &self.unit, &self.config);
+        self.operation = if superseded {
+            Runner::supersede(&self.operation, key)
+        } else {
+            Runner::start(key, &self.unit, &self.config)
+        };
         Response::bare(request.code, request.value, ParamCode::Accepted)
     }
 

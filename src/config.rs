@@ -22,6 +22,32 @@ pub struct Version {
     pub build: u16,
 }
 
+/// The `S2` revisions of MMU firmware 3.0.x the unit speaks the wire of, newest first: 3.0.1
+/// added register 0x22, 3.0.2 register 0x23, 3.0.3 nothing on the wire; requests, answers and
+/// the printers' register use are the same (Prusa-Firmware-MMU tags v3.0.0..v3.0.3; research
+/// notes `printer-truth.md` §5). A printer expecting any of them can talk to this unit.
+pub const WIRE_COMPATIBLE_REVISIONS: [u8; 4] = [3, 2, 1, 0];
+
+/// The revision to answer to the `repeat`-th `S2` in a row (0: the first): the configured one
+/// (register 0x52), then every other wire-compatible revision, newest first, then round again.
+/// Prusa's printer sends the same `S<n>` again at once on a mismatch, up to six mismatches per
+/// handshake (`protocol_logic.cpp` `ProcessVersionResponse`, Buddy and MK3S firmware alike), so
+/// every printer family finds its revision within one handshake.
+pub fn offered_revision(configured: u8, repeat: u8) -> u8 {
+    let mut others = WIRE_COMPATIBLE_REVISIONS
+        .iter()
+        .copied()
+        .filter(|&r| r != configured);
+    let offers = 1 + WIRE_COMPATIBLE_REVISIONS
+        .iter()
+        .filter(|&&r| r != configured)
+        .count();
+    match usize::from(repeat) % offers {
+        0 => configured,
+        k => others.nth(k - 1).unwrap_or(configured),
+    }
+}
+
 /// Everything the unit logic can be tuned with.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Config {

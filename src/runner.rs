@@ -5,10 +5,16 @@
 //! same step when the next can finish at once), stops every motor of the command and holds the
 //! error when one fails, and on a button in an error state does what the command's recovery
 //! table says ([`Command::on_button`]).
+//!
+//! A command the printer sends while another command's error waits is accepted and takes the
+//! error over before anything moves ([`Runner::supersede`]): Prusa's printer re-sends a rejected
+//! command at once and forever, so it could never send the Retry of the screen it shows
+//! (`protocol_logic.cpp` `CommandRejected` → `CommandRestart`; printer-truth §2.3, §7). Its plan
+//! is made once the error is resolved, from what the sensors then say.
 
 use mmu_protocol::{ButtonCode, ErrorCode, ProgressCode, RequestCode};
 
-use crate::commands::{Action, Command, MAX_PHASES, Plan, extend};
+use crate::commands::{Action, Command, MAX_PHASES, Plan, clear_hub, extend};
 use crate::config::Config;
 use crate::phases::{self, Notes, Outcome, Phase, PhaseRun};
 use crate::time::Instant;
@@ -39,6 +45,12 @@ pub struct Runner {
     notes: Notes,
     /// The failed phase's distance goal start, for the attempt after Retry.
     resume_goal_from: Option<i32>,
+    /// When the plan runs out, make the command's own plan (from the sensors as they are then)
+    /// instead of finishing: the plan so far only resolved an error in its way.
+    then_plan: bool,
+    /// The command whose recovery table answers the buttons for the error shown, when the error
+    /// was taken over from it ([`Runner::supersede`]).
+    inherited: Option<Command>,
 }
 
 impl Runner {
@@ -59,6 +71,8 @@ impl Runner {
             status,
             notes: Notes::default(),
             resume_goal_from: None,
+            then_plan: false,
+            inherited: None,
         }
     }
 
@@ -75,26 +89,33 @@ impl Runner {
         }
     }
 
-    /// A command that failed before it moved anything.
+    /// A command that failed before it moved anything. Retry plans it again.
     pub fn failed(request: (RequestCode, u8), error: ErrorCode) -> Self {
         let mut runner = Self::new(request, &[]);
         runner.status = Status::Failed(error);
         runner
     }
 
+    /// The command `request` arrives while `waiting`'s error waits for the user: it takes the
+    /// error over and moves nothing. The buttons then do what `waiting`'s recovery table says;
+    /// once the error is resolved the command is planned from the sensors. An error of the
+    /// sensor check (start-up or `H0`) is resolved by checking again, trusting the sensors as
+    /// Retry does; any other by the new command's plan itself, which starts by clearing
+    /// whatever the failed command left in the hub path.
+    pub fn supersede(waiting: &Runner, request: (RequestCode, u8)) -> Self {
+        let mut runner = Self::new(request, &[]);
+        runner.status = waiting.status;
+        runner.inherited = waiting.inherited.or(waiting.command);
+        runner.then_plan = true;
+        if waiting.phase() == Some(Phase::CheckSensors) {
+            extend(&mut runner.plan, &[Phase::CheckSensors]);
+        }
+        runner
+    }
+
     /// Where the command stands.
     pub fn status(&self) -> Status {
         self.status
-    }
-
-    /// True while the command runs or waits in an error: new commands are refused.
-    pub fn is_busy(&self) -> bool {
-        match self.status {
-            Status::Running(_) => true,
-            // An invalid tool needs no recovery: the printer stops the print or resets the unit.
-            Status::Failed(error) => error != ErrorCode::INVALID_TOOL,
-            Status::Finished => false,
-        }
     }
 
     /// The phase running (or failed), if any.
@@ -111,29 +132,47 @@ impl Runner {
     }
 
     /// The printer (or the unit's own button) pressed `button`: in an error state, what the
-    /// command's recovery table says; otherwise nothing.
-    pub fn press(&mut self, button: ButtonCode, config: &Config) {
-        let (Status::Failed(error), Some(command)) = (self.status, self.command) else {
+    /// recovery table says; otherwise nothing. A command that failed before any phase ran is
+    /// planned again from the sensors on Retry (it fails again with the cause then present, or
+    /// runs): its Retry must never report a finish nothing led to.
+    pub fn press<const N: usize>(&mut self, button: ButtonCode, unit: &Unit<N>, config: &Config) {
+        let (Status::Failed(error), Some(command)) = (self.status, self.inherited.or(self.command)) else {
             return;
         };
-        match command.on_button(error, button) {
-            None => {}
-            Some(Action::Continue) => self.advance(),
-            Some(Action::RetryPhase) => {
+        let Some(action) = command.on_button(error, button) else {
+            return;
+        };
+        self.inherited = None;
+        match action {
+            Action::Continue => self.advance(),
+            Action::RetryPhase => {
                 self.notes.trust_sensors = true;
                 self.run = None;
-                self.status = self
-                    .phase()
-                    .map_or(Status::Finished, |phase| Status::Running(phase.progress()));
+                match self.phase() {
+                    Some(phase) => self.status = Status::Running(phase.progress()),
+                    None => self.then_plan = true,
+                }
             }
-            Some(Action::Replan(replan)) => {
-                let Some(slot) = self.phase().and_then(Phase::slot) else {
+            Action::Replan(replan) => match self.phase().and_then(Phase::slot) {
+                Some(slot) => {
+                    let then_plan = self.then_plan;
+                    *self = Runner::new(self.request, &replan(slot, config));
+                    self.then_plan = then_plan;
+                    self.notes.trust_sensors = true;
+                }
+                None => self.then_plan = true,
+            },
+            Action::UnloadFirst => {
+                let mut unload = Plan::new();
+                if let Err(error) = clear_hub(&mut unload, unit) {
+                    self.status = Status::Failed(error);
                     return;
-                };
-                *self = Runner::new(self.request, &replan(slot, config));
-                self.notes.trust_sensors = true;
+                }
+                *self = Runner::new(self.request, &unload);
+                self.then_plan = true;
             }
         }
+        self.plan_when_due(unit, config);
     }
 
     /// Something went wrong outside the plan (the follower could not follow while printing): the
@@ -157,6 +196,32 @@ impl Runner {
         };
     }
 
+    /// With the plan run out and the command's own plan still to make, make it now from what
+    /// the unit knows (the sensors, after a Retry).
+    fn plan_when_due<const N: usize>(&mut self, unit: &Unit<N>, config: &Config) {
+        if !self.then_plan || self.phase().is_some() {
+            return;
+        }
+        self.then_plan = false;
+        let planned = match self.command {
+            Some(command) => command.plan(self.request.1, unit, config),
+            None => Err(ErrorCode::INTERNAL),
+        };
+        self.plan.clear();
+        self.index = 0;
+        self.run = None;
+        self.resume_goal_from = None;
+        self.status = match planned {
+            Ok(plan) => {
+                extend(&mut self.plan, &plan);
+                self.plan
+                    .first()
+                    .map_or(Status::Finished, |phase| Status::Running(phase.progress()))
+            }
+            Err(error) => Status::Failed(error),
+        };
+    }
+
     fn fail<const N: usize>(&mut self, error: ErrorCode, unit: &mut Unit<N>, now: Instant) {
         if let Some(slot) = self.phase().and_then(Phase::slot) {
             unit.brake(slot, now);
@@ -171,14 +236,20 @@ impl Runner {
         // Phases that finish at once (a check, a move already at its goal) hand over in the same step.
         for _ in 0..MAX_PHASES {
             let Status::Running(_) = self.status else { return };
+            self.plan_when_due(unit, config);
             let Some(phase) = self.phase() else {
-                self.status = Status::Finished;
+                if let Status::Running(_) = self.status {
+                    self.status = Status::Finished;
+                }
                 return;
             };
             let resume = self.resume_goal_from.take();
             match phases::step(phase, &mut self.run, resume, &mut self.notes, unit, now, config) {
                 Outcome::Continue => return,
-                Outcome::Done => self.advance(),
+                Outcome::Done => {
+                    self.advance();
+                    self.plan_when_due(unit, config);
+                }
                 Outcome::Fail(error) => {
                     self.fail(error, unit, now);
                     return;

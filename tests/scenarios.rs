@@ -158,8 +158,6 @@ fn eject_waits_for_continue_then_finishes() {
     assert_eq!(run.last, error(eject, ErrorCode::FILAMENT_EJECTED));
     assert_eq!(rig.model.slot_filament_present(1), Some(false));
     assert!(rig.motors_stopped());
-    // A new command waits until the user confirms.
-    assert_eq!(rig.send(t(0)).unwrap().param, ParamCode::Rejected);
     assert_eq!(
         rig.send(Request::new(RequestCode::Button, 1)).unwrap().param,
         ParamCode::Accepted

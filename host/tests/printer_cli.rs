@@ -189,7 +189,10 @@ fn reset_reconnects_and_shows_the_first_answer() {
 
 #[test]
 fn a_printer_expecting_another_version_stops() {
-    let text = printer_fails(&["--expect-version", "3.0.2", "status"]);
+    // 3.0.0 to 3.0.2 are negotiated (the unit offers the next revision when S2 is asked again);
+    // an MMU2S-era printer expecting 2.1.9 is not.
+    printer_ok(&["--expect-version", "3.0.2", "status"]);
+    let text = printer_fails(&["--expect-version", "2.1.9", "status"]);
     assert!(
         text.contains("MMU FW UPDATE NEEDED, printer screen 04504"),
         "{text}"
@@ -231,11 +234,12 @@ fn the_demo_runs_its_script() {
 /// Before: `S2 answered Some(2)`, a Rust `Option` in a user message, with no way out.
 #[test]
 fn a_version_mismatch_says_what_the_unit_reports_and_what_to_do() {
-    let text = printer_fails(&["--expect-version", "3.0.2", "status"]);
+    // 3.0.0 to 3.0.3 are negotiated; a revision the unit does not offer by itself fails.
+    let text = printer_fails(&["--expect-version", "3.0.4", "status"]);
     assert!(!text.contains("Some("), "{text}");
-    assert!(text.contains("the unit reports version 3.0.3"), "{text}");
-    assert!(text.contains("--expect-version 3.0.3"), "{text}");
-    assert!(text.contains("write 0x52 2"), "{text}");
+    assert!(text.contains("the printer expects 3.0.4"), "{text}");
+    assert!(text.contains("--expect-version 3.0."), "{text}");
+    assert!(text.contains("write 0x52 4"), "{text}");
 }
 
 /// Before: `printer --slots 9` exited 1, `sim --slots 9` 2; `--fault jam:7` on 3 slots was

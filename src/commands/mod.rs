@@ -62,12 +62,17 @@ pub enum Command {
 #[derive(Debug, Clone, Copy)]
 pub enum Action {
     /// Run the failed phase again from wherever the sensors say the filament is (the user has
-    /// looked: the sensors are trusted over the known lanes).
+    /// looked: the sensors are trusted over the known lanes). After an error raised before any
+    /// phase ran (the command's plan failed), plan the whole command again from the sensors: it
+    /// fails again with the cause then present, or runs (never a finish nothing led to).
     RetryPhase,
     /// The error is a question answered: go on with the next phase.
     Continue,
     /// Start over with the plan this function makes for the failed phase's slot.
     Replan(fn(usize, &Config) -> Plan),
+    /// Unload whatever owns the hub path and park it, then plan the command again (FIL. ALREADY
+    /// LOADED's Unload: "unload it first", then do what was asked).
+    UnloadFirst,
 }
 
 /// One row of a command's recovery table: after `error`, the printer's `button` does `action`.

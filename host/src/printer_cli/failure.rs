@@ -94,7 +94,7 @@ pub(crate) fn printer_failure(error: PrinterError, expected: (u8, u8, u8)) -> Fa
     let mut message = format!("the unit reports version {reported}, the printer expects {want} ({screen})");
     if part == 2 {
         message.push_str(&format!(
-            ".\n  To talk to this unit as it is, add --expect-version {reported}.\n  To make it report {want} (register 0x52: 3 for MK4, MK3.5 and Core One, 2 for MK3S): \
+            ".\n  To talk to this unit as it is, add --expect-version {reported}.\n  To make it offer {want} first (register 0x52; it offers 3.0.3 to 3.0.0 by itself): \
              mmu printer --port DEV --expect-version {reported} write 0x52 {revision}"
         ));
     } else {
