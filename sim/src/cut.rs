@@ -18,6 +18,9 @@ use mmu_protocol::{Request, RequestCode};
 
 use crate::flash::{CutModel, G0_PAGE, MemFlash};
 
+/// The longest a unit's start-up check may take before it listens, ms.
+const START_UP_MAX_MS: u32 = 5_000;
+
 /// Slots of the studied unit.
 pub const SLOTS: usize = 3;
 /// The flash of the study: STM32G0 pages.
@@ -177,7 +180,15 @@ impl Unit {
 
     /// A frame from the printer, in one step: what the unit answers and the board action.
     pub fn ask(&mut self, request: Request) -> (String, Option<BoardAction>) {
-        // The unit takes a frame only at the start of a quiet line.
+        // The unit hears nothing before its start-up check has ended, and takes a frame only at
+        // the start of a quiet line.
+        for _ in 0..START_UP_MAX_MS {
+            if self.app.is_listening() {
+                break;
+            }
+            self.now = self.now + 1;
+            self.app.step(self.now, &Samples::default(), &[]);
+        }
         self.now = self.now + u64::from(mmu_protocol::SILENCE_MS);
         self.app.step(self.now, &Samples::default(), &[]);
         let frame = request.encode();
