@@ -392,6 +392,10 @@ impl<const N: usize> App<N> {
         if after == before {
             return;
         }
+        if after == Status::Finished {
+            // What the printer's extruder moves from now on is evidence for the next command.
+            self.unit.moved_by_printer = [0; N];
+        }
         match after {
             Status::Failed(error) if error != ErrorCode::FILAMENT_EJECTED => {
                 self.counters.drive_errors = self.counters.drive_errors.saturating_add(1);

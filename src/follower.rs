@@ -45,12 +45,14 @@ pub fn follow<const N: usize>(
     let tension = unit.hub.tension.reading();
     let assist = follow_duty(0, tension, config).permille() > 0;
     let mut failed = None;
+    // A slot restored as loaded is followed only once it is known to hold the path.
+    let follows: [bool; N] =
+        core::array::from_fn(|slot| unit.lanes.get(slot) == Some(&Lane::Loaded) && unit.owner_proven(slot));
     for (slot, (drive, feeder)) in unit.drives.iter_mut().zip(unit.feeders.iter()).enumerate() {
         if Some(slot) == driving {
             continue;
         }
-        let loaded = unit.lanes.get(slot) == Some(&Lane::Loaded);
-        if !(allowed && loaded && assist) {
+        if !(allowed && follows.get(slot).copied().unwrap_or(false) && assist) {
             drive.release(now);
             continue;
         }

@@ -60,6 +60,14 @@ pub enum Phase {
         /// The slot.
         slot: usize,
     },
+    /// `P3`, for a slot only believed to hold the hub path (a stored lane): pull back at most the
+    /// hub search distance, which leaves a parked filament in its drive gear whichever slot it
+    /// is, until the hub sensor clears and proves the belief. Still seeing filament there is
+    /// `8008`: someone has to look.
+    ProveOwner {
+        /// The slot.
+        slot: usize,
+    },
     /// `P18`: pull back until the slot sensor clears.
     EjectFromSlot {
         /// The slot.
@@ -80,7 +88,7 @@ impl Phase {
             Phase::FeedThroughBowden { .. } => ProgressCode::FEEDING_TO_BONDTECH,
             Phase::FeedToFsensor { .. } => ProgressCode::FEEDING_TO_FSENSOR,
             Phase::FeedToNozzle { .. } => ProgressCode::FEEDING_TO_NOZZLE,
-            Phase::UnloadToHub { .. } => ProgressCode::UNLOADING_TO_FINDA,
+            Phase::UnloadToHub { .. } | Phase::ProveOwner { .. } => ProgressCode::UNLOADING_TO_FINDA,
             Phase::EjectFromSlot { .. } => ProgressCode::EJECTING_FILAMENT,
             Phase::CheckSensors => ProgressCode::HOMING,
             Phase::AwaitContinue => ProgressCode::ERR_WAITING_FOR_USER,
@@ -96,6 +104,7 @@ impl Phase {
             | Phase::FeedToFsensor { slot }
             | Phase::FeedToNozzle { slot }
             | Phase::UnloadToHub { slot }
+            | Phase::ProveOwner { slot }
             | Phase::EjectFromSlot { slot } => Some(slot),
             Phase::CheckSensors | Phase::AwaitContinue => None,
         }
@@ -104,9 +113,10 @@ impl Phase {
     /// Where the slot's filament is once this phase is done.
     const fn arrival(self) -> Option<Lane> {
         match self {
-            Phase::FeedToHub { .. } | Phase::FeedThroughBowden { .. } | Phase::UnloadToHub { .. } => {
-                Some(Lane::InHub)
-            }
+            Phase::FeedToHub { .. }
+            | Phase::FeedThroughBowden { .. }
+            | Phase::UnloadToHub { .. }
+            | Phase::ProveOwner { .. } => Some(Lane::InHub),
             Phase::FeedToFsensor { .. } => Some(Lane::AtFsensor),
             Phase::FeedToNozzle { .. } => Some(Lane::Loaded),
             Phase::RetractToPark { .. } => Some(Lane::Parked),
@@ -190,6 +200,11 @@ fn bounds(phase: Phase, config: &Config) -> Option<Bounds> {
                 .saturating_add(config.fsensor_search_mm)
                 .saturating_add(config.hub_search_mm),
             ErrorCode::FINDA_DIDNT_SWITCH_OFF,
+        ),
+        Phase::ProveOwner { .. } => reverse(
+            config.load_speed,
+            config.hub_search_mm,
+            ErrorCode::FINDA_VS_EEPROM_DISREPANCY,
         ),
         Phase::EjectFromSlot { .. } => reverse(
             config.load_speed,
@@ -340,6 +355,7 @@ fn step_motion<const N: usize>(
                 // Known (and persisted) before the tip leaves the park position, so a restart
                 // mid-way knows whose filament may be in the hub path.
                 unit.set_lane(slot, Lane::InHub);
+                unit.proven_owner = Some(slot);
                 Goal::Drive
             }
         }
@@ -393,6 +409,18 @@ fn step_motion<const N: usize>(
             if !hub && !unit.fsensor_triggered() {
                 notes.hub_cleared = Some((slot, odometry));
                 Goal::Reached
+            } else {
+                Goal::Drive
+            }
+        }
+        Phase::ProveOwner { .. } => {
+            if !hub && !unit.fsensor_triggered() {
+                notes.hub_cleared = Some((slot, odometry));
+                unit.proven_owner = Some(slot);
+                Goal::Reached
+            } else if unit.fsensor_triggered() || toward_goal_mm >= i32::from(bounds.max_mm) {
+                // Filament in the printer, or pulled as far as is safe (Retry adds nothing).
+                return Outcome::Fail(ErrorCode::FINDA_VS_EEPROM_DISREPANCY);
             } else {
                 Goal::Drive
             }

@@ -46,6 +46,13 @@ impl Lane {
     }
 }
 
+/// Revolutions of a coasting motor in one burst that prove the printer's extruder moved its
+/// filament: 10 mm with the reference drive (a lone edge could be noise or a nudge by hand).
+pub const PROOF_REVOLUTIONS: u8 = 5;
+/// The longest pause between two revolutions of one burst, ms (the printer's extruder moves at
+/// 20 mm/s or more: a revolution every 100 ms).
+pub const PROOF_GAP_MS: u64 = 500;
+
 /// One of the unit's analog sensors.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -138,6 +145,15 @@ pub struct Unit<const N: usize> {
     pub fsensor: u8,
     /// The slot last asked for (MMU3 "selector slot").
     pub selected: Option<usize>,
+    /// The slot this unit itself fed past its park position since it started: its ownership of
+    /// the hub path is known, not a stored belief.
+    pub proven_owner: Option<usize>,
+    /// Per slot, motor revolutions counted in one burst (each within [`PROOF_GAP_MS`] of the
+    /// last) while the motor coasted, since the last command ended: the printer's extruder moved
+    /// that slot's filament, so it holds the hub path. A lone edge (noise, a nudge) never adds up.
+    pub moved_by_printer: [u8; N],
+    /// When each slot's last coasting revolution came.
+    coasting_revolution_at: [Instant; N],
 }
 
 impl<const N: usize> Default for Unit<N> {
@@ -149,6 +165,9 @@ impl<const N: usize> Default for Unit<N> {
             lanes: [Lane::Unknown; N],
             fsensor: 0,
             selected: None,
+            proven_owner: None,
+            moved_by_printer: [0; N],
+            coasting_revolution_at: [Instant::ZERO; N],
         }
     }
 }
@@ -168,7 +187,19 @@ impl<const N: usize> Unit<N> {
             .zip(self.drives.iter())
             .enumerate()
         {
+            let before = feeder.odometry_centi();
             feeder.sense(slot, *sample, drive.counting(), now, config, &rails);
+            if feeder.odometry_centi() != before
+                && drive.command() == mmu_hal_port::MotorCommand::Coast
+                && let (Some(moved), Some(last)) = (
+                    self.moved_by_printer.get_mut(slot),
+                    self.coasting_revolution_at.get_mut(slot),
+                )
+            {
+                let in_burst = now.millis_since(*last) <= PROOF_GAP_MS;
+                *moved = if in_burst { moved.saturating_add(1) } else { 1 };
+                *last = now;
+            }
         }
         let hub = &samples.hub;
         self.hub.filament.update(
@@ -194,6 +225,27 @@ impl<const N: usize> Unit<N> {
     /// The printer reports filament at (or past) its sensor.
     pub fn fsensor_triggered(&self) -> bool {
         self.fsensor != 0
+    }
+
+    /// True when `slot`'s claim on the hub path is more than a stored belief: this unit fed it
+    /// there since it started, or the printer's extruder moved its filament (and no other) since
+    /// the last command ended. Moving a slot backwards on a belief alone could drag the wrong
+    /// filament out of its drive (README, "How the unit knows where the filament is").
+    pub fn owner_proven(&self, slot: usize) -> bool {
+        self.proven_owner == Some(slot) || (self.moved_by_printer(slot) && !self.owner_contradicted(slot))
+    }
+
+    /// True when the printer's extruder moved another slot's filament since the last command
+    /// ended: `slot` cannot be the one holding the path, whatever the stored lanes say.
+    pub fn owner_contradicted(&self, slot: usize) -> bool {
+        self.proven_owner.is_none_or(|owner| owner != slot)
+            && (0..N).any(|other| other != slot && self.moved_by_printer(other))
+    }
+
+    fn moved_by_printer(&self, slot: usize) -> bool {
+        self.moved_by_printer
+            .get(slot)
+            .is_some_and(|&revolutions| revolutions >= PROOF_REVOLUTIONS)
     }
 
     /// The slot whose filament occupies the hub path.

@@ -551,9 +551,14 @@ impl Operator<StrikingLink> for SoakUser {
         }
     }
 
-    fn decide(&mut self, link: &mut StrikingLink, _request: Request, _error: ErrorCode) -> Decision {
+    fn decide(&mut self, link: &mut StrikingLink, _request: Request, error: ErrorCode) -> Decision {
         if self.fix(link) {
             self.presses = 0;
+        }
+        if error == ErrorCode::FINDA_VS_EEPROM_DISREPANCY && link.sim_mut().unload_manually() > 0 {
+            // The screen says UNLOAD MANUALLY: done by hand; Retry at the next look.
+            self.presses = 0;
+            return Decision::Wait;
         }
         if link.sim().model().extruder_busy() {
             return Decision::Wait;

@@ -26,6 +26,13 @@ impl Operator<SimLink> for Watcher {
                 .model_mut()
                 .remove_filament(usize::from(request.value));
             Decision::Press(ButtonCode::MIDDLE)
+        } else if error == ErrorCode::FINDA_VS_EEPROM_DISREPANCY {
+            // Unload by hand, then come back to the screen and press Retry.
+            if link.sim_mut().unload_manually() > 0 {
+                Decision::Wait
+            } else {
+                Decision::Press(ButtonCode::MIDDLE)
+            }
         } else {
             Decision::GiveUp
         }
@@ -300,7 +307,7 @@ fn retry_after_a_bowden_jam_feeds_on_from_where_the_tip_stopped() {
 }
 
 #[test]
-fn a_power_loss_mid_tool_change_is_resumed_from_the_stored_lanes() {
+fn a_power_loss_mid_tool_change_is_resumed_once_the_user_unloaded_by_hand() {
     let (mut printer, mut op) = connected();
     assert_eq!(run(&mut printer, &mut op, RequestCode::Tool, 0), OK);
     let now = printer.link().sim().now_ms();
@@ -319,6 +326,18 @@ fn a_power_loss_mid_tool_change_is_resumed_from_the_stored_lanes() {
     assert!(
         op.events
             .contains(&PrinterEvent::Interrupted(Request::new(RequestCode::Tool, 1))),
+        "{:?}",
+        op.events
+    );
+    // Slot 1's tip stopped deep in the Bowden tube: the stored lane says it holds the path, but
+    // pulling it back the distance that is safe for any slot does not clear the hub sensor, so
+    // the unit asks for a manual unload instead of pulling further on a belief.
+    let unload = Request::new(RequestCode::Unload, 0);
+    assert!(
+        op.events.contains(&PrinterEvent::Error(
+            unload,
+            ErrorCode::FINDA_VS_EEPROM_DISREPANCY
+        )),
         "{:?}",
         op.events
     );

@@ -188,6 +188,22 @@ pub(crate) fn extend(plan: &mut Plan, phases: &[Phase]) {
 /// to own it, no motor moves on a guess.
 pub(crate) fn clear_hub<const N: usize>(plan: &mut Plan, unit: &Unit<N>) -> Result<(), ErrorCode> {
     match (unit.active(), unit.hub_present()) {
+        // With the hub sensor seeing filament, an unload may pull a long way: a slot only believed
+        // to hold the path (a stored lane) is first pulled back a distance safe for any slot,
+        // until the hub sensor proves it ([`Phase::ProveOwner`]).
+        (Some(active), Some(true)) if unit.owner_contradicted(active) => {
+            Err(ErrorCode::FINDA_VS_EEPROM_DISREPANCY)
+        }
+        (Some(active), Some(true)) if !unit.owner_proven(active) => {
+            extend(
+                plan,
+                &[
+                    Phase::ProveOwner { slot: active },
+                    Phase::RetractToPark { slot: active },
+                ],
+            );
+            Ok(())
+        }
         (Some(active), _) => {
             extend(plan, &unload_from_nozzle::phases(active));
             Ok(())
