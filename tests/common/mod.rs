@@ -7,12 +7,48 @@ pub mod bounds;
 
 use mmu_firmware::{App, Config, Instant, MotorCommand};
 use mmu_model::{Fault, Model, ModelConfig};
-use mmu_protocol::{ParamCode, ProgressCode, Request, RequestCode, Response, ResponseDecoder};
+use mmu_protocol::{
+    ButtonCode, ErrorCode, ParamCode, ProgressCode, Request, RequestCode, Response, ResponseDecoder,
+    ResultCode,
+};
 
 /// One step of the rig, ms.
 pub const STEP_MS: u64 = 1;
 /// The printer's heartbeat while a command runs, ms.
 pub const POLL_MS: u64 = 100;
+
+/// Where a parked tip rests, mm from the hub sensor.
+pub const PARK_MM: f32 = -15.0;
+
+/// `T<slot>`.
+pub fn t(slot: u8) -> Request {
+    Request::new(RequestCode::Tool, slot)
+}
+
+/// The `Q0` answer of `request` finished without error.
+pub fn finished(request: Request) -> Response {
+    Response::finished(request.code, request.value, ResultCode::OK)
+}
+
+/// The `Q0` answer of `request` stopped on `code`.
+pub fn error(request: Request, code: ErrorCode) -> Response {
+    Response::error(request.code, request.value, code)
+}
+
+/// Slot `slot`'s tip rests near the park position.
+pub fn assert_parked<const N: usize>(rig: &Rig<N>, slot: usize) {
+    let tip = rig.model.tip_mm(slot).unwrap();
+    assert!(
+        (tip - PARK_MM).abs() <= 5.0,
+        "slot {slot} should rest near the park position, tip at {tip} mm"
+    );
+}
+
+/// The printer (or the user) presses `button`; the unit accepts it.
+pub fn press<const N: usize>(rig: &mut Rig<N>, button: ButtonCode) {
+    let answer = rig.send(Request::new(RequestCode::Button, button.0));
+    assert_eq!(answer.map(|a| a.param), Some(ParamCode::Accepted), "{button:?}");
+}
 
 /// How the printer reports its filament sensor.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
