@@ -173,6 +173,13 @@ impl<const N: usize> Rig<N> {
     /// Issue a command and play the printer until it finishes or fails: `Q0` every
     /// [`POLL_MS`], filament sensor changes reported at once, co-feeding during `P1c`.
     pub fn command(&mut self, request: Request) -> Run {
+        self.issue(request);
+        self.follow(request, 600_000)
+    }
+
+    /// Send a command as the printer does (its own unload first when the command unloads) and
+    /// check that it is accepted; nothing more is played.
+    pub fn issue(&mut self, request: Request) {
         let same_tool =
             request.code == RequestCode::Tool && self.model.loaded_slot() == Some(request.value.into());
         if matches!(
@@ -188,7 +195,6 @@ impl<const N: usize> Rig<N> {
             ParamCode::Accepted,
             "{request:?} was not accepted: {answer:?}"
         );
-        self.follow(request, 600_000)
     }
 
     /// What the printer does before it asks for an unload or another tool: ram and pull the
@@ -205,6 +211,12 @@ impl<const N: usize> Rig<N> {
 
     /// Keep playing the printer for the command in progress.
     pub fn follow(&mut self, request: Request, timeout_ms: u64) -> Run {
+        self.follow_until(request, None, timeout_ms)
+    }
+
+    /// Keep playing the printer for the command in progress until `Q0` reports `until` (then the
+    /// run's `last` is that `P` answer) or the command ends.
+    pub fn follow_until(&mut self, request: Request, until: Option<ProgressCode>, timeout_ms: u64) -> Run {
         let mut progress: Vec<ProgressCode> = Vec::new();
         let start = self.now;
         loop {
@@ -226,6 +238,12 @@ impl<const N: usize> Rig<N> {
                     let code = ProgressCode(answer.param_value.unwrap_or(0) as u8);
                     if progress.last() != Some(&code) {
                         progress.push(code);
+                    }
+                    if until == Some(code) {
+                        return Run {
+                            progress,
+                            last: answer,
+                        };
                     }
                 }
                 ParamCode::Finished | ParamCode::Error => {
