@@ -405,7 +405,7 @@ fn stdio_serves_a_printer_session() {
     assert_eq!(printer.ask(version), Response::read(&version, 3));
 
     // A slot the unit does not have: refused at once (Prusa's `R`), or accepted and then reported
-    // INVALID_TOOL (what this firmware does, see tests/scenarios.rs).
+    // INVALID_TOOL (what this firmware does, see tests/tool_change.rs).
     let no_such_slot = Request::new(RequestCode::Tool, 7);
     let answer = printer.ask(no_such_slot);
     if answer != Response::rejected(&no_such_slot) {

@@ -7,12 +7,48 @@ pub mod bounds;
 
 use mmu_firmware::{App, Config, Instant, MotorCommand};
 use mmu_model::{Fault, Model, ModelConfig};
-use mmu_protocol::{ParamCode, ProgressCode, Request, RequestCode, Response, ResponseDecoder};
+use mmu_protocol::{
+    ButtonCode, ErrorCode, ParamCode, ProgressCode, Request, RequestCode, Response, ResponseDecoder,
+    ResultCode,
+};
 
 /// One step of the rig, ms.
 pub const STEP_MS: u64 = 1;
 /// The printer's heartbeat while a command runs, ms.
 pub const POLL_MS: u64 = 100;
+
+/// Where a parked tip rests, mm from the hub sensor.
+pub const PARK_MM: f32 = -15.0;
+
+/// `T<slot>`.
+pub fn t(slot: u8) -> Request {
+    Request::new(RequestCode::Tool, slot)
+}
+
+/// The `Q0` answer of `request` finished without error.
+pub fn finished(request: Request) -> Response {
+    Response::finished(request.code, request.value, ResultCode::OK)
+}
+
+/// The `Q0` answer of `request` stopped on `code`.
+pub fn error(request: Request, code: ErrorCode) -> Response {
+    Response::error(request.code, request.value, code)
+}
+
+/// Slot `slot`'s tip rests near the park position.
+pub fn assert_parked<const N: usize>(rig: &Rig<N>, slot: usize) {
+    let tip = rig.model.tip_mm(slot).unwrap();
+    assert!(
+        (tip - PARK_MM).abs() <= 5.0,
+        "slot {slot} should rest near the park position, tip at {tip} mm"
+    );
+}
+
+/// The printer (or the user) presses `button`; the unit accepts it.
+pub fn press<const N: usize>(rig: &mut Rig<N>, button: ButtonCode) {
+    let answer = rig.send(Request::new(RequestCode::Button, button.0));
+    assert_eq!(answer.map(|a| a.param), Some(ParamCode::Accepted), "{button:?}");
+}
 
 /// How the printer reports its filament sensor.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -137,6 +173,13 @@ impl<const N: usize> Rig<N> {
     /// Issue a command and play the printer until it finishes or fails: `Q0` every
     /// [`POLL_MS`], filament sensor changes reported at once, co-feeding during `P1c`.
     pub fn command(&mut self, request: Request) -> Run {
+        self.issue(request);
+        self.follow(request, 600_000)
+    }
+
+    /// Send a command as the printer does (its own unload first when the command unloads) and
+    /// check that it is accepted; nothing more is played.
+    pub fn issue(&mut self, request: Request) {
         let same_tool =
             request.code == RequestCode::Tool && self.model.loaded_slot() == Some(request.value.into());
         if matches!(
@@ -152,7 +195,6 @@ impl<const N: usize> Rig<N> {
             ParamCode::Accepted,
             "{request:?} was not accepted: {answer:?}"
         );
-        self.follow(request, 600_000)
     }
 
     /// What the printer does before it asks for an unload or another tool: ram and pull the
@@ -169,6 +211,12 @@ impl<const N: usize> Rig<N> {
 
     /// Keep playing the printer for the command in progress.
     pub fn follow(&mut self, request: Request, timeout_ms: u64) -> Run {
+        self.follow_until(request, None, timeout_ms)
+    }
+
+    /// Keep playing the printer for the command in progress until `Q0` reports `until` (then the
+    /// run's `last` is that `P` answer) or the command ends.
+    pub fn follow_until(&mut self, request: Request, until: Option<ProgressCode>, timeout_ms: u64) -> Run {
         let mut progress: Vec<ProgressCode> = Vec::new();
         let start = self.now;
         loop {
@@ -190,6 +238,12 @@ impl<const N: usize> Rig<N> {
                     let code = ProgressCode(answer.param_value.unwrap_or(0) as u8);
                     if progress.last() != Some(&code) {
                         progress.push(code);
+                    }
+                    if until == Some(code) {
+                        return Run {
+                            progress,
+                            last: answer,
+                        };
                     }
                 }
                 ParamCode::Finished | ParamCode::Error => {
