@@ -68,6 +68,13 @@ pub enum Phase {
         /// The slot.
         slot: usize,
     },
+    /// `P19`, for a slot whose tip nobody knows (after `X42` or a wiped store) before another
+    /// slot is fed: pull back the park distance (less if the slot sensor clears: the tip is at
+    /// the drive gear), so a tip resting in the merge where the slot paths join cannot block it.
+    ClearMerge {
+        /// The slot.
+        slot: usize,
+    },
     /// `P18`: pull back until the slot sensor clears.
     EjectFromSlot {
         /// The slot.
@@ -84,7 +91,7 @@ impl Phase {
     pub const fn progress(self) -> ProgressCode {
         match self {
             Phase::FeedToHub { .. } => ProgressCode::FEEDING_TO_FINDA,
-            Phase::RetractToPark { .. } => ProgressCode::RETRACTING_FROM_FINDA,
+            Phase::RetractToPark { .. } | Phase::ClearMerge { .. } => ProgressCode::RETRACTING_FROM_FINDA,
             Phase::FeedThroughBowden { .. } => ProgressCode::FEEDING_TO_BONDTECH,
             Phase::FeedToFsensor { .. } => ProgressCode::FEEDING_TO_FSENSOR,
             Phase::FeedToNozzle { .. } => ProgressCode::FEEDING_TO_NOZZLE,
@@ -105,6 +112,7 @@ impl Phase {
             | Phase::FeedToNozzle { slot }
             | Phase::UnloadToHub { slot }
             | Phase::ProveOwner { slot }
+            | Phase::ClearMerge { slot }
             | Phase::EjectFromSlot { slot } => Some(slot),
             Phase::CheckSensors | Phase::AwaitContinue => None,
         }
@@ -121,7 +129,7 @@ impl Phase {
             Phase::FeedToNozzle { .. } => Some(Lane::Loaded),
             Phase::RetractToPark { .. } => Some(Lane::Parked),
             Phase::EjectFromSlot { .. } => Some(Lane::Empty),
-            Phase::CheckSensors | Phase::AwaitContinue => None,
+            Phase::ClearMerge { .. } | Phase::CheckSensors | Phase::AwaitContinue => None,
         }
     }
 }
@@ -201,6 +209,7 @@ fn bounds(phase: Phase, config: &Config) -> Option<Bounds> {
                 .saturating_add(config.hub_search_mm),
             ErrorCode::FINDA_DIDNT_SWITCH_OFF,
         ),
+        Phase::ClearMerge { .. } => reverse(config.load_speed, config.park_mm, ErrorCode::MOVE_PULLEY_FAILED),
         Phase::ProveOwner { .. } => reverse(
             config.load_speed,
             config.hub_search_mm,
@@ -261,7 +270,13 @@ pub enum Outcome {
     Done,
     /// Stopped on an error.
     Fail(ErrorCode),
+    /// The feed stalled where the slot paths join and these other slots, whose tips nobody
+    /// knows, may be what blocks it: clear them out of the merge, then feed again.
+    Blocked(SlotSet),
 }
+
+/// A set of slots.
+pub type SlotSet = u8;
 
 /// Where a motion phase stands against its goal.
 enum Goal {
@@ -425,6 +440,16 @@ fn step_motion<const N: usize>(
                 Goal::Drive
             }
         }
+        Phase::ClearMerge { .. } => {
+            if !slot_sees || toward_goal_mm >= i32::from(config.park_mm) {
+                if let Some(clear) = unit.clear_of_merge.get_mut(slot) {
+                    *clear = true;
+                }
+                Goal::Reached
+            } else {
+                Goal::Drive
+            }
+        }
         Phase::EjectFromSlot { .. } => {
             if slot_sees {
                 Goal::Drive
@@ -454,8 +479,25 @@ fn step_motion<const N: usize>(
     };
     match drive.run(motion, feeder, tension, now, config) {
         Ok(()) => Outcome::Continue,
+        Err(ErrorCode::STALLED_PULLEY) if matches!(phase, Phase::FeedToHub { .. }) => {
+            match merge_suspects(unit, slot) {
+                0 => Outcome::Fail(ErrorCode::STALLED_PULLEY),
+                suspects => Outcome::Blocked(suspects),
+            }
+        }
         Err(error) => Outcome::Fail(error),
     }
+}
+
+/// The other slots with filament whose tips nobody knows (lanes wiped, or never known since the
+/// unit started) and that were not pulled out of the merge yet: one of them may rest where the
+/// slot paths join and block `slot`'s feed.
+fn merge_suspects<const N: usize>(unit: &Unit<N>, slot: usize) -> SlotSet {
+    (0..N)
+        .filter(|&other| other != slot && unit.lane(other) == Lane::Unknown)
+        .filter(|&other| !unit.clear_of_merge.get(other).copied().unwrap_or(true))
+        .filter(|&other| unit.feeders.get(other).and_then(|f| f.filament.present()) != Some(false))
+        .fold(0, |set, other| set | (1 << other))
 }
 
 /// How long the Bowden tube has read compressed past the follower's deadband (where

@@ -186,6 +186,29 @@ impl Runner {
         }
     }
 
+    /// Run [`Phase::ClearMerge`] for each suspect slot, then the blocked phase again.
+    fn clear_merge_first(&mut self, suspects: phases::SlotSet) {
+        let rest = self.plan.get(self.index..).map(Plan::from_slice);
+        let mut plan: Plan = self
+            .plan
+            .get(..self.index)
+            .map(Plan::from_slice)
+            .and_then(Result::ok)
+            .unwrap_or_default();
+        for slot in (0..8).filter(|slot| suspects & (1 << slot) != 0) {
+            extend(&mut plan, &[Phase::ClearMerge { slot }]);
+        }
+        if let Some(Ok(rest)) = rest {
+            extend(&mut plan, &rest);
+        }
+        self.plan = plan;
+        self.run = None;
+        self.resume_goal_from = None;
+        self.status = self
+            .phase()
+            .map_or(Status::Finished, |phase| Status::Running(phase.progress()));
+    }
+
     fn advance(&mut self) {
         self.index += 1;
         self.run = None;
@@ -252,6 +275,10 @@ impl Runner {
                 }
                 Outcome::Fail(error) => {
                     self.fail(error, unit, now);
+                    return;
+                }
+                Outcome::Blocked(suspects) => {
+                    self.clear_merge_first(suspects);
                     return;
                 }
             }

@@ -154,6 +154,8 @@ pub struct Unit<const N: usize> {
     pub moved_by_printer: [u8; N],
     /// When each slot's last coasting revolution came.
     coasting_revolution_at: [Instant; N],
+    /// Per slot of unknown position: pulled back out of the merge since the unit started.
+    pub clear_of_merge: [bool; N],
 }
 
 impl<const N: usize> Default for Unit<N> {
@@ -168,6 +170,7 @@ impl<const N: usize> Default for Unit<N> {
             proven_owner: None,
             moved_by_printer: [0; N],
             coasting_revolution_at: [Instant::ZERO; N],
+            clear_of_merge: [false; N],
         }
     }
 }

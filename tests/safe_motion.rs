@@ -173,3 +173,23 @@ fn a_right_but_unproven_belief_is_proven_by_the_printers_own_unload() {
     assert_eq!(run.last.param, ParamCode::Finished, "{:?}", run.last);
     assert_eq!(rig.model.loaded_slot(), Some(2));
 }
+
+#[test]
+fn after_the_lanes_are_wiped_a_tip_resting_in_the_merge_does_not_block_another_slot() {
+    let mut rig = Rig::<3>::new();
+    // Slot 0's tip rests 5 mm before the hub sensor, inside the merge; the hub sensor does not see
+    // it, and the unit's lanes were wiped (X42, or a store wiped after a flash error).
+    rig.model.insert_filament(0, -5.0);
+    rig.boot();
+    assert_eq!(rig.app.lanes(), [Lane::Unknown; 3]);
+    let run = rig.command(t(1));
+    assert_eq!(run.last.param, ParamCode::Finished, "{:?}", run.last);
+    assert_eq!(rig.model.loaded_slot(), Some(1));
+    let merge = rig.model.config().merge_mm;
+    let tip = rig.model.tip_mm(0).unwrap();
+    assert!(tip < merge, "slot 0 was pulled out of the merge: tip at {tip} mm");
+    assert!(
+        tip > rig.model.config().drive_gear_mm + 50.0,
+        "and no further than needed: {tip} mm"
+    );
+}

@@ -32,8 +32,9 @@ use crate::config::Config;
 use crate::phases::{Phase, sensor_fault_error};
 use crate::unit::{Lane, SensorId, Unit};
 
-/// The longest plan: unload (2 phases) + load to nozzle (4) + eject (2) fits with room.
-pub const MAX_PHASES: usize = 8;
+/// The longest plan: unload (2 phases) + load to nozzle (4) + eject (2) fits with room, and so
+/// does a load that first clears the merge of every other slot.
+pub const MAX_PHASES: usize = 12;
 
 /// The phases of one command, in order.
 pub type Plan = Vec<Phase, MAX_PHASES>;
