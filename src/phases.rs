@@ -15,6 +15,9 @@ use crate::drive::{Budget, Motion};
 use crate::time::Instant;
 use crate::unit::{Lane, SensorId, Unit};
 
+/// How far a slot whose tip nobody knows is fed to find out whether the slot sensor sees it, mm
+/// (the sensor sits just after the drive gear).
+const SLOT_PROBE_MM: i32 = 10;
 /// How long a check may wait for the sensors to settle after start, ms.
 const SENSOR_SETTLE_MS: u64 = 1000;
 /// How long the Bowden tube must stay compressed before the extruder's gears count as holding
@@ -260,6 +263,8 @@ pub struct Notes {
     /// Odometry of a slot when the hub sensor last saw its tip leave, so parking that follows an
     /// unload measures from the hub and not from where the unload stopped.
     pub hub_cleared: Option<(usize, i32)>,
+    /// The park position was measured from a point the hub sensor did not confirm.
+    pub park_unsure: bool,
 }
 
 /// What a phase did in one step.
@@ -297,15 +302,11 @@ pub fn step<const N: usize>(
     now: Instant,
     config: &Config,
 ) -> Outcome {
-    let outcome = match phase.slot() {
+    match phase.slot() {
         Some(slot) => step_motion(phase, slot, run, resume_goal_from, notes, unit, now, config),
         None if phase == Phase::AwaitContinue => Outcome::Fail(ErrorCode::FILAMENT_EJECTED),
         None => check_sensors(run, notes, unit, now),
-    };
-    if let (Outcome::Done, Some(slot), Some(lane)) = (&outcome, phase.slot(), phase.arrival()) {
-        unit.set_lane(slot, lane);
     }
-    outcome
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -363,9 +364,12 @@ fn step_motion<const N: usize>(
         Phase::FeedToHub { .. } => {
             if hub {
                 Goal::Reached
-            } else if !slot_sees {
-                // An empty slot: nothing to feed.
+            } else if !slot_sees && (unit.lane(slot) != Lane::Unknown || toward_goal_mm >= SLOT_PROBE_MM) {
+                // An empty slot: nothing to feed (a tip of unknown position may rest between the
+                // drive gear and the slot sensor: a short feed first shows it).
                 return Outcome::Fail(ErrorCode::FINDA_DIDNT_SWITCH_ON);
+            } else if !slot_sees {
+                Goal::Drive
             } else {
                 // Known (and persisted) before the tip leaves the park position, so a restart
                 // mid-way knows whose filament may be in the hub path.
@@ -377,7 +381,12 @@ fn step_motion<const N: usize>(
         Phase::RetractToPark { .. } => match (hub, run.mark_centi.or(hub_mark(notes, slot))) {
             (true, _) => Goal::Drive,
             (false, None) => {
+                // Where the hub cleared: the park distance counts from here, also after a Retry.
+                // A retract that starts with the hub already clear (after a Retry) did not see
+                // where: the tip ends somewhere behind its park position.
                 run.mark_centi = Some(odometry);
+                notes.hub_cleared = Some((slot, odometry));
+                notes.park_unsure |= run.started == now;
                 Goal::Drive
             }
             (false, Some(mark)) if (mark - odometry) / 100 >= i32::from(config.park_mm) => Goal::Reached,
@@ -467,7 +476,29 @@ fn step_motion<const N: usize>(
     let motion = match goal {
         Goal::Reached => {
             drive.brake(now);
+            let lane = match phase.arrival() {
+                Some(Lane::Parked) if notes.park_unsure => Some(Lane::Unknown),
+                lane => lane,
+            };
+            if let Some(lane) = lane {
+                unit.set_lane(slot, lane);
+            }
             return Outcome::Done;
+        }
+        // The slot sensor sits just after the drive gear: a tip pulled back past it is about to
+        // leave the gear. Only an eject means to go there; any other pull back stops.
+        Goal::Drive
+            if bounds.direction == Direction::Reverse
+                && !slot_sees
+                && !matches!(phase, Phase::EjectFromSlot { .. } | Phase::ClearMerge { .. }) =>
+        {
+            drive.brake(now);
+            if let Phase::RetractToPark { .. } = phase {
+                // Behind its park position, at the gear: where exactly, nobody knows.
+                unit.set_lane(slot, Lane::Unknown);
+                return Outcome::Done;
+            }
+            return Outcome::Fail(bounds.error);
         }
         Goal::Drive => Motion::Run {
             direction: bounds.direction,
@@ -530,7 +561,13 @@ fn check_sensors<const N: usize>(
     if let Some(fault) = unit.first_fault() {
         return Outcome::Fail(sensor_fault_error(fault));
     }
-    let Some(hub) = unit.hub_present() else {
+    // Every sensor must have settled: a reading, or a fault (a sensor stuck at a rail is called
+    // faulty only after the rail timeout, so an early check would miss it).
+    let unsettled = (0..Unit::<N>::SENSOR_COUNT)
+        .map(SensorId::from_index)
+        .find(|&id| unit.sensor(id).is_some_and(|s| s.reading().is_none()));
+    let hub = unit.hub_present();
+    if let (Some(_), _) | (None, None) = (unsettled, hub) {
         let started = run
             .get_or_insert(PhaseRun {
                 started: now,
@@ -540,8 +577,11 @@ fn check_sensors<const N: usize>(
             })
             .started;
         if now.millis_since(started) > SENSOR_SETTLE_MS {
-            return Outcome::Fail(ErrorCode::FINDA_FLICKERS);
+            return Outcome::Fail(unsettled.map_or(ErrorCode::FINDA_FLICKERS, sensor_fault_error));
         }
+        return Outcome::Continue;
+    }
+    let Some(hub) = hub else {
         return Outcome::Continue;
     };
     // At most one slot can be past its park position: stored lanes that say otherwise are

@@ -145,23 +145,19 @@ impl Runner {
         self.inherited = None;
         match action {
             Action::Continue => self.advance(),
-            Action::RetryPhase => {
-                self.notes.trust_sensors = true;
-                self.run = None;
-                match self.phase() {
-                    Some(phase) => self.status = Status::Running(phase.progress()),
+            Action::RetryPhase => self.retry_phase(),
+            Action::ReplanIfHubSees(_) if unit.hub_present() != Some(true) => self.retry_phase(),
+            Action::Replan(replan) | Action::ReplanIfHubSees(replan) => {
+                match self.phase().and_then(Phase::slot) {
+                    Some(slot) => {
+                        let then_plan = self.then_plan;
+                        *self = Runner::new(self.request, &replan(slot, config));
+                        self.then_plan = then_plan;
+                        self.notes.trust_sensors = true;
+                    }
                     None => self.then_plan = true,
                 }
             }
-            Action::Replan(replan) => match self.phase().and_then(Phase::slot) {
-                Some(slot) => {
-                    let then_plan = self.then_plan;
-                    *self = Runner::new(self.request, &replan(slot, config));
-                    self.then_plan = then_plan;
-                    self.notes.trust_sensors = true;
-                }
-                None => self.then_plan = true,
-            },
             Action::UnloadFirst => {
                 let mut unload = Plan::new();
                 if let Err(error) = clear_hub(&mut unload, unit) {
@@ -173,6 +169,17 @@ impl Runner {
             }
         }
         self.plan_when_due(unit, config);
+    }
+
+    /// Run the failed phase again, trusting the sensors (or plan the command again when the
+    /// error came before any phase).
+    fn retry_phase(&mut self) {
+        self.notes.trust_sensors = true;
+        self.run = None;
+        match self.phase() {
+            Some(phase) => self.status = Status::Running(phase.progress()),
+            None => self.then_plan = true,
+        }
     }
 
     /// Something went wrong outside the plan (the follower could not follow while printing): the

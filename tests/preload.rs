@@ -7,7 +7,7 @@
 
 mod common;
 
-use common::{Rig, assert_parked, error, finished, press};
+use common::{Rig, assert_parked, error, finished, press, t};
 use mmu_model::{Fault, Rail, SensorId};
 use mmu_protocol::{ButtonCode, ErrorCode, ParamCode, ProgressCode as P, Request, RequestCode};
 
@@ -189,4 +189,26 @@ fn motor_hall_sensor_disconnected_while_parking_then_retry_parks() {
         ErrorCode::MOVE_PULLEY_FAILED,
         &[P::RETRACTING_FROM_FINDA],
     );
+}
+
+#[test]
+fn hub_never_clears_after_the_preload_then_retry_parks_where_the_next_load_finds_the_hub() {
+    let mut rig = Rig::<3>::new();
+    rig.boot();
+    assert_eq!(
+        rig.send(Request::write(0xa0, 50)).unwrap().param,
+        ParamCode::Accepted
+    );
+    let run = rig.command(l(1));
+    assert_eq!(run.last, error(l(1), ErrorCode::FINDA_DIDNT_SWITCH_OFF));
+    assert_eq!(
+        rig.send(Request::write(0xa0, 2400)).unwrap().param,
+        ParamCode::Accepted
+    );
+    rig.idle(100);
+    retry(&mut rig);
+    assert_eq!(rig.follow(l(1), 120_000).last, finished(l(1)));
+    // Recorded as parked: the next tool change searches the hub within `hub_search_mm` of it.
+    let run = rig.command(t(1));
+    assert_eq!(run.last, finished(t(1)), "tip at {:?} mm", rig.model.tip_mm(1));
 }

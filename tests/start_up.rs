@@ -121,3 +121,15 @@ fn hub_sensor_disconnected_at_start_then_retry_after_it_is_reconnected_finishes(
         rig.model.clear_all();
     });
 }
+
+#[test]
+fn motor_hall_sensor_disconnected_at_start_then_retry_after_it_is_reconnected_finishes() {
+    let mut rig = Rig::<3>::new();
+    rig.inject(Fault::SensorDisconnected {
+        sensor: SensorId::MotorHall(1),
+        rail: Rail::High,
+    });
+    fails_then_retry_after(&mut rig, ErrorCode::MOVE_PULLEY_FAILED, |rig| {
+        rig.model.clear_all();
+    });
+}

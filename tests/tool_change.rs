@@ -413,3 +413,23 @@ fn motor_hall_sensor_disconnected_while_parking_the_old_slot_then_retry_parks_an
         "slot 0 parked: tip at {tip} mm"
     );
 }
+
+#[test]
+fn hub_threshold_fixed_then_retry_loads() {
+    let mut rig = Rig::<3>::new();
+    rig.boot();
+    assert_eq!(
+        rig.send(Request::write(0x90, 4090)).unwrap().param,
+        ParamCode::Accepted
+    );
+    failing_tool_change(&mut rig, 0, ErrorCode::FINDA_DIDNT_SWITCH_ON);
+    assert_eq!(
+        rig.send(Request::write(0x90, 2600)).unwrap().param,
+        ParamCode::Accepted
+    );
+    rig.idle(100);
+    retry(&mut rig);
+    let run = rig.follow(t(0), 120_000);
+    assert_eq!(run.last, finished(t(0)), "progress {:?}", run.progress);
+    assert_eq!(rig.model.loaded_slot(), Some(0));
+}

@@ -219,3 +219,27 @@ fn slot_sensor_disconnected_on_unload_then_retry_unloads_and_parks() {
         &[P::UNLOADING_TO_FINDA, P::RETRACTING_FROM_FINDA],
     );
 }
+
+#[test]
+fn hub_never_clears_on_unload_then_retry_leaves_the_slot_loadable() {
+    let mut rig = Rig::<3>::new();
+    rig.boot();
+    rig.command(t(0));
+    assert_eq!(
+        rig.send(Request::write(0xa0, 50)).unwrap().param,
+        ParamCode::Accepted
+    );
+    let unload = Request::new(RequestCode::Unload, 0);
+    let run = rig.command(unload);
+    assert_eq!(run.last, error(unload, ErrorCode::FINDA_DIDNT_SWITCH_OFF));
+    assert_eq!(
+        rig.send(Request::write(0xa0, 2400)).unwrap().param,
+        ParamCode::Accepted
+    );
+    rig.idle(100);
+    retry(&mut rig);
+    assert_eq!(rig.follow(unload, 120_000).last, finished(unload));
+    // The slot's drive gear still holds the filament: the next tool change loads it.
+    let run = rig.command(t(0));
+    assert_eq!(run.last, finished(t(0)), "tip at {:?} mm", rig.model.tip_mm(0));
+}

@@ -33,8 +33,14 @@ fn reload_from_park(slot: usize, config: &Config) -> Plan {
 
 /// What each error of the load means and what Retry does.
 pub const RECOVERY: &[Recovery] = &[
-    // `8001`: the hub sensor did not see the tip (or the slot is empty).
-    retry(ErrorCode::FINDA_DIDNT_SWITCH_ON),
+    // `8001`: the hub sensor did not see the tip (or the slot is empty). When it sees it on Retry
+    // (its threshold was wrong), the tip may be far past it: load again from the park position,
+    // as MMU 3.0.3 restarts a tool change when FINDA is pressed on Retry.
+    Recovery {
+        error: ErrorCode::FINDA_DIDNT_SWITCH_ON,
+        button: ButtonCode::MIDDLE,
+        action: Action::ReplanIfHubSees(reload_from_park),
+    },
     // `8003`: the printer's sensor did not trigger within the search distance.
     retry(ErrorCode::FSENSOR_DIDNT_SWITCH_ON),
     // `8009`: the printer's sensor triggered during the fast feed: the Bowden tube is shorter

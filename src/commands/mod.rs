@@ -71,6 +71,10 @@ pub enum Action {
     Continue,
     /// Start over with the plan this function makes for the failed phase's slot.
     Replan(fn(usize, &Config) -> Plan),
+    /// A feed towards the hub sensor that ran out of distance: if the hub sensor now sees the
+    /// filament (it missed the tip, which may be far past it), start over with the plan this
+    /// function makes, from the park position; otherwise run the feed again ([`Action::RetryPhase`]).
+    ReplanIfHubSees(fn(usize, &Config) -> Plan),
     /// Unload whatever owns the hub path and park it, then plan the command again (FIL. ALREADY
     /// LOADED's Unload: "unload it first", then do what was asked).
     UnloadFirst,
