@@ -1,5 +1,6 @@
 //! ToolChange (`T<n>`): the loaded slot comes out ([`super::unload_from_nozzle`]), slot *n* goes
-//! in to the nozzle ([`super::load_to_nozzle`]). Slot *n* already loaded: done at once.
+//! in to the nozzle ([`super::load_to_nozzle`]). Slot *n* already loaded (and known to be, not
+//! only stored): done at once.
 //!
 //! Progress: `P3 P19` (unload, when another slot is loaded), then `P5 P6 P1c P7`. Errors and
 //! recovery: those of its two parts; filament in the hub that no slot owns is `8008` before
@@ -14,7 +15,9 @@ use crate::unit::{Lane, Unit};
 /// The plan for `T<slot>`.
 pub fn plan<const N: usize>(slot: usize, unit: &Unit<N>, config: &Config) -> Result<Plan, ErrorCode> {
     let mut plan = Plan::new();
-    if unit.lane(slot) == Lane::Loaded {
+    // Already loaded, and known to be (a stored lane alone could report the wrong filament as
+    // loaded: then it is unloaded, proving or refusing the belief, and loaded again).
+    if unit.lane(slot) == Lane::Loaded && unit.owner_proven(slot) {
         return Ok(plan);
     }
     clear_hub(&mut plan, unit)?;

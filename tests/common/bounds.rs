@@ -2,6 +2,8 @@
 //! (`tests/properties.rs`) and the App fuzz target (`fuzz/fuzz_targets/app.rs`, which includes
 //! this file by path).
 
+use mmu_firmware::follower;
+use mmu_firmware::runner::Status;
 use mmu_firmware::{App, Config, Direction, Instant, MotorCommand, Samples};
 use mmu_protocol::ResponseDecoder;
 
@@ -13,19 +15,23 @@ pub const LONGEST_PHASE_MS: u64 = 120 * 2000 / 20 + 1000;
 pub struct Watch<const N: usize> {
     /// Per slot: since when it has been driven by the same phase of the same operation.
     driven_since: [Option<(u64, String)>; N],
+    /// Per slot: since when the tension follower has driven it.
+    followed_since: [Option<u64>; N],
 }
 
 impl<const N: usize> Default for Watch<N> {
     fn default() -> Self {
         Watch {
             driven_since: core::array::from_fn(|_| None),
+            followed_since: [None; N],
         }
     }
 }
 
 impl<const N: usize> Watch<N> {
     /// Never two slots fed towards the hub at once; no phase drives a motor beyond
-    /// [`LONGEST_PHASE_MS`]. Says what went wrong.
+    /// [`LONGEST_PHASE_MS`]; no motor moves while the unit holds an error; the tension follower
+    /// never assists longer than its still time without a revolution. Says what went wrong.
     pub fn check(&mut self, app: &App<N>, now: u64, motors: &[MotorCommand; N]) -> Result<(), String> {
         let forward = motors
             .iter()
@@ -33,6 +39,11 @@ impl<const N: usize> Watch<N> {
             .count();
         if forward > 1 {
             return Err(format!("two slots fed towards the hub at once: {motors:?}"));
+        }
+        if matches!(app.operation().status(), Status::Failed(_)) && motors.iter().any(|m| m.is_driving()) {
+            return Err(format!(
+                "a motor driven while the unit holds an error: {motors:?}"
+            ));
         }
         let phase = format!("{:?}/{:?}", app.operation().request, app.operation().phase());
         for (slot, motor) in motors.iter().enumerate() {
@@ -46,6 +57,19 @@ impl<const N: usize> Watch<N> {
                 }
                 (true, _) => *entry = Some((now, phase.clone())),
                 (false, _) => *entry = None,
+            }
+            // The follower: driven, but never longer than its still time without a revolution.
+            let follows = !by_phase && motor.is_driving();
+            let followed = &mut self.followed_since[slot];
+            *followed = follows.then(|| followed.unwrap_or(now));
+            if let (Some(since), Some(feeder)) = (*followed, app.unit().feeders.get(slot)) {
+                let still_since = since.max(feeder.hall.last_revolution().as_millis());
+                if now - still_since > follower::STILL_MS + 1 {
+                    return Err(format!(
+                        "slot {slot} assisted {} ms without a revolution",
+                        now - still_since
+                    ));
+                }
             }
         }
         Ok(())
