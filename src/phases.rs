@@ -426,7 +426,26 @@ fn step_motion<const N: usize>(
     };
     match drive.run(motion, feeder, tension, now, config) {
         Ok(()) => Outcome::Continue,
-        Err(error) => Outcome::Fail(error),
+        Err(error) => Outcome::Fail(first_cause(phase, error)),
+    }
+}
+
+/// The error that names what the user must look at. A motor stopped on its way to the printer's
+/// sensor (`P6`, `P1c`) stopped because the filament did not get there: a jam in the Bowden
+/// tube, or the tip pressed into the printer's idle extruder because its sensor never triggered
+/// (or was never heard). That is FSENSOR DIDNT TRIGG. (`8003`), whose screen sends the user to the
+/// tube and the printer's sensor; PULLEY CANNOT MOVE (`8047`) would send them to the slot motor,
+/// which moved the filament all the way from the hub. MMU 3.0.3 reports `8003` here too: it has
+/// no pulley stall detection and runs out its planned distance (`feed_to_bondtech.cpp`).
+fn first_cause(phase: Phase, error: ErrorCode) -> ErrorCode {
+    let towards_fsensor = matches!(
+        phase,
+        Phase::FeedThroughBowden { .. } | Phase::FeedToFsensor { .. }
+    );
+    if towards_fsensor && error == ErrorCode::STALLED_PULLEY {
+        ErrorCode::FSENSOR_DIDNT_SWITCH_ON
+    } else {
+        error
     }
 }
 

@@ -142,7 +142,7 @@ impl Runner {
         let Some(action) = command.on_button(error, button) else {
             return;
         };
-        self.inherited = None;
+        let inherited = self.inherited.take();
         match action {
             Action::Continue => self.advance(),
             Action::RetryPhase => {
@@ -155,8 +155,12 @@ impl Runner {
             }
             Action::Replan(replan) => match self.phase().and_then(Phase::slot) {
                 Some(slot) => {
+                    let Some(plan) = replan(slot, unit.fsensor_triggered(), config) else {
+                        self.inherited = inherited;
+                        return;
+                    };
                     let then_plan = self.then_plan;
-                    *self = Runner::new(self.request, &replan(slot, config));
+                    *self = Runner::new(self.request, &plan);
                     self.then_plan = then_plan;
                     self.notes.trust_sensors = true;
                 }

@@ -291,8 +291,10 @@ fn printer_sensor_never_triggers_then_retry_recovers() {
     rig.boot();
     rig.fsensor = FsensorReports::Stuck(0);
     failing_tool_change(&mut rig, 1, ErrorCode::FSENSOR_DIDNT_SWITCH_ON);
-    // The sensor works again; the printer (or the user) presses Retry.
+    // The sensor works again (the printer reports it at once); the printer (or the user)
+    // presses Retry.
     rig.fsensor = FsensorReports::Truthful;
+    rig.printer_step(None);
     assert_eq!(
         rig.send(Request::new(RequestCode::Button, 1)).unwrap().param,
         ParamCode::Accepted

@@ -68,8 +68,10 @@ pub enum Action {
     RetryPhase,
     /// The error is a question answered: go on with the next phase.
     Continue,
-    /// Start over with the plan this function makes for the failed phase's slot.
-    Replan(fn(usize, &Config) -> Plan),
+    /// Start over with the plan this function makes for the failed phase's slot, given whether
+    /// the printer's sensor reads filament now; `None`: nothing moves and the error stays (its
+    /// cause is still there).
+    Replan(fn(usize, bool, &Config) -> Option<Plan>),
     /// Unload whatever owns the hub path and park it, then plan the command again (FIL. ALREADY
     /// LOADED's Unload: "unload it first", then do what was asked).
     UnloadFirst,

@@ -1,0 +1,128 @@
+//! Errors that name the first cause, and Retries that lead out of them (issue 12 #12, #11, #7).
+//! Each test plays the printer against the physical model and is named after what a user sees.
+
+mod common;
+
+use common::{FsensorReports, Rig};
+use mmu_model::Fault;
+use mmu_protocol::{ErrorCode, ParamCode, Request, RequestCode, Response, ResultCode};
+
+fn t(slot: u8) -> Request {
+    Request::new(RequestCode::Tool, slot)
+}
+
+fn finished(request: Request) -> Response {
+    Response::finished(request.code, request.value, ResultCode::OK)
+}
+
+fn error(request: Request, code: ErrorCode) -> Response {
+    Response::error(request.code, request.value, code)
+}
+
+fn press(rig: &mut Rig<3>, button: u8) {
+    let answer = rig.send(Request::new(RequestCode::Button, button));
+    assert_eq!(answer.map(|a| a.param), Some(ParamCode::Accepted));
+}
+
+/// A printer that never co-feeds (its extruder stays idle): `Q0` every 100 ms until the command
+/// ends; the last answer.
+fn follow_without_cofeed(rig: &mut Rig<3>, request: Request) -> Response {
+    for _ in 0..1200 {
+        rig.idle(100);
+        let answer = rig.query();
+        if answer.param != ParamCode::Processing {
+            return answer;
+        }
+    }
+    panic!("{request:?} did not end");
+}
+
+// ---- #12: errors that name the wrong part -----------------------------------------------------
+
+/// A jam in the Bowden tube stops the filament on its way to the printer's sensor: the screen
+/// must send the user to the tube and the printer's sensor (`8003` FSENSOR DIDNT TRIGG.), not
+/// to the slot motor (`8047` PULLEY CANNOT MOVE).
+#[test]
+fn a_bowden_jam_is_reported_as_the_printer_sensor_not_triggering() {
+    let mut rig = Rig::<3>::new();
+    rig.boot();
+    rig.inject(Fault::BowdenJam);
+    let run = rig.command(t(1));
+    assert_eq!(
+        run.last,
+        error(t(1), ErrorCode::FSENSOR_DIDNT_SWITCH_ON),
+        "{:?}",
+        run.progress
+    );
+    rig.idle(10);
+    assert!(rig.motors_stopped());
+}
+
+/// The printer's sensor never triggers and the printer does not co-feed: the tip runs into the
+/// idle extruder's gears and the motor stalls there. The first cause is the sensor that did not
+/// trigger (`8003`), not the slot motor.
+#[test]
+fn the_printer_sensor_never_triggering_is_8003_even_when_the_motor_stalls_at_the_idle_extruder() {
+    let mut rig = Rig::<3>::new();
+    rig.boot();
+    rig.fsensor = FsensorReports::Stuck(0);
+    rig.send(t(1));
+    assert_eq!(
+        follow_without_cofeed(&mut rig, t(1)),
+        error(t(1), ErrorCode::FSENSOR_DIDNT_SWITCH_ON)
+    );
+    rig.idle(10);
+    assert!(rig.motors_stopped());
+}
+
+/// After `8003` the user clears the jam and pulls the filament back to the hub to look: Retry
+/// searches the whole bounded distance again from a known place (back to the park position,
+/// then the full load), instead of counting on from where the first attempt stopped.
+#[test]
+fn retry_after_8003_searches_the_full_distance_again() {
+    let mut rig = Rig::<3>::new();
+    rig.boot();
+    rig.inject(Fault::BowdenJam);
+    let run = rig.command(t(1));
+    assert_eq!(run.last, error(t(1), ErrorCode::FSENSOR_DIDNT_SWITCH_ON));
+    rig.model.clear_all();
+    assert!(rig.model.insert_filament(1, 5.0));
+    rig.idle(100);
+    press(&mut rig, 1);
+    let run = rig.follow(t(1), 120_000);
+    assert_eq!(run.last, finished(t(1)), "{:?}", run.progress);
+    assert_eq!(rig.model.loaded_slot(), Some(1));
+}
+
+/// With the printer's sensor stuck on, the load stops at once with `8009` (FSENSOR TOO EARLY).
+/// The printer's automatic Retries (three `B1`) must keep that first cause on the screen, moving
+/// nothing, instead of unloading into `8004` (FSENSOR FIL. STUCK). Once the sensor works, Retry
+/// loads.
+#[test]
+fn a_printer_sensor_stuck_on_keeps_8009_through_the_automatic_retries() {
+    let mut rig = Rig::<3>::new();
+    rig.boot();
+    rig.fsensor = FsensorReports::Stuck(1);
+    let run = rig.command(t(2));
+    assert_eq!(run.last, error(t(2), ErrorCode::FSENSOR_TOO_EARLY));
+    rig.idle(300);
+    let before = rig.motor_log.len();
+    for _ in 0..3 {
+        press(&mut rig, 1);
+        rig.idle(500);
+        assert_eq!(rig.query(), error(t(2), ErrorCode::FSENSOR_TOO_EARLY));
+    }
+    assert!(
+        rig.motor_log[before..]
+            .iter()
+            .all(|motors| motors.iter().all(|m| !m.is_driving())),
+        "nothing moves while the sensor still reads filament"
+    );
+    rig.fsensor = FsensorReports::Truthful;
+    // The printer reports its sensor's change at once (`f0`), then the user presses Retry.
+    rig.printer_step(None);
+    press(&mut rig, 1);
+    let run = rig.follow(t(2), 120_000);
+    assert_eq!(run.last, finished(t(2)), "{:?}", run.progress);
+    assert_eq!(rig.model.loaded_slot(), Some(2));
+}
