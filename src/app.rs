@@ -19,7 +19,7 @@ use crate::drive;
 use crate::follower;
 use crate::persist::{Counters, MAX_SETTINGS, Snapshot};
 use crate::registers;
-use crate::runner::{Runner, Status};
+use crate::runner::{Learned, Runner, Status};
 use crate::time::Instant;
 use crate::unit::{Lane, Unit};
 
@@ -82,6 +82,8 @@ pub struct App<const N: usize> {
     started_up: bool,
     /// `S2` requests in a row, none other between (version negotiation).
     s2_in_a_row: u8,
+    /// The Bowden length the last Retry of FSENSOR TOO EARLY learned since start, mm (0: none).
+    bowden_learned_mm: u16,
 }
 
 impl<const N: usize> App<N> {
@@ -107,6 +109,7 @@ impl<const N: usize> App<N> {
             pending_button: None,
             started_up: false,
             s2_in_a_row: 0,
+            bowden_learned_mm: 0,
         }
     }
 
@@ -185,7 +188,16 @@ impl<const N: usize> App<N> {
         if self.operation.request.0 == RequestCode::Tool {
             self.pending_button = Some(button);
         } else {
-            self.operation.press(button, &self.unit, &self.config);
+            let learned = self.operation.press(button, &self.unit, &mut self.config);
+            self.note(learned);
+        }
+    }
+
+    /// Keep what a recovery learned where the registers show it (the setting itself is already
+    /// in the config, which the persistence keeper saves).
+    fn note(&mut self, learned: Option<Learned>) {
+        if let Some(Learned::BowdenMm(mm)) = learned {
+            self.bowden_learned_mm = mm;
         }
     }
 
@@ -237,8 +249,10 @@ impl<const N: usize> App<N> {
                 Response::rejected(request)
             }),
             RequestCode::Button => {
-                self.operation
-                    .press(ButtonCode(request.value), &self.unit, &self.config);
+                let learned = self
+                    .operation
+                    .press(ButtonCode(request.value), &self.unit, &mut self.config);
+                self.note(learned);
                 Some(Response::accepted(request))
             }
             RequestCode::FilamentSensor => {
@@ -332,6 +346,7 @@ impl<const N: usize> App<N> {
             failures: &self.counters.failures,
             fed_mm: &self.counters.fed_mm,
             dropped_responses: self.dropped_responses,
+            bowden_learned_mm: self.bowden_learned_mm,
             now: self.now,
         };
         registers::read(&view, address)

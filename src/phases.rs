@@ -226,6 +226,12 @@ impl PhaseRun {
     pub fn goal_from_centi(&self) -> i32 {
         self.goal_from_centi
     }
+
+    /// How far the filament moved from the goal start to `odometry_centi`, forward positive
+    /// (1/100 mm).
+    pub fn fed_centi(&self, odometry_centi: i32) -> i32 {
+        odometry_centi.saturating_sub(self.goal_from_centi)
+    }
 }
 
 /// What phases of one command learn and pass on to the later ones.

@@ -14,7 +14,7 @@
 
 use mmu_protocol::{ButtonCode, ErrorCode, ProgressCode, RequestCode};
 
-use crate::commands::{Action, Command, MAX_PHASES, Plan, clear_hub, extend};
+use crate::commands::{Action, Command, MAX_PHASES, Plan, Retry, clear_hub, extend};
 use crate::config::Config;
 use crate::phases::{self, Notes, Outcome, Phase, PhaseRun};
 use crate::time::Instant;
@@ -32,6 +32,14 @@ pub enum Status {
     Finished,
 }
 
+/// A setting a recovery learned.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Learned {
+    /// The Bowden length (register 0x22), mm, measured when the printer's sensor triggered.
+    BowdenMm(u16),
+}
+
 /// The command being carried out (or the last one).
 #[derive(Debug, Clone)]
 pub struct Runner {
@@ -45,6 +53,8 @@ pub struct Runner {
     notes: Notes,
     /// The failed phase's distance goal start, for the attempt after Retry.
     resume_goal_from: Option<i32>,
+    /// How far the failed phase moved its filament from its goal start, 1/100 mm.
+    failed_fed_centi: Option<i32>,
     /// When the plan runs out, make the command's own plan (from the sensors as they are then)
     /// instead of finishing: the plan so far only resolved an error in its way.
     then_plan: bool,
@@ -71,6 +81,7 @@ impl Runner {
             status,
             notes: Notes::default(),
             resume_goal_from: None,
+            failed_fed_centi: None,
             then_plan: false,
             inherited: None,
         }
@@ -134,14 +145,19 @@ impl Runner {
     /// The printer (or the unit's own button) pressed `button`: in an error state, what the
     /// recovery table says; otherwise nothing. A command that failed before any phase ran is
     /// planned again from the sensors on Retry (it fails again with the cause then present, or
-    /// runs): its Retry must never report a finish nothing led to.
-    pub fn press<const N: usize>(&mut self, button: ButtonCode, unit: &Unit<N>, config: &Config) {
+    /// runs): its Retry must never report a finish nothing led to. A setting the recovery
+    /// learned (the Bowden length after `8009`) goes into `config`, and is returned.
+    pub fn press<const N: usize>(
+        &mut self,
+        button: ButtonCode,
+        unit: &Unit<N>,
+        config: &mut Config,
+    ) -> Option<Learned> {
         let (Status::Failed(error), Some(command)) = (self.status, self.inherited.or(self.command)) else {
-            return;
+            return None;
         };
-        let Some(action) = command.on_button(error, button) else {
-            return;
-        };
+        let action = command.on_button(error, button)?;
+        let mut learned = None;
         let inherited = self.inherited.take();
         match action {
             Action::Continue => self.advance(),
@@ -155,12 +171,21 @@ impl Runner {
             }
             Action::Replan(replan) => match self.phase().and_then(Phase::slot) {
                 Some(slot) => {
-                    let Some(plan) = replan(slot, unit.fsensor_triggered(), config) else {
-                        self.inherited = inherited;
-                        return;
+                    let retry = Retry {
+                        slot,
+                        fsensor: unit.fsensor_triggered(),
+                        fed_mm: self.failed_fed_centi.map(|centi| centi / 100),
                     };
+                    let Some(replanned) = replan(&retry, config) else {
+                        self.inherited = inherited;
+                        return None;
+                    };
+                    if let Some(bowden_mm) = replanned.bowden_mm {
+                        config.bowden_mm = bowden_mm;
+                        learned = Some(Learned::BowdenMm(bowden_mm));
+                    }
                     let then_plan = self.then_plan;
-                    *self = Runner::new(self.request, &plan);
+                    *self = Runner::new(self.request, &replanned.plan);
                     self.then_plan = then_plan;
                     self.notes.trust_sensors = true;
                 }
@@ -170,13 +195,14 @@ impl Runner {
                 let mut unload = Plan::new();
                 if let Err(error) = clear_hub(&mut unload, unit) {
                     self.status = Status::Failed(error);
-                    return;
+                    return None;
                 }
                 *self = Runner::new(self.request, &unload);
                 self.then_plan = true;
             }
         }
         self.plan_when_due(unit, config);
+        learned
     }
 
     /// Something went wrong outside the plan (the follower could not follow while printing): the
@@ -230,7 +256,15 @@ impl Runner {
         if let Some(slot) = self.phase().and_then(Phase::slot) {
             unit.brake(slot, now);
         }
-        self.resume_goal_from = self.run.take().map(|run| run.goal_from_centi());
+        let run = self.run.take();
+        self.resume_goal_from = run.map(|run| run.goal_from_centi());
+        self.failed_fed_centi = match (run, self.phase().and_then(Phase::slot)) {
+            (Some(run), Some(slot)) => unit
+                .feeders
+                .get(slot)
+                .map(|feeder| run.fed_centi(feeder.odometry_centi())),
+            _ => None,
+        };
         self.status = Status::Failed(error);
     }
 

@@ -126,3 +126,68 @@ fn a_printer_sensor_stuck_on_keeps_8009_through_the_automatic_retries() {
     assert_eq!(run.last, finished(t(2)), "{:?}", run.progress);
     assert_eq!(rig.model.loaded_slot(), Some(2));
 }
+
+// ---- #11: a wrong Bowden length cannot be fixed from the screen --------------------------------
+
+/// Register 0x22 says 420 mm on a 360 mm tube (and on a 330 mm one): the printer's sensor
+/// triggers during the fast feed (`8009`). The printer cannot write 0x22 while `T` runs, so Retry
+/// must fix it: the unit measured where the sensor triggered (from where the hub sensor saw the
+/// tip), keeps that as the Bowden length (a setting: it survives a restart), says so in register
+/// 0x53, and finishes the load.
+#[test]
+fn retry_after_8009_learns_the_bowden_length_and_finishes() {
+    for tube in [360.0, 330.0] {
+        let config = mmu_firmware::Config {
+            bowden_mm: 420,
+            ..mmu_firmware::Config::default()
+        };
+        let model = mmu_model::ModelConfig {
+            bowden_length_mm: tube,
+            extruder_gears_mm: tube + 4.0,
+            nozzle_mm: tube + 60.0,
+            ..mmu_model::ModelConfig::default()
+        };
+        let mut rig = Rig::<3>::with(config, model);
+        rig.boot();
+        let run = rig.command(t(0));
+        assert_eq!(run.last, error(t(0), ErrorCode::FSENSOR_TOO_EARLY), "{tube}");
+        let read = |rig: &mut Rig<3>, address| {
+            rig.send(Request::new(RequestCode::Read, address))
+                .and_then(|a| a.param_value)
+        };
+        assert_eq!(read(&mut rig, 0x53), Some(0), "nothing learned yet");
+        press(&mut rig, 1);
+        let run = rig.follow(t(0), 120_000);
+        assert_eq!(run.last, finished(t(0)), "{tube}: {:?}", run.progress);
+        assert_eq!(rig.model.loaded_slot(), Some(0));
+        let learned = read(&mut rig, 0x22).unwrap();
+        assert!(
+            (f32::from(learned) - tube).abs() <= 8.0,
+            "0x22 learned {learned} mm on a {tube} mm tube"
+        );
+        assert_eq!(read(&mut rig, 0x53), Some(learned));
+        // What the persistence keeper saves brings it back after a restart.
+        let mut restarted = mmu_firmware::App::<3>::new(mmu_firmware::Config::default());
+        restarted.restore(&rig.app.snapshot());
+        assert_eq!(restarted.read_register(0x22), Some(learned), "{tube}");
+        // The next load uses it: no 8009 any more.
+        assert_eq!(rig.command(t(1)).last, finished(t(1)), "{tube}");
+    }
+}
+
+/// The length is never learned longer than the old value, nor from a sensor that reads filament
+/// where no tube could end (stuck on at the hub): then `8009` stays, as above.
+#[test]
+fn a_sensor_on_at_the_hub_teaches_nothing() {
+    let mut rig = Rig::<3>::new();
+    rig.boot();
+    rig.fsensor = FsensorReports::Stuck(1);
+    assert_eq!(rig.command(t(0)).last, error(t(0), ErrorCode::FSENSOR_TOO_EARLY));
+    press(&mut rig, 1);
+    rig.idle(500);
+    assert_eq!(rig.query(), error(t(0), ErrorCode::FSENSOR_TOO_EARLY));
+    let bowden = rig
+        .send(Request::new(RequestCode::Read, 0x22))
+        .and_then(|a| a.param_value);
+    assert_eq!(bowden, Some(360));
+}

@@ -6,7 +6,7 @@
 
 use mmu_protocol::{ButtonCode, ErrorCode};
 
-use super::{Action, Plan, Recovery, extend, retry, unload_from_nozzle};
+use super::{Action, Plan, Recovery, Replanned, Retry, extend, retry, unload_from_nozzle};
 use crate::config::Config;
 use crate::phases::Phase;
 
@@ -32,29 +32,62 @@ fn reload_from_park(slot: usize, config: &Config) -> Plan {
     plan
 }
 
+/// The phases of the load from the printer's sensor on.
+fn from_fsensor(slot: usize) -> Plan {
+    let mut plan = Plan::new();
+    extend(
+        &mut plan,
+        &[Phase::FeedToFsensor { slot }, Phase::FeedToNozzle { slot }],
+    );
+    plan
+}
+
 /// Retry after `8003`. The printer's sensor reads filament now (it works again, or the user
 /// pushed the tip to it): the search is over, the load goes on from there. Otherwise the user
 /// may have moved the filament by hand to look: the load starts over from the park position,
 /// searching the full bounded distance again rather than what the first attempt left (MMU 3.0.3's
 /// Retry also unloads and loads again).
-fn after_no_trigger(slot: usize, fsensor: bool, config: &Config) -> Option<Plan> {
-    let mut plan = Plan::new();
-    if fsensor {
-        extend(
-            &mut plan,
-            &[Phase::FeedToFsensor { slot }, Phase::FeedToNozzle { slot }],
-        );
+fn after_no_trigger(retry: &Retry, config: &Config) -> Option<Replanned> {
+    Some(Replanned::plan(if retry.fsensor {
+        from_fsensor(retry.slot)
     } else {
-        plan = reload_from_park(slot, config);
-    }
-    Some(plan)
+        reload_from_park(retry.slot, config)
+    }))
 }
 
-/// Retry after `8009`. While the printer's sensor still reads filament nothing moves and `8009`
-/// stays: an unload would only end in `8004` (FSENSOR FIL. STUCK), hiding the first cause. Once it
-/// is clear, the load starts over from the park position.
-fn after_too_early(slot: usize, fsensor: bool, config: &Config) -> Option<Plan> {
-    (!fsensor).then(|| reload_from_park(slot, config))
+/// Retry after `8009`. The printer cannot write register 0x22 while `T` runs (printer-truth §9:
+/// Marlin runs no G-code inside `manage_response`), so a Bowden length longer than the tube would
+/// fail every Retry the same way. The fast feed measured the length: from where the hub sensor
+/// saw the tip to where the printer's sensor triggered. With the sensor still reading filament
+/// and that length one a tube can have ([`learned_bowden_mm`]), it becomes register 0x22 and the
+/// load goes on from the printer's sensor. A sensor that reads filament where no tube could end
+/// teaches nothing: nothing moves and `8009` stays (an unload would only end in `8004` FSENSOR
+/// FIL. STUCK, hiding the first cause). With the sensor clear, the load starts over from the park
+/// position.
+fn after_too_early(retry: &Retry, config: &Config) -> Option<Replanned> {
+    if !retry.fsensor {
+        return Some(Replanned::plan(reload_from_park(retry.slot, config)));
+    }
+    let learned = learned_bowden_mm(retry.fed_mm?, config)?;
+    Some(Replanned {
+        plan: from_fsensor(retry.slot),
+        bowden_mm: Some(learned),
+    })
+}
+
+/// The shortest Bowden length learned, mm: register 0x22's own lower bound.
+pub const MIN_LEARNED_BOWDEN_MM: u16 = 50;
+
+/// The Bowden length that a fast feed of `fed_mm` from the hub sensor to the printer's
+/// triggering sensor shows, if it is one to keep: never longer than the length in force (the
+/// sensor triggered before it, so the tube is not longer), never shorter than what was fed (the
+/// tip got that far; the printer reports its sensor within a few ms, under 1 mm at the fast
+/// speed), and within register 0x22's range.
+pub fn learned_bowden_mm(fed_mm: i32, config: &Config) -> Option<u16> {
+    let fed = u16::try_from(fed_mm).ok()?;
+    (MIN_LEARNED_BOWDEN_MM..config.bowden_mm)
+        .contains(&fed)
+        .then_some(fed)
 }
 
 /// What each error of the load means and what Retry does.
