@@ -165,7 +165,8 @@ impl<const N: usize> App<N> {
             }
         }
         let before = self.operation.status();
-        self.operation.step(&mut self.unit, now, &self.config);
+        self.operation
+            .step(&mut self.unit, now, &self.config, self.last_rx);
         self.count_transition(before);
         self.started_up |= !matches!(self.operation.status(), Status::Running(_));
         self.count_fed();

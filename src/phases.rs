@@ -24,6 +24,17 @@ const HELD_CONFIRM_MS: u64 = 100;
 /// printer pushes its own extra load + 2 mm, and the tube takes up some before it holds.
 const NOZZLE_PUSH_MARGIN_MM: u16 = 10;
 
+/// How long the printer may stay silent before a phase that depends on it holds its motor, ms.
+/// While a command runs, Prusa's printer sends `Q0` one heartbeat (1 s, `heartBeatPeriod` in
+/// `protocol_logic.h`) after its last exchange, the register poll right after, and `f` as soon as
+/// its sensor changes; so a line quiet for longer means a request or an answer was lost and the
+/// printer waits out its 2 s link timeout before it handshakes again: its `f` cannot arrive and
+/// its co-feed stops (printer-truth §8). 100 ms above the heartbeat for the exchange in flight
+/// and the printer's loop; at `P1c`'s 20 mm/s the unit then pushes at most about 22 mm past the
+/// printer's last word, inside what the printer's own co-feed and extra push take up before the
+/// slot motor could count as stalled.
+pub const PRINTER_SILENT_MS: u64 = 1100;
+
 /// One bounded step of a command.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -219,6 +230,51 @@ pub struct PhaseRun {
     mark_centi: Option<i32>,
     /// Since when the Bowden tube reads compressed.
     compressed_since: Option<Instant>,
+    /// The budget of the motion in progress: when and where the drive's lease began, and what
+    /// earlier leases of this attempt used (a hold ends a lease; the silence is not counted).
+    lease: Lease,
+    /// The motor is held while the printer is silent.
+    held: bool,
+}
+
+/// What the leases of one phase attempt used of its budget.
+#[derive(Debug, Clone, Copy)]
+struct Lease {
+    started: Instant,
+    from_centi: i32,
+    used_mm: u16,
+    used_ms: u64,
+}
+
+impl Lease {
+    fn new(now: Instant, odometry_centi: i32) -> Self {
+        Lease {
+            started: now,
+            from_centi: odometry_centi,
+            used_mm: 0,
+            used_ms: 0,
+        }
+    }
+
+    /// End the lease in progress at `now`, counting what it used.
+    fn end(&mut self, now: Instant, odometry_centi: i32) {
+        let mm = odometry_centi.abs_diff(self.from_centi) / 100;
+        self.used_mm = self.used_mm.saturating_add(u16::try_from(mm).unwrap_or(u16::MAX));
+        self.used_ms = self.used_ms.saturating_add(now.millis_since(self.started));
+    }
+
+    /// Begin a new lease at `now`: what is left of `full`.
+    fn resume(&mut self, full: Budget, now: Instant, odometry_centi: i32) -> Budget {
+        self.started = now;
+        self.from_centi = odometry_centi;
+        let max_ms = full.max_ms.saturating_sub(self.used_ms);
+        Budget {
+            max_mm: full.max_mm.saturating_sub(self.used_mm),
+            max_ms,
+            max_still_ms: full.max_still_ms.min(max_ms),
+            error: full.error,
+        }
+    }
 }
 
 impl PhaseRun {
@@ -242,6 +298,8 @@ pub struct Notes {
     /// Odometry of a slot when the hub sensor last saw its tip leave, so parking that follows an
     /// unload measures from the hub and not from where the unload stopped.
     pub hub_cleared: Option<(usize, i32)>,
+    /// When a byte from the printer last arrived.
+    pub printer_heard: Instant,
 }
 
 /// What a phase did in one step.
@@ -311,6 +369,8 @@ fn step_motion<const N: usize>(
                 goal_from_centi: resume_goal_from.unwrap_or(odometry),
                 mark_centi: None,
                 compressed_since: None,
+                lease: Lease::new(now, odometry),
+                held: false,
             })
         }
     };
@@ -430,6 +490,25 @@ fn step_motion<const N: usize>(
             speed: config.slow_speed,
         },
     };
+    let printer_silent = now.millis_since(notes.printer_heard) > PRINTER_SILENT_MS;
+    if depends_on_printer(phase) && printer_silent {
+        // Hold: no `f` can arrive and the printer's co-feed has stopped. The lease ends, so the
+        // silence counts against no bound; what the phase used so far stays counted.
+        if !run.held {
+            run.lease.end(now, odometry);
+            run.held = true;
+        }
+        drive.brake(now);
+        return Outcome::Continue;
+    }
+    if run.held {
+        run.held = false;
+        drive.begin(
+            run.lease.resume(bounds.budget(config), now, odometry),
+            feeder,
+            now,
+        );
+    }
     match drive.run(motion, feeder, tension, now, config) {
         Ok(()) => Outcome::Continue,
         Err(error) => Outcome::Fail(first_cause(phase, error)),
@@ -453,6 +532,12 @@ fn first_cause(phase: Phase, error: ErrorCode) -> ErrorCode {
     } else {
         error
     }
+}
+
+/// The phases whose progress rests on the printer: `P1c` ends on its `f1` while it co-feeds,
+/// `P7` pushes into its extruder as it takes the filament.
+const fn depends_on_printer(phase: Phase) -> bool {
+    matches!(phase, Phase::FeedToFsensor { .. } | Phase::FeedToNozzle { .. })
 }
 
 /// How long the Bowden tube has read compressed past the follower's deadband (where
@@ -492,6 +577,8 @@ fn check_sensors<const N: usize>(
                 goal_from_centi: 0,
                 mark_centi: None,
                 compressed_since: None,
+                lease: Lease::new(now, 0),
+                held: false,
             })
             .started;
         if now.millis_since(started) > SENSOR_SETTLE_MS {

@@ -269,8 +269,16 @@ impl Runner {
     }
 
     /// Advance the command to `now`: step the running phase and move on, finish or fail as the
-    /// sensors say.
-    pub fn step<const N: usize>(&mut self, unit: &mut Unit<N>, now: Instant, config: &Config) {
+    /// sensors say. `printer_heard` is when a byte from the printer last arrived: a phase that
+    /// depends on the printer holds its motor while it is silent.
+    pub fn step<const N: usize>(
+        &mut self,
+        unit: &mut Unit<N>,
+        now: Instant,
+        config: &Config,
+        printer_heard: Instant,
+    ) {
+        self.notes.printer_heard = printer_heard;
         // Phases that finish at once (a check, a move already at its goal) hand over in the same step.
         for _ in 0..MAX_PHASES {
             let Status::Running(_) = self.status else { return };

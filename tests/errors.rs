@@ -191,3 +191,59 @@ fn a_sensor_on_at_the_hub_teaches_nothing() {
         .and_then(|a| a.param_value);
     assert_eq!(bowden, Some(360));
 }
+
+// ---- #7: link loss during the co-feed ------------------------------------------------------------
+
+/// How long a silent printer may leave the unit pushing in `P1c`: the hold starts after
+/// [`mmu_firmware::phases::PRINTER_SILENT_MS`] and the motor is braked in the same step; 10 ms
+/// for the brake to take.
+const HOLD_WITHIN_MS: u64 = mmu_firmware::phases::PRINTER_SILENT_MS + 10;
+
+/// The printer goes silent during `P1c` (its request or the unit's answer was lost: it waits out
+/// its 2 s link timeout, then handshakes again; its co-feed stops and no `f` can arrive). The
+/// unit holds its motor until the printer speaks again, without failing and without the silence
+/// counting against the phase's time bound (also for a silence longer than that bound), then the
+/// change finishes.
+#[test]
+fn a_silent_printer_during_p1c_holds_the_motor_until_it_speaks_again() {
+    for silence_ms in [3000, 20_000] {
+        let mut rig = Rig::<3>::new();
+        rig.boot();
+        rig.send(t(1));
+        // Play the printer until the unit reports `P1c`, and not a step longer.
+        loop {
+            for _ in 0..10 {
+                rig.step_with(&[]);
+            }
+            let answer = rig.query();
+            assert_eq!(answer.param, ParamCode::Processing, "{answer:?}");
+            if answer.param_value == Some(u16::from(mmu_protocol::ProgressCode::FEEDING_TO_FSENSOR.0)) {
+                break;
+            }
+        }
+        let silent_from = rig.motor_log.len();
+        rig.idle(silence_ms);
+        let driven: Vec<usize> = rig.motor_log[silent_from..]
+            .iter()
+            .enumerate()
+            .filter(|(_, motors)| motors.iter().any(|m| m.is_driving()))
+            .map(|(ms, _)| ms)
+            .collect();
+        let last_driven = driven.last().copied().unwrap_or(0) as u64;
+        assert!(
+            last_driven < HOLD_WITHIN_MS,
+            "{silence_ms} ms silence: driven {last_driven} ms into it"
+        );
+        assert!(!driven.is_empty(), "the unit went on for a heartbeat first");
+        // The printer handshakes again and reports its sensor; the load goes on.
+        rig.handshake();
+        let resumed_from = rig.motor_log.len();
+        let run = rig.follow(t(1), 120_000);
+        assert_eq!(run.last, finished(t(1)), "{silence_ms}: {:?}", run.progress);
+        assert_eq!(rig.model.loaded_slot(), Some(1));
+        let resumed = rig.motor_log[resumed_from..]
+            .iter()
+            .position(|motors| motors[1].is_driving());
+        assert!(resumed.is_some_and(|ms| ms < 20), "resumed after {resumed:?} ms");
+    }
+}
