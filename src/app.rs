@@ -18,6 +18,7 @@ use crate::config::{Config, offered_revision};
 use crate::drive;
 use crate::follower;
 use crate::persist::{Counters, MAX_SETTINGS, Snapshot};
+use crate::phases::PrinterLink;
 use crate::registers;
 use crate::runner::{Learned, Runner, Status};
 use crate::time::Instant;
@@ -84,6 +85,9 @@ pub struct App<const N: usize> {
     s2_in_a_row: u8,
     /// The Bowden length the last Retry of FSENSOR TOO EARLY learned since start, mm (0: none).
     bowden_learned_mm: u16,
+    /// The link to the printer as the phases that depend on it see it (`P1c`, `P7` hold their
+    /// motor while it is in doubt).
+    printer: PrinterLink,
 }
 
 impl<const N: usize> App<N> {
@@ -110,6 +114,10 @@ impl<const N: usize> App<N> {
             started_up: false,
             s2_in_a_row: 0,
             bowden_learned_mm: 0,
+            printer: PrinterLink {
+                heard: Instant::ZERO,
+                in_sync: true,
+            },
         }
     }
 
@@ -147,26 +155,41 @@ impl<const N: usize> App<N> {
         self.unit.sense(samples, now, &self.config);
         if !rx.is_empty() {
             self.last_rx = now;
+            self.printer.heard = now;
         } else if now.millis_since(self.last_rx) >= u64::from(mmu_protocol::SILENCE_MS) {
             // A silence on the line ends any frame: what was dropped is not a request.
-            let _ = self.decoder.line_silent();
+            if self.decoder.line_silent().is_some() {
+                self.printer.in_sync = false;
+            }
         }
         for &byte in rx {
-            if let Some(Ok(request)) = self.decoder.feed(byte) {
-                if !self.started_up {
-                    // Not heard: the printer re-sends after its 2 s link timeout.
+            let request = match self.decoder.feed(byte) {
+                Some(Ok(request)) => request,
+                Some(Err(_)) => {
+                    // A lost frame: perhaps the printer's `f`.
+                    self.printer.in_sync = false;
                     continue;
                 }
-                self.handle(&request, &mut out);
-                if out.action.is_some() {
-                    // The board resets: motors stay off and nothing after `X` is answered.
-                    return out;
-                }
+                None => continue,
+            };
+            if !self.started_up {
+                // Not heard: the printer re-sends after its 2 s link timeout.
+                continue;
+            }
+            match (request.code, request.value) {
+                (RequestCode::Version, 0) => self.printer.in_sync = false,
+                (RequestCode::FilamentSensor | RequestCode::Query, _) => self.printer.in_sync = true,
+                _ => {}
+            }
+            self.handle(&request, &mut out);
+            if out.action.is_some() {
+                // The board resets: motors stay off and nothing after `X` is answered.
+                return out;
             }
         }
         let before = self.operation.status();
         self.operation
-            .step(&mut self.unit, now, &self.config, self.last_rx);
+            .step(&mut self.unit, now, &self.config, self.printer);
         self.count_transition(before);
         self.started_up |= !matches!(self.operation.status(), Status::Running(_));
         self.count_fed();

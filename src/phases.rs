@@ -298,8 +298,28 @@ pub struct Notes {
     /// Odometry of a slot when the hub sensor last saw its tip leave, so parking that follows an
     /// unload measures from the hub and not from where the unload stopped.
     pub hub_cleared: Option<(usize, i32)>,
+    /// What the unit knows of the link to the printer.
+    pub printer: PrinterLink,
+}
+
+/// What the unit knows of the link to the printer, for the phases that depend on it.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct PrinterLink {
     /// When a byte from the printer last arrived.
-    pub printer_heard: Instant,
+    pub heard: Instant,
+    /// False from a broken frame or the start of a handshake (`S0`) until the printer reports its
+    /// sensor again (`f`) or polls (`Q0`): a frame was lost, and the printer's `f` with it, perhaps;
+    /// it sends `f` again at the end of its handshake, before its next `Q0`
+    /// (`protocol_logic.cpp` `StartSeqStep`, printer-truth §8).
+    pub in_sync: bool,
+}
+
+impl PrinterLink {
+    /// True when the printer may have a sensor change the unit has not heard: silent for longer
+    /// than [`PRINTER_SILENT_MS`], or out of sync.
+    pub fn in_doubt(&self, now: Instant) -> bool {
+        !self.in_sync || now.millis_since(self.heard) > PRINTER_SILENT_MS
+    }
 }
 
 /// What a phase did in one step.
@@ -490,10 +510,9 @@ fn step_motion<const N: usize>(
             speed: config.slow_speed,
         },
     };
-    let printer_silent = now.millis_since(notes.printer_heard) > PRINTER_SILENT_MS;
-    if depends_on_printer(phase) && printer_silent {
-        // Hold: no `f` can arrive and the printer's co-feed has stopped. The lease ends, so the
-        // silence counts against no bound; what the phase used so far stays counted.
+    if depends_on_printer(phase) && notes.printer.in_doubt(now) {
+        // Hold: the printer's `f` may be lost and its co-feed has stopped. The lease ends, so the
+        // hold counts against no bound; what the phase used so far stays counted.
         if !run.held {
             run.lease.end(now, odometry);
             run.held = true;

@@ -16,7 +16,7 @@ use mmu_protocol::{ButtonCode, ErrorCode, ProgressCode, RequestCode};
 
 use crate::commands::{Action, Command, MAX_PHASES, Plan, Retry, clear_hub, extend};
 use crate::config::Config;
-use crate::phases::{self, Notes, Outcome, Phase, PhaseRun};
+use crate::phases::{self, Notes, Outcome, Phase, PhaseRun, PrinterLink};
 use crate::time::Instant;
 use crate::unit::Unit;
 
@@ -269,16 +269,16 @@ impl Runner {
     }
 
     /// Advance the command to `now`: step the running phase and move on, finish or fail as the
-    /// sensors say. `printer_heard` is when a byte from the printer last arrived: a phase that
-    /// depends on the printer holds its motor while it is silent.
+    /// sensors say. A phase that depends on the printer holds its motor while the `printer` link
+    /// is in doubt ([`PrinterLink::in_doubt`]).
     pub fn step<const N: usize>(
         &mut self,
         unit: &mut Unit<N>,
         now: Instant,
         config: &Config,
-        printer_heard: Instant,
+        printer: PrinterLink,
     ) {
-        self.notes.printer_heard = printer_heard;
+        self.notes.printer = printer;
         // Phases that finish at once (a check, a move already at its goal) hand over in the same step.
         for _ in 0..MAX_PHASES {
             let Status::Running(_) = self.status else { return };

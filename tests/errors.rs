@@ -210,17 +210,7 @@ fn a_silent_printer_during_p1c_holds_the_motor_until_it_speaks_again() {
         let mut rig = Rig::<3>::new();
         rig.boot();
         rig.send(t(1));
-        // Play the printer until the unit reports `P1c`, and not a step longer.
-        loop {
-            for _ in 0..10 {
-                rig.step_with(&[]);
-            }
-            let answer = rig.query();
-            assert_eq!(answer.param, ParamCode::Processing, "{answer:?}");
-            if answer.param_value == Some(u16::from(mmu_protocol::ProgressCode::FEEDING_TO_FSENSOR.0)) {
-                break;
-            }
-        }
+        play_until_p1c(&mut rig);
         let silent_from = rig.motor_log.len();
         rig.idle(silence_ms);
         let driven: Vec<usize> = rig.motor_log[silent_from..]
@@ -246,4 +236,57 @@ fn a_silent_printer_during_p1c_holds_the_motor_until_it_speaks_again() {
             .position(|motors| motors[1].is_driving());
         assert!(resumed.is_some_and(|ms| ms < 20), "resumed after {resumed:?} ms");
     }
+}
+
+/// Play the printer for `T` until the unit reports `P1c`, and not a step longer.
+fn play_until_p1c(rig: &mut Rig<3>) {
+    loop {
+        for _ in 0..10 {
+            rig.step_with(&[]);
+        }
+        let answer = rig.query();
+        assert_eq!(answer.param, ParamCode::Processing, "{answer:?}");
+        if answer.param_value == Some(u16::from(mmu_protocol::ProgressCode::FEEDING_TO_FSENSOR.0)) {
+            return;
+        }
+    }
+}
+
+/// A frame from the printer arrives broken during `P1c` (at 1 % byte errors, sometimes its `f1`).
+/// The printer then waits out its link timeout and handshakes again, and on a noisy line its
+/// handshakes may break too, each a heartbeat apart: never silent long enough for the silence
+/// rule. The unit holds from the broken frame until the printer reports its sensor again (`f`, at
+/// the end of a handshake that got through), then the change finishes.
+#[test]
+fn a_broken_frame_during_p1c_holds_the_motor_until_the_printer_reports_its_sensor() {
+    let mut rig = Rig::<3>::new();
+    rig.boot();
+    rig.send(t(1));
+    play_until_p1c(&mut rig);
+    // `f1*..` with its CRC broken.
+    let mut broken = Request::new(RequestCode::FilamentSensor, 1)
+        .encode()
+        .as_bytes()
+        .to_vec();
+    broken[1] ^= 0x02;
+    assert_eq!(rig.send_bytes(&broken), None);
+    let held_from = rig.motor_log.len();
+    for _ in 0..4 {
+        rig.idle(900);
+        // A handshake that breaks after its first exchange.
+        rig.send(Request::new(RequestCode::Version, 0));
+    }
+    rig.idle(900);
+    let driven_ms = rig.motor_log[held_from..]
+        .iter()
+        .filter(|motors| motors.iter().any(|m| m.is_driving()))
+        .count();
+    assert_eq!(
+        driven_ms, 0,
+        "driven {driven_ms} ms while the printer's sensor was unknown"
+    );
+    rig.handshake();
+    let run = rig.follow(t(1), 120_000);
+    assert_eq!(run.last, finished(t(1)), "{:?}", run.progress);
+    assert_eq!(rig.model.loaded_slot(), Some(1));
 }
