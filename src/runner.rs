@@ -61,6 +61,9 @@ pub struct Runner {
     /// The command whose recovery table answers the buttons for the error shown, when the error
     /// was taken over from it ([`Runner::supersede`]).
     inherited: Option<Command>,
+    /// The error shown came after the command had finished (the follower's jam while printing):
+    /// Retry finishes it again instead of planning it again.
+    failed_after_finish: bool,
 }
 
 impl Runner {
@@ -84,6 +87,7 @@ impl Runner {
             failed_fed_centi: None,
             then_plan: false,
             inherited: None,
+            failed_after_finish: false,
         }
     }
 
@@ -166,8 +170,12 @@ impl Runner {
                 self.run = None;
                 match self.phase() {
                     Some(phase) => self.status = Status::Running(phase.progress()),
+                    // The command had done its work: planning it again would ask its question
+                    // again (FIL. ALREADY LOADED, FILAMENT EJECTED) or move filament it moved.
+                    None if self.failed_after_finish => self.status = Status::Finished,
                     None => self.then_plan = true,
                 }
+                self.failed_after_finish = false;
             }
             Action::Replan(replan) => match self.phase().and_then(Phase::slot) {
                 Some(slot) => {
@@ -210,6 +218,7 @@ impl Runner {
     /// shown stays.
     pub fn interrupt(&mut self, error: ErrorCode) {
         if !matches!(self.status, Status::Failed(_)) {
+            self.failed_after_finish = self.status == Status::Finished;
             self.index = self.plan.len();
             self.run = None;
             self.status = Status::Failed(error);
