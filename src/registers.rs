@@ -315,7 +315,7 @@ pub const REGISTERS: &[Row] = &[
             true
         }),
     },
-    read_only!(0x53, "bowden_learned_mm", |v, _| Some(v.bowden_learned_mm)),
+    read_only!(0x53, "learned_bowden_mm", |v, _| Some(v.bowden_learned_mm)),
     block!(RAW, Sensors, "raw", |v, i| Some(
         v.sensor(SensorId::from_index(i))?.raw()
     )),
