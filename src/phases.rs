@@ -61,6 +61,13 @@ pub enum Phase {
         /// The slot.
         slot: usize,
     },
+    /// `P1c` after Retry of `8003`: the same slow feed from wherever the tip is past the hub
+    /// sensor, at most the whole Bowden length plus the search distance (the tip may be anywhere
+    /// in the tube: the user may have moved it, a slipping drive may have fed less than counted).
+    SearchFsensor {
+        /// The slot.
+        slot: usize,
+    },
     /// `P7`: push the extra load distance at the slow speed, following the extruder's tension.
     FeedToNozzle {
         /// The slot.
@@ -89,7 +96,7 @@ impl Phase {
             Phase::FeedToHub { .. } => ProgressCode::FEEDING_TO_FINDA,
             Phase::RetractToPark { .. } => ProgressCode::RETRACTING_FROM_FINDA,
             Phase::FeedThroughBowden { .. } => ProgressCode::FEEDING_TO_BONDTECH,
-            Phase::FeedToFsensor { .. } => ProgressCode::FEEDING_TO_FSENSOR,
+            Phase::FeedToFsensor { .. } | Phase::SearchFsensor { .. } => ProgressCode::FEEDING_TO_FSENSOR,
             Phase::FeedToNozzle { .. } => ProgressCode::FEEDING_TO_NOZZLE,
             Phase::UnloadToHub { .. } => ProgressCode::UNLOADING_TO_FINDA,
             Phase::EjectFromSlot { .. } => ProgressCode::EJECTING_FILAMENT,
@@ -105,6 +112,7 @@ impl Phase {
             | Phase::RetractToPark { slot }
             | Phase::FeedThroughBowden { slot }
             | Phase::FeedToFsensor { slot }
+            | Phase::SearchFsensor { slot }
             | Phase::FeedToNozzle { slot }
             | Phase::UnloadToHub { slot }
             | Phase::EjectFromSlot { slot } => Some(slot),
@@ -118,7 +126,7 @@ impl Phase {
             Phase::FeedToHub { .. } | Phase::FeedThroughBowden { .. } | Phase::UnloadToHub { .. } => {
                 Some(Lane::InHub)
             }
-            Phase::FeedToFsensor { .. } => Some(Lane::AtFsensor),
+            Phase::FeedToFsensor { .. } | Phase::SearchFsensor { .. } => Some(Lane::AtFsensor),
             Phase::FeedToNozzle { .. } => Some(Lane::Loaded),
             Phase::RetractToPark { .. } => Some(Lane::Parked),
             Phase::EjectFromSlot { .. } => Some(Lane::Empty),
@@ -184,6 +192,11 @@ fn bounds(phase: Phase, config: &Config) -> Option<Bounds> {
         Phase::FeedToFsensor { .. } => forward(
             config.slow_speed,
             config.bowden_slowdown_mm.saturating_add(config.fsensor_search_mm),
+            ErrorCode::FSENSOR_DIDNT_SWITCH_ON,
+        ),
+        Phase::SearchFsensor { .. } => forward(
+            config.slow_speed,
+            config.bowden_mm.saturating_add(config.fsensor_search_mm),
             ErrorCode::FSENSOR_DIDNT_SWITCH_ON,
         ),
         Phase::FeedToNozzle { .. } => forward(
@@ -448,7 +461,7 @@ fn step_motion<const N: usize>(
                 Goal::Drive
             }
         }
-        Phase::FeedToFsensor { .. } => {
+        Phase::FeedToFsensor { .. } | Phase::SearchFsensor { .. } => {
             if unit.fsensor_triggered() {
                 Goal::Reached
             } else {
@@ -544,7 +557,7 @@ fn step_motion<const N: usize>(
 fn first_cause(phase: Phase, error: ErrorCode) -> ErrorCode {
     let towards_fsensor = matches!(
         phase,
-        Phase::FeedThroughBowden { .. } | Phase::FeedToFsensor { .. }
+        Phase::FeedThroughBowden { .. } | Phase::FeedToFsensor { .. } | Phase::SearchFsensor { .. }
     );
     if towards_fsensor && error == ErrorCode::STALLED_PULLEY {
         ErrorCode::FSENSOR_DIDNT_SWITCH_ON
@@ -556,7 +569,10 @@ fn first_cause(phase: Phase, error: ErrorCode) -> ErrorCode {
 /// The phases whose progress rests on the printer: `P1c` ends on its `f1` while it co-feeds,
 /// `P7` pushes into its extruder as it takes the filament.
 const fn depends_on_printer(phase: Phase) -> bool {
-    matches!(phase, Phase::FeedToFsensor { .. } | Phase::FeedToNozzle { .. })
+    matches!(
+        phase,
+        Phase::FeedToFsensor { .. } | Phase::SearchFsensor { .. } | Phase::FeedToNozzle { .. }
+    )
 }
 
 /// How long the Bowden tube has read compressed past the follower's deadband (where

@@ -182,6 +182,7 @@ impl Runner {
                     let retry = Retry {
                         slot,
                         fsensor: unit.fsensor_triggered(),
+                        hub: unit.hub_present() == Some(true),
                         fed_mm: self.failed_fed_centi.map(|centi| centi / 100),
                     };
                     let Some(replanned) = replan(&retry, config) else {

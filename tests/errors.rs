@@ -75,23 +75,25 @@ fn the_printer_sensor_never_triggering_is_8003_even_when_the_motor_stalls_at_the
     assert!(rig.motors_stopped());
 }
 
-/// After `8003` the user clears the jam and pulls the filament back to the hub to look: Retry
-/// searches the whole bounded distance again from a known place (back to the park position,
-/// then the full load), instead of counting on from where the first attempt stopped.
+/// After `8003` the user clears the jam and pulls the filament back to look: just past the hub
+/// sensor, or out of the hub. Retry searches the whole bounded distance again (from where the tip
+/// is, or from the park position), instead of counting on from where the first attempt stopped.
 #[test]
 fn retry_after_8003_searches_the_full_distance_again() {
-    let mut rig = Rig::<3>::new();
-    rig.boot();
-    rig.inject(Fault::BowdenJam);
-    let run = rig.command(t(1));
-    assert_eq!(run.last, error(t(1), ErrorCode::FSENSOR_DIDNT_SWITCH_ON));
-    rig.model.clear_all();
-    assert!(rig.model.insert_filament(1, 5.0));
-    rig.idle(100);
-    press(&mut rig, 1);
-    let run = rig.follow(t(1), 120_000);
-    assert_eq!(run.last, finished(t(1)), "{:?}", run.progress);
-    assert_eq!(rig.model.loaded_slot(), Some(1));
+    for pulled_back_to in [5.0, -20.0] {
+        let mut rig = Rig::<3>::new();
+        rig.boot();
+        rig.inject(Fault::BowdenJam);
+        let run = rig.command(t(1));
+        assert_eq!(run.last, error(t(1), ErrorCode::FSENSOR_DIDNT_SWITCH_ON));
+        rig.model.clear_all();
+        assert!(rig.model.insert_filament(1, pulled_back_to));
+        rig.idle(100);
+        press(&mut rig, 1);
+        let run = rig.follow(t(1), 120_000);
+        assert_eq!(run.last, finished(t(1)), "{pulled_back_to}: {:?}", run.progress);
+        assert_eq!(rig.model.loaded_slot(), Some(1));
+    }
 }
 
 /// With the printer's sensor stuck on, the load stops at once with `8009` (FSENSOR TOO EARLY).

@@ -43,16 +43,25 @@ fn from_fsensor(slot: usize) -> Plan {
 }
 
 /// Retry after `8003`. The printer's sensor reads filament now (it works again, or the user
-/// pushed the tip to it): the search is over, the load goes on from there. Otherwise the user
-/// may have moved the filament by hand to look: the load starts over from the park position,
-/// searching the full bounded distance again rather than what the first attempt left (MMU 3.0.3's
-/// Retry also unloads and loads again).
+/// pushed the tip to it): the search is over, the load goes on from there. The tip is still past
+/// the hub sensor: search again from where it is, slowly, over the whole Bowden length plus the
+/// search distance, not only what the first attempt left (the user may have pulled it back to
+/// look, a slipping drive fed less than it counted). The hub sensor sees nothing (the filament
+/// was taken out): the load starts over from the park position.
 fn after_no_trigger(retry: &Retry, config: &Config) -> Option<Replanned> {
-    Some(Replanned::plan(if retry.fsensor {
-        from_fsensor(retry.slot)
+    let slot = retry.slot;
+    let mut plan = Plan::new();
+    if retry.fsensor {
+        plan = from_fsensor(slot);
+    } else if retry.hub {
+        extend(
+            &mut plan,
+            &[Phase::SearchFsensor { slot }, Phase::FeedToNozzle { slot }],
+        );
     } else {
-        reload_from_park(retry.slot, config)
-    }))
+        plan = reload_from_park(slot, config);
+    }
+    Some(Replanned::plan(plan))
 }
 
 /// Retry after `8009`. The printer cannot write register 0x22 while `T` runs (printer-truth §9:

@@ -83,6 +83,8 @@ pub struct Retry {
     pub slot: usize,
     /// The printer's sensor reads filament now.
     pub fsensor: bool,
+    /// The hub sensor sees filament now (a faulty one counts as not).
+    pub hub: bool,
     /// How far the failed phase moved the filament from where it first started (its first
     /// attempt), mm, in its own direction; `None` when no attempt ran.
     pub fed_mm: Option<i32>,
