@@ -18,8 +18,9 @@ use crate::config::{Config, offered_revision};
 use crate::drive;
 use crate::follower;
 use crate::persist::{Counters, MAX_SETTINGS, Snapshot};
+use crate::phases::PrinterLink;
 use crate::registers;
-use crate::runner::{Runner, Status};
+use crate::runner::{Learned, Runner, Status};
 use crate::time::Instant;
 use crate::unit::{Lane, Unit};
 
@@ -82,6 +83,11 @@ pub struct App<const N: usize> {
     started_up: bool,
     /// `S2` requests in a row, none other between (version negotiation).
     s2_in_a_row: u8,
+    /// The Bowden length the last Retry of FSENSOR TOO EARLY learned since start, mm (0: none).
+    bowden_learned_mm: u16,
+    /// The link to the printer as the phases that depend on it see it (`P1c`, `P7` hold their
+    /// motor while it is in doubt).
+    printer: PrinterLink,
 }
 
 impl<const N: usize> App<N> {
@@ -107,6 +113,11 @@ impl<const N: usize> App<N> {
             pending_button: None,
             started_up: false,
             s2_in_a_row: 0,
+            bowden_learned_mm: 0,
+            printer: PrinterLink {
+                heard: Instant::ZERO,
+                in_sync: true,
+            },
         }
     }
 
@@ -144,25 +155,41 @@ impl<const N: usize> App<N> {
         self.unit.sense(samples, now, &self.config);
         if !rx.is_empty() {
             self.last_rx = now;
+            self.printer.heard = now;
         } else if now.millis_since(self.last_rx) >= u64::from(mmu_protocol::SILENCE_MS) {
             // A silence on the line ends any frame: what was dropped is not a request.
-            let _ = self.decoder.line_silent();
+            if self.decoder.line_silent().is_some() {
+                self.printer.in_sync = false;
+            }
         }
         for &byte in rx {
-            if let Some(Ok(request)) = self.decoder.feed(byte) {
-                if !self.started_up {
-                    // Not heard: the printer re-sends after its 2 s link timeout.
+            let request = match self.decoder.feed(byte) {
+                Some(Ok(request)) => request,
+                Some(Err(_)) => {
+                    // A lost frame: perhaps the printer's `f`.
+                    self.printer.in_sync = false;
                     continue;
                 }
-                self.handle(&request, &mut out);
-                if out.action.is_some() {
-                    // The board resets: motors stay off and nothing after `X` is answered.
-                    return out;
-                }
+                None => continue,
+            };
+            if !self.started_up {
+                // Not heard: the printer re-sends after its 2 s link timeout.
+                continue;
+            }
+            match (request.code, request.value) {
+                (RequestCode::Version, 0) => self.printer.in_sync = false,
+                (RequestCode::FilamentSensor | RequestCode::Query, _) => self.printer.in_sync = true,
+                _ => {}
+            }
+            self.handle(&request, &mut out);
+            if out.action.is_some() {
+                // The board resets: motors stay off and nothing after `X` is answered.
+                return out;
             }
         }
         let before = self.operation.status();
-        self.operation.step(&mut self.unit, now, &self.config);
+        self.operation
+            .step(&mut self.unit, now, &self.config, self.printer);
         self.count_transition(before);
         self.started_up |= !matches!(self.operation.status(), Status::Running(_));
         self.count_fed();
@@ -185,7 +212,16 @@ impl<const N: usize> App<N> {
         if self.operation.request.0 == RequestCode::Tool {
             self.pending_button = Some(button);
         } else {
-            self.operation.press(button, &self.unit, &self.config);
+            let learned = self.operation.press(button, &self.unit, &mut self.config);
+            self.note(learned);
+        }
+    }
+
+    /// Keep what a recovery learned where the registers show it (the setting itself is already
+    /// in the config, which the persistence keeper saves).
+    fn note(&mut self, learned: Option<Learned>) {
+        if let Some(Learned::BowdenMm(mm)) = learned {
+            self.bowden_learned_mm = mm;
         }
     }
 
@@ -237,8 +273,10 @@ impl<const N: usize> App<N> {
                 Response::rejected(request)
             }),
             RequestCode::Button => {
-                self.operation
-                    .press(ButtonCode(request.value), &self.unit, &self.config);
+                let learned = self
+                    .operation
+                    .press(ButtonCode(request.value), &self.unit, &mut self.config);
+                self.note(learned);
                 Some(Response::accepted(request))
             }
             RequestCode::FilamentSensor => {
@@ -332,6 +370,7 @@ impl<const N: usize> App<N> {
             failures: &self.counters.failures,
             fed_mm: &self.counters.fed_mm,
             dropped_responses: self.dropped_responses,
+            bowden_learned_mm: self.bowden_learned_mm,
             now: self.now,
         };
         registers::read(&view, address)

@@ -27,6 +27,17 @@ const HELD_CONFIRM_MS: u64 = 100;
 /// printer pushes its own extra load + 2 mm, and the tube takes up some before it holds.
 const NOZZLE_PUSH_MARGIN_MM: u16 = 10;
 
+/// How long the printer may stay silent before a phase that depends on it holds its motor, ms.
+/// While a command runs, Prusa's printer sends `Q0` one heartbeat (1 s, `heartBeatPeriod` in
+/// `protocol_logic.h`) after its last exchange, the register poll right after, and `f` as soon as
+/// its sensor changes; so a line quiet for longer means a request or an answer was lost and the
+/// printer waits out its 2 s link timeout before it handshakes again: its `f` cannot arrive and
+/// its co-feed stops (printer-truth §8). 100 ms above the heartbeat for the exchange in flight
+/// and the printer's loop; at `P1c`'s 20 mm/s the unit then pushes at most about 22 mm past the
+/// printer's last word, inside what the printer's own co-feed and extra push take up before the
+/// slot motor could count as stalled.
+pub const PRINTER_SILENT_MS: u64 = 1100;
+
 /// One bounded step of a command.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -50,6 +61,13 @@ pub enum Phase {
     },
     /// `P1c`: slow feed until the printer's sensor triggers; the printer co-feeds.
     FeedToFsensor {
+        /// The slot.
+        slot: usize,
+    },
+    /// `P1c` after Retry of `8003`: the same slow feed from wherever the tip is past the hub
+    /// sensor, at most the whole Bowden length plus the search distance (the tip may be anywhere
+    /// in the tube: the user may have moved it, a slipping drive may have fed less than counted).
+    SearchFsensor {
         /// The slot.
         slot: usize,
     },
@@ -96,7 +114,7 @@ impl Phase {
             Phase::FeedToHub { .. } => ProgressCode::FEEDING_TO_FINDA,
             Phase::RetractToPark { .. } | Phase::ClearMerge { .. } => ProgressCode::RETRACTING_FROM_FINDA,
             Phase::FeedThroughBowden { .. } => ProgressCode::FEEDING_TO_BONDTECH,
-            Phase::FeedToFsensor { .. } => ProgressCode::FEEDING_TO_FSENSOR,
+            Phase::FeedToFsensor { .. } | Phase::SearchFsensor { .. } => ProgressCode::FEEDING_TO_FSENSOR,
             Phase::FeedToNozzle { .. } => ProgressCode::FEEDING_TO_NOZZLE,
             Phase::UnloadToHub { .. } | Phase::ProveOwner { .. } => ProgressCode::UNLOADING_TO_FINDA,
             Phase::EjectFromSlot { .. } => ProgressCode::EJECTING_FILAMENT,
@@ -112,6 +130,7 @@ impl Phase {
             | Phase::RetractToPark { slot }
             | Phase::FeedThroughBowden { slot }
             | Phase::FeedToFsensor { slot }
+            | Phase::SearchFsensor { slot }
             | Phase::FeedToNozzle { slot }
             | Phase::UnloadToHub { slot }
             | Phase::ProveOwner { slot }
@@ -128,7 +147,7 @@ impl Phase {
             | Phase::FeedThroughBowden { .. }
             | Phase::UnloadToHub { .. }
             | Phase::ProveOwner { .. } => Some(Lane::InHub),
-            Phase::FeedToFsensor { .. } => Some(Lane::AtFsensor),
+            Phase::FeedToFsensor { .. } | Phase::SearchFsensor { .. } => Some(Lane::AtFsensor),
             Phase::FeedToNozzle { .. } => Some(Lane::Loaded),
             Phase::RetractToPark { .. } => Some(Lane::Parked),
             Phase::EjectFromSlot { .. } => Some(Lane::Empty),
@@ -196,6 +215,11 @@ fn bounds(phase: Phase, config: &Config) -> Option<Bounds> {
             config.bowden_slowdown_mm.saturating_add(config.fsensor_search_mm),
             ErrorCode::FSENSOR_DIDNT_SWITCH_ON,
         ),
+        Phase::SearchFsensor { .. } => forward(
+            config.slow_speed,
+            config.bowden_mm.saturating_add(config.fsensor_search_mm),
+            ErrorCode::FSENSOR_DIDNT_SWITCH_ON,
+        ),
         Phase::FeedToNozzle { .. } => forward(
             config.slow_speed,
             config
@@ -246,12 +270,63 @@ pub struct PhaseRun {
     mark_centi: Option<i32>,
     /// Since when the Bowden tube reads compressed.
     compressed_since: Option<Instant>,
+    /// The budget of the motion in progress: when and where the drive's lease began, and what
+    /// earlier leases of this attempt used (a hold ends a lease; the silence is not counted).
+    lease: Lease,
+    /// The motor is held while the printer is silent.
+    held: bool,
+}
+
+/// What the leases of one phase attempt used of its budget.
+#[derive(Debug, Clone, Copy)]
+struct Lease {
+    started: Instant,
+    from_centi: i32,
+    used_mm: u16,
+    used_ms: u64,
+}
+
+impl Lease {
+    fn new(now: Instant, odometry_centi: i32) -> Self {
+        Lease {
+            started: now,
+            from_centi: odometry_centi,
+            used_mm: 0,
+            used_ms: 0,
+        }
+    }
+
+    /// End the lease in progress at `now`, counting what it used.
+    fn end(&mut self, now: Instant, odometry_centi: i32) {
+        let mm = odometry_centi.abs_diff(self.from_centi) / 100;
+        self.used_mm = self.used_mm.saturating_add(u16::try_from(mm).unwrap_or(u16::MAX));
+        self.used_ms = self.used_ms.saturating_add(now.millis_since(self.started));
+    }
+
+    /// Begin a new lease at `now`: what is left of `full`.
+    fn resume(&mut self, full: Budget, now: Instant, odometry_centi: i32) -> Budget {
+        self.started = now;
+        self.from_centi = odometry_centi;
+        let max_ms = full.max_ms.saturating_sub(self.used_ms);
+        Budget {
+            max_mm: full.max_mm.saturating_sub(self.used_mm),
+            max_ms,
+            max_still_ms: full.max_still_ms.min(max_ms),
+            error: full.error,
+        }
+    }
 }
 
 impl PhaseRun {
     /// Where the distance goal of this phase counts from (kept for the attempt after Retry).
     pub fn goal_from_centi(&self) -> i32 {
         self.goal_from_centi
+    }
+
+    /// How far the filament moved from the goal start to `odometry_centi`, forward positive
+    /// (1/100 mm).
+    pub fn fed_centi(&self, odometry_centi: i32) -> i32 {
+        odometry_centi.saturating_sub(self.goal_from_centi)
     }
 }
 
@@ -265,6 +340,28 @@ pub struct Notes {
     pub hub_cleared: Option<(usize, i32)>,
     /// The park position was measured from a point the hub sensor did not confirm.
     pub park_unsure: bool,
+    /// What the unit knows of the link to the printer.
+    pub printer: PrinterLink,
+}
+
+/// What the unit knows of the link to the printer, for the phases that depend on it.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct PrinterLink {
+    /// When a byte from the printer last arrived.
+    pub heard: Instant,
+    /// False from a broken frame or the start of a handshake (`S0`) until the printer reports its
+    /// sensor again (`f`) or polls (`Q0`): a frame was lost, and the printer's `f` with it, perhaps;
+    /// it sends `f` again at the end of its handshake, before its next `Q0`
+    /// (`protocol_logic.cpp` `StartSeqStep`, printer-truth §8).
+    pub in_sync: bool,
+}
+
+impl PrinterLink {
+    /// True when the printer may have a sensor change the unit has not heard: silent for longer
+    /// than [`PRINTER_SILENT_MS`], or out of sync.
+    pub fn in_doubt(&self, now: Instant) -> bool {
+        !self.in_sync || now.millis_since(self.heard) > PRINTER_SILENT_MS
+    }
 }
 
 /// What a phase did in one step.
@@ -336,6 +433,8 @@ fn step_motion<const N: usize>(
                 goal_from_centi: resume_goal_from.unwrap_or(odometry),
                 mark_centi: None,
                 compressed_since: None,
+                lease: Lease::new(now, odometry),
+                held: false,
             })
         }
     };
@@ -402,7 +501,7 @@ fn step_motion<const N: usize>(
                 Goal::Drive
             }
         }
-        Phase::FeedToFsensor { .. } => {
+        Phase::FeedToFsensor { .. } | Phase::SearchFsensor { .. } => {
             if unit.fsensor_triggered() {
                 Goal::Reached
             } else {
@@ -508,6 +607,24 @@ fn step_motion<const N: usize>(
             speed: config.slow_speed,
         },
     };
+    if depends_on_printer(phase) && notes.printer.in_doubt(now) {
+        // Hold: the printer's `f` may be lost and its co-feed has stopped. The lease ends, so the
+        // hold counts against no bound; what the phase used so far stays counted.
+        if !run.held {
+            run.lease.end(now, odometry);
+            run.held = true;
+        }
+        drive.brake(now);
+        return Outcome::Continue;
+    }
+    if run.held {
+        run.held = false;
+        drive.begin(
+            run.lease.resume(bounds.budget(config), now, odometry),
+            feeder,
+            now,
+        );
+    }
     match drive.run(motion, feeder, tension, now, config) {
         Ok(()) => Outcome::Continue,
         Err(ErrorCode::STALLED_PULLEY) if matches!(phase, Phase::FeedToHub { .. }) => {
@@ -516,7 +633,7 @@ fn step_motion<const N: usize>(
                 suspects => Outcome::Blocked(suspects),
             }
         }
-        Err(error) => Outcome::Fail(error),
+        Err(error) => Outcome::Fail(first_cause(phase, error)),
     }
 }
 
@@ -529,6 +646,34 @@ fn merge_suspects<const N: usize>(unit: &Unit<N>, slot: usize) -> SlotSet {
         .filter(|&other| !unit.clear_of_merge.get(other).copied().unwrap_or(true))
         .filter(|&other| unit.feeders.get(other).and_then(|f| f.filament.present()) != Some(false))
         .fold(0, |set, other| set | (1 << other))
+}
+
+/// The error that names what the user must look at. A motor stopped on its way to the printer's
+/// sensor (`P6`, `P1c`) stopped because the filament did not get there: a jam in the Bowden
+/// tube, or the tip pressed into the printer's idle extruder because its sensor never triggered
+/// (or was never heard). That is FSENSOR DIDNT TRIGG. (`8003`), whose screen sends the user to the
+/// tube and the printer's sensor; PULLEY CANNOT MOVE (`8047`) would send them to the slot motor,
+/// which moved the filament all the way from the hub. MMU 3.0.3 reports `8003` here too: it has
+/// no pulley stall detection and runs out its planned distance (`feed_to_bondtech.cpp`).
+fn first_cause(phase: Phase, error: ErrorCode) -> ErrorCode {
+    let towards_fsensor = matches!(
+        phase,
+        Phase::FeedThroughBowden { .. } | Phase::FeedToFsensor { .. } | Phase::SearchFsensor { .. }
+    );
+    if towards_fsensor && error == ErrorCode::STALLED_PULLEY {
+        ErrorCode::FSENSOR_DIDNT_SWITCH_ON
+    } else {
+        error
+    }
+}
+
+/// The phases whose progress rests on the printer: `P1c` ends on its `f1` while it co-feeds,
+/// `P7` pushes into its extruder as it takes the filament.
+const fn depends_on_printer(phase: Phase) -> bool {
+    matches!(
+        phase,
+        Phase::FeedToFsensor { .. } | Phase::SearchFsensor { .. } | Phase::FeedToNozzle { .. }
+    )
 }
 
 /// How long the Bowden tube has read compressed past the follower's deadband (where
@@ -574,6 +719,8 @@ fn check_sensors<const N: usize>(
                 goal_from_centi: 0,
                 mark_centi: None,
                 compressed_since: None,
+                lease: Lease::new(now, 0),
+                held: false,
             })
             .started;
         if now.millis_since(started) > SENSOR_SETTLE_MS {

@@ -54,6 +54,8 @@ pub struct View<'a> {
     pub fed_mm: &'a [u32],
     /// Responses dropped because a step's transmit buffer was full.
     pub dropped_responses: u16,
+    /// The Bowden length the last Retry of FSENSOR TOO EARLY learned since start, mm (0: none).
+    pub bowden_learned_mm: u16,
     /// The time of the current step.
     pub now: Instant,
 }
@@ -193,6 +195,9 @@ pub const SENSOR_FAULTS: u8 = 0x50;
 pub const DROPPED_RESPONSES: u8 = 0x51;
 /// Extension: the revision `S2` reports.
 pub const REPORTED_REVISION: u8 = 0x52;
+/// Extension: the Bowden length (0x22) the last Retry of FSENSOR TOO EARLY learned since start,
+/// mm; 0 when none (read only).
+pub const BOWDEN_LEARNED: u8 = 0x53;
 /// Extension: raw sample of sensor `i` at `RAW + i` (read only).
 pub const RAW: u8 = 0x60;
 /// Extension: filtered value of sensor `i` at `FILTERED + i` (read only).
@@ -310,6 +315,7 @@ pub const REGISTERS: &[Row] = &[
             true
         }),
     },
+    read_only!(0x53, "learned_bowden_mm", |v, _| Some(v.bowden_learned_mm)),
     block!(RAW, Sensors, "raw", |v, i| Some(
         v.sensor(SensorId::from_index(i))?.raw()
     )),
@@ -434,6 +440,7 @@ pub fn changed_settings<const CAP: usize>(
         failures: &[],
         fed_mm: &[],
         dropped_responses: 0,
+        bowden_learned_mm: 0,
         now: Instant::ZERO,
     };
     let (ours, theirs) = (view(config), view(defaults));

@@ -14,9 +14,9 @@
 
 use mmu_protocol::{ButtonCode, ErrorCode, ProgressCode, RequestCode};
 
-use crate::commands::{Action, Command, MAX_PHASES, Plan, clear_hub, extend};
+use crate::commands::{Action, Command, MAX_PHASES, Plan, Retry, clear_hub, extend};
 use crate::config::Config;
-use crate::phases::{self, Notes, Outcome, Phase, PhaseRun};
+use crate::phases::{self, Notes, Outcome, Phase, PhaseRun, PrinterLink};
 use crate::time::Instant;
 use crate::unit::Unit;
 
@@ -32,6 +32,14 @@ pub enum Status {
     Finished,
 }
 
+/// A setting a recovery learned.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Learned {
+    /// The Bowden length (register 0x22), mm, measured when the printer's sensor triggered.
+    BowdenMm(u16),
+}
+
 /// The command being carried out (or the last one).
 #[derive(Debug, Clone)]
 pub struct Runner {
@@ -45,12 +53,17 @@ pub struct Runner {
     notes: Notes,
     /// The failed phase's distance goal start, for the attempt after Retry.
     resume_goal_from: Option<i32>,
+    /// How far the failed phase moved its filament from its goal start, 1/100 mm.
+    failed_fed_centi: Option<i32>,
     /// When the plan runs out, make the command's own plan (from the sensors as they are then)
     /// instead of finishing: the plan so far only resolved an error in its way.
     then_plan: bool,
     /// The command whose recovery table answers the buttons for the error shown, when the error
     /// was taken over from it ([`Runner::supersede`]).
     inherited: Option<Command>,
+    /// The error shown came after the command had finished (the follower's jam while printing):
+    /// Retry finishes it again instead of planning it again.
+    failed_after_finish: bool,
 }
 
 impl Runner {
@@ -71,8 +84,10 @@ impl Runner {
             status,
             notes: Notes::default(),
             resume_goal_from: None,
+            failed_fed_centi: None,
             then_plan: false,
             inherited: None,
+            failed_after_finish: false,
         }
     }
 
@@ -134,41 +149,58 @@ impl Runner {
     /// The printer (or the unit's own button) pressed `button`: in an error state, what the
     /// recovery table says; otherwise nothing. A command that failed before any phase ran is
     /// planned again from the sensors on Retry (it fails again with the cause then present, or
-    /// runs): its Retry must never report a finish nothing led to.
-    pub fn press<const N: usize>(&mut self, button: ButtonCode, unit: &Unit<N>, config: &Config) {
+    /// runs): its Retry must never report a finish nothing led to. A setting the recovery
+    /// learned (the Bowden length after `8009`) goes into `config`, and is returned.
+    pub fn press<const N: usize>(
+        &mut self,
+        button: ButtonCode,
+        unit: &Unit<N>,
+        config: &mut Config,
+    ) -> Option<Learned> {
         let (Status::Failed(error), Some(command)) = (self.status, self.inherited.or(self.command)) else {
-            return;
+            return None;
         };
-        let Some(action) = command.on_button(error, button) else {
-            return;
-        };
-        self.inherited = None;
+        let action = command.on_button(error, button)?;
+        let mut learned = None;
+        let inherited = self.inherited.take();
         match action {
             Action::Continue => self.advance(),
             Action::RetryPhase => self.retry_phase(),
-            Action::ReplanIfHubSees(_) if unit.hub_present() != Some(true) => self.retry_phase(),
-            Action::Replan(replan) | Action::ReplanIfHubSees(replan) => {
-                match self.phase().and_then(Phase::slot) {
-                    Some(slot) => {
-                        let then_plan = self.then_plan;
-                        *self = Runner::new(self.request, &replan(slot, config));
-                        self.then_plan = then_plan;
-                        self.notes.trust_sensors = true;
+            Action::Replan(replan) => match self.phase().and_then(Phase::slot) {
+                Some(slot) => {
+                    let retry = Retry {
+                        slot,
+                        fsensor: unit.fsensor_triggered(),
+                        hub: unit.hub_present() == Some(true),
+                        fed_mm: self.failed_fed_centi.map(|centi| centi / 100),
+                    };
+                    let Some(replanned) = replan(&retry, config) else {
+                        self.inherited = inherited;
+                        return None;
+                    };
+                    if let Some(bowden_mm) = replanned.bowden_mm {
+                        config.bowden_mm = bowden_mm;
+                        learned = Some(Learned::BowdenMm(bowden_mm));
                     }
-                    None => self.then_plan = true,
+                    let then_plan = self.then_plan;
+                    *self = Runner::new(self.request, &replanned.plan);
+                    self.then_plan = then_plan;
+                    self.notes.trust_sensors = true;
                 }
-            }
+                None => self.then_plan = true,
+            },
             Action::UnloadFirst => {
                 let mut unload = Plan::new();
                 if let Err(error) = clear_hub(&mut unload, unit) {
                     self.status = Status::Failed(error);
-                    return;
+                    return None;
                 }
                 *self = Runner::new(self.request, &unload);
                 self.then_plan = true;
             }
         }
         self.plan_when_due(unit, config);
+        learned
     }
 
     /// Run the failed phase again, trusting the sensors (or plan the command again when the
@@ -178,8 +210,12 @@ impl Runner {
         self.run = None;
         match self.phase() {
             Some(phase) => self.status = Status::Running(phase.progress()),
+            // The command had done its work: planning it again would ask its question again
+            // (FIL. ALREADY LOADED, FILAMENT EJECTED) or move filament it moved.
+            None if self.failed_after_finish => self.status = Status::Finished,
             None => self.then_plan = true,
         }
+        self.failed_after_finish = false;
     }
 
     /// Something went wrong outside the plan (the follower could not follow while printing): the
@@ -187,6 +223,7 @@ impl Runner {
     /// shown stays.
     pub fn interrupt(&mut self, error: ErrorCode) {
         if !matches!(self.status, Status::Failed(_)) {
+            self.failed_after_finish = self.status == Status::Finished;
             self.index = self.plan.len();
             self.run = None;
             self.status = Status::Failed(error);
@@ -256,13 +293,29 @@ impl Runner {
         if let Some(slot) = self.phase().and_then(Phase::slot) {
             unit.brake(slot, now);
         }
-        self.resume_goal_from = self.run.take().map(|run| run.goal_from_centi());
+        let run = self.run.take();
+        self.resume_goal_from = run.map(|run| run.goal_from_centi());
+        self.failed_fed_centi = match (run, self.phase().and_then(Phase::slot)) {
+            (Some(run), Some(slot)) => unit
+                .feeders
+                .get(slot)
+                .map(|feeder| run.fed_centi(feeder.odometry_centi())),
+            _ => None,
+        };
         self.status = Status::Failed(error);
     }
 
     /// Advance the command to `now`: step the running phase and move on, finish or fail as the
-    /// sensors say.
-    pub fn step<const N: usize>(&mut self, unit: &mut Unit<N>, now: Instant, config: &Config) {
+    /// sensors say. A phase that depends on the printer holds its motor while the `printer` link
+    /// is in doubt ([`PrinterLink::in_doubt`]).
+    pub fn step<const N: usize>(
+        &mut self,
+        unit: &mut Unit<N>,
+        now: Instant,
+        config: &Config,
+        printer: PrinterLink,
+    ) {
+        self.notes.printer = printer;
         // Phases that finish at once (a check, a move already at its goal) hand over in the same step.
         for _ in 0..MAX_PHASES {
             let Status::Running(_) = self.status else { return };

@@ -6,7 +6,7 @@
 
 use mmu_protocol::{ButtonCode, ErrorCode};
 
-use super::{Action, Plan, Recovery, extend, retry, unload_from_nozzle};
+use super::{Action, Plan, Recovery, Replanned, Retry, extend, unload_from_nozzle};
 use crate::config::Config;
 use crate::phases::Phase;
 
@@ -23,12 +23,93 @@ pub const fn phases(slot: usize, hub_search_mm: u16) -> [Phase; 4] {
     ]
 }
 
-/// After `8009`: back to the park position and load again from there.
+/// Back to the park position and load again from there, every phase with its full bound (the
+/// tip's place is known again once the hub sensor clears).
 fn reload_from_park(slot: usize, config: &Config) -> Plan {
     let mut plan = Plan::new();
     extend(&mut plan, &unload_from_nozzle::phases(slot));
     extend(&mut plan, &phases(slot, config.hub_search_mm));
     plan
+}
+
+/// The phases of the load from the printer's sensor on.
+fn from_fsensor(slot: usize) -> Plan {
+    let mut plan = Plan::new();
+    extend(
+        &mut plan,
+        &[Phase::FeedToFsensor { slot }, Phase::FeedToNozzle { slot }],
+    );
+    plan
+}
+
+/// Retry after `8001`. The hub sensor sees the filament now (its threshold was wrong, or the
+/// user pushed the tip): the tip may be far past it, so the load starts over from the park
+/// position. It still sees nothing: the feed to the hub runs again from where the tip is, as far
+/// as from an unknown position.
+fn after_missed_hub(retry: &Retry, config: &Config) -> Option<Replanned> {
+    if retry.hub {
+        return Some(Replanned::plan(reload_from_park(retry.slot, config)));
+    }
+    let mut plan = Plan::new();
+    extend(&mut plan, &phases(retry.slot, config.preload_max_mm));
+    Some(Replanned::plan(plan))
+}
+
+/// Retry after `8003`. The printer's sensor reads filament now (it works again, or the user
+/// pushed the tip to it): the search is over, the load goes on from there. The tip is still past
+/// the hub sensor: search again from where it is, slowly, over the whole Bowden length plus the
+/// search distance, not only what the first attempt left (the user may have pulled it back to
+/// look, a slipping drive fed less than it counted). The hub sensor sees nothing (the filament
+/// was taken out): the load starts over from the park position.
+fn after_no_trigger(retry: &Retry, config: &Config) -> Option<Replanned> {
+    let slot = retry.slot;
+    let mut plan = Plan::new();
+    if retry.fsensor {
+        plan = from_fsensor(slot);
+    } else if retry.hub {
+        extend(
+            &mut plan,
+            &[Phase::SearchFsensor { slot }, Phase::FeedToNozzle { slot }],
+        );
+    } else {
+        plan = reload_from_park(slot, config);
+    }
+    Some(Replanned::plan(plan))
+}
+
+/// Retry after `8009`. The printer cannot write register 0x22 while `T` runs (printer-truth §9:
+/// Marlin runs no G-code inside `manage_response`), so a Bowden length longer than the tube would
+/// fail every Retry the same way. The fast feed measured the length: from where the hub sensor
+/// saw the tip to where the printer's sensor triggered. With the sensor still reading filament
+/// and that length one a tube can have ([`learned_bowden_mm`]), it becomes register 0x22 and the
+/// load goes on from the printer's sensor. A sensor that reads filament where no tube could end
+/// teaches nothing: nothing moves and `8009` stays (an unload would only end in `8004` FSENSOR
+/// FIL. STUCK, hiding the first cause). With the sensor clear, the load starts over from the park
+/// position.
+fn after_too_early(retry: &Retry, config: &Config) -> Option<Replanned> {
+    if !retry.fsensor {
+        return Some(Replanned::plan(reload_from_park(retry.slot, config)));
+    }
+    let learned = learned_bowden_mm(retry.fed_mm?, config)?;
+    Some(Replanned {
+        plan: from_fsensor(retry.slot),
+        bowden_mm: Some(learned),
+    })
+}
+
+/// The shortest Bowden length learned, mm: register 0x22's own lower bound.
+pub const MIN_LEARNED_BOWDEN_MM: u16 = 50;
+
+/// The Bowden length that a fast feed of `fed_mm` from the hub sensor to the printer's
+/// triggering sensor shows, if it is one to keep: never longer than the length in force (the
+/// sensor triggered before it, so the tube is not longer), never shorter than what was fed (the
+/// tip got that far; the printer reports its sensor within a few ms, under 1 mm at the fast
+/// speed), and within register 0x22's range.
+pub fn learned_bowden_mm(fed_mm: i32, config: &Config) -> Option<u16> {
+    let fed = u16::try_from(fed_mm).ok()?;
+    (MIN_LEARNED_BOWDEN_MM..config.bowden_mm)
+        .contains(&fed)
+        .then_some(fed)
 }
 
 /// What each error of the load means and what Retry does.
@@ -39,15 +120,20 @@ pub const RECOVERY: &[Recovery] = &[
     Recovery {
         error: ErrorCode::FINDA_DIDNT_SWITCH_ON,
         button: ButtonCode::MIDDLE,
-        action: Action::ReplanIfHubSees(reload_from_park),
+        action: Action::Replan(after_missed_hub),
     },
-    // `8003`: the printer's sensor did not trigger within the search distance.
-    retry(ErrorCode::FSENSOR_DIDNT_SWITCH_ON),
+    // `8003`: the printer's sensor did not trigger within the search distance, or the filament
+    // stopped on its way there (a Bowden jam, the printer's idle extruder).
+    Recovery {
+        error: ErrorCode::FSENSOR_DIDNT_SWITCH_ON,
+        button: ButtonCode::MIDDLE,
+        action: Action::Replan(after_no_trigger),
+    },
     // `8009`: the printer's sensor triggered during the fast feed: the Bowden tube is shorter
-    // than configured or holds a leftover.
+    // than configured, holds a leftover, or the sensor is stuck on.
     Recovery {
         error: ErrorCode::FSENSOR_TOO_EARLY,
         button: ButtonCode::MIDDLE,
-        action: Action::Replan(reload_from_park),
+        action: Action::Replan(after_too_early),
     },
 ];

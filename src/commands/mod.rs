@@ -69,15 +69,45 @@ pub enum Action {
     RetryPhase,
     /// The error is a question answered: go on with the next phase.
     Continue,
-    /// Start over with the plan this function makes for the failed phase's slot.
-    Replan(fn(usize, &Config) -> Plan),
-    /// A feed towards the hub sensor that ran out of distance: if the hub sensor now sees the
-    /// filament (it missed the tip, which may be far past it), start over with the plan this
-    /// function makes, from the park position; otherwise run the feed again ([`Action::RetryPhase`]).
-    ReplanIfHubSees(fn(usize, &Config) -> Plan),
+    /// Start over with the plan this function makes from what the failed phase left
+    /// ([`Retry`]); `None`: nothing moves and the error stays (its cause is still there).
+    Replan(fn(&Retry, &Config) -> Option<Replanned>),
     /// Unload whatever owns the hub path and park it, then plan the command again (FIL. ALREADY
     /// LOADED's Unload: "unload it first", then do what was asked).
     UnloadFirst,
+}
+
+/// What a failed motion phase leaves for a [`Action::Replan`] to decide on.
+#[derive(Debug, Clone, Copy)]
+pub struct Retry {
+    /// The failed phase's slot.
+    pub slot: usize,
+    /// The printer's sensor reads filament now.
+    pub fsensor: bool,
+    /// The hub sensor sees filament now (a faulty one counts as not).
+    pub hub: bool,
+    /// How far the failed phase moved the filament from where it first started (its first
+    /// attempt), mm, in its own direction; `None` when no attempt ran.
+    pub fed_mm: Option<i32>,
+}
+
+/// A new plan after Retry, and a setting it learned on the way.
+#[derive(Debug, Clone)]
+pub struct Replanned {
+    /// The phases to run.
+    pub plan: Plan,
+    /// A Bowden length (register 0x22) measured by the failed attempt, to keep.
+    pub bowden_mm: Option<u16>,
+}
+
+impl Replanned {
+    /// Just a plan.
+    pub fn plan(plan: Plan) -> Self {
+        Replanned {
+            plan,
+            bowden_mm: None,
+        }
+    }
 }
 
 /// One row of a command's recovery table: after `error`, the printer's `button` does `action`.

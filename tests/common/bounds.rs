@@ -8,8 +8,9 @@ use mmu_firmware::{App, Config, Direction, Instant, MotorCommand, Samples};
 use mmu_protocol::ResponseDecoder;
 
 /// The longest any single phase may drive with the default configuration: the slow search for
-/// the printer's sensor, (30 + 90) mm at 20 mm/s, twice over, plus 1 s of slack.
-pub const LONGEST_PHASE_MS: u64 = 120 * 2000 / 20 + 1000;
+/// the printer's sensor after Retry of `8003`, over the whole Bowden tube, (360 + 90) mm at
+/// 20 mm/s, twice over, plus 1 s of slack.
+pub const LONGEST_PHASE_MS: u64 = 450 * 2000 / 20 + 1000;
 
 /// Follows the App's motor commands step by step.
 pub struct Watch<const N: usize> {

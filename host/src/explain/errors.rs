@@ -31,8 +31,8 @@ pub fn error_help(error: ErrorCode) -> ErrorHelp {
             "a broken-off tip or a blob left in the hub; that the slot motor turns backwards; the hub filament sensor with `mmu sensors` (with the hub empty its filtered value must fall below its \"off\" threshold, register 0xa0)",
         ),
         ErrorCode::FSENSOR_DIDNT_SWITCH_ON => help(
-            "the printer's filament sensor did not trigger within the search distance past the Bowden tube (register 0x48)",
-            "the Bowden tube is seated at both ends and the filament is not caught at its printer end; the Bowden length (register 0x22) matches the real tube; the printer's filament sensor works and the printer reports it (`f`, or register 0x09)",
+            "the printer's filament sensor did not trigger within the search distance past the Bowden tube (register 0x48), or the filament stopped on its way there (a jam in the Bowden tube, or the tip pressed into the printer's idle extruder)",
+            "the Bowden tube is seated at both ends and nothing blocks it; the filament is not caught at its printer end; the Bowden length (register 0x22) matches the real tube; the printer's filament sensor works and the printer reports it (`f`, or register 0x09)",
         ),
         ErrorCode::FSENSOR_DIDNT_SWITCH_OFF => help(
             "the printer's filament sensor still triggered after unloading the check distance (register 0x0c)",
