@@ -90,6 +90,14 @@ echo "largest RAM symbols (.data, .bss):"
 top dDbB
 
 status=0
+# The panic handler keeps `core::fmt` out (src/main.rs, `panic`): any of its symbols means a
+# formatting path came back (about 1.7 KiB).
+fmt_symbols="$(grep -c 'core::fmt::' <<<"$symbols" || true)"
+if [ "$fmt_symbols" -gt 0 ]; then
+    grep 'core::fmt::' <<<"$symbols" | head -n 5 >&2
+    echo "firmware-size: FAIL: core::fmt is linked ($fmt_symbols symbols): see src/main.rs, panic" >&2
+    status=1
+fi
 if [ "$flash" -gt "$FLASH_BUDGET" ]; then
     echo "firmware-size: FAIL: flash $flash B is over the $FLASH_BUDGET B budget" >&2
     status=1

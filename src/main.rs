@@ -268,7 +268,16 @@ impl Persisted {
 /// Stops every motor, reports the panic over RTT once, then faults: with a probe attached,
 /// `probe-rs run` prints a backtrace and exits; without one, the HardFault handler waits for the
 /// watchdog to reset the MCU.
+///
+/// Inlined into `core::panicking::panic_fmt` (under fat LTO), which then visibly never reads the
+/// message: the `fmt::Arguments` that the core panics (bounds checks, `unwrap`, in Embassy too)
+/// build become dead and `core::fmt` (`Formatter::pad`, integer `Display`) is not linked, 1.7 KiB
+/// of flash. Reading `info.message()` here, or dropping the `inline`, brings it back
+/// (`scripts/firmware-size.sh` fails on any `core::fmt` symbol).
 #[panic_handler]
+// rustc calls the hint unused on an exported function, but LLVM applies it under LTO.
+#[allow(unused_attributes)]
+#[inline(always)]
 fn panic(info: &PanicInfo) -> ! {
     static PANICKED: AtomicBool = AtomicBool::new(false);
     cortex_m::interrupt::disable();
@@ -276,8 +285,8 @@ fn panic(info: &PanicInfo) -> ! {
     // thumbv6m has no atomic swap; interrupts are off, so load + store cannot be torn apart.
     if !PANICKED.load(Ordering::Relaxed) {
         PANICKED.store(true, Ordering::Relaxed);
-        // The location only: formatting the message would link `core::fmt` (about 2 KiB of
-        // flash). Panics raised through defmt (`unwrap!`, `panic!`) have logged their message.
+        // The location only (see above). Panics raised through defmt (`unwrap!`, `panic!`) have
+        // logged their message.
         match info.location() {
             Some(at) => error!("panic at {=str}:{=u32}", at.file(), at.line()),
             None => error!("panic"),
