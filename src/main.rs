@@ -69,9 +69,23 @@ fn main() -> ! {
     static EXECUTOR: StaticCell<Executor> = StaticCell::new();
     EXECUTOR.init(Executor::new()).run(|spawner| {
         let (control, sampler, flash) = board::init();
+        let logic = new_logic();
         spawner.spawn(unwrap!(sample_task(sampler)));
-        spawner.spawn(unwrap!(control_task(control, flash)));
+        spawner.spawn(unwrap!(control_task(control, flash, logic)));
     })
+}
+
+/// The unit logic, in a static rather than in the control task's future. Built out of line:
+/// `App::new` builds it on the stack first (about 2.5 KiB), and this frame is gone before the
+/// tasks run, whereas a temporary in the task's `poll` or in `Executor::run` would stay under
+/// every later step (the worst-case stack, `scripts/firmware-size.sh`).
+#[inline(never)]
+fn new_logic() -> &'static mut ControlLoop<SLOTS> {
+    static LOGIC: StaticCell<ControlLoop<SLOTS>> = StaticCell::new();
+    LOGIC.init(ControlLoop::new(
+        App::new(Config::default()),
+        millis(Clock::now()),
+    ))
 }
 
 #[embassy_executor::task]
@@ -86,8 +100,11 @@ async fn sample_task(mut sampler: board::Sampler) {
 }
 
 #[embassy_executor::task]
-async fn control_task(mut board: board::Control, flash: board::StoreFlash) {
-    let mut control = ControlLoop::new(App::<SLOTS>::new(Config::default()), millis(Clock::now()));
+async fn control_task(
+    mut board: board::Control,
+    flash: board::StoreFlash,
+    control: &'static mut ControlLoop<SLOTS>,
+) {
     let mut persisted = Persisted::boot(control.app_mut(), flash);
     let mut ticker = Ticker::every(CONTROL_PERIOD);
     let mut deadline = Clock::now() + CONTROL_PERIOD;
@@ -105,7 +122,7 @@ async fn control_task(mut board: board::Control, flash: board::StoreFlash) {
         let received = board.receive(&mut rx);
         let button_down = board.button_down();
         let step = control_step(
-            &mut control,
+            control,
             &Tick {
                 now: millis(now),
                 lateness_us: lateness.as_micros(),
@@ -221,6 +238,14 @@ impl Persisted {
     fn boot(app: &mut App<SLOTS>, flash: board::StoreFlash) -> Self {
         let store = unwrap!(Store::new(flash, board::STORE_RANGE));
         let (keeper, boot) = block_on(Keeper::boot(store, app));
+        Self::log_boot(app, boot);
+        Persisted(keeper)
+    }
+
+    /// What the boot found. Out of line: the snapshot it logs from is then not on the stack
+    /// together with the store's boot future.
+    #[inline(never)]
+    fn log_boot(app: &App<SLOTS>, boot: Boot) {
         match boot {
             Boot::Restored => {
                 let snapshot = app.snapshot();
@@ -240,7 +265,6 @@ impl Persisted {
                 damage.unreadable, damage.torn
             ),
         }
-        Persisted(keeper)
     }
 
     /// Writes what changed (see [`Keeper::update`]). Returns whether it wrote, i.e. stalled the
