@@ -122,8 +122,9 @@ impl SlotDrive {
         let still_since = lease.started.max(feeder.hall.last_revolution());
         let still_too_long =
             self.command.is_driving() && now.millis_since(still_since) > lease.budget.max_still_ms;
+        // More than `max_mm` whole millimetres, without a division (`centi / 100 > max_mm`).
         let too_far =
-            feeder.odometry_centi().abs_diff(lease.from_centi) / 100 > u32::from(lease.budget.max_mm);
+            feeder.odometry_centi().abs_diff(lease.from_centi) > u32::from(lease.budget.max_mm) * 100 + 99;
         let too_long = now.millis_since(lease.started) > lease.budget.max_ms;
         let verdict = if self.stalled(feeder, now, config) {
             Err(ErrorCode::STALLED_PULLEY)

@@ -436,7 +436,8 @@ impl RevolutionCounter {
             Some(period)
                 if period > 0 && now.millis_since(self.last_revolution) <= period.saturating_mul(2) =>
             {
-                (60_000 / period) as u32
+                // A 32-bit division (a period over 60 s is 0 rpm): the 64-bit one costs twice.
+                u32::try_from(period).map_or(0, |period| 60_000 / period)
             }
             _ => 0,
         }
