@@ -75,6 +75,9 @@ impl Window {
 
     /// Stores `value` in place of the oldest sample of a window of `capacity`; returns the
     /// sample it replaced, if that one was part of the window before.
+    // The per-sample helpers are `inline(always)`: the firmware is built with `opt-level = "z"`,
+    // which would call each of them for every sample of every sensor (frame setup included).
+    #[inline(always)]
     fn push(&mut self, value: u16, capacity: usize) -> Option<u16> {
         let capacity = capacity.clamp(1, MAX_WINDOW);
         if self.next >= capacity {
@@ -159,6 +162,7 @@ impl MedianWindow {
 
 /// Puts `new` into the ascending `sorted`, whose element at `gap` is free (replaced), keeping it
 /// ascending: the gap moves to `new`'s place.
+#[inline(always)]
 fn settle(sorted: &mut [u16], mut gap: usize, new: u16) {
     while gap + 1 < sorted.len() && sorted[gap + 1] < new {
         sorted[gap] = sorted[gap + 1];
@@ -196,6 +200,7 @@ fn divide_small(sum: u32, len: usize) -> u32 {
 /// The high 32 bits of the 64-bit product `a × b`, from 16-bit halves: four single-cycle
 /// multiplications on the Cortex-M0+ instead of the 64-bit multiplication routine
 /// (`__aeabi_lmul`), which LLVM would otherwise turn this back into (hence the `black_box`).
+#[inline(always)]
 fn mul_high(a: u32, b: u32) -> u32 {
     let (a0, a1) = (a & 0xffff, a >> 16);
     let (b0, b1) = (b & 0xffff, core::hint::black_box(b >> 16));
@@ -205,6 +210,7 @@ fn mul_high(a: u32, b: u32) -> u32 {
 }
 
 /// `x / 1000` for any `u32`, without a division (the multiplier is `⌈2³⁸ / 1000⌉`).
+#[inline(always)]
 pub fn div1000(x: u32) -> u32 {
     mul_high(x, 0x1062_4dd3) >> 6
 }
