@@ -99,21 +99,24 @@ def analyse(elf):
 
 
 def deepest(fn, frame, calls, memo, stack, cycles):
-    """(bytes, path) of the deepest call chain from `fn`."""
+    """(bytes, path, cut) of the deepest call chain from `fn`; `cut` when it met a recursion (such
+    a result depends on the path it was reached by, so it is not remembered)."""
     if fn in memo:
         return memo[fn]
     if fn in stack:
         cycles.add(fn)
-        return (0, [])
+        return (0, [], True)
     stack.add(fn)
-    best = (0, [])
-    for callee in calls.get(fn, ()):
+    best, cut = (0, []), False
+    for callee in sorted(calls.get(fn, ())):
         depth = deepest(callee, frame, calls, memo, stack, cycles)
+        cut = cut or depth[2]
         if depth[0] > best[0]:
-            best = depth
+            best = depth[:2]
     stack.discard(fn)
-    result = (frame.get(fn, 0) + best[0], [fn] + best[1])
-    memo[fn] = result
+    result = (frame.get(fn, 0) + best[0], [fn] + best[1], cut)
+    if not cut:
+        memo[fn] = result
     return result
 
 
@@ -160,9 +163,9 @@ def main():
         faults = {i: h for i, h in handlers.items() if i in (2, 3)}  # NMI, HardFault
         others = {i: h for i, h in handlers.items() if i not in (2, 3) and "DefaultHandler" not in h}
         worst_irq = max((deepest(h, frame, calls, memo, set(), cycles) for h in others.values()),
-                        key=lambda d: d[0], default=(0, []))
+                        key=lambda d: d[0], default=(0, [], False))
         worst_fault = max((deepest(h, frame, calls, memo, set(), cycles) for h in faults.values()),
-                          key=lambda d: d[0], default=(0, []))
+                          key=lambda d: d[0], default=(0, [], False))
         show("worst interrupt", worst_irq)
         show("NMI / HardFault", worst_fault)
         total += worst_irq[0] + worst_fault[0] + 2 * EXCEPTION_FRAME
