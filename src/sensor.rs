@@ -201,7 +201,7 @@ fn divide_small(sum: u32, len: usize) -> u32 {
 /// multiplications on the Cortex-M0+ instead of the 64-bit multiplication routine
 /// (`__aeabi_lmul`), which LLVM would otherwise turn this back into (hence the `black_box`).
 #[inline(always)]
-fn mul_high(a: u32, b: u32) -> u32 {
+pub(crate) fn mul_high(a: u32, b: u32) -> u32 {
     let (a0, a1) = (a & 0xffff, a >> 16);
     let (b0, b1) = (b & 0xffff, core::hint::black_box(b >> 16));
     let (low, cross1, cross2) = (a0 * b0, a0 * b1, a1 * b0);
