@@ -4,6 +4,8 @@
 
     python3 scripts/stack-estimate.py ELF [--root SYMBOL_PART] [--indirect CALLER=CALLEE_PART ...]
 
+Needs `llvm-objdump` (any recent LLVM; `LLVM_OBJDUMP` names another, e.g. rustup's llvm-tools).
+
 Each function's frame is what its code takes from the stack: the registers it pushes (4 B each)
 plus every `sub sp, #n` and `ldr rX, =-n; add sp, rX`. The call graph is every `bl` and every
 branch into another function (tail calls counted as calls: an over-estimate). Paths through a
@@ -21,7 +23,7 @@ import re
 import struct
 import subprocess
 import sys
-import tempfile
+import os
 from collections import defaultdict
 
 FUNC = re.compile(r"^([0-9a-f]+) <(.+)>:$")
@@ -32,17 +34,20 @@ EXCEPTION_FRAME = 32 + 4
 
 
 def sections(elf):
-    """(address, bytes) of every loadable section, for reading literal pools and the vectors."""
-    out = subprocess.run(["llvm-objdump", "-h", elf], capture_output=True, text=True, check=True).stdout
+    """(address, bytes) of the sections that hold code and constants, for reading literal pools
+    and the vector table (read from the ELF32 section headers)."""
+    data = open(elf, "rb").read()
+    if data[:4] != b"\x7fELF" or data[4] != 1:
+        sys.exit(f"stack-estimate: {elf} is not a 32-bit ELF")
+    shoff, = struct.unpack_from("<I", data, 0x20)
+    shentsize, shnum, shstrndx = struct.unpack_from("<HHH", data, 0x2E)
+    headers = [struct.unpack_from("<IIIIIIIIII", data, shoff + i * shentsize) for i in range(shnum)]
+    names = headers[shstrndx][4]
     found = []
-    for line in out.splitlines():
-        parts = line.split()
-        if len(parts) >= 4 and parts[1] in (".vector_table", ".text", ".rodata"):
-            name, size, addr = parts[1], int(parts[2], 16), int(parts[3], 16)
-            with tempfile.NamedTemporaryFile() as out_file:
-                subprocess.run(["llvm-objcopy", "-O", "binary", f"--only-section={name}", elf,
-                                out_file.name], check=True)
-                found.append((addr, open(out_file.name, "rb").read()[:size]))
+    for name, kind, _flags, addr, offset, size, *_ in headers:
+        label = data[names + name:data.index(b"\0", names + name)].decode()
+        if label in (".vector_table", ".text", ".rodata") and kind == 1:  # SHT_PROGBITS
+            found.append((addr, data[offset:offset + size]))
     return found
 
 
@@ -55,7 +60,8 @@ def read_word(mem, address):
 
 def analyse(elf):
     mem = sections(elf)
-    dis = subprocess.run(["llvm-objdump", "-d", "--no-show-raw-insn", "-C", elf],
+    objdump = os.environ.get("LLVM_OBJDUMP", "llvm-objdump")
+    dis = subprocess.run([objdump, "-d", "--no-show-raw-insn", "-C", elf],
                          capture_output=True, text=True, check=True).stdout
     frame = defaultdict(int)
     calls = defaultdict(set)
