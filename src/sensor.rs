@@ -352,6 +352,13 @@ impl AnalogSensor {
 
     /// The filtered value, if the sensor is healthy and has seen enough samples to mean it.
     pub fn reading(&self) -> Option<u16> {
+        self.fresh_reading()
+    }
+
+    /// [`Self::reading`], inlined into the per-sample updates below (a call per sensor and step
+    /// otherwise).
+    #[inline(always)]
+    fn fresh_reading(&self) -> Option<u16> {
         (self.fault.is_none() && self.samples >= WARM_UP_SAMPLES).then(|| self.filter.value())
     }
 }
@@ -375,7 +382,7 @@ impl PresenceSensor {
         thresholds: Thresholds,
     ) {
         self.analog.update(raw, now, filter, rails);
-        if let Some(value) = self.analog.reading() {
+        if let Some(value) = self.analog.fresh_reading() {
             self.present = thresholds.decide(self.present, value);
         }
     }
@@ -410,7 +417,7 @@ impl RevolutionCounter {
         edges: Thresholds,
     ) -> bool {
         self.analog.update(raw, now, filter, rails);
-        let Some(value) = self.analog.reading() else {
+        let Some(value) = self.analog.fresh_reading() else {
             return false;
         };
         let was_high = self.high;
