@@ -22,9 +22,19 @@ if command -v rustup >/dev/null 2>&1; then
 fi
 
 export DEFMT_LOG="${DEFMT_LOG:-info}"
+# No registry paths in the image: panic locations of the dependencies name their files by
+# absolute path (`/root/.cargo/registry/src/index.crates.io-<hash>/embassy-stm32-0.6.0/src/...`).
+# Remapped to `embassy-stm32-0.6.0/src/...` they take ~0.4 KiB less flash. The prefix depends on
+# the machine, so it is set here rather than in .cargo/config.toml; `--config` adds it to that
+# file's thumbv6m rustflags (cargo joins the arrays). A plain `cargo fw` builds without it.
+cargo_home="${CARGO_HOME:-$HOME/.cargo}"
+remap=""
+for index in "$cargo_home"/registry/src/*/ "$cargo_home"/git/checkouts/; do
+    [ -d "$index" ] && remap="$remap\"--remap-path-prefix=$index=\","
+done
 # `cargo fw` = build --release --target thumbv6m-none-eabi --features mcu --bin mmu-firmware
 # (.cargo/config.toml). --locked: exactly the dependency versions in Cargo.lock.
-cargo fw --locked >&2
+cargo fw --locked --config "target.thumbv6m-none-eabi.rustflags=[${remap%,}]" >&2
 
 target_dir="${CARGO_TARGET_DIR:-target}"
 case "$target_dir" in

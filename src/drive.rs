@@ -122,8 +122,9 @@ impl SlotDrive {
         let still_since = lease.started.max(feeder.hall.last_revolution());
         let still_too_long =
             self.command.is_driving() && now.millis_since(still_since) > lease.budget.max_still_ms;
+        // More than `max_mm` whole millimetres, without a division (`centi / 100 > max_mm`).
         let too_far =
-            feeder.odometry_centi().abs_diff(lease.from_centi) / 100 > u32::from(lease.budget.max_mm);
+            feeder.odometry_centi().abs_diff(lease.from_centi) > u32::from(lease.budget.max_mm) * 100 + 99;
         let too_long = now.millis_since(lease.started) > lease.budget.max_ms;
         let verdict = if self.stalled(feeder, now, config) {
             Err(ErrorCode::STALLED_PULLEY)
@@ -199,13 +200,11 @@ impl SlotDrive {
             },
         };
         self.schedule = Some(schedule);
-        let elapsed_ms = i64::try_from(now.millis_since(schedule.since)).unwrap_or(i64::MAX / 1000);
-        let scheduled_centi = i64::from(speed).saturating_mul(elapsed_ms) / 10;
         let moved_centi = match direction {
             Direction::Forward => i64::from(odometry) - i64::from(schedule.from_centi),
             Direction::Reverse => i64::from(schedule.from_centi) - i64::from(odometry),
         };
-        let lag_mm = ((scheduled_centi - moved_centi) / 100).clamp(-1000, 1000) as i32;
+        let lag_mm = schedule_lag_mm(speed, now.millis_since(schedule.since), moved_centi);
         let open_loop = i32::from(speed) * 1000 / i32::from(config.full_duty_speed.max(1));
         let duty = (open_loop + CATCH_UP_GAIN * lag_mm).clamp(0, i32::from(config.max_duty.min(1000)));
         self.set(
@@ -247,6 +246,25 @@ pub const fn stopped<const N: usize>() -> [MotorCommand; N] {
     [MotorCommand::Coast; N]
 }
 
+/// How far the filament is behind its schedule after `elapsed_ms` at `speed` mm/s, in whole mm
+/// (truncated), within ±1000: `(speed × elapsed / 10 − moved_centi) / 100`. Without a library
+/// division while `speed × elapsed` fits 32 bits (the first minute at full speed): a 64-bit
+/// division costs a few hundred instructions on the Cortex-M0+, every step of a move.
+fn schedule_lag_mm(speed: u16, elapsed_ms: u64, moved_centi: i64) -> i32 {
+    let elapsed_ms = i64::try_from(elapsed_ms).unwrap_or(i64::MAX / 1000);
+    let scheduled = i64::from(speed).saturating_mul(elapsed_ms);
+    let scheduled_centi = match u32::try_from(scheduled) {
+        // ⌈2³⁵ / 10⌉: exact for every u32.
+        Ok(scheduled) => i64::from(crate::sensor::mul_high(scheduled, 0xcccc_cccd) >> 3),
+        Err(_) => scheduled / 10,
+    };
+    // Beyond ±100 000 centi the truncated quotient is beyond ±1000 and clamped anyway.
+    let lag_centi = (scheduled_centi - moved_centi).clamp(-100_000, 100_000) as i32;
+    // ⌈2³² / 100⌉: exact up to 100 000.
+    let lag_mm = crate::sensor::mul_high(lag_centi.unsigned_abs(), 42_949_673) as i32;
+    (if lag_centi < 0 { -lag_mm } else { lag_mm }).clamp(-1000, 1000)
+}
+
 /// Duty that moves the filament at `speed` while keeping the Bowden tube at rest: more when the
 /// extruder pulls it taut, less when it is compressed. Without a healthy tension sensor it is the
 /// open-loop duty for `speed`.
@@ -266,4 +284,72 @@ pub fn follow_duty(speed: u16, tension: Option<u16>, config: &Config) -> Duty {
     });
     let limit = i32::from(config.tension_max_duty.min(config.max_duty));
     Duty::from_permille((open_loop + correction).clamp(0, limit) as u16)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The lag as it was computed, with 64-bit divisions.
+    fn dividing_lag_mm(speed: u16, elapsed_ms: u64, moved_centi: i64) -> i32 {
+        let elapsed_ms = i64::try_from(elapsed_ms).unwrap_or(i64::MAX / 1000);
+        let scheduled_centi = i64::from(speed).saturating_mul(elapsed_ms) / 10;
+        ((scheduled_centi - moved_centi) / 100).clamp(-1000, 1000) as i32
+    }
+
+    #[test]
+    fn the_schedule_lag_is_what_the_divisions_gave() {
+        let speeds = [0, 1, 7, 20, 60, 100, 333, 1000, 65_535];
+        let elapsed = [
+            0,
+            1,
+            9,
+            10,
+            11,
+            999,
+            1000,
+            65_537,
+            4_294_967,
+            65_540_001,
+            1 << 40,
+            u64::MAX,
+        ];
+        for speed in speeds {
+            for elapsed_ms in elapsed {
+                let scheduled = i64::from(speed)
+                    .saturating_mul(i64::try_from(elapsed_ms).unwrap_or(i64::MAX / 1000))
+                    / 10;
+                // Around every quotient boundary near the schedule, and far off it both ways.
+                for offset in (-101_000..=101_000).step_by(97).chain([
+                    -100_100, -100_099, -100_000, -99_999, -100, -99, -1, 0, 1, 99, 100, 99_999, 100_000,
+                    100_099, 100_100,
+                ]) {
+                    for moved_centi in [
+                        scheduled.saturating_sub(offset),
+                        -offset,
+                        i64::MIN / 4,
+                        i64::MAX / 4,
+                    ] {
+                        assert_eq!(
+                            schedule_lag_mm(speed, elapsed_ms, moved_centi),
+                            dividing_lag_mm(speed, elapsed_ms, moved_centi),
+                            "speed {speed}, elapsed {elapsed_ms}, moved {moved_centi}"
+                        );
+                    }
+                }
+            }
+        }
+        // Every product that fits 32 bits divides exactly: lags just around the quotient.
+        for scheduled in (0..=u32::MAX).step_by(9_973).chain([u32::MAX, u32::MAX - 1]) {
+            let elapsed_ms = u64::from(scheduled);
+            for k in [-101, -100, -99, -1, 0, 1, 99, 100, 101] {
+                let moved_centi = i64::from(scheduled / 10) - k;
+                assert_eq!(
+                    schedule_lag_mm(1, elapsed_ms, moved_centi),
+                    dividing_lag_mm(1, elapsed_ms, moved_centi),
+                    "elapsed {elapsed_ms}, moved {moved_centi}"
+                );
+            }
+        }
+    }
 }

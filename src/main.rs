@@ -1,14 +1,13 @@
 //! MCU entry point of the reference board (NUCLEO-G071RB): the unit logic ([`mmu_firmware::App`])
 //! stepped every millisecond, with the same code the host tests and the simulator step.
 //!
-//! Tasks (one thread-mode Embassy executor):
-//! - `sample_task`: a DMA scan of all nine Hall sensors every millisecond (Ticker), published
-//!   to the control task through [`LATEST`];
-//! - `control_task`: at boot it restores what the unit kept in flash ([`Persisted`]); then every
-//!   millisecond (Ticker) it drains the bytes the printer sent, debounces the button, steps the
-//!   App, applies the motor commands, queues the response bytes, drives the status LED, carries
-//!   out resets, feeds the watchdog when it stepped on time with fresh samples, and writes what
-//!   changed to flash.
+//! One task, `control_task`, on a thread-mode Embassy executor: at boot it restores what the unit
+//! kept in flash ([`Persisted`]); then every millisecond (Ticker) it scans all nine Hall sensors
+//! (DMA, about 210 µs with the CPU free), drains the bytes the printer sent, debounces the button,
+//! steps the App, applies the motor commands, queues the response bytes, drives the status LED,
+//! carries out resets, feeds the watchdog when it stepped on time, and writes what changed to
+//! flash. (A separate sampler task publishing its scans cost 380 B of flash and 190 B of RAM
+//! more; a scan that never completes now stalls the loop, so the watchdog resets the MCU.)
 //!
 //! The printer UART's receive path needs no task of its own: the USART interrupt moves every byte
 //! into a 256-byte ring as it arrives, whatever the tasks are doing (a byte could only be lost if
@@ -24,7 +23,6 @@
 
 mod board;
 
-use core::cell::Cell;
 use core::panic::PanicInfo;
 use core::sync::atomic::{AtomicBool, Ordering};
 
@@ -33,28 +31,20 @@ use defmt::{error, info, unwrap, warn};
 use defmt_rtt as _;
 use embassy_executor::Executor;
 use embassy_futures::block_on;
-use embassy_sync::blocking_mutex::Mutex;
-use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_time::{Duration, Instant as Clock, Ticker};
 use mmu_firmware::control::{self, ControlLoop, ResetBoard, Tick};
 use mmu_firmware::persist::{Boot, Keeper, Store};
-use mmu_firmware::{App, BoardAction, Config, Instant, Samples, drive};
+use mmu_firmware::{App, BoardAction, Config, Instant, drive};
 use static_cell::StaticCell;
 
 use board::SLOTS;
 
 /// Period of the control step.
 const CONTROL_PERIOD: Duration = Duration::from_millis(1);
-/// Period of the sensor scan.
-const SAMPLE_PERIOD: Duration = Duration::from_millis(1);
 /// Most bytes handed to one step: 5x what 115200 Bd delivers per millisecond.
 const RX_CHUNK: usize = 64;
 /// The longest a reset waits for the last response to leave the UART.
 const FLUSH_BEFORE_RESET: Duration = Duration::from_millis(20);
-
-/// The latest sensor scan and when it was taken (`None` before the first one).
-static LATEST: Mutex<CriticalSectionRawMutex, Cell<Option<(Clock, Samples<SLOTS>)>>> =
-    Mutex::new(Cell::new(None));
 
 #[entry]
 fn main() -> ! {
@@ -69,47 +59,51 @@ fn main() -> ! {
     static EXECUTOR: StaticCell<Executor> = StaticCell::new();
     EXECUTOR.init(Executor::new()).run(|spawner| {
         let (control, sampler, flash) = board::init();
-        spawner.spawn(unwrap!(sample_task(sampler)));
-        spawner.spawn(unwrap!(control_task(control, flash)));
+        let logic = new_logic();
+        spawner.spawn(unwrap!(control_task(control, sampler, flash, logic)));
     })
 }
 
-#[embassy_executor::task]
-async fn sample_task(mut sampler: board::Sampler) {
-    let mut ticker = Ticker::every(SAMPLE_PERIOD);
-    loop {
-        let samples = sampler.sample().await;
-        let taken = Clock::now();
-        LATEST.lock(|latest| latest.set(Some((taken, samples))));
-        ticker.next().await;
-    }
+/// The unit logic, in a static rather than in the control task's future. Built out of line:
+/// `App::new` builds it on the stack first (about 2.5 KiB), and this frame is gone before the
+/// tasks run, whereas a temporary in the task's `poll` or in `Executor::run` would stay under
+/// every later step (the worst-case stack, `scripts/firmware-size.sh`).
+#[inline(never)]
+fn new_logic() -> &'static mut ControlLoop<SLOTS> {
+    static LOGIC: StaticCell<ControlLoop<SLOTS>> = StaticCell::new();
+    LOGIC.init(ControlLoop::new(
+        App::new(Config::default()),
+        millis(Clock::now()),
+    ))
 }
 
 #[embassy_executor::task]
-async fn control_task(mut board: board::Control, flash: board::StoreFlash) {
-    let mut control = ControlLoop::new(App::<SLOTS>::new(Config::default()), millis(Clock::now()));
+async fn control_task(
+    mut board: board::Control,
+    mut sampler: board::Sampler,
+    flash: board::StoreFlash,
+    control: &'static mut ControlLoop<SLOTS>,
+) {
     let mut persisted = Persisted::boot(control.app_mut(), flash);
     let mut ticker = Ticker::every(CONTROL_PERIOD);
     let mut deadline = Clock::now() + CONTROL_PERIOD;
     let mut rx = [0u8; RX_CHUNK];
     loop {
         ticker.next().await;
-        let now = Clock::now();
-        let lateness = now.saturating_duration_since(deadline);
+        let lateness = Clock::now().saturating_duration_since(deadline);
         deadline += CONTROL_PERIOD;
 
-        // The App never sees made-up readings: it first steps once the first scan has landed.
-        let Some((taken, samples)) = LATEST.lock(Cell::get) else {
-            continue;
-        };
+        // This tick's scan, then the step: the App steps on readings taken just before it.
+        let samples = sampler.sample().await;
+        let now = Clock::now();
         let received = board.receive(&mut rx);
         let button_down = board.button_down();
         let step = control_step(
-            &mut control,
+            control,
             &Tick {
                 now: millis(now),
                 lateness_us: lateness.as_micros(),
-                sample_age_us: now.saturating_duration_since(taken).as_micros(),
+                sample_age_us: 0,
                 samples: &samples,
                 rx: &rx[..received],
                 button_down,
@@ -221,6 +215,14 @@ impl Persisted {
     fn boot(app: &mut App<SLOTS>, flash: board::StoreFlash) -> Self {
         let store = unwrap!(Store::new(flash, board::STORE_RANGE));
         let (keeper, boot) = block_on(Keeper::boot(store, app));
+        Self::log_boot(app, boot);
+        Persisted(keeper)
+    }
+
+    /// What the boot found. Out of line: the snapshot it logs from is then not on the stack
+    /// together with the store's boot future.
+    #[inline(never)]
+    fn log_boot(app: &App<SLOTS>, boot: Boot) {
         match boot {
             Boot::Restored => {
                 let snapshot = app.snapshot();
@@ -240,7 +242,6 @@ impl Persisted {
                 damage.unreadable, damage.torn
             ),
         }
-        Persisted(keeper)
     }
 
     /// Writes what changed (see [`Keeper::update`]). Returns whether it wrote, i.e. stalled the
@@ -268,7 +269,16 @@ impl Persisted {
 /// Stops every motor, reports the panic over RTT once, then faults: with a probe attached,
 /// `probe-rs run` prints a backtrace and exits; without one, the HardFault handler waits for the
 /// watchdog to reset the MCU.
+///
+/// Inlined into `core::panicking::panic_fmt` (under fat LTO), which then visibly never reads the
+/// message: the `fmt::Arguments` that the core panics (bounds checks, `unwrap`, in Embassy too)
+/// build become dead and `core::fmt` (`Formatter::pad`, integer `Display`) is not linked, 1.7 KiB
+/// of flash. Reading `info.message()` here, or dropping the `inline`, brings it back
+/// (`scripts/firmware-size.sh` fails on any `core::fmt` symbol).
 #[panic_handler]
+// rustc calls the hint unused on an exported function, but LLVM applies it under LTO.
+#[allow(unused_attributes)]
+#[inline(always)]
 fn panic(info: &PanicInfo) -> ! {
     static PANICKED: AtomicBool = AtomicBool::new(false);
     cortex_m::interrupt::disable();
@@ -276,8 +286,8 @@ fn panic(info: &PanicInfo) -> ! {
     // thumbv6m has no atomic swap; interrupts are off, so load + store cannot be torn apart.
     if !PANICKED.load(Ordering::Relaxed) {
         PANICKED.store(true, Ordering::Relaxed);
-        // The location only: formatting the message would link `core::fmt` (about 2 KiB of
-        // flash). Panics raised through defmt (`unwrap!`, `panic!`) have logged their message.
+        // The location only (see above). Panics raised through defmt (`unwrap!`, `panic!`) have
+        // logged their message.
         match info.location() {
             Some(at) => error!("panic at {=str}:{=u32}", at.file(), at.line()),
             None => error!("panic"),

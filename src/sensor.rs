@@ -10,8 +10,9 @@
 //! Every sensor is filtered in every 1 ms step on a core without a divider (Cortex-M0+), where
 //! a division is a library call of about a hundred instructions: the filters divide by
 //! multiplying with precomputed reciprocals ([`div1000`], [`Window::mean`]), skip the smoothing
-//! when it is off, and compute the filtered value once per sample. The results are exactly those
-//! of the divisions they replace (see the tests).
+//! when it is off, and compute the filtered value once per sample; the median window stays sorted
+//! by insertion, so a sample costs a few moves instead of a copy and sort of the window. The
+//! results are exactly those of the sort and divisions they replace (see the tests).
 
 use crate::time::Instant;
 
@@ -72,22 +73,32 @@ impl Window {
         }
     }
 
-    fn push(&mut self, value: u16, capacity: usize) {
+    /// Stores `value` in place of the oldest sample of a window of `capacity`; returns the
+    /// sample it replaced, if that one was part of the window before.
+    // The per-sample helpers are `inline(always)`: the firmware is built with `opt-level = "z"`,
+    // which would call each of them for every sample of every sensor (frame setup included).
+    #[inline(always)]
+    fn push(&mut self, value: u16, capacity: usize) -> Option<u16> {
         let capacity = capacity.clamp(1, MAX_WINDOW);
         if self.next >= capacity {
             self.next = 0;
         }
-        if let Some(slot) = self.values.get_mut(self.next) {
-            *slot = value;
-        }
+        let replaced = self
+            .values
+            .get_mut(self.next)
+            .map(|slot| core::mem::replace(slot, value))
+            .filter(|_| self.next < self.len);
         self.next += 1;
         self.len = (self.len + 1).min(capacity);
+        replaced
     }
 
     fn filled(&self) -> &[u16] {
         self.values.get(..self.len).unwrap_or(&[])
     }
 
+    /// The median by copying and sorting: the reference for [`MedianWindow`].
+    #[cfg(test)]
     fn median(&self) -> u16 {
         let mut sorted = [0u16; MAX_WINDOW];
         let values = self.filled();
@@ -102,6 +113,67 @@ impl Window {
         let values = self.filled();
         let sum: u32 = values.iter().map(|&v| u32::from(v)).sum();
         divide_small(sum, values.len()) as u16
+    }
+}
+
+/// A [`Window`] that keeps its samples sorted as well, for the sliding median: in the steady
+/// state a new sample replaces the oldest one in the sorted copy by insertion (at most
+/// [`MAX_WINDOW`] moves), instead of copying and sorting the whole window every sample. Only while
+/// the window fills up or changes length is the sorted copy rebuilt from the ring (by insertion
+/// too: no sort routine in the image).
+#[derive(Debug, Clone, Copy)]
+struct MedianWindow {
+    ring: Window,
+    /// `ring.filled()` in ascending order.
+    sorted: [u16; MAX_WINDOW],
+}
+
+impl MedianWindow {
+    const fn new() -> Self {
+        MedianWindow {
+            ring: Window::new(),
+            sorted: [0; MAX_WINDOW],
+        }
+    }
+
+    /// Adds a sample to a window of `capacity`; returns the new median (the upper one of an even
+    /// count, as the sort-based median did).
+    fn push(&mut self, value: u16, capacity: usize) -> u16 {
+        let len_before = self.ring.len;
+        let replaced = self.ring.push(value, capacity);
+        let len = self.ring.len;
+        let sorted = self.sorted.get_mut(..len).unwrap_or(&mut []);
+        match replaced {
+            Some(old) if len == len_before => {
+                if let Some(gap) = sorted.iter().position(|&v| v == old) {
+                    settle(sorted, gap, value);
+                }
+            }
+            // Insertion sort of the ring, a sample at a time.
+            _ => {
+                for (end, &sample) in self.ring.filled().iter().enumerate() {
+                    settle(sorted.get_mut(..=end).unwrap_or(&mut []), end, sample);
+                }
+            }
+        }
+        sorted.get(len / 2).copied().unwrap_or(0)
+    }
+}
+
+/// Puts `new` into the ascending `sorted`, whose element at `gap` is free (replaced), keeping it
+/// ascending: the gap moves to `new`'s place.
+#[inline(always)]
+fn settle(sorted: &mut [u16], mut gap: usize, new: u16) {
+    while gap + 1 < sorted.len() && sorted[gap + 1] < new {
+        sorted[gap] = sorted[gap + 1];
+        gap += 1;
+    }
+    while gap > 0 && gap < sorted.len() && sorted[gap - 1] > new {
+        sorted[gap] = sorted[gap - 1];
+        gap -= 1;
+    }
+    if let Some(slot) = sorted.get_mut(gap) {
+        *slot = new;
     }
 }
 
@@ -128,7 +200,8 @@ fn divide_small(sum: u32, len: usize) -> u32 {
 /// The high 32 bits of the 64-bit product `a × b`, from 16-bit halves: four single-cycle
 /// multiplications on the Cortex-M0+ instead of the 64-bit multiplication routine
 /// (`__aeabi_lmul`), which LLVM would otherwise turn this back into (hence the `black_box`).
-fn mul_high(a: u32, b: u32) -> u32 {
+#[inline(always)]
+pub(crate) fn mul_high(a: u32, b: u32) -> u32 {
     let (a0, a1) = (a & 0xffff, a >> 16);
     let (b0, b1) = (b & 0xffff, core::hint::black_box(b >> 16));
     let (low, cross1, cross2) = (a0 * b0, a0 * b1, a1 * b0);
@@ -137,6 +210,7 @@ fn mul_high(a: u32, b: u32) -> u32 {
 }
 
 /// `x / 1000` for any `u32`, without a division (the multiplier is `⌈2³⁸ / 1000⌉`).
+#[inline(always)]
 pub fn div1000(x: u32) -> u32 {
     mul_high(x, 0x1062_4dd3) >> 6
 }
@@ -144,7 +218,7 @@ pub fn div1000(x: u32) -> u32 {
 /// Sliding median, then moving average, then exponential smoothing.
 #[derive(Debug, Clone, Copy)]
 pub struct Filter {
-    medians: Window,
+    medians: MedianWindow,
     averages: Window,
     /// The smoothed value in 1/1000 counts.
     smoothed_milli: Option<u32>,
@@ -162,7 +236,7 @@ impl Filter {
     /// An empty filter.
     pub const fn new() -> Self {
         Filter {
-            medians: Window::new(),
+            medians: MedianWindow::new(),
             averages: Window::new(),
             smoothed_milli: None,
             value: 0,
@@ -171,8 +245,8 @@ impl Filter {
 
     /// Feed one raw sample; returns the filtered value.
     pub fn push(&mut self, raw: u16, config: &FilterConfig) -> u16 {
-        self.medians.push(raw, config.median.into());
-        self.averages.push(self.medians.median(), config.average.into());
+        let median = self.medians.push(raw, config.median.into());
+        self.averages.push(median, config.average.into());
         let mean = u32::from(self.averages.mean());
         let weight = u32::from(config.smoothing_permille.clamp(1, 1000));
         // (previous × (1000 − w) + mean × 1000 × w) / 1000, with the exact part taken out.
@@ -278,6 +352,13 @@ impl AnalogSensor {
 
     /// The filtered value, if the sensor is healthy and has seen enough samples to mean it.
     pub fn reading(&self) -> Option<u16> {
+        self.fresh_reading()
+    }
+
+    /// [`Self::reading`], inlined into the per-sample updates below (a call per sensor and step
+    /// otherwise).
+    #[inline(always)]
+    fn fresh_reading(&self) -> Option<u16> {
         (self.fault.is_none() && self.samples >= WARM_UP_SAMPLES).then(|| self.filter.value())
     }
 }
@@ -301,7 +382,7 @@ impl PresenceSensor {
         thresholds: Thresholds,
     ) {
         self.analog.update(raw, now, filter, rails);
-        if let Some(value) = self.analog.reading() {
+        if let Some(value) = self.analog.fresh_reading() {
             self.present = thresholds.decide(self.present, value);
         }
     }
@@ -336,7 +417,7 @@ impl RevolutionCounter {
         edges: Thresholds,
     ) -> bool {
         self.analog.update(raw, now, filter, rails);
-        let Some(value) = self.analog.reading() else {
+        let Some(value) = self.analog.fresh_reading() else {
             return false;
         };
         let was_high = self.high;
@@ -368,7 +449,8 @@ impl RevolutionCounter {
             Some(period)
                 if period > 0 && now.millis_since(self.last_revolution) <= period.saturating_mul(2) =>
             {
-                (60_000 / period) as u32
+                // A 32-bit division (a period over 60 s is 0 rpm): the 64-bit one costs twice.
+                u32::try_from(period).map_or(0, |period| 60_000 / period)
             }
             _ => 0,
         }
@@ -496,6 +578,41 @@ mod tests {
                     "{config:?} at {i}"
                 );
             }
+        }
+    }
+
+    #[test]
+    fn the_filter_follows_window_changes_as_the_divisions_did() {
+        // Window lengths changing between samples (a `set` of the filter registers), growing and
+        // shrinking while the windows are partly and fully filled, and a clear in between.
+        let mut filter = Filter::new();
+        let mut reference = DividingFilter {
+            medians: Window::new(),
+            averages: Window::new(),
+            smoothed: None,
+        };
+        let mut seed: u32 = 11;
+        for i in 0..6000u32 {
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            let raw = (seed >> 20) as u16; // 0..4096, every value possible
+            let config = FilterConfig {
+                median: [5, 9, 1, 3, 9, 2, 0, 12][(i / 37 % 8) as usize],
+                average: [4, 1, 9, 2][(i / 53 % 4) as usize],
+                smoothing_permille: 400,
+            };
+            if i % 1000 == 999 {
+                filter.clear();
+                reference = DividingFilter {
+                    medians: Window::new(),
+                    averages: Window::new(),
+                    smoothed: None,
+                };
+            }
+            assert_eq!(
+                filter.push(raw, &config),
+                reference.push(raw, &config),
+                "{config:?} at {i}"
+            );
         }
     }
 
