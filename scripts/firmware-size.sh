@@ -17,7 +17,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-FLASH_BUDGET="${FLASH_BUDGET:-51716}" # 50692 B measured (2026-11-22) + 1 KiB
+FLASH_BUDGET="${FLASH_BUDGET:-54340}" # 53316 B measured (2026-11-22, with the safe-motion and printer-truth logic) + 1 KiB
 FLASH_TARGET=32768
 RAM_BUDGET="${RAM_BUDGET:-8192}"
 RAM_TOTAL=36864 # the STM32G071RB's SRAM (memory.x)

@@ -114,6 +114,7 @@ pub struct Row {
     /// How many addresses the row covers.
     pub span: Span,
     /// The name tools show, e.g. `bowden_mm`; block registers add their subject (`raw.hub.filament`).
+    /// Empty in the firmware image, which never shows it.
     pub name: &'static str,
     /// The values a write accepts (`None`: read only).
     pub range: Option<(u16, u16)>,
@@ -142,13 +143,20 @@ impl Row {
     }
 }
 
+/// A register's name. Only tools show names: the firmware image (feature `mcu`) leaves them out.
+macro_rules! name {
+    ($name:literal) => {
+        if cfg!(feature = "mcu") { "" } else { $name }
+    };
+}
+
 /// A plain setting: a [`Config`] field and the values it accepts.
 macro_rules! setting {
     ($address:literal, $name:literal, $min:literal..=$max:literal, $field:ident) => {
         Row {
             address: $address,
             span: Span::One,
-            name: $name,
+            name: name!($name),
             range: Some(($min, $max)),
             read: |v, _| Some(v.config.$field),
             write: Some(|t, _, value| {
@@ -165,7 +173,7 @@ macro_rules! read_only {
         Row {
             address: $address,
             span: Span::One,
-            name: $name,
+            name: name!($name),
             range: None,
             read: $read,
             write: None,
@@ -179,7 +187,7 @@ macro_rules! block {
         Row {
             address: $address,
             span: Span::$span,
-            name: $name,
+            name: name!($name),
             range: None,
             read: $read,
             write: None,
@@ -249,7 +257,7 @@ pub const REGISTERS: &[Row] = &[
     Row {
         address: 0x09,
         span: Span::One,
-        name: "fsensor",
+        name: name!("fsensor"),
         range: Some((0, 255)),
         read: |v, _| Some(u16::from(v.fsensor != 0)),
         // The Core One reports its filament sensor this way instead of `f`.
@@ -307,7 +315,7 @@ pub const REGISTERS: &[Row] = &[
     Row {
         address: REPORTED_REVISION,
         span: Span::One,
-        name: "reported_revision",
+        name: name!("reported_revision"),
         range: Some((0, 255)),
         read: |v, _| Some(v.config.version.revision.into()),
         write: Some(|t, _, value| {
@@ -325,7 +333,7 @@ pub const REGISTERS: &[Row] = &[
     Row {
         address: THRESHOLD_ON,
         span: Span::Sensors,
-        name: "threshold_on",
+        name: name!("threshold_on"),
         range: Some((0, 4095)),
         read: |v, i| Some(thresholds(v.config, SensorId::from_index(i))?.on),
         write: Some(|t, i, value| set_threshold(t.config, SensorId::from_index(i), |th| th.on = value)),
@@ -333,7 +341,7 @@ pub const REGISTERS: &[Row] = &[
     Row {
         address: THRESHOLD_OFF,
         span: Span::Sensors,
-        name: "threshold_off",
+        name: name!("threshold_off"),
         range: Some((0, 4095)),
         read: |v, i| Some(thresholds(v.config, SensorId::from_index(i))?.off),
         write: Some(|t, i, value| set_threshold(t.config, SensorId::from_index(i), |th| th.off = value)),
