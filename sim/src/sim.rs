@@ -246,17 +246,12 @@ impl Sim {
     }
 
     /// What a person does on the printer's UNLOAD MANUALLY screen (`8008`): pull every filament
-    /// whose tip is past its park position (in the hub or the Bowden tube, not in the extruder's
-    /// gears) back to the park position. Returns how many were pulled back.
+    /// whose tip is past its park position (in the hub, the Bowden tube or the extruder) back to
+    /// the park position. Returns how many were pulled back.
     pub fn unload_manually(&mut self) -> usize {
         let park = -f32::from(self.unit_config().park_mm);
-        let gears = self.model.config().extruder_gears_mm;
         let past_park: Vec<usize> = (0..self.options.slots)
-            .filter(|&slot| {
-                self.model
-                    .tip_mm(slot)
-                    .is_some_and(|tip| tip > park && tip < gears)
-            })
+            .filter(|&slot| self.model.tip_mm(slot).is_some_and(|tip| tip > park))
             .collect();
         for &slot in &past_park {
             self.model.insert_filament(slot, park);
