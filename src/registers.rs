@@ -311,7 +311,8 @@ pub const REGISTERS: &[Row] = &[
             .fold(0u16, |mask, i| mask | (1 << i))
     )),
     read_only!(0x51, "dropped_responses", |v, _| Some(v.dropped_responses)),
-    // The revision `S2` reports: 3 for Buddy firmware (MK4, MK3.5, Core One), 2 for MK3S firmware.
+    // The revision the first `S2` reports; asked again, the unit offers the other wire-compatible
+    // revisions (app.rs), so every printer family finds its own.
     Row {
         address: REPORTED_REVISION,
         span: Span::One,
