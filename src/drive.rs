@@ -165,6 +165,12 @@ impl SlotDrive {
         self.lease.is_some()
     }
 
+    /// True while the motor turns freely (not driven, not braked): whatever turns it now is the
+    /// filament, pulled or pushed by the printer's extruder or a hand.
+    pub fn is_coasting(&self) -> bool {
+        self.command == MotorCommand::Coast
+    }
+
     /// The command for the motor now.
     pub fn command(&self) -> MotorCommand {
         self.command

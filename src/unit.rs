@@ -193,7 +193,7 @@ impl<const N: usize> Unit<N> {
             let before = feeder.odometry_centi();
             feeder.sense(slot, *sample, drive.counting(), now, config, &rails);
             if feeder.odometry_centi() != before
-                && drive.command() == mmu_hal_port::MotorCommand::Coast
+                && drive.is_coasting()
                 && let (Some(moved), Some(last)) = (
                     self.moved_by_printer.get_mut(slot),
                     self.coasting_revolution_at.get_mut(slot),
