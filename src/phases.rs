@@ -89,9 +89,10 @@ pub enum Phase {
         /// The slot.
         slot: usize,
     },
-    /// `P19`, for a slot whose tip nobody knows (after `X42` or a wiped store) before another
-    /// slot is fed: pull back the park distance (less if the slot sensor clears: the tip is at
-    /// the drive gear), so a tip resting in the merge where the slot paths join cannot block it.
+    /// `P19`, for a parked slot or one whose tip nobody knows (after `X42` or a wiped store),
+    /// when another slot's feed stalls where the slot paths join: pull back the park distance
+    /// (less if the slot sensor clears: the tip is at the drive gear), so a tip resting in the
+    /// merge cannot block it.
     ClearMerge {
         /// The slot.
         slot: usize,
@@ -474,6 +475,9 @@ fn step_motion<const N: usize>(
                 // mid-way knows whose filament may be in the hub path.
                 unit.set_lane(slot, Lane::InHub);
                 unit.proven_owner = Some(slot);
+                if let Some(clear) = unit.clear_of_merge.get_mut(slot) {
+                    *clear = false;
+                }
                 Goal::Drive
             }
         }
@@ -637,12 +641,13 @@ fn step_motion<const N: usize>(
     }
 }
 
-/// The other slots with filament whose tips nobody knows (lanes wiped, or never known since the
-/// unit started) and that were not pulled out of the merge yet: one of them may rest where the
-/// slot paths join and block `slot`'s feed.
+/// The other slots with filament that rest before the hub (parked, or nobody knows where: lanes
+/// wiped) and were not pulled out of the merge since they were last fed: one of them may rest
+/// where the slot paths join and block `slot`'s feed (a park counted by a slipping drive falls
+/// short, an unknown tip may be anywhere).
 fn merge_suspects<const N: usize>(unit: &Unit<N>, slot: usize) -> SlotSet {
     (0..N)
-        .filter(|&other| other != slot && unit.lane(other) == Lane::Unknown)
+        .filter(|&other| other != slot && matches!(unit.lane(other), Lane::Unknown | Lane::Parked))
         .filter(|&other| !unit.clear_of_merge.get(other).copied().unwrap_or(true))
         .filter(|&other| unit.feeders.get(other).and_then(|f| f.filament.present()) != Some(false))
         .fold(0, |set, other| set | (1 << other))

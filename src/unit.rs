@@ -154,7 +154,7 @@ pub struct Unit<const N: usize> {
     pub moved_by_printer: [u8; N],
     /// When each slot's last coasting revolution came.
     coasting_revolution_at: [Instant; N],
-    /// Per slot of unknown position: pulled back out of the merge since the unit started.
+    /// Per slot: pulled back out of the merge since it was last fed towards the hub.
     pub clear_of_merge: [bool; N],
 }
 

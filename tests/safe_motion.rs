@@ -193,3 +193,37 @@ fn after_the_lanes_are_wiped_a_tip_resting_in_the_merge_does_not_block_another_s
         "and no further than needed: {tip} mm"
     );
 }
+
+#[test]
+fn a_slipping_drive_that_parks_inside_the_merge_does_not_block_the_next_slot() {
+    let mut rig = Rig::<3>::new();
+    rig.boot();
+    rig.command(t(0));
+    // Slot 0's drive slips: its park, counted by its motor, leaves the tip in the merge.
+    rig.inject(Fault::Slip { slot: 0, ratio: 0.4 });
+    let mut run = rig.command(t(1));
+    // The slipping unload runs out of distance (8002): the printer presses Retry, as it does up to
+    // three times by itself.
+    for _ in 0..3 {
+        if run.last.param != ParamCode::Error {
+            break;
+        }
+        rig.send(Request::new(RequestCode::Button, 1));
+        run = rig.follow(t(1), 120_000);
+    }
+    assert_eq!(
+        run.last.param,
+        ParamCode::Finished,
+        "{:?} {:?}, tips {:?} {:?}",
+        run.progress,
+        run.last,
+        rig.model.tip_mm(0),
+        rig.model.tip_mm(1)
+    );
+    assert_eq!(rig.model.loaded_slot(), Some(1));
+    let tip = rig.model.tip_mm(0).unwrap();
+    assert!(
+        tip < rig.model.config().merge_mm,
+        "slot 0 rests out of the merge: {tip} mm"
+    );
+}
