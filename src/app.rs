@@ -354,6 +354,12 @@ impl<const N: usize> App<N> {
         }
     }
 
+    /// The board could not send a step's response bytes (its transmit ring was full): counted with
+    /// the responses the step itself dropped, in register 0x51.
+    pub fn count_dropped_response(&mut self) {
+        self.dropped_responses = self.dropped_responses.saturating_add(1);
+    }
+
     /// The value of register `address`, or `None` when the unit has no such register.
     pub fn read_register(&self, address: u8) -> Option<u16> {
         let view = registers::View {

@@ -185,9 +185,10 @@ impl<const N: usize> ControlLoop<N> {
         }
     }
 
-    /// The board could not queue a step's response bytes.
+    /// The board could not queue a step's response bytes: logged, and counted in register 0x51.
     pub fn tx_dropped(&mut self) {
         self.stats.tx_dropped += 1;
+        self.app.count_dropped_response();
     }
 
     /// The board wrote to flash after the step.

@@ -120,3 +120,12 @@ fn a_reset_stops_the_motors_first_and_saves_before_restarting() {
         );
     }
 }
+
+#[test]
+fn responses_the_board_could_not_send_are_counted_in_register_0x51() {
+    let mut control = ControlLoop::new(App::<3>::default(), at(0));
+    assert_eq!(control.app().read_register(0x51), Some(0));
+    control.tx_dropped();
+    control.tx_dropped();
+    assert_eq!(control.app().read_register(0x51), Some(2));
+}

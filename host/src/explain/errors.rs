@@ -44,7 +44,7 @@ pub fn error_help(error: ErrorCode) -> ErrorHelp {
         ),
         ErrorCode::INVALID_TOOL => help(
             "the request names a slot this unit does not have (register 0x40 holds how many it has)",
-            "the tool numbers in the G-code and the printer's MMU slot count",
+            "the slicer profile: one made for a 5-slot MMU3 sends T3 and T4 to a 3-slot unit; set the printer profile's number of extruders to this unit's slot count and slice again; on the printer, Stop print (the unit is ready for the next print at once)",
         ),
         ErrorCode::FINDA_VS_EEPROM_DISREPANCY => help(
             "what the unit remembers (or knows) about the lanes and what the hub filament sensor sees disagree: filament in the hub that no slot owns, or none where a slot should be",
