@@ -35,6 +35,35 @@ pub fn error(request: Request, code: ErrorCode) -> Response {
     Response::error(request.code, request.value, code)
 }
 
+/// What `Q0` reports while a slot is fed into the printer (`LoadToNozzle`).
+pub const LOAD_PROGRESS: [ProgressCode; 4] = [
+    ProgressCode::FEEDING_TO_FINDA,
+    ProgressCode::FEEDING_TO_BONDTECH,
+    ProgressCode::FEEDING_TO_FSENSOR,
+    ProgressCode::FEEDING_TO_NOZZLE,
+];
+
+/// What `Q0` reports while the loaded slot comes out and is parked (`UnloadFromNozzle`).
+pub const UNLOAD_PROGRESS: [ProgressCode; 2] = [
+    ProgressCode::UNLOADING_TO_FINDA,
+    ProgressCode::RETRACTING_FROM_FINDA,
+];
+
+/// What `Q0` reports while a slot is fed to the hub and parked again (preload, re-park).
+pub const PARK_PROGRESS: [ProgressCode; 2] = [
+    ProgressCode::FEEDING_TO_FINDA,
+    ProgressCode::RETRACTING_FROM_FINDA,
+];
+
+/// The hub sensor's "off" threshold register: slot *n*'s sensor is at `HUB_OFF_REGISTER + 1 + n`.
+pub const HUB_OFF_REGISTER: u8 = 0xa0;
+
+/// An "off" threshold no reading goes below: the sensor seems to hold filament forever.
+pub const OFF_THRESHOLD_NEVER: u16 = 50;
+
+/// The default "off" threshold.
+pub const OFF_THRESHOLD_DEFAULT: u16 = 2400;
+
 /// Slot `slot`'s tip rests near the park position.
 pub fn assert_parked<const N: usize>(rig: &Rig<N>, slot: usize) {
     let tip = rig.model.tip_mm(slot).unwrap();
@@ -283,6 +312,129 @@ impl<const N: usize> Rig<N> {
 
     pub fn inject(&mut self, fault: Fault) {
         assert!(self.model.inject(fault));
+    }
+
+    /// Write a register; the unit accepts it.
+    pub fn write(&mut self, address: u8, value: u16) {
+        let answer = self.send(Request::write(address, value));
+        assert_eq!(
+            answer.map(|a| a.param),
+            Some(ParamCode::Accepted),
+            "write {address:#04x} = {value}"
+        );
+    }
+
+    /// The value of register `address`.
+    pub fn read(&mut self, address: u8) -> Option<u16> {
+        self.send(Request::new(RequestCode::Read, address))
+            .and_then(|a| a.param_value)
+    }
+
+    /// Retry (the Middle button) after the printer has reported its sensor as it is now.
+    pub fn retry(&mut self) {
+        self.printer_step(None);
+        press(self, ButtonCode::MIDDLE);
+    }
+
+    /// Retry (the Middle button, as the only thing sent), then the `Q0` answer 50 ms later.
+    pub fn press_retry_then_query(&mut self) -> Response {
+        press(self, ButtonCode::MIDDLE);
+        self.idle(50);
+        self.query()
+    }
+
+    /// Issue `request` and play it until `Q0` reports `progress`.
+    pub fn command_until(&mut self, request: Request, progress: ProgressCode) -> Run {
+        self.issue(request);
+        let run = self.follow_until(request, Some(progress), 120_000);
+        assert_eq!(run.progress.last(), Some(&progress), "{:?}", run.last);
+        run
+    }
+
+    /// Issue `request`: it stops on `code` and every motor stops.
+    pub fn command_fails_with(&mut self, request: Request, code: ErrorCode) -> Run {
+        let run = self.command(request);
+        self.stopped_on(request, code, run)
+    }
+
+    /// The command in progress stops on `code` and every motor stops.
+    pub fn fails_with(&mut self, request: Request, code: ErrorCode) -> Run {
+        let run = self.follow(request, 120_000);
+        self.stopped_on(request, code, run)
+    }
+
+    fn stopped_on(&mut self, request: Request, code: ErrorCode, run: Run) -> Run {
+        assert_eq!(run.last, error(request, code), "progress {:?}", run.progress);
+        self.idle(10);
+        assert!(self.motors_stopped(), "every motor stops on {code}");
+        run
+    }
+
+    /// Retry, then play the command until it ends: it finishes.
+    pub fn retry_finishes(&mut self, request: Request) -> Run {
+        self.retry();
+        let run = self.follow(request, 120_000);
+        assert_eq!(run.last, finished(request), "progress {:?}", run.progress);
+        run
+    }
+
+    /// The command in progress stops on `code` with every motor stopped; the fault is cleared
+    /// and Retry pressed: it goes on from the failed phase (`progress`) and finishes.
+    pub fn fails_then_retry_finishes(
+        &mut self,
+        request: Request,
+        code: ErrorCode,
+        progress: &[ProgressCode],
+    ) {
+        self.fails_with(request, code);
+        self.model.clear_all();
+        self.idle(1000);
+        assert_eq!(self.retry_finishes(request).progress, progress);
+    }
+
+    /// The hub sensor never reads "off": the next command that pulls a tip out of the hub
+    /// stops on `FINDA_DIDNT_SWITCH_OFF`.
+    pub fn hub_never_clears(&mut self) {
+        self.write(HUB_OFF_REGISTER, OFF_THRESHOLD_NEVER);
+    }
+
+    /// The hub sensor's "off" threshold is right again, and the rig has seen it.
+    pub fn hub_clears_again(&mut self) {
+        self.write(HUB_OFF_REGISTER, OFF_THRESHOLD_DEFAULT);
+        self.idle(100);
+    }
+
+    /// Filament pushed into the hub by hand (slot 1's, 5 mm past the sensor): `request` stops on
+    /// `FINDA_VS_EEPROM_DISREPANCY`; Retry with it still there gives the same error and moves
+    /// no motor. The user pulls it back to the park position and presses Retry: the run that
+    /// follows.
+    pub fn filament_in_the_hub_no_slot_owns_then_pulled_back(&mut self, request: Request) -> Run {
+        self.model.insert_filament(1, 5.0);
+        self.idle(100);
+        let before = self.motor_log.len();
+        let run = self.command(request);
+        let unowned = error(request, ErrorCode::FINDA_VS_EEPROM_DISREPANCY);
+        assert_eq!(run.last, unowned);
+        self.retry();
+        self.idle(50);
+        assert_eq!(self.query(), unowned, "the cause is still there");
+        assert!(self.nothing_moved_since(before), "no motor moves on a guess");
+        self.model.insert_filament(1, PARK_MM);
+        self.idle(100);
+        self.retry();
+        self.follow(request, 120_000)
+    }
+
+    /// No motor was driven since the motor log had `since` entries.
+    pub fn nothing_moved_since(&self, since: usize) -> bool {
+        self.motor_log[since..]
+            .iter()
+            .all(|motors| motors.iter().all(|m| !m.is_driving()))
+    }
+
+    /// Slot `slot`'s motor was never driven.
+    pub fn slot_never_ran(&self, slot: usize) -> bool {
+        self.motor_log.iter().all(|motors| !motors[slot].is_driving())
     }
 
     /// True when no motor was driven in the last `steps` steps.
