@@ -343,6 +343,24 @@ impl<const N: usize> Rig<N> {
         self.query()
     }
 
+    /// `request` waits on `code`: Retry with the cause still there gives the same error; the
+    /// cause is removed (`fix`) and Retry checks again: `request` finishes.
+    pub fn retry_fails_until_fixed(
+        &mut self,
+        request: Request,
+        code: ErrorCode,
+        fix: impl FnOnce(&mut Self),
+    ) {
+        assert_eq!(
+            self.press_retry_then_query(),
+            error(request, code),
+            "the cause is still there"
+        );
+        fix(self);
+        self.idle(1000);
+        assert_eq!(self.press_retry_then_query(), finished(request));
+    }
+
     /// Issue `request` and play it until `Q0` reports `progress`.
     pub fn command_until(&mut self, request: Request, progress: ProgressCode) -> Run {
         self.issue(request);
