@@ -66,12 +66,9 @@ fn printer_sensor_never_clears_on_the_cut_unload_then_retry_reparks() {
 fn hub_never_clears_on_the_repark_then_retry_finishes() {
     let mut rig = Rig::<3>::new();
     rig.boot();
-    rig.hub_never_clears();
-    let run = rig.command_fails_with(k(1), ErrorCode::FINDA_DIDNT_SWITCH_OFF);
-    assert_eq!(run.progress, PARK_PROGRESS);
-    rig.hub_clears_again();
-    let run = rig.retry_finishes(k(1));
-    assert_eq!(run.progress, [P::RETRACTING_FROM_FINDA]);
+    let (failed, retried) = rig.hub_never_clears_then_retry(k(1));
+    assert_eq!(failed.progress, PARK_PROGRESS);
+    assert_eq!(retried.progress, [P::RETRACTING_FROM_FINDA]);
     let tip = rig.model.tip_mm(1).unwrap();
     assert!(tip < 0.0, "slot 1 is out of the hub path: tip at {tip} mm");
 }
@@ -105,10 +102,7 @@ fn hub_sensor_disconnected_on_cut_then_retry_reparks() {
     rig.boot();
     rig.command(t(1));
     rig.command_until(k(1), P::UNLOADING_TO_FINDA);
-    rig.inject(Fault::SensorDisconnected {
-        sensor: SensorId::HubFilament,
-        rail: Rail::High,
-    });
+    rig.disconnect(SensorId::HubFilament, Rail::High);
     fails_then_retry_reparks(
         &mut rig,
         1,
@@ -122,10 +116,7 @@ fn motor_hall_sensor_disconnected_on_cut_then_retry_reparks() {
     let mut rig = Rig::<3>::new();
     rig.boot();
     rig.command_until(k(2), P::RETRACTING_FROM_FINDA);
-    rig.inject(Fault::SensorDisconnected {
-        sensor: SensorId::MotorHall(2),
-        rail: Rail::Low,
-    });
+    rig.disconnect(SensorId::MotorHall(2), Rail::Low);
     fails_then_retry_reparks(
         &mut rig,
         2,

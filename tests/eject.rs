@@ -183,10 +183,7 @@ fn hub_sensor_disconnected_on_eject_then_retry_ejects() {
     let mut rig = Rig::<3>::new();
     rig.boot();
     let eject = eject_until_it_pulls(&mut rig, 2);
-    rig.inject(Fault::SensorDisconnected {
-        sensor: SensorId::HubFilament,
-        rail: Rail::High,
-    });
+    rig.disconnect(SensorId::HubFilament, Rail::High);
     fails_then_retry_ejects(
         &mut rig,
         eject,

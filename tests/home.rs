@@ -8,7 +8,7 @@
 mod common;
 
 use common::{PARK_MM, Rig, error, finished, t};
-use mmu_model::{Fault, Rail, SensorId};
+use mmu_model::{Rail, SensorId};
 use mmu_protocol::{ErrorCode, Request, RequestCode};
 
 #[test]
@@ -65,9 +65,7 @@ fn loaded_slot_pulled_out_by_hand_then_retry_trusts_the_sensors_and_the_next_cha
     assert_eq!(run.last, error(h0(), ErrorCode::FINDA_VS_EEPROM_DISREPANCY));
     // Retry: the user has looked; the hub sensor is believed over the known state.
     assert_eq!(rig.press_retry_then_query(), finished(h0()));
-    let run = rig.command(t(1));
-    assert_eq!(run.last, finished(t(1)), "progress {:?}", run.progress);
-    assert_eq!(rig.model.loaded_slot(), Some(1));
+    rig.tool_change_loads(1);
     let tip = rig.model.tip_mm(0).unwrap();
     assert!(tip < -8.0, "slot 0 stays out of the hub path: tip at {tip} mm");
 }
@@ -76,10 +74,7 @@ fn loaded_slot_pulled_out_by_hand_then_retry_trusts_the_sensors_and_the_next_cha
 fn hub_sensor_disconnected_then_retry_after_it_is_reconnected_finishes() {
     let mut rig = Rig::<3>::new();
     rig.boot();
-    rig.inject(Fault::SensorDisconnected {
-        sensor: SensorId::HubFilament,
-        rail: Rail::High,
-    });
+    rig.disconnect(SensorId::HubFilament, Rail::High);
     rig.idle(1000);
     fails_then_retry_after(&mut rig, ErrorCode::FINDA_FLICKERS, |rig| {
         rig.model.clear_all();
@@ -90,10 +85,7 @@ fn hub_sensor_disconnected_then_retry_after_it_is_reconnected_finishes() {
 fn slot_sensor_disconnected_then_retry_after_it_is_reconnected_finishes() {
     let mut rig = Rig::<3>::new();
     rig.boot();
-    rig.inject(Fault::SensorDisconnected {
-        sensor: SensorId::SlotFilament(2),
-        rail: Rail::Low,
-    });
+    rig.disconnect(SensorId::SlotFilament(2), Rail::Low);
     rig.idle(1000);
     fails_then_retry_after(&mut rig, ErrorCode::MOVE_PULLEY_FAILED, |rig| {
         rig.model.clear_all();

@@ -59,12 +59,9 @@ fn empty_slot_then_retry_after_the_user_inserts_filament_parks_it() {
 fn hub_never_clears_after_the_preload_then_retry_finishes() {
     let mut rig = Rig::<3>::new();
     rig.boot();
-    rig.hub_never_clears();
-    let run = rig.command_fails_with(l(1), ErrorCode::FINDA_DIDNT_SWITCH_OFF);
-    assert_eq!(run.progress, PARK_PROGRESS);
-    rig.hub_clears_again();
-    let run = rig.retry_finishes(l(1));
-    assert_eq!(run.progress, [P::RETRACTING_FROM_FINDA]);
+    let (failed, retried) = rig.hub_never_clears_then_retry(l(1));
+    assert_eq!(failed.progress, PARK_PROGRESS);
+    assert_eq!(retried.progress, [P::RETRACTING_FROM_FINDA]);
     let tip = rig.model.tip_mm(1).unwrap();
     assert!(tip < 0.0, "slot 1 is out of the hub path: tip at {tip} mm");
 }
@@ -93,10 +90,7 @@ fn hub_sensor_disconnected_on_preload_then_retry_parks() {
     let mut rig = Rig::<3>::new();
     rig.boot();
     rig.command_until(l(0), P::FEEDING_TO_FINDA);
-    rig.inject(Fault::SensorDisconnected {
-        sensor: SensorId::HubFilament,
-        rail: Rail::Low,
-    });
+    rig.disconnect(SensorId::HubFilament, Rail::Low);
     // The tip passed the hub while its sensor could not see it: the repeated `P5` ends in its
     // first step, before the printer's next `Q0`.
     fails_then_retry_parks(
@@ -112,10 +106,7 @@ fn motor_hall_sensor_disconnected_while_parking_then_retry_parks() {
     let mut rig = Rig::<3>::new();
     rig.boot();
     rig.command_until(l(2), P::RETRACTING_FROM_FINDA);
-    rig.inject(Fault::SensorDisconnected {
-        sensor: SensorId::MotorHall(2),
-        rail: Rail::Low,
-    });
+    rig.disconnect(SensorId::MotorHall(2), Rail::Low);
     fails_then_retry_parks(
         &mut rig,
         2,
@@ -128,10 +119,7 @@ fn motor_hall_sensor_disconnected_while_parking_then_retry_parks() {
 fn hub_never_clears_after_the_preload_then_retry_parks_where_the_next_load_finds_the_hub() {
     let mut rig = Rig::<3>::new();
     rig.boot();
-    rig.hub_never_clears();
-    rig.command_fails_with(l(1), ErrorCode::FINDA_DIDNT_SWITCH_OFF);
-    rig.hub_clears_again();
-    rig.retry_finishes(l(1));
+    rig.hub_never_clears_then_retry(l(1));
     // Recorded as parked: the next tool change searches the hub within `hub_search_mm` of it.
     let run = rig.command(t(1));
     assert_eq!(run.last, finished(t(1)), "tip at {:?} mm", rig.model.tip_mm(1));

@@ -9,10 +9,10 @@
 
 mod common;
 
-use common::{Rig, error, finished, t};
+use common::{Rig, error, finished};
 use mmu_firmware::persist::Snapshot;
 use mmu_firmware::unit::Lane;
-use mmu_model::{Fault, Rail, SensorId};
+use mmu_model::{Rail, SensorId};
 use mmu_protocol::{ErrorCode, Request, RequestCode};
 
 #[test]
@@ -69,9 +69,7 @@ fn slot_stored_as_loaded_whose_tip_the_hub_does_not_see_then_retry_trusts_the_se
     assert!(rig.nothing_moved_since(0));
     assert_eq!(rig.press_retry_then_query(), finished(x0()));
     // Slot 0 keeps the hub path until the next command parks it from where it is.
-    let run = rig.command(t(1));
-    assert_eq!(run.last, finished(t(1)), "progress {:?}", run.progress);
-    assert_eq!(rig.model.loaded_slot(), Some(1));
+    rig.tool_change_loads(1);
     let tip = rig.model.tip_mm(0).unwrap();
     assert!(tip < -8.0, "slot 0 stays out of the hub path: tip at {tip} mm");
 }
@@ -87,18 +85,13 @@ fn two_slots_stored_past_the_park_position_then_retry_forgets_them() {
     assert!(rig.nothing_moved_since(0));
     assert_eq!(rig.press_retry_then_query(), finished(x0()));
     assert!(rig.nothing_moved_since(0));
-    let run = rig.command(t(1));
-    assert_eq!(run.last, finished(t(1)), "progress {:?}", run.progress);
-    assert_eq!(rig.model.loaded_slot(), Some(1));
+    rig.tool_change_loads(1);
 }
 
 #[test]
 fn hub_sensor_disconnected_at_start_then_retry_after_it_is_reconnected_finishes() {
     let mut rig = Rig::<3>::new();
-    rig.inject(Fault::SensorDisconnected {
-        sensor: SensorId::HubFilament,
-        rail: Rail::Low,
-    });
+    rig.disconnect(SensorId::HubFilament, Rail::Low);
     fails_then_retry_after(&mut rig, ErrorCode::FINDA_FLICKERS, |rig| {
         rig.model.clear_all();
     });
@@ -107,10 +100,7 @@ fn hub_sensor_disconnected_at_start_then_retry_after_it_is_reconnected_finishes(
 #[test]
 fn motor_hall_sensor_disconnected_at_start_then_retry_after_it_is_reconnected_finishes() {
     let mut rig = Rig::<3>::new();
-    rig.inject(Fault::SensorDisconnected {
-        sensor: SensorId::MotorHall(1),
-        rail: Rail::High,
-    });
+    rig.disconnect(SensorId::MotorHall(1), Rail::High);
     fails_then_retry_after(&mut rig, ErrorCode::MOVE_PULLEY_FAILED, |rig| {
         rig.model.clear_all();
     });

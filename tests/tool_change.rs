@@ -133,10 +133,7 @@ fn empty_slot_fails_without_moving() {
 fn disconnected_hub_sensor_is_reported_not_believed() {
     let mut rig = Rig::<3>::new();
     rig.boot();
-    rig.inject(Fault::SensorDisconnected {
-        sensor: SensorId::HubFilament,
-        rail: Rail::High,
-    });
+    rig.disconnect(SensorId::HubFilament, Rail::High);
     rig.command_fails_with(t(0), ErrorCode::FINDA_FLICKERS);
     assert_eq!(rig.read(0x50), Some(1));
 }
@@ -145,10 +142,7 @@ fn disconnected_hub_sensor_is_reported_not_believed() {
 fn disconnected_motor_hall_sensor() {
     let mut rig = Rig::<3>::new();
     rig.boot();
-    rig.inject(Fault::SensorDisconnected {
-        sensor: SensorId::MotorHall(0),
-        rail: Rail::Low,
-    });
+    rig.disconnect(SensorId::MotorHall(0), Rail::Low);
     rig.command_fails_with(t(0), ErrorCode::MOVE_PULLEY_FAILED);
 }
 
@@ -179,10 +173,7 @@ fn hub_never_clears_on_the_unload_half_then_retry_unloads_and_loads() {
     rig.boot();
     rig.command(t(0));
     // An "off" threshold no reading goes below: the hub seems to hold filament forever.
-    rig.hub_never_clears();
-    rig.command_fails_with(t(2), ErrorCode::FINDA_DIDNT_SWITCH_OFF);
-    rig.hub_clears_again();
-    rig.retry_finishes(t(2));
+    rig.hub_never_clears_then_retry(t(2));
     assert_eq!(rig.model.loaded_slot(), Some(2));
     let tip = rig.model.tip_mm(0).unwrap();
     assert!(tip < 0.0, "slot 0 is out of the hub path: tip at {tip} mm");
@@ -237,10 +228,7 @@ fn hub_sensor_disconnected_in_the_bowden_feed_then_retry_goes_on_from_there() {
     let mut rig = Rig::<3>::new();
     rig.boot();
     rig.command_until(t(0), P::FEEDING_TO_BONDTECH);
-    rig.inject(Fault::SensorDisconnected {
-        sensor: SensorId::HubFilament,
-        rail: Rail::Low,
-    });
+    rig.disconnect(SensorId::HubFilament, Rail::Low);
     rig.fails_then_retry_finishes(t(0), ErrorCode::FINDA_FLICKERS, &LOAD_PROGRESS[1..]);
     assert_eq!(rig.model.loaded_slot(), Some(0));
 }
@@ -251,10 +239,7 @@ fn motor_hall_sensor_disconnected_while_parking_the_old_slot_then_retry_parks_an
     rig.boot();
     rig.command(t(0));
     rig.command_until(t(2), P::RETRACTING_FROM_FINDA);
-    rig.inject(Fault::SensorDisconnected {
-        sensor: SensorId::MotorHall(0),
-        rail: Rail::Low,
-    });
+    rig.disconnect(SensorId::MotorHall(0), Rail::Low);
     rig.fails_then_retry_finishes(
         t(2),
         ErrorCode::MOVE_PULLEY_FAILED,

@@ -101,10 +101,7 @@ fn hub_never_clears_on_unload_then_retry_finishes() {
     let mut rig = Rig::<3>::new();
     rig.boot();
     rig.command(t(0));
-    rig.hub_never_clears();
-    rig.command_fails_with(u0(), ErrorCode::FINDA_DIDNT_SWITCH_OFF);
-    rig.hub_clears_again();
-    rig.retry_finishes(u0());
+    rig.hub_never_clears_then_retry(u0());
     let tip = rig.model.tip_mm(0).unwrap();
     assert!(tip < 0.0, "slot 0 is out of the hub path: tip at {tip} mm");
     assert_eq!(rig.model.loaded_slot(), None);
@@ -132,10 +129,7 @@ fn stalled_motor_on_unload_then_retry_unloads_and_parks() {
 fn hub_sensor_disconnected_on_unload_then_retry_unloads_and_parks() {
     let mut rig = Rig::<3>::new();
     unload_until(&mut rig, P::UNLOADING_TO_FINDA);
-    rig.inject(Fault::SensorDisconnected {
-        sensor: SensorId::HubFilament,
-        rail: Rail::High,
-    });
+    rig.disconnect(SensorId::HubFilament, Rail::High);
     fails_then_retry_parks(&mut rig, ErrorCode::FINDA_FLICKERS, &UNLOAD_PROGRESS);
 }
 
@@ -143,10 +137,7 @@ fn hub_sensor_disconnected_on_unload_then_retry_unloads_and_parks() {
 fn slot_sensor_disconnected_on_unload_then_retry_unloads_and_parks() {
     let mut rig = Rig::<3>::new();
     unload_until(&mut rig, P::UNLOADING_TO_FINDA);
-    rig.inject(Fault::SensorDisconnected {
-        sensor: SensorId::SlotFilament(0),
-        rail: Rail::High,
-    });
+    rig.disconnect(SensorId::SlotFilament(0), Rail::High);
     fails_then_retry_parks(&mut rig, ErrorCode::MOVE_PULLEY_FAILED, &UNLOAD_PROGRESS);
 }
 
@@ -155,10 +146,7 @@ fn hub_never_clears_on_unload_then_retry_leaves_the_slot_loadable() {
     let mut rig = Rig::<3>::new();
     rig.boot();
     rig.command(t(0));
-    rig.hub_never_clears();
-    rig.command_fails_with(u0(), ErrorCode::FINDA_DIDNT_SWITCH_OFF);
-    rig.hub_clears_again();
-    rig.retry_finishes(u0());
+    rig.hub_never_clears_then_retry(u0());
     // The slot's drive gear still holds the filament: the next tool change loads it.
     let run = rig.command(t(0));
     assert_eq!(run.last, finished(t(0)), "tip at {:?} mm", rig.model.tip_mm(0));

@@ -6,7 +6,7 @@
 pub mod bounds;
 
 use mmu_firmware::{App, Config, Instant, MotorCommand};
-use mmu_model::{Fault, Model, ModelConfig};
+use mmu_model::{Fault, Model, ModelConfig, Rail, SensorId};
 use mmu_protocol::{
     ButtonCode, ErrorCode, ParamCode, ProgressCode, Request, RequestCode, Response, ResponseDecoder,
     ResultCode,
@@ -361,6 +361,14 @@ impl<const N: usize> Rig<N> {
         assert_eq!(self.press_retry_then_query(), finished(request));
     }
 
+    /// `T<slot>` runs to the end: it finishes with slot `slot` loaded.
+    pub fn tool_change_loads(&mut self, slot: u8) -> Run {
+        let run = self.command(t(slot));
+        assert_eq!(run.last, finished(t(slot)), "progress {:?}", run.progress);
+        assert_eq!(self.model.loaded_slot(), Some(slot.into()));
+        run
+    }
+
     /// Issue `request` and play it until `Q0` reports `progress`.
     pub fn command_until(&mut self, request: Request, progress: ProgressCode) -> Run {
         self.issue(request);
@@ -420,6 +428,21 @@ impl<const N: usize> Rig<N> {
     pub fn hub_clears_again(&mut self) {
         self.write(HUB_OFF_REGISTER, OFF_THRESHOLD_DEFAULT);
         self.idle(100);
+    }
+
+    /// The hub sensor never reads "off": `request` stops on `FINDA_DIDNT_SWITCH_OFF` with every
+    /// motor stopped; the threshold is fixed and Retry finishes it. The failed run and the
+    /// retried one.
+    pub fn hub_never_clears_then_retry(&mut self, request: Request) -> (Run, Run) {
+        self.hub_never_clears();
+        let failed = self.command_fails_with(request, ErrorCode::FINDA_DIDNT_SWITCH_OFF);
+        self.hub_clears_again();
+        (failed, self.retry_finishes(request))
+    }
+
+    /// `sensor`'s wire comes loose and rests at `rail`.
+    pub fn disconnect(&mut self, sensor: SensorId, rail: Rail) {
+        self.inject(Fault::SensorDisconnected { sensor, rail });
     }
 
     /// Filament pushed into the hub by hand (slot 1's, 5 mm past the sensor): `request` stops on
