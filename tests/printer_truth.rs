@@ -39,9 +39,7 @@ fn start_up_error_then_tool_change_is_accepted_and_fails_with_the_start_up_error
     rig.model.insert_filament(0, -15.0);
     rig.idle(100);
     press(&mut rig, ButtonCode::MIDDLE);
-    let run = rig.follow(t(1), 120_000);
-    assert_eq!(run.last, finished(t(1)));
-    assert_eq!(rig.model.loaded_slot(), Some(1));
+    rig.tool_change_goes_on_and_loads(1);
 }
 
 /// The same after the user fixed the fault without pressing Retry: still no `R`.
@@ -55,9 +53,7 @@ fn start_up_error_fixed_without_retry_then_tool_change_runs_after_retry() {
     assert_eq!(rig.send(t(2)), Some(accepted(t(2))));
     assert_eq!(rig.query(), error(t(2), ErrorCode::FINDA_VS_EEPROM_DISREPANCY));
     press(&mut rig, ButtonCode::MIDDLE);
-    let run = rig.follow(t(2), 120_000);
-    assert_eq!(run.last, finished(t(2)));
-    assert_eq!(rig.model.loaded_slot(), Some(2));
+    rig.tool_change_goes_on_and_loads(2);
 }
 
 /// A command sent over any other waiting error (printer-truth §2.3: the printer sends `T<m>`
@@ -77,9 +73,7 @@ fn tool_change_over_a_waiting_motion_error_is_accepted_and_runs_after_retry() {
     assert!(rig.nothing_moved_since(before));
     rig.model.clear_all();
     press(&mut rig, ButtonCode::MIDDLE);
-    let run = rig.follow(t(2), 120_000);
-    assert_eq!(run.last, finished(t(2)));
-    assert_eq!(rig.model.loaded_slot(), Some(2));
+    rig.tool_change_goes_on_and_loads(2);
 }
 
 /// A command over the eject's question (`E800c`, Continue) takes the question over: Continue
@@ -93,9 +87,7 @@ fn tool_change_over_the_eject_question_runs_after_continue() {
     assert_eq!(rig.send(t(0)), Some(accepted(t(0))));
     assert_eq!(rig.query(), error(t(0), ErrorCode::FILAMENT_EJECTED));
     press(&mut rig, ButtonCode::MIDDLE);
-    let run = rig.follow(t(0), 120_000);
-    assert_eq!(run.last, finished(t(0)));
-    assert_eq!(rig.model.loaded_slot(), Some(0));
+    rig.tool_change_goes_on_and_loads(0);
 }
 
 // ---- #9: Retry "finishes" a command that never moved -----------------------------------------
@@ -147,9 +139,7 @@ fn retry_after_a_hub_sensor_fault_at_planning_reports_the_fault_again() {
     rig.model.clear_all();
     rig.idle(1000);
     press(&mut rig, ButtonCode::MIDDLE);
-    let run = rig.follow(t(1), 120_000);
-    assert_eq!(run.last, finished(t(1)));
-    assert_eq!(rig.model.loaded_slot(), Some(1));
+    rig.tool_change_goes_on_and_loads(1);
 }
 
 // ---- #1: 8005 FIL. ALREADY LOADED ---------------------------------------------------------------

@@ -187,9 +187,9 @@ fn empty_slot_then_retry_after_the_user_inserts_filament_loads_it() {
     rig.command_fails_with(t(2), ErrorCode::FINDA_DIDNT_SWITCH_ON);
     rig.model.insert_filament(2, PARK_MM);
     rig.idle(100);
-    let run = rig.retry_finishes(t(2));
+    rig.retry();
+    let run = rig.tool_change_goes_on_and_loads(2);
     assert_eq!(run.progress, LOAD_PROGRESS);
-    assert_eq!(rig.model.loaded_slot(), Some(2));
 }
 
 #[test]
@@ -218,9 +218,9 @@ fn stalled_motor_then_retry_after_the_jam_is_cleared_loads() {
     rig.inject(Fault::Jam { slot: 1 });
     rig.command_fails_with(t(1), ErrorCode::STALLED_PULLEY);
     rig.model.clear_all();
-    let run = rig.retry_finishes(t(1));
+    rig.retry();
+    let run = rig.tool_change_goes_on_and_loads(1);
     assert_eq!(run.progress, LOAD_PROGRESS);
-    assert_eq!(rig.model.loaded_slot(), Some(1));
 }
 
 #[test]

@@ -369,6 +369,14 @@ impl<const N: usize> Rig<N> {
         run
     }
 
+    /// The `T<slot>` in progress goes on to the end: it finishes with slot `slot` loaded.
+    pub fn tool_change_goes_on_and_loads(&mut self, slot: u8) -> Run {
+        let run = self.follow(t(slot), 120_000);
+        assert_eq!(run.last, finished(t(slot)), "progress {:?}", run.progress);
+        assert_eq!(self.model.loaded_slot(), Some(slot.into()));
+        run
+    }
+
     /// Issue `request` and play it until `Q0` reports `progress`.
     pub fn command_until(&mut self, request: Request, progress: ProgressCode) -> Run {
         self.issue(request);
