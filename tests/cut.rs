@@ -5,9 +5,9 @@
 
 mod common;
 
-use common::{FsensorReports, Rig, assert_parked, error, finished, press, t};
+use common::{FsensorReports, PARK_PROGRESS, Rig, UNLOAD_PROGRESS, assert_parked, error, finished, t};
 use mmu_model::{Fault, Rail, SensorId};
-use mmu_protocol::{ButtonCode, ErrorCode, ParamCode, ProgressCode as P, Request, RequestCode};
+use mmu_protocol::{ErrorCode, ProgressCode as P, Request, RequestCode};
 
 #[test]
 fn cut_reparks_the_slot_as_this_unit_has_no_blade() {
@@ -16,15 +16,7 @@ fn cut_reparks_the_slot_as_this_unit_has_no_blade() {
     rig.command(t(2));
     let cut = Request::new(RequestCode::Cut, 2);
     let run = rig.command(cut);
-    assert_eq!(
-        run.progress,
-        [
-            P::UNLOADING_TO_FINDA,
-            P::RETRACTING_FROM_FINDA,
-            P::FEEDING_TO_FINDA,
-            P::RETRACTING_FROM_FINDA
-        ]
-    );
+    assert_eq!(run.progress, [UNLOAD_PROGRESS, PARK_PROGRESS].concat());
     assert_eq!(run.last, finished(cut));
     assert_parked(&rig, 2);
 }
@@ -40,62 +32,19 @@ fn k(slot: u8) -> Request {
     Request::new(RequestCode::Cut, slot)
 }
 
-/// Retry (the Middle button) after the printer has reported its sensor as it is now.
-fn retry(rig: &mut Rig<3>) {
-    rig.printer_step(None);
-    press(rig, ButtonCode::MIDDLE);
-}
-
 /// The cut of `slot` stopped on `code` with every motor stopped; the fault is cleared and Retry
 /// pressed: it goes on from the failed phase (`progress`) and re-parks the slot.
 fn fails_then_retry_reparks(rig: &mut Rig<3>, slot: u8, code: ErrorCode, progress: &[P]) {
-    let run = rig.follow(k(slot), 120_000);
-    assert_eq!(run.last, error(k(slot), code), "progress {:?}", run.progress);
-    rig.idle(10);
-    assert!(rig.motors_stopped(), "every motor stops on {code}");
-    rig.model.clear_all();
-    rig.idle(1000);
-    retry(rig);
-    let run = rig.follow(k(slot), 120_000);
-    assert_eq!(run.progress, progress);
-    assert_eq!(run.last, finished(k(slot)));
+    rig.fails_then_retry_finishes(k(slot), code, progress);
     assert_parked(rig, slot.into());
-}
-
-/// Play `K<slot>` until `Q0` reports `progress`.
-fn cut_until(rig: &mut Rig<3>, slot: u8, progress: P) {
-    rig.issue(k(slot));
-    let run = rig.follow_until(k(slot), Some(progress), 120_000);
-    assert_eq!(run.progress.last(), Some(&progress), "{:?}", run.last);
 }
 
 #[test]
 fn filament_in_the_hub_no_slot_owns_then_retry_after_it_is_pulled_back_reparks() {
     let mut rig = Rig::<3>::new();
     rig.boot();
-    rig.model.insert_filament(1, 5.0);
-    rig.idle(100);
-    let before = rig.motor_log.len();
-    let run = rig.command(k(2));
-    assert_eq!(run.last, error(k(2), ErrorCode::FINDA_VS_EEPROM_DISREPANCY));
-    retry(&mut rig);
-    rig.idle(50);
-    assert_eq!(
-        rig.query(),
-        error(k(2), ErrorCode::FINDA_VS_EEPROM_DISREPANCY),
-        "the cause is still there"
-    );
-    assert!(
-        rig.motor_log[before..]
-            .iter()
-            .all(|motors| motors.iter().all(|m| !m.is_driving())),
-        "no motor moves on a guess"
-    );
-    rig.model.insert_filament(1, -15.0);
-    rig.idle(100);
-    retry(&mut rig);
-    let run = rig.follow(k(2), 120_000);
-    assert_eq!(run.progress, [P::FEEDING_TO_FINDA, P::RETRACTING_FROM_FINDA]);
+    let run = rig.filament_in_the_hub_no_slot_owns_then_pulled_back(k(2));
+    assert_eq!(run.progress, PARK_PROGRESS);
     assert_eq!(run.last, finished(k(2)));
     assert_parked(&rig, 2);
 }
@@ -106,23 +55,10 @@ fn printer_sensor_never_clears_on_the_cut_unload_then_retry_reparks() {
     rig.boot();
     rig.command(t(2));
     rig.fsensor = FsensorReports::Stuck(1);
-    let run = rig.command(k(2));
-    assert_eq!(run.last, error(k(2), ErrorCode::FSENSOR_DIDNT_SWITCH_OFF));
-    rig.idle(10);
-    assert!(rig.motors_stopped());
+    rig.command_fails_with(k(2), ErrorCode::FSENSOR_DIDNT_SWITCH_OFF);
     rig.fsensor = FsensorReports::Truthful;
-    retry(&mut rig);
-    let run = rig.follow(k(2), 120_000);
-    assert_eq!(
-        run.progress,
-        [
-            P::UNLOADING_TO_FINDA,
-            P::RETRACTING_FROM_FINDA,
-            P::FEEDING_TO_FINDA,
-            P::RETRACTING_FROM_FINDA
-        ]
-    );
-    assert_eq!(run.last, finished(k(2)));
+    let run = rig.retry_finishes(k(2));
+    assert_eq!(run.progress, [UNLOAD_PROGRESS, PARK_PROGRESS].concat());
     assert_parked(&rig, 2);
 }
 
@@ -130,24 +66,9 @@ fn printer_sensor_never_clears_on_the_cut_unload_then_retry_reparks() {
 fn hub_never_clears_on_the_repark_then_retry_finishes() {
     let mut rig = Rig::<3>::new();
     rig.boot();
-    assert_eq!(
-        rig.send(Request::write(0xa0, 50)).unwrap().param,
-        ParamCode::Accepted
-    );
-    let run = rig.command(k(1));
-    assert_eq!(run.progress, [P::FEEDING_TO_FINDA, P::RETRACTING_FROM_FINDA]);
-    assert_eq!(run.last, error(k(1), ErrorCode::FINDA_DIDNT_SWITCH_OFF));
-    rig.idle(10);
-    assert!(rig.motors_stopped());
-    assert_eq!(
-        rig.send(Request::write(0xa0, 2400)).unwrap().param,
-        ParamCode::Accepted
-    );
-    rig.idle(100);
-    retry(&mut rig);
-    let run = rig.follow(k(1), 120_000);
-    assert_eq!(run.progress, [P::RETRACTING_FROM_FINDA]);
-    assert_eq!(run.last, finished(k(1)));
+    let (failed, retried) = rig.hub_never_clears_then_retry(k(1));
+    assert_eq!(failed.progress, PARK_PROGRESS);
+    assert_eq!(retried.progress, [P::RETRACTING_FROM_FINDA]);
     let tip = rig.model.tip_mm(1).unwrap();
     assert!(tip < 0.0, "slot 1 is out of the hub path: tip at {tip} mm");
 }
@@ -159,16 +80,10 @@ fn empty_slot_then_retry_after_the_user_inserts_filament_reparks_it() {
     rig.boot();
     let run = rig.command(k(1));
     assert_eq!(run.last, error(k(1), ErrorCode::FINDA_DIDNT_SWITCH_ON));
-    assert!(
-        rig.motor_log.iter().all(|motors| !motors[1].is_driving()),
-        "slot 1's motor never ran"
-    );
+    assert!(rig.slot_never_ran(1), "slot 1's motor never ran");
     rig.model.insert_filament(1, -90.0);
     rig.idle(100);
-    retry(&mut rig);
-    let run = rig.follow(k(1), 120_000);
-    assert_eq!(run.progress, [P::FEEDING_TO_FINDA, P::RETRACTING_FROM_FINDA]);
-    assert_eq!(run.last, finished(k(1)));
+    assert_eq!(rig.retry_finishes(k(1)).progress, PARK_PROGRESS);
     assert_parked(&rig, 1);
 }
 
@@ -178,12 +93,7 @@ fn stalled_motor_on_cut_then_retry_after_the_jam_is_cleared_reparks() {
     rig.boot();
     rig.inject(Fault::Jam { slot: 0 });
     rig.issue(k(0));
-    fails_then_retry_reparks(
-        &mut rig,
-        0,
-        ErrorCode::STALLED_PULLEY,
-        &[P::FEEDING_TO_FINDA, P::RETRACTING_FROM_FINDA],
-    );
+    fails_then_retry_reparks(&mut rig, 0, ErrorCode::STALLED_PULLEY, &PARK_PROGRESS);
 }
 
 #[test]
@@ -191,21 +101,13 @@ fn hub_sensor_disconnected_on_cut_then_retry_reparks() {
     let mut rig = Rig::<3>::new();
     rig.boot();
     rig.command(t(1));
-    cut_until(&mut rig, 1, P::UNLOADING_TO_FINDA);
-    rig.inject(Fault::SensorDisconnected {
-        sensor: SensorId::HubFilament,
-        rail: Rail::High,
-    });
+    rig.command_until(k(1), P::UNLOADING_TO_FINDA);
+    rig.disconnect(SensorId::HubFilament, Rail::High);
     fails_then_retry_reparks(
         &mut rig,
         1,
         ErrorCode::FINDA_FLICKERS,
-        &[
-            P::UNLOADING_TO_FINDA,
-            P::RETRACTING_FROM_FINDA,
-            P::FEEDING_TO_FINDA,
-            P::RETRACTING_FROM_FINDA,
-        ],
+        &[UNLOAD_PROGRESS, PARK_PROGRESS].concat(),
     );
 }
 
@@ -213,11 +115,8 @@ fn hub_sensor_disconnected_on_cut_then_retry_reparks() {
 fn motor_hall_sensor_disconnected_on_cut_then_retry_reparks() {
     let mut rig = Rig::<3>::new();
     rig.boot();
-    cut_until(&mut rig, 2, P::RETRACTING_FROM_FINDA);
-    rig.inject(Fault::SensorDisconnected {
-        sensor: SensorId::MotorHall(2),
-        rail: Rail::Low,
-    });
+    rig.command_until(k(2), P::RETRACTING_FROM_FINDA);
+    rig.disconnect(SensorId::MotorHall(2), Rail::Low);
     fails_then_retry_reparks(
         &mut rig,
         2,

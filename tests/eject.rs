@@ -7,9 +7,12 @@
 
 mod common;
 
-use common::{FsensorReports, Rig, error, finished, press, t};
+use common::{
+    FsensorReports, HUB_OFF_REGISTER, OFF_THRESHOLD_DEFAULT, OFF_THRESHOLD_NEVER, Rig, UNLOAD_PROGRESS,
+    error, finished, press, t,
+};
 use mmu_model::{Fault, Rail, SensorId};
-use mmu_protocol::{ButtonCode, ErrorCode, ParamCode, ProgressCode as P, Request, RequestCode};
+use mmu_protocol::{ButtonCode, ErrorCode, ProgressCode as P, Request, RequestCode};
 
 #[test]
 fn eject_waits_for_continue_then_finishes() {
@@ -21,10 +24,7 @@ fn eject_waits_for_continue_then_finishes() {
     assert_eq!(run.last, error(eject, ErrorCode::FILAMENT_EJECTED));
     assert_eq!(rig.model.slot_filament_present(1), Some(false));
     assert!(rig.motors_stopped());
-    assert_eq!(
-        rig.send(Request::new(RequestCode::Button, 1)).unwrap().param,
-        ParamCode::Accepted
-    );
+    press(&mut rig, ButtonCode::MIDDLE);
     rig.idle(5);
     assert_eq!(rig.query(), finished(eject));
 }
@@ -38,11 +38,7 @@ fn eject_of_the_loaded_slot_unloads_it_first() {
     let run = rig.command(eject);
     assert_eq!(
         run.progress,
-        [
-            P::UNLOADING_TO_FINDA,
-            P::RETRACTING_FROM_FINDA,
-            P::EJECTING_FILAMENT
-        ]
+        [&UNLOAD_PROGRESS[..], &[P::EJECTING_FILAMENT]].concat()
     );
     assert_eq!(run.last, error(eject, ErrorCode::FILAMENT_EJECTED));
 }
@@ -62,17 +58,10 @@ fn continue_finishes(rig: &mut Rig<3>, eject: Request) {
     assert_eq!(rig.model.slot_filament_present(eject.value.into()), Some(false));
 }
 
-/// Retry (the Middle button) after the printer has reported its sensor as it is now.
-fn retry(rig: &mut Rig<3>) {
-    rig.printer_step(None);
-    press(rig, ButtonCode::MIDDLE);
-}
-
 /// The eject stopped on `code` with every motor stopped; the fault is cleared and Retry pressed:
 /// it goes on from the failed phase (`progress`) to the question, and Continue finishes it.
 fn fails_then_retry_ejects(rig: &mut Rig<3>, eject: Request, code: ErrorCode, progress: &[P]) {
-    let run = rig.follow(eject, 120_000);
-    assert_eq!(run.last, error(eject, code), "progress {:?}", run.progress);
+    rig.fails_with(eject, code);
     rig.model.clear_all();
     rig.idle(1000);
     fails_then_retry_ejects_after(rig, eject, progress);
@@ -82,7 +71,7 @@ fn fails_then_retry_ejects(rig: &mut Rig<3>, eject: Request, code: ErrorCode, pr
 fn fails_then_retry_ejects_after(rig: &mut Rig<3>, eject: Request, progress: &[P]) {
     rig.idle(10);
     assert!(rig.motors_stopped());
-    retry(rig);
+    rig.retry();
     let run = rig.follow(eject, 120_000);
     assert_eq!(run.progress, progress);
     continue_finishes(rig, eject);
@@ -105,9 +94,7 @@ fn eject_question_is_answered_by_continue_only() {
         );
     }
     assert!(
-        rig.motor_log[before..]
-            .iter()
-            .all(|motors| motors.iter().all(|m| !m.is_driving())),
+        rig.nothing_moved_since(before),
         "nothing moves while the question waits"
     );
     continue_finishes(&mut rig, eject);
@@ -117,23 +104,15 @@ fn eject_question_is_answered_by_continue_only() {
 fn slot_sensor_never_clears_on_eject_then_retry_asks_to_take_the_filament() {
     let mut rig = Rig::<3>::new();
     rig.boot();
-    // An "off" threshold of slot 1's filament sensor (0xa0 + 5) no reading goes below.
-    assert_eq!(
-        rig.send(Request::write(0xa5, 50)).unwrap().param,
-        ParamCode::Accepted
-    );
+    // An "off" threshold of slot 1's filament sensor no reading goes below.
+    let slot_1_off = HUB_OFF_REGISTER + 5;
+    rig.write(slot_1_off, OFF_THRESHOLD_NEVER);
     let eject = Request::new(RequestCode::Eject, 1);
-    let run = rig.command(eject);
+    let run = rig.command_fails_with(eject, ErrorCode::MOVE_PULLEY_FAILED);
     assert_eq!(run.progress, [P::EJECTING_FILAMENT]);
-    assert_eq!(run.last, error(eject, ErrorCode::MOVE_PULLEY_FAILED));
-    rig.idle(10);
-    assert!(rig.motors_stopped());
-    assert_eq!(
-        rig.send(Request::write(0xa5, 2400)).unwrap().param,
-        ParamCode::Accepted
-    );
+    rig.write(slot_1_off, OFF_THRESHOLD_DEFAULT);
     rig.idle(100);
-    retry(&mut rig);
+    rig.retry();
     rig.follow(eject, 120_000);
     continue_finishes(&mut rig, eject);
 }
@@ -151,11 +130,7 @@ fn printer_sensor_never_clears_on_the_eject_unload_then_retry_ejects() {
     fails_then_retry_ejects_after(
         &mut rig,
         eject,
-        &[
-            P::UNLOADING_TO_FINDA,
-            P::RETRACTING_FROM_FINDA,
-            P::EJECTING_FILAMENT,
-        ],
+        &[&UNLOAD_PROGRESS[..], &[P::EJECTING_FILAMENT]].concat(),
     );
 }
 
@@ -164,19 +139,12 @@ fn hub_never_clears_on_the_eject_unload_then_retry_ejects() {
     let mut rig = Rig::<3>::new();
     rig.boot();
     rig.command(t(0));
-    assert_eq!(
-        rig.send(Request::write(0xa0, 50)).unwrap().param,
-        ParamCode::Accepted
-    );
+    rig.hub_never_clears();
     let eject = Request::new(RequestCode::Eject, 0);
     let run = rig.command(eject);
     assert_eq!(run.last, error(eject, ErrorCode::FINDA_DIDNT_SWITCH_OFF));
-    assert_eq!(
-        rig.send(Request::write(0xa0, 2400)).unwrap().param,
-        ParamCode::Accepted
-    );
-    rig.idle(100);
-    retry(&mut rig);
+    rig.hub_clears_again();
+    rig.retry();
     let run = rig.follow(eject, 120_000);
     assert_eq!(
         run.last,
@@ -215,10 +183,7 @@ fn hub_sensor_disconnected_on_eject_then_retry_ejects() {
     let mut rig = Rig::<3>::new();
     rig.boot();
     let eject = eject_until_it_pulls(&mut rig, 2);
-    rig.inject(Fault::SensorDisconnected {
-        sensor: SensorId::HubFilament,
-        rail: Rail::High,
-    });
+    rig.disconnect(SensorId::HubFilament, Rail::High);
     fails_then_retry_ejects(
         &mut rig,
         eject,

@@ -3,26 +3,9 @@
 
 mod common;
 
-use common::{FsensorReports, Rig};
+use common::{FsensorReports, Rig, error, finished, press, t};
 use mmu_model::Fault;
-use mmu_protocol::{ErrorCode, ParamCode, Request, RequestCode, Response, ResultCode};
-
-fn t(slot: u8) -> Request {
-    Request::new(RequestCode::Tool, slot)
-}
-
-fn finished(request: Request) -> Response {
-    Response::finished(request.code, request.value, ResultCode::OK)
-}
-
-fn error(request: Request, code: ErrorCode) -> Response {
-    Response::error(request.code, request.value, code)
-}
-
-fn press(rig: &mut Rig<3>, button: u8) {
-    let answer = rig.send(Request::new(RequestCode::Button, button));
-    assert_eq!(answer.map(|a| a.param), Some(ParamCode::Accepted));
-}
+use mmu_protocol::{ButtonCode, ErrorCode, ParamCode, Request, RequestCode, Response};
 
 /// A printer that never co-feeds (its extruder stays idle): `Q0` every 100 ms until the command
 /// ends; the last answer.
@@ -89,7 +72,7 @@ fn retry_after_8003_searches_the_full_distance_again() {
         rig.model.clear_all();
         assert!(rig.model.insert_filament(1, pulled_back_to));
         rig.idle(100);
-        press(&mut rig, 1);
+        press(&mut rig, ButtonCode::MIDDLE);
         let run = rig.follow(t(1), 120_000);
         assert_eq!(run.last, finished(t(1)), "{pulled_back_to}: {:?}", run.progress);
         assert_eq!(rig.model.loaded_slot(), Some(1));
@@ -110,20 +93,17 @@ fn a_printer_sensor_stuck_on_keeps_8009_through_the_automatic_retries() {
     rig.idle(300);
     let before = rig.motor_log.len();
     for _ in 0..3 {
-        press(&mut rig, 1);
+        press(&mut rig, ButtonCode::MIDDLE);
         rig.idle(500);
         assert_eq!(rig.query(), error(t(2), ErrorCode::FSENSOR_TOO_EARLY));
     }
     assert!(
-        rig.motor_log[before..]
-            .iter()
-            .all(|motors| motors.iter().all(|m| !m.is_driving())),
+        rig.nothing_moved_since(before),
         "nothing moves while the sensor still reads filament"
     );
     rig.fsensor = FsensorReports::Truthful;
     // The printer reports its sensor's change at once (`f0`), then the user presses Retry.
-    rig.printer_step(None);
-    press(&mut rig, 1);
+    rig.retry();
     let run = rig.follow(t(2), 120_000);
     assert_eq!(run.last, finished(t(2)), "{:?}", run.progress);
     assert_eq!(rig.model.loaded_slot(), Some(2));
@@ -153,21 +133,17 @@ fn retry_after_8009_learns_the_bowden_length_and_finishes() {
         rig.boot();
         let run = rig.command(t(0));
         assert_eq!(run.last, error(t(0), ErrorCode::FSENSOR_TOO_EARLY), "{tube}");
-        let read = |rig: &mut Rig<3>, address| {
-            rig.send(Request::new(RequestCode::Read, address))
-                .and_then(|a| a.param_value)
-        };
-        assert_eq!(read(&mut rig, 0x53), Some(0), "nothing learned yet");
-        press(&mut rig, 1);
+        assert_eq!(rig.read(0x53), Some(0), "nothing learned yet");
+        press(&mut rig, ButtonCode::MIDDLE);
         let run = rig.follow(t(0), 120_000);
         assert_eq!(run.last, finished(t(0)), "{tube}: {:?}", run.progress);
         assert_eq!(rig.model.loaded_slot(), Some(0));
-        let learned = read(&mut rig, 0x22).unwrap();
+        let learned = rig.read(0x22).unwrap();
         assert!(
             (f32::from(learned) - tube).abs() <= 8.0,
             "0x22 learned {learned} mm on a {tube} mm tube"
         );
-        assert_eq!(read(&mut rig, 0x53), Some(learned));
+        assert_eq!(rig.read(0x53), Some(learned));
         // What the persistence keeper saves brings it back after a restart.
         let mut restarted = mmu_firmware::App::<3>::new(mmu_firmware::Config::default());
         restarted.restore(&rig.app.snapshot());
@@ -185,13 +161,10 @@ fn a_sensor_on_at_the_hub_teaches_nothing() {
     rig.boot();
     rig.fsensor = FsensorReports::Stuck(1);
     assert_eq!(rig.command(t(0)).last, error(t(0), ErrorCode::FSENSOR_TOO_EARLY));
-    press(&mut rig, 1);
+    press(&mut rig, ButtonCode::MIDDLE);
     rig.idle(500);
     assert_eq!(rig.query(), error(t(0), ErrorCode::FSENSOR_TOO_EARLY));
-    let bowden = rig
-        .send(Request::new(RequestCode::Read, 0x22))
-        .and_then(|a| a.param_value);
-    assert_eq!(bowden, Some(360));
+    assert_eq!(rig.read(0x22), Some(360));
 }
 
 // ---- #7: link loss during the co-feed ------------------------------------------------------------

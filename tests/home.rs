@@ -7,22 +7,21 @@
 
 mod common;
 
-use common::{PARK_MM, Rig, error, finished, press, t};
-use mmu_model::{Fault, Rail, SensorId};
-use mmu_protocol::{ButtonCode, ErrorCode, Request, RequestCode};
+use common::{PARK_MM, Rig, error, finished, t};
+use mmu_model::{Rail, SensorId};
+use mmu_protocol::{ErrorCode, Request, RequestCode};
 
 #[test]
 fn home_checks_the_sensors_against_the_known_state() {
     let mut rig = Rig::<3>::new();
     rig.boot();
-    let home = Request::new(RequestCode::Home, 0);
-    let run = rig.command(home);
-    assert_eq!(run.last, finished(home));
+    let run = rig.command(h0());
+    assert_eq!(run.last, finished(h0()));
     // Filament pushed into the hub by hand: the unit does not know whose it is.
     rig.model.insert_filament(1, 5.0);
     rig.idle(100);
-    let run = rig.command(home);
-    assert_eq!(run.last, error(home, ErrorCode::FINDA_VS_EEPROM_DISREPANCY));
+    let run = rig.command(h0());
+    assert_eq!(run.last, error(h0(), ErrorCode::FINDA_VS_EEPROM_DISREPANCY));
 }
 
 // ---- recovery: every row of the check's table, raised by `H0` on the rig --------------------
@@ -39,21 +38,8 @@ fn fails_then_retry_after(rig: &mut Rig<3>, code: ErrorCode, fix: impl FnOnce(&m
     let before = rig.motor_log.len();
     let run = rig.command(h0());
     assert_eq!(run.last, error(h0(), code));
-    assert!(
-        rig.motor_log[before..]
-            .iter()
-            .all(|motors| motors.iter().all(|m| !m.is_driving())),
-        "a check moves no motor"
-    );
-    // Retry with the cause still there: the same error.
-    press(rig, ButtonCode::MIDDLE);
-    rig.idle(50);
-    assert_eq!(rig.query(), error(h0(), code), "the cause is still there");
-    fix(rig);
-    rig.idle(1000);
-    press(rig, ButtonCode::MIDDLE);
-    rig.idle(50);
-    assert_eq!(rig.query(), finished(h0()));
+    assert!(rig.nothing_moved_since(before), "a check moves no motor");
+    rig.retry_fails_until_fixed(h0(), code, fix);
 }
 
 #[test]
@@ -78,12 +64,8 @@ fn loaded_slot_pulled_out_by_hand_then_retry_trusts_the_sensors_and_the_next_cha
     let run = rig.command(h0());
     assert_eq!(run.last, error(h0(), ErrorCode::FINDA_VS_EEPROM_DISREPANCY));
     // Retry: the user has looked; the hub sensor is believed over the known state.
-    press(&mut rig, ButtonCode::MIDDLE);
-    rig.idle(50);
-    assert_eq!(rig.query(), finished(h0()));
-    let run = rig.command(t(1));
-    assert_eq!(run.last, finished(t(1)), "progress {:?}", run.progress);
-    assert_eq!(rig.model.loaded_slot(), Some(1));
+    assert_eq!(rig.press_retry_then_query(), finished(h0()));
+    rig.tool_change_loads(1);
     let tip = rig.model.tip_mm(0).unwrap();
     assert!(tip < -8.0, "slot 0 stays out of the hub path: tip at {tip} mm");
 }
@@ -92,10 +74,7 @@ fn loaded_slot_pulled_out_by_hand_then_retry_trusts_the_sensors_and_the_next_cha
 fn hub_sensor_disconnected_then_retry_after_it_is_reconnected_finishes() {
     let mut rig = Rig::<3>::new();
     rig.boot();
-    rig.inject(Fault::SensorDisconnected {
-        sensor: SensorId::HubFilament,
-        rail: Rail::High,
-    });
+    rig.disconnect(SensorId::HubFilament, Rail::High);
     rig.idle(1000);
     fails_then_retry_after(&mut rig, ErrorCode::FINDA_FLICKERS, |rig| {
         rig.model.clear_all();
@@ -106,10 +85,7 @@ fn hub_sensor_disconnected_then_retry_after_it_is_reconnected_finishes() {
 fn slot_sensor_disconnected_then_retry_after_it_is_reconnected_finishes() {
     let mut rig = Rig::<3>::new();
     rig.boot();
-    rig.inject(Fault::SensorDisconnected {
-        sensor: SensorId::SlotFilament(2),
-        rail: Rail::Low,
-    });
+    rig.disconnect(SensorId::SlotFilament(2), Rail::Low);
     rig.idle(1000);
     fails_then_retry_after(&mut rig, ErrorCode::MOVE_PULLEY_FAILED, |rig| {
         rig.model.clear_all();

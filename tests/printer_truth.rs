@@ -4,35 +4,11 @@
 
 mod common;
 
-use common::Rig;
-use mmu_protocol::{ButtonCode, ErrorCode, ParamCode, Request, RequestCode, Response, ResultCode};
-
-fn t(slot: u8) -> Request {
-    Request::new(RequestCode::Tool, slot)
-}
+use common::{Rig, error, finished, press, t};
+use mmu_protocol::{ButtonCode, ErrorCode, ParamCode, Request, RequestCode, Response};
 
 fn accepted(request: Request) -> Response {
     Response::bare(request.code, request.value, ParamCode::Accepted)
-}
-
-fn finished(request: Request) -> Response {
-    Response::finished(request.code, request.value, ResultCode::OK)
-}
-
-fn error(request: Request, code: ErrorCode) -> Response {
-    Response::error(request.code, request.value, code)
-}
-
-fn press(rig: &mut Rig<3>, button: u8) {
-    let answer = rig.send(Request::new(RequestCode::Button, button));
-    assert_eq!(answer.map(|a| a.param), Some(ParamCode::Accepted));
-}
-
-/// No slot motor ran since the motor log had `since` entries.
-fn nothing_moved_since(rig: &Rig<3>, since: usize) -> bool {
-    rig.motor_log[since..]
-        .iter()
-        .all(|motors| motors.iter().all(|m| !m.is_driving()))
 }
 
 // ---- #10: a start-up error turns the next command into an endless reject ---------------------
@@ -52,20 +28,18 @@ fn start_up_error_then_tool_change_is_accepted_and_fails_with_the_start_up_error
     assert_eq!(rig.send(t(1)), Some(accepted(t(1))));
     assert_eq!(rig.query(), error(t(1), ErrorCode::FINDA_VS_EEPROM_DISREPANCY));
     // The printer's automatic Retry while the filament is still in the hub: the same error.
-    press(&mut rig, 1);
+    press(&mut rig, ButtonCode::MIDDLE);
     rig.idle(50);
     assert_eq!(rig.query(), error(t(1), ErrorCode::FINDA_VS_EEPROM_DISREPANCY));
     assert!(
-        nothing_moved_since(&rig, before),
+        rig.nothing_moved_since(before),
         "no motor moves before the check passes"
     );
     // The user pulls the filament back out of the hub and presses Retry on the screen.
     rig.model.insert_filament(0, -15.0);
     rig.idle(100);
-    press(&mut rig, 1);
-    let run = rig.follow(t(1), 120_000);
-    assert_eq!(run.last, finished(t(1)));
-    assert_eq!(rig.model.loaded_slot(), Some(1));
+    press(&mut rig, ButtonCode::MIDDLE);
+    rig.tool_change_goes_on_and_loads(1);
 }
 
 /// The same after the user fixed the fault without pressing Retry: still no `R`.
@@ -78,10 +52,8 @@ fn start_up_error_fixed_without_retry_then_tool_change_runs_after_retry() {
     rig.idle(100);
     assert_eq!(rig.send(t(2)), Some(accepted(t(2))));
     assert_eq!(rig.query(), error(t(2), ErrorCode::FINDA_VS_EEPROM_DISREPANCY));
-    press(&mut rig, ButtonCode::MIDDLE.0);
-    let run = rig.follow(t(2), 120_000);
-    assert_eq!(run.last, finished(t(2)));
-    assert_eq!(rig.model.loaded_slot(), Some(2));
+    press(&mut rig, ButtonCode::MIDDLE);
+    rig.tool_change_goes_on_and_loads(2);
 }
 
 /// A command sent over any other waiting error (printer-truth §2.3: the printer sends `T<m>`
@@ -98,12 +70,10 @@ fn tool_change_over_a_waiting_motion_error_is_accepted_and_runs_after_retry() {
     assert_eq!(rig.send(t(2)), Some(accepted(t(2))));
     rig.idle(50);
     assert_eq!(rig.query(), error(t(2), ErrorCode::STALLED_PULLEY));
-    assert!(nothing_moved_since(&rig, before));
+    assert!(rig.nothing_moved_since(before));
     rig.model.clear_all();
-    press(&mut rig, 1);
-    let run = rig.follow(t(2), 120_000);
-    assert_eq!(run.last, finished(t(2)));
-    assert_eq!(rig.model.loaded_slot(), Some(2));
+    press(&mut rig, ButtonCode::MIDDLE);
+    rig.tool_change_goes_on_and_loads(2);
 }
 
 /// A command over the eject's question (`E800c`, Continue) takes the question over: Continue
@@ -116,10 +86,8 @@ fn tool_change_over_the_eject_question_runs_after_continue() {
     assert_eq!(rig.command(eject).last, error(eject, ErrorCode::FILAMENT_EJECTED));
     assert_eq!(rig.send(t(0)), Some(accepted(t(0))));
     assert_eq!(rig.query(), error(t(0), ErrorCode::FILAMENT_EJECTED));
-    press(&mut rig, 1);
-    let run = rig.follow(t(0), 120_000);
-    assert_eq!(run.last, finished(t(0)));
-    assert_eq!(rig.model.loaded_slot(), Some(0));
+    press(&mut rig, ButtonCode::MIDDLE);
+    rig.tool_change_goes_on_and_loads(0);
 }
 
 // ---- #9: Retry "finishes" a command that never moved -----------------------------------------
@@ -136,17 +104,17 @@ fn retry_after_a_plan_error_plans_again_instead_of_finishing() {
     assert_eq!(rig.send(t(1)), Some(accepted(t(1))));
     assert_eq!(rig.query(), error(t(1), ErrorCode::FINDA_VS_EEPROM_DISREPANCY));
     let before = rig.motor_log.len();
-    press(&mut rig, 1);
+    press(&mut rig, ButtonCode::MIDDLE);
     rig.idle(50);
     assert_eq!(
         rig.query(),
         error(t(1), ErrorCode::FINDA_VS_EEPROM_DISREPANCY),
         "the cause is still there"
     );
-    assert!(nothing_moved_since(&rig, before));
+    assert!(rig.nothing_moved_since(before));
     rig.model.insert_filament(1, -15.0);
     rig.idle(100);
-    press(&mut rig, 1);
+    press(&mut rig, ButtonCode::MIDDLE);
     let run = rig.follow(t(1), 120_000);
     assert_eq!(run.last, finished(t(1)));
     assert_eq!(rig.model.loaded_slot(), Some(1), "the finish is a real load");
@@ -165,15 +133,13 @@ fn retry_after_a_hub_sensor_fault_at_planning_reports_the_fault_again() {
     rig.idle(1000);
     assert_eq!(rig.send(t(1)), Some(accepted(t(1))));
     assert_eq!(rig.query(), error(t(1), ErrorCode::FINDA_FLICKERS));
-    press(&mut rig, 1);
+    press(&mut rig, ButtonCode::MIDDLE);
     rig.idle(50);
     assert_eq!(rig.query(), error(t(1), ErrorCode::FINDA_FLICKERS));
     rig.model.clear_all();
     rig.idle(1000);
-    press(&mut rig, 1);
-    let run = rig.follow(t(1), 120_000);
-    assert_eq!(run.last, finished(t(1)));
-    assert_eq!(rig.model.loaded_slot(), Some(1));
+    press(&mut rig, ButtonCode::MIDDLE);
+    rig.tool_change_goes_on_and_loads(1);
 }
 
 // ---- #1: 8005 FIL. ALREADY LOADED ---------------------------------------------------------------
@@ -187,7 +153,7 @@ fn continue_on_filament_already_loaded_finishes_the_preload() {
     let preload = Request::new(RequestCode::Load, 1);
     assert_eq!(rig.send(preload), Some(accepted(preload)));
     assert_eq!(rig.query(), error(preload, ErrorCode::FILAMENT_ALREADY_LOADED));
-    press(&mut rig, 1);
+    press(&mut rig, ButtonCode::MIDDLE);
     rig.idle(5);
     assert_eq!(rig.query(), finished(preload));
     assert_eq!(rig.model.loaded_slot(), Some(0));
@@ -393,7 +359,7 @@ fn a_request_whose_answer_does_not_fit_is_not_acted_on_and_is_counted() {
 /// preloaded as asked.
 #[test]
 fn unload_on_filament_already_loaded_unloads_then_preloads() {
-    for unload in [ButtonCode::RIGHT.0, ButtonCode::LEFT.0] {
+    for unload in [ButtonCode::RIGHT, ButtonCode::LEFT] {
         let mut rig = Rig::<3>::new();
         rig.boot();
         rig.command(t(0));
@@ -406,13 +372,14 @@ fn unload_on_filament_already_loaded_unloads_then_preloads() {
         rig.unload_extruder();
         press(&mut rig, unload);
         let run = rig.follow(preload, 120_000);
-        assert_eq!(run.last, finished(preload), "B{unload}: {:?}", run.progress);
-        assert_eq!(rig.model.loaded_slot(), None, "B{unload}");
+        assert_eq!(run.last, finished(preload), "B{}: {:?}", unload.0, run.progress);
+        assert_eq!(rig.model.loaded_slot(), None, "B{}", unload.0);
         for slot in [0, 1] {
             let tip = rig.model.tip_mm(slot).unwrap();
             assert!(
                 (tip + 15.0).abs() <= 5.0,
-                "B{unload}: slot {slot} parked, tip at {tip} mm"
+                "B{}: slot {slot} parked, tip at {tip} mm",
+                unload.0
             );
         }
     }

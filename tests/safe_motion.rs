@@ -3,16 +3,12 @@
 
 mod common;
 
-use common::Rig;
+use common::{Rig, t};
 use mmu_firmware::persist::Snapshot;
 use mmu_firmware::unit::Lane;
 use mmu_firmware::{App, Config, HubSamples, Instant, Samples, SlotSamples};
 use mmu_model::Fault;
 use mmu_protocol::{ErrorCode, ParamCode, Request, RequestCode};
-
-fn t(slot: u8) -> Request {
-    Request::new(RequestCode::Tool, slot)
-}
 
 /// The last time (ms) slot `slot`'s motor was driven, from the rig's motor log.
 fn last_driven(rig: &Rig<3>, slot: usize) -> Option<u64> {

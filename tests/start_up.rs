@@ -9,11 +9,11 @@
 
 mod common;
 
-use common::{Rig, error, finished, press, t};
+use common::{Rig, error, finished};
 use mmu_firmware::persist::Snapshot;
 use mmu_firmware::unit::Lane;
-use mmu_model::{Fault, Rail, SensorId};
-use mmu_protocol::{ButtonCode, ErrorCode, Request, RequestCode};
+use mmu_model::{Rail, SensorId};
+use mmu_protocol::{ErrorCode, Request, RequestCode};
 
 #[test]
 fn boot_reports_x0_f0_and_the_handshake_matches_mmu_3_0_3() {
@@ -49,27 +49,13 @@ fn x0() -> Request {
     Request::new(RequestCode::Reset, 0)
 }
 
-/// No motor was driven since power-up.
-fn nothing_moved(rig: &Rig<3>) -> bool {
-    rig.motor_log
-        .iter()
-        .all(|motors| motors.iter().all(|m| !m.is_driving()))
-}
-
 /// The check after power-up stops on `code` with no motor moved; the cause is removed (`fix`)
 /// and Retry checks again: `X0 F0`.
 fn fails_then_retry_after(rig: &mut Rig<3>, code: ErrorCode, fix: impl FnOnce(&mut Rig<3>)) {
     assert_eq!(rig.boot(), error(x0(), code));
-    assert!(nothing_moved(rig));
-    press(rig, ButtonCode::MIDDLE);
-    rig.idle(50);
-    assert_eq!(rig.query(), error(x0(), code), "the cause is still there");
-    fix(rig);
-    rig.idle(1000);
-    press(rig, ButtonCode::MIDDLE);
-    rig.idle(50);
-    assert_eq!(rig.query(), finished(x0()));
-    assert!(nothing_moved(rig));
+    assert!(rig.nothing_moved_since(0));
+    rig.retry_fails_until_fixed(x0(), code, fix);
+    assert!(rig.nothing_moved_since(0));
 }
 
 #[test]
@@ -80,14 +66,10 @@ fn slot_stored_as_loaded_whose_tip_the_hub_does_not_see_then_retry_trusts_the_se
         ..Snapshot::default()
     });
     assert_eq!(rig.boot(), error(x0(), ErrorCode::FINDA_VS_EEPROM_DISREPANCY));
-    assert!(nothing_moved(&rig));
-    press(&mut rig, ButtonCode::MIDDLE);
-    rig.idle(50);
-    assert_eq!(rig.query(), finished(x0()));
+    assert!(rig.nothing_moved_since(0));
+    assert_eq!(rig.press_retry_then_query(), finished(x0()));
     // Slot 0 keeps the hub path until the next command parks it from where it is.
-    let run = rig.command(t(1));
-    assert_eq!(run.last, finished(t(1)), "progress {:?}", run.progress);
-    assert_eq!(rig.model.loaded_slot(), Some(1));
+    rig.tool_change_loads(1);
     let tip = rig.model.tip_mm(0).unwrap();
     assert!(tip < -8.0, "slot 0 stays out of the hub path: tip at {tip} mm");
 }
@@ -100,23 +82,16 @@ fn two_slots_stored_past_the_park_position_then_retry_forgets_them() {
         ..Snapshot::default()
     });
     assert_eq!(rig.boot(), error(x0(), ErrorCode::FINDA_VS_EEPROM_DISREPANCY));
-    assert!(nothing_moved(&rig));
-    press(&mut rig, ButtonCode::MIDDLE);
-    rig.idle(50);
-    assert_eq!(rig.query(), finished(x0()));
-    assert!(nothing_moved(&rig));
-    let run = rig.command(t(1));
-    assert_eq!(run.last, finished(t(1)), "progress {:?}", run.progress);
-    assert_eq!(rig.model.loaded_slot(), Some(1));
+    assert!(rig.nothing_moved_since(0));
+    assert_eq!(rig.press_retry_then_query(), finished(x0()));
+    assert!(rig.nothing_moved_since(0));
+    rig.tool_change_loads(1);
 }
 
 #[test]
 fn hub_sensor_disconnected_at_start_then_retry_after_it_is_reconnected_finishes() {
     let mut rig = Rig::<3>::new();
-    rig.inject(Fault::SensorDisconnected {
-        sensor: SensorId::HubFilament,
-        rail: Rail::Low,
-    });
+    rig.disconnect(SensorId::HubFilament, Rail::Low);
     fails_then_retry_after(&mut rig, ErrorCode::FINDA_FLICKERS, |rig| {
         rig.model.clear_all();
     });
@@ -125,10 +100,7 @@ fn hub_sensor_disconnected_at_start_then_retry_after_it_is_reconnected_finishes(
 #[test]
 fn motor_hall_sensor_disconnected_at_start_then_retry_after_it_is_reconnected_finishes() {
     let mut rig = Rig::<3>::new();
-    rig.inject(Fault::SensorDisconnected {
-        sensor: SensorId::MotorHall(1),
-        rail: Rail::High,
-    });
+    rig.disconnect(SensorId::MotorHall(1), Rail::High);
     fails_then_retry_after(&mut rig, ErrorCode::MOVE_PULLEY_FAILED, |rig| {
         rig.model.clear_all();
     });

@@ -10,31 +10,18 @@
 
 mod common;
 
-use common::{FsensorReports, PARK_MM, Rig, assert_parked, error, finished, press, t};
+use common::{
+    FsensorReports, LOAD_PROGRESS, PARK_MM, Rig, UNLOAD_PROGRESS, assert_parked, error, finished, t,
+};
 use mmu_model::{Fault, Rail, SensorId};
-use mmu_protocol::{ButtonCode, ErrorCode, ParamCode, ProgressCode as P, Request, RequestCode};
-
-fn failing_tool_change(rig: &mut Rig<3>, slot: u8, code: ErrorCode) {
-    let run = rig.command(t(slot));
-    assert_eq!(run.last, error(t(slot), code), "progress {:?}", run.progress);
-    rig.idle(10);
-    assert!(rig.motors_stopped(), "every motor stops on {code}");
-}
+use mmu_protocol::{ErrorCode, ParamCode, ProgressCode as P};
 
 #[test]
 fn tool_change_loads_to_the_nozzle_with_the_mmu3_progress_sequence() {
     let mut rig = Rig::<3>::new();
     rig.boot();
     let run = rig.command(t(0));
-    assert_eq!(
-        run.progress,
-        [
-            P::FEEDING_TO_FINDA,
-            P::FEEDING_TO_BONDTECH,
-            P::FEEDING_TO_FSENSOR,
-            P::FEEDING_TO_NOZZLE
-        ]
-    );
+    assert_eq!(run.progress, LOAD_PROGRESS);
     assert_eq!(run.last, finished(t(0)));
     assert!(
         rig.model.fsensor_state() >= 1,
@@ -45,16 +32,8 @@ fn tool_change_loads_to_the_nozzle_with_the_mmu3_progress_sequence() {
     rig.idle(2000);
     assert!(rig.motors_stopped());
     // Register 0x07 says InNozzle, the selector register says slot 0.
-    assert_eq!(
-        rig.send(Request::new(RequestCode::Read, 7)).unwrap().param_value,
-        Some(8)
-    );
-    assert_eq!(
-        rig.send(Request::new(RequestCode::Read, 0x1b))
-            .unwrap()
-            .param_value,
-        Some(0)
-    );
+    assert_eq!(rig.read(7), Some(8));
+    assert_eq!(rig.read(0x1b), Some(0));
 }
 
 #[test]
@@ -63,17 +42,7 @@ fn tool_change_to_another_slot_unloads_first_and_parks_the_old_one() {
     rig.boot();
     rig.command(t(0));
     let run = rig.command(t(2));
-    assert_eq!(
-        run.progress,
-        [
-            P::UNLOADING_TO_FINDA,
-            P::RETRACTING_FROM_FINDA,
-            P::FEEDING_TO_FINDA,
-            P::FEEDING_TO_BONDTECH,
-            P::FEEDING_TO_FSENSOR,
-            P::FEEDING_TO_NOZZLE
-        ]
-    );
+    assert_eq!(run.progress, [&UNLOAD_PROGRESS[..], &LOAD_PROGRESS].concat());
     assert_eq!(run.last, finished(t(2)));
     assert_parked(&rig, 0);
     assert_eq!(rig.model.loaded_slot(), Some(2));
@@ -108,11 +77,8 @@ fn hub_never_sees_the_tip() {
     let mut rig = Rig::<3>::new();
     rig.boot();
     // A hub threshold no reading reaches: the tip passes unseen.
-    assert_eq!(
-        rig.send(Request::write(0x90, 4090)).unwrap().param,
-        ParamCode::Accepted
-    );
-    failing_tool_change(&mut rig, 0, ErrorCode::FINDA_DIDNT_SWITCH_ON);
+    rig.write(0x90, 4090);
+    rig.command_fails_with(t(0), ErrorCode::FINDA_DIDNT_SWITCH_ON);
     // Before a preload the unit does not know where the tip is: the bound is the preload distance.
     let tip = rig.model.tip_mm(0).unwrap();
     let bound = PARK_MM + f32::from(rig.app.config().preload_max_mm) + 5.0;
@@ -127,17 +93,11 @@ fn printer_sensor_never_triggers_then_retry_recovers() {
     let mut rig = Rig::<3>::new();
     rig.boot();
     rig.fsensor = FsensorReports::Stuck(0);
-    failing_tool_change(&mut rig, 1, ErrorCode::FSENSOR_DIDNT_SWITCH_ON);
+    rig.command_fails_with(t(1), ErrorCode::FSENSOR_DIDNT_SWITCH_ON);
     // The sensor works again (the printer reports it at once); the printer (or the user)
     // presses Retry.
     rig.fsensor = FsensorReports::Truthful;
-    rig.printer_step(None);
-    assert_eq!(
-        rig.send(Request::new(RequestCode::Button, 1)).unwrap().param,
-        ParamCode::Accepted
-    );
-    let run = rig.follow(t(1), 120_000);
-    assert_eq!(run.last, finished(t(1)));
+    rig.retry_finishes(t(1));
     assert_eq!(rig.model.loaded_slot(), Some(1));
 }
 
@@ -146,7 +106,7 @@ fn printer_sensor_triggering_too_early() {
     let mut rig = Rig::<3>::new();
     rig.boot();
     rig.fsensor = FsensorReports::Stuck(1);
-    failing_tool_change(&mut rig, 2, ErrorCode::FSENSOR_TOO_EARLY);
+    rig.command_fails_with(t(2), ErrorCode::FSENSOR_TOO_EARLY);
 }
 
 #[test]
@@ -154,7 +114,7 @@ fn stalled_motor() {
     let mut rig = Rig::<3>::new();
     rig.boot();
     rig.inject(Fault::Jam { slot: 1 });
-    failing_tool_change(&mut rig, 1, ErrorCode::STALLED_PULLEY);
+    rig.command_fails_with(t(1), ErrorCode::STALLED_PULLEY);
 }
 
 #[test]
@@ -162,7 +122,7 @@ fn empty_slot_fails_without_moving() {
     let mut rig = Rig::<3>::new();
     rig.model.remove_filament(2);
     rig.boot();
-    failing_tool_change(&mut rig, 2, ErrorCode::FINDA_DIDNT_SWITCH_ON);
+    rig.command_fails_with(t(2), ErrorCode::FINDA_DIDNT_SWITCH_ON);
     assert!(
         rig.motor_log.iter().all(|motors| !motors[2].is_driving()),
         "slot 2's motor never ran"
@@ -173,28 +133,17 @@ fn empty_slot_fails_without_moving() {
 fn disconnected_hub_sensor_is_reported_not_believed() {
     let mut rig = Rig::<3>::new();
     rig.boot();
-    rig.inject(Fault::SensorDisconnected {
-        sensor: SensorId::HubFilament,
-        rail: Rail::High,
-    });
-    failing_tool_change(&mut rig, 0, ErrorCode::FINDA_FLICKERS);
-    assert_eq!(
-        rig.send(Request::new(RequestCode::Read, 0x50))
-            .unwrap()
-            .param_value,
-        Some(1)
-    );
+    rig.disconnect(SensorId::HubFilament, Rail::High);
+    rig.command_fails_with(t(0), ErrorCode::FINDA_FLICKERS);
+    assert_eq!(rig.read(0x50), Some(1));
 }
 
 #[test]
 fn disconnected_motor_hall_sensor() {
     let mut rig = Rig::<3>::new();
     rig.boot();
-    rig.inject(Fault::SensorDisconnected {
-        sensor: SensorId::MotorHall(0),
-        rail: Rail::Low,
-    });
-    failing_tool_change(&mut rig, 0, ErrorCode::MOVE_PULLEY_FAILED);
+    rig.disconnect(SensorId::MotorHall(0), Rail::Low);
+    rig.command_fails_with(t(0), ErrorCode::MOVE_PULLEY_FAILED);
 }
 
 // ---- recovery: every row of the tool change's tables, raised on the rig ---------------------
@@ -204,41 +153,16 @@ fn disconnected_motor_hall_sensor() {
 // `printer_sensor_never_triggers_then_retry_recovers` above. `INTERNAL` (a motion without a
 // budget) cannot be raised on the model: no fault reaches it.
 
-/// Play `T<slot>` until `Q0` reports `progress`.
-fn tool_change_until(rig: &mut Rig<3>, slot: u8, progress: P) {
-    rig.issue(t(slot));
-    let run = rig.follow_until(t(slot), Some(progress), 120_000);
-    assert_eq!(run.progress.last(), Some(&progress), "{:?}", run.last);
-}
-
-/// Retry (the Middle button) after the printer has reported its sensor as it is now.
-fn retry(rig: &mut Rig<3>) {
-    rig.printer_step(None);
-    press(rig, ButtonCode::MIDDLE);
-}
-
 #[test]
 fn printer_sensor_never_clears_on_the_unload_half_then_retry_unloads_and_loads() {
     let mut rig = Rig::<3>::new();
     rig.boot();
     rig.command(t(0));
     rig.fsensor = FsensorReports::Stuck(1);
-    failing_tool_change(&mut rig, 1, ErrorCode::FSENSOR_DIDNT_SWITCH_OFF);
+    rig.command_fails_with(t(1), ErrorCode::FSENSOR_DIDNT_SWITCH_OFF);
     rig.fsensor = FsensorReports::Truthful;
-    retry(&mut rig);
-    let run = rig.follow(t(1), 120_000);
-    assert_eq!(
-        run.progress,
-        [
-            P::UNLOADING_TO_FINDA,
-            P::RETRACTING_FROM_FINDA,
-            P::FEEDING_TO_FINDA,
-            P::FEEDING_TO_BONDTECH,
-            P::FEEDING_TO_FSENSOR,
-            P::FEEDING_TO_NOZZLE
-        ]
-    );
-    assert_eq!(run.last, finished(t(1)));
+    let run = rig.retry_finishes(t(1));
+    assert_eq!(run.progress, [&UNLOAD_PROGRESS[..], &LOAD_PROGRESS].concat());
     assert_parked(&rig, 0);
     assert_eq!(rig.model.loaded_slot(), Some(1));
 }
@@ -249,18 +173,7 @@ fn hub_never_clears_on_the_unload_half_then_retry_unloads_and_loads() {
     rig.boot();
     rig.command(t(0));
     // An "off" threshold no reading goes below: the hub seems to hold filament forever.
-    assert_eq!(
-        rig.send(Request::write(0xa0, 50)).unwrap().param,
-        ParamCode::Accepted
-    );
-    failing_tool_change(&mut rig, 2, ErrorCode::FINDA_DIDNT_SWITCH_OFF);
-    assert_eq!(
-        rig.send(Request::write(0xa0, 2400)).unwrap().param,
-        ParamCode::Accepted
-    );
-    retry(&mut rig);
-    let run = rig.follow(t(2), 120_000);
-    assert_eq!(run.last, finished(t(2)), "progress {:?}", run.progress);
+    rig.hub_never_clears_then_retry(t(2));
     assert_eq!(rig.model.loaded_slot(), Some(2));
     let tip = rig.model.tip_mm(0).unwrap();
     assert!(tip < 0.0, "slot 0 is out of the hub path: tip at {tip} mm");
@@ -271,22 +184,12 @@ fn empty_slot_then_retry_after_the_user_inserts_filament_loads_it() {
     let mut rig = Rig::<3>::new();
     rig.model.remove_filament(2);
     rig.boot();
-    failing_tool_change(&mut rig, 2, ErrorCode::FINDA_DIDNT_SWITCH_ON);
+    rig.command_fails_with(t(2), ErrorCode::FINDA_DIDNT_SWITCH_ON);
     rig.model.insert_filament(2, PARK_MM);
     rig.idle(100);
-    retry(&mut rig);
-    let run = rig.follow(t(2), 120_000);
-    assert_eq!(
-        run.progress,
-        [
-            P::FEEDING_TO_FINDA,
-            P::FEEDING_TO_BONDTECH,
-            P::FEEDING_TO_FSENSOR,
-            P::FEEDING_TO_NOZZLE
-        ]
-    );
-    assert_eq!(run.last, finished(t(2)));
-    assert_eq!(rig.model.loaded_slot(), Some(2));
+    rig.retry();
+    let run = rig.tool_change_goes_on_and_loads(2);
+    assert_eq!(run.progress, LOAD_PROGRESS);
 }
 
 #[test]
@@ -294,25 +197,17 @@ fn bowden_shorter_than_configured_then_retry_goes_on_from_the_printer_sensor() {
     let mut rig = Rig::<3>::new();
     rig.boot();
     // The unit believes in a 420 mm Bowden tube; the printer's sensor is at 360 mm.
-    assert_eq!(
-        rig.send(Request::write(0x22, 420)).unwrap().param,
-        ParamCode::Accepted
-    );
-    let run = rig.command(t(1));
+    rig.write(0x22, 420);
+    let run = rig.command_fails_with(t(1), ErrorCode::FSENSOR_TOO_EARLY);
     assert_eq!(run.progress, [P::FEEDING_TO_FINDA, P::FEEDING_TO_BONDTECH]);
-    assert_eq!(run.last, error(t(1), ErrorCode::FSENSOR_TOO_EARLY));
-    rig.idle(10);
-    assert!(rig.motors_stopped());
     // Retry: the tip is at the printer's sensor, the load goes on from there (the printer cannot
     // write 0x22 while `T` runs; the unit learned the length: tests/errors.rs).
-    retry(&mut rig);
-    let run = rig.follow(t(1), 120_000);
+    let run = rig.retry_finishes(t(1));
     assert!(
         !run.progress.contains(&P::UNLOADING_TO_FINDA),
         "no unload and reload: {:?}",
         run.progress
     );
-    assert_eq!(run.last, finished(t(1)));
     assert_eq!(rig.model.loaded_slot(), Some(1));
 }
 
@@ -321,49 +216,20 @@ fn stalled_motor_then_retry_after_the_jam_is_cleared_loads() {
     let mut rig = Rig::<3>::new();
     rig.boot();
     rig.inject(Fault::Jam { slot: 1 });
-    failing_tool_change(&mut rig, 1, ErrorCode::STALLED_PULLEY);
+    rig.command_fails_with(t(1), ErrorCode::STALLED_PULLEY);
     rig.model.clear_all();
-    retry(&mut rig);
-    let run = rig.follow(t(1), 120_000);
-    assert_eq!(
-        run.progress,
-        [
-            P::FEEDING_TO_FINDA,
-            P::FEEDING_TO_BONDTECH,
-            P::FEEDING_TO_FSENSOR,
-            P::FEEDING_TO_NOZZLE
-        ]
-    );
-    assert_eq!(run.last, finished(t(1)));
-    assert_eq!(rig.model.loaded_slot(), Some(1));
+    rig.retry();
+    let run = rig.tool_change_goes_on_and_loads(1);
+    assert_eq!(run.progress, LOAD_PROGRESS);
 }
 
 #[test]
 fn hub_sensor_disconnected_in_the_bowden_feed_then_retry_goes_on_from_there() {
     let mut rig = Rig::<3>::new();
     rig.boot();
-    tool_change_until(&mut rig, 0, P::FEEDING_TO_BONDTECH);
-    rig.inject(Fault::SensorDisconnected {
-        sensor: SensorId::HubFilament,
-        rail: Rail::Low,
-    });
-    let run = rig.follow(t(0), 120_000);
-    assert_eq!(run.last, error(t(0), ErrorCode::FINDA_FLICKERS));
-    rig.idle(10);
-    assert!(rig.motors_stopped());
-    rig.model.clear_all();
-    rig.idle(1000);
-    retry(&mut rig);
-    let run = rig.follow(t(0), 120_000);
-    assert_eq!(
-        run.progress,
-        [
-            P::FEEDING_TO_BONDTECH,
-            P::FEEDING_TO_FSENSOR,
-            P::FEEDING_TO_NOZZLE
-        ]
-    );
-    assert_eq!(run.last, finished(t(0)));
+    rig.command_until(t(0), P::FEEDING_TO_BONDTECH);
+    rig.disconnect(SensorId::HubFilament, Rail::Low);
+    rig.fails_then_retry_finishes(t(0), ErrorCode::FINDA_FLICKERS, &LOAD_PROGRESS[1..]);
     assert_eq!(rig.model.loaded_slot(), Some(0));
 }
 
@@ -372,30 +238,13 @@ fn motor_hall_sensor_disconnected_while_parking_the_old_slot_then_retry_parks_an
     let mut rig = Rig::<3>::new();
     rig.boot();
     rig.command(t(0));
-    tool_change_until(&mut rig, 2, P::RETRACTING_FROM_FINDA);
-    rig.inject(Fault::SensorDisconnected {
-        sensor: SensorId::MotorHall(0),
-        rail: Rail::Low,
-    });
-    let run = rig.follow(t(2), 120_000);
-    assert_eq!(run.last, error(t(2), ErrorCode::MOVE_PULLEY_FAILED));
-    rig.idle(10);
-    assert!(rig.motors_stopped());
-    rig.model.clear_all();
-    rig.idle(1000);
-    retry(&mut rig);
-    let run = rig.follow(t(2), 120_000);
-    assert_eq!(
-        run.progress,
-        [
-            P::RETRACTING_FROM_FINDA,
-            P::FEEDING_TO_FINDA,
-            P::FEEDING_TO_BONDTECH,
-            P::FEEDING_TO_FSENSOR,
-            P::FEEDING_TO_NOZZLE
-        ]
+    rig.command_until(t(2), P::RETRACTING_FROM_FINDA);
+    rig.disconnect(SensorId::MotorHall(0), Rail::Low);
+    rig.fails_then_retry_finishes(
+        t(2),
+        ErrorCode::MOVE_PULLEY_FAILED,
+        &[&[P::RETRACTING_FROM_FINDA][..], &LOAD_PROGRESS].concat(),
     );
-    assert_eq!(run.last, finished(t(2)));
     assert_eq!(rig.model.loaded_slot(), Some(2));
     // The motor ran blind until the fault was recognised, so slot 0 may rest a few mm further
     // back than the park position, but within the distance the next load searches the hub.
@@ -411,18 +260,10 @@ fn motor_hall_sensor_disconnected_while_parking_the_old_slot_then_retry_parks_an
 fn hub_threshold_fixed_then_retry_loads() {
     let mut rig = Rig::<3>::new();
     rig.boot();
-    assert_eq!(
-        rig.send(Request::write(0x90, 4090)).unwrap().param,
-        ParamCode::Accepted
-    );
-    failing_tool_change(&mut rig, 0, ErrorCode::FINDA_DIDNT_SWITCH_ON);
-    assert_eq!(
-        rig.send(Request::write(0x90, 2600)).unwrap().param,
-        ParamCode::Accepted
-    );
+    rig.write(0x90, 4090);
+    rig.command_fails_with(t(0), ErrorCode::FINDA_DIDNT_SWITCH_ON);
+    rig.write(0x90, 2600);
     rig.idle(100);
-    retry(&mut rig);
-    let run = rig.follow(t(0), 120_000);
-    assert_eq!(run.last, finished(t(0)), "progress {:?}", run.progress);
+    rig.retry_finishes(t(0));
     assert_eq!(rig.model.loaded_slot(), Some(0));
 }

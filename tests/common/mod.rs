@@ -4,6 +4,7 @@
 #![allow(dead_code)] // each test file uses a different part of the rig
 
 pub mod bounds;
+mod scenarios;
 
 use mmu_firmware::{App, Config, Instant, MotorCommand};
 use mmu_model::{Fault, Model, ModelConfig};
@@ -34,6 +35,35 @@ pub fn finished(request: Request) -> Response {
 pub fn error(request: Request, code: ErrorCode) -> Response {
     Response::error(request.code, request.value, code)
 }
+
+/// What `Q0` reports while a slot is fed into the printer (`LoadToNozzle`).
+pub const LOAD_PROGRESS: [ProgressCode; 4] = [
+    ProgressCode::FEEDING_TO_FINDA,
+    ProgressCode::FEEDING_TO_BONDTECH,
+    ProgressCode::FEEDING_TO_FSENSOR,
+    ProgressCode::FEEDING_TO_NOZZLE,
+];
+
+/// What `Q0` reports while the loaded slot comes out and is parked (`UnloadFromNozzle`).
+pub const UNLOAD_PROGRESS: [ProgressCode; 2] = [
+    ProgressCode::UNLOADING_TO_FINDA,
+    ProgressCode::RETRACTING_FROM_FINDA,
+];
+
+/// What `Q0` reports while a slot is fed to the hub and parked again (preload, re-park).
+pub const PARK_PROGRESS: [ProgressCode; 2] = [
+    ProgressCode::FEEDING_TO_FINDA,
+    ProgressCode::RETRACTING_FROM_FINDA,
+];
+
+/// The hub sensor's "off" threshold register: slot *n*'s sensor is at `HUB_OFF_REGISTER + 1 + n`.
+pub const HUB_OFF_REGISTER: u8 = 0xa0;
+
+/// An "off" threshold no reading goes below: the sensor seems to hold filament forever.
+pub const OFF_THRESHOLD_NEVER: u16 = 50;
+
+/// The default "off" threshold.
+pub const OFF_THRESHOLD_DEFAULT: u16 = 2400;
 
 /// Slot `slot`'s tip rests near the park position.
 pub fn assert_parked<const N: usize>(rig: &Rig<N>, slot: usize) {
