@@ -596,11 +596,13 @@ fn step_motion<const N: usize>(
                 && !matches!(phase, Phase::EjectFromSlot { .. } | Phase::ClearMerge { .. }) =>
         {
             drive.brake(now);
-            if let Phase::RetractToPark { .. } = phase {
+            if let (Phase::RetractToPark { .. }, false) = (phase, hub) {
                 // Behind its park position, at the gear: where exactly, nobody knows.
                 unit.set_lane(slot, Lane::Unknown);
                 return Outcome::Done;
             }
+            // Still filament in the hub with this tip at its gear: the hub sensor is wrong, or
+            // another filament is there. Not parked.
             return Outcome::Fail(bounds.error);
         }
         Goal::Drive => Motion::Run {
