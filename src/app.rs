@@ -69,9 +69,6 @@ pub struct App<const N: usize> {
     odometry_seen: [i32; N],
     fed_centi: [u64; N],
     decoder: RequestDecoder,
-    /// When the last byte from the printer arrived: a line silent for
-    /// [`mmu_protocol::SILENCE_MS`] may start a new frame.
-    last_rx: Instant,
     /// The time of the current step.
     pub(crate) now: Instant,
     /// A physical button press waiting for the printer to collect it with `Q0` (during `T`, the
@@ -108,7 +105,6 @@ impl<const N: usize> App<N> {
             // The printer may be mid-frame when the unit starts: only a newline or a silence
             // starts the first frame.
             decoder: RequestDecoder::new_mid_line(),
-            last_rx: Instant::ZERO,
             now: Instant::ZERO,
             pending_button: None,
             started_up: false,
@@ -154,9 +150,8 @@ impl<const N: usize> App<N> {
         self.now = now;
         self.unit.sense(samples, now, &self.config);
         if !rx.is_empty() {
-            self.last_rx = now;
             self.printer.heard = now;
-        } else if now.millis_since(self.last_rx) >= u64::from(mmu_protocol::SILENCE_MS) {
+        } else if now.millis_since(self.printer.heard) >= u64::from(mmu_protocol::SILENCE_MS) {
             // A silence on the line ends any frame: what was dropped is not a request.
             if self.decoder.line_silent().is_some() {
                 self.printer.in_sync = false;
