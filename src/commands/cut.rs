@@ -6,25 +6,15 @@
 
 use mmu_protocol::ErrorCode;
 
-use super::{Plan, Recovery, clear_hub, extend, hub_search, retry};
+use super::{Plan, Recovery, clear_hub, extend, hub_search, preload, retry};
 use crate::config::Config;
-use crate::phases::Phase;
 use crate::unit::Unit;
 
 /// The plan for `K<slot>`.
 pub fn plan<const N: usize>(slot: usize, unit: &Unit<N>, config: &Config) -> Result<Plan, ErrorCode> {
     let mut plan = Plan::new();
     clear_hub(&mut plan, unit)?;
-    extend(
-        &mut plan,
-        &[
-            Phase::FeedToHub {
-                slot,
-                max_mm: hub_search(slot, unit, config),
-            },
-            Phase::RetractToPark { slot },
-        ],
-    );
+    extend(&mut plan, &preload::phases(slot, hub_search(slot, unit, config)));
     Ok(plan)
 }
 

@@ -18,17 +18,13 @@ pub fn plan<const N: usize>(slot: usize, unit: &Unit<N>, config: &Config) -> Res
     }
     let mut plan = Plan::new();
     clear_hub(&mut plan, unit)?;
-    extend(
-        &mut plan,
-        &[
-            Phase::FeedToHub {
-                slot,
-                max_mm: config.preload_max_mm,
-            },
-            Phase::RetractToPark { slot },
-        ],
-    );
+    extend(&mut plan, &phases(slot, config.preload_max_mm));
     Ok(plan)
+}
+
+/// Feed `slot` until the hub sensor sees its tip (at most `max_mm`), then park it.
+pub const fn phases(slot: usize, max_mm: u16) -> [Phase; 2] {
+    [Phase::FeedToHub { slot, max_mm }, Phase::RetractToPark { slot }]
 }
 
 /// What each error of the preload means and what Retry does.
