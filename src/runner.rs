@@ -232,20 +232,11 @@ impl Runner {
 
     /// Run [`Phase::ClearMerge`] for each suspect slot, then the blocked phase again.
     fn clear_merge_first(&mut self, suspects: phases::SlotSet) {
-        let rest = self.plan.get(self.index..).map(Plan::from_slice);
-        let mut plan: Plan = self
-            .plan
-            .get(..self.index)
-            .map(Plan::from_slice)
-            .and_then(Result::ok)
-            .unwrap_or_default();
-        for slot in (0..8).filter(|slot| suspects & (1 << slot) != 0) {
-            extend(&mut plan, &[Phase::ClearMerge { slot }]);
+        // Highest slot first, each before the blocked phase: they run in slot order. Every plan
+        // fits with a clearance of each other slot (MAX_PHASES).
+        for slot in (0..8).rev().filter(|slot| suspects & (1 << slot) != 0) {
+            let _ = self.plan.insert(self.index, Phase::ClearMerge { slot });
         }
-        if let Some(Ok(rest)) = rest {
-            extend(&mut plan, &rest);
-        }
-        self.plan = plan;
         self.run = None;
         self.resume_goal_from = None;
         self.status = self
