@@ -4,33 +4,22 @@
 
 use std::io::{BufRead, BufReader, Read, Write};
 use std::path::PathBuf;
-use std::process::{Child, Command, Output, Stdio};
+use std::process::{Child, Command, Stdio};
 use std::sync::mpsc::{self, Receiver};
 use std::thread;
 use std::time::{Duration, Instant};
 
 use serde_json::Value;
 
+mod common;
+
+use common::{mmu, text};
+
 /// Longest wait for the simulator to say something.
 const WAIT: Duration = Duration::from_secs(20);
 /// As a printer does, a client lets the unit boot before it talks: the unit takes a frame only
 /// at the start of a quiet line (`mmu_protocol::SILENCE_MS`).
 const BOOT: Duration = Duration::from_millis(200);
-
-fn mmu(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_mmu"))
-        .args(args)
-        .output()
-        .expect("the mmu binary runs")
-}
-
-fn text(output: &Output) -> String {
-    format!(
-        "{}{}",
-        String::from_utf8_lossy(&output.stdout),
-        String::from_utf8_lossy(&output.stderr)
-    )
-}
 
 fn ok(args: &[&str]) -> String {
     let output = mmu(args);

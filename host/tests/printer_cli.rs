@@ -5,13 +5,9 @@ use std::process::{Command, Output};
 
 use serde_json::Value;
 
-/// Runs `mmu args...` and returns its output.
-fn mmu(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_mmu"))
-        .args(args)
-        .output()
-        .expect("the mmu binary runs")
-}
+mod common;
+
+use common::mmu;
 
 fn stdout(output: &Output) -> String {
     String::from_utf8(output.stdout.clone()).expect("stdout is UTF-8")
