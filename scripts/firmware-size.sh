@@ -67,6 +67,8 @@ if [ "$flash" -gt "$FLASH_TARGET" ]; then
 fi
 
 # The largest contributors: symbols by size, flash (code, read-only data) and RAM separately.
+# `sed -n 1,Np`, not `head`: head exits early and, under pipefail, sort's SIGPIPE fails the run
+# (exit 141) once the symbol list outgrows the pipe buffer.
 symbols="$("$nm_tool" --size-sort -S -C "$elf")"
 top() {
     awk -v types="$1" '
@@ -74,7 +76,7 @@ top() {
             name = $4; for (i = 5; i <= NF; i++) name = name " " $i
             if (length(name) > 100) name = substr(name, 1, 97) "..."
             printf "%8d  %s\n", ("0x" $2) + 0, name
-        }' <<<"$symbols" | sort -n -r | head -n "$TOP"
+        }' <<<"$symbols" | sort -n -r | sed -n "1,${TOP}p"
 }
 hex_awk_ok="$(awk 'BEGIN { print ("0x10" + 0) }')"
 if [ "$hex_awk_ok" != 16 ]; then
@@ -82,7 +84,7 @@ if [ "$hex_awk_ok" != 16 ]; then
     top() {
         while read -r _ size type name; do
             case "$1" in *"$type"*) printf '%8d  %.100s\n' "$((16#$size))" "$name" ;; esac
-        done <<<"$symbols" | sort -n -r | head -n "$TOP"
+        done <<<"$symbols" | sort -n -r | sed -n "1,${TOP}p"
     }
 fi
 # The worst-case stack, a static estimate from the disassembly (scripts/stack-estimate.py): the
@@ -93,7 +95,7 @@ echo
 # It disassembles with llvm-objdump: from PATH, else from rustup's llvm-tools component.
 if [ -z "${LLVM_OBJDUMP:-}" ] && ! command -v llvm-objdump >/dev/null 2>&1; then
     rustup component add llvm-tools >&2
-    LLVM_OBJDUMP="$(find "$(rustc --print sysroot)/lib/rustlib" -name llvm-objdump -type f | head -n 1)"
+    LLVM_OBJDUMP="$(find "$(rustc --print sysroot)/lib/rustlib" -name llvm-objdump -type f | sed -n 1p)"
     export LLVM_OBJDUMP
 fi
 stack_report="$(python3 scripts/stack-estimate.py "$elf" --indirect 'Executor::run=TaskStorage$LT$F$GT$::poll')"
@@ -112,7 +114,7 @@ status=0
 # formatting path came back (about 1.7 KiB).
 fmt_symbols="$(grep -c 'core::fmt::' <<<"$symbols" || true)"
 if [ "$fmt_symbols" -gt 0 ]; then
-    grep 'core::fmt::' <<<"$symbols" | head -n 5 >&2
+    grep 'core::fmt::' <<<"$symbols" | sed -n 1,5p >&2
     echo "firmware-size: FAIL: core::fmt is linked ($fmt_symbols symbols): see src/main.rs, panic" >&2
     status=1
 fi
