@@ -227,8 +227,9 @@ pub const SPEED: u8 = 0xd0;
 /// Extension: filament fed or pulled by slot `k`'s moves, whole metres, at `FED_METRES + k` (read only).
 pub const FED_METRES: u8 = 0xe0;
 
-/// The register map, MMU3 registers first.
-pub const REGISTERS: &[Row] = &[
+/// The register map, MMU3 registers first. A `static`, not a `const`: each use of a `const` slice
+/// may get its own copy in the image (two copies of this table cost 1.5 KiB).
+pub static REGISTERS: &[Row] = &[
     read_only!(0x00, "version.major", |v, _| Some(v.config.version.major.into())),
     read_only!(0x01, "version.minor", |v, _| Some(v.config.version.minor.into())),
     read_only!(0x02, "version.revision", |v, _| Some(
