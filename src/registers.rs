@@ -115,7 +115,7 @@ pub struct Row {
     pub span: Span,
     /// The name tools show, e.g. `bowden_mm`; block registers add their subject (`raw.hub.filament`).
     /// Empty in the firmware image, which never shows it.
-    pub name: &'static str,
+    pub name: Name,
     /// The values a write accepts (`None`: read only).
     pub range: Option<(u16, u16)>,
     read: fn(&View, usize) -> Option<u16>,
@@ -143,11 +143,29 @@ impl Row {
     }
 }
 
-/// A register's name. Only tools show names: the firmware image (feature `mcu`) leaves them out.
+/// A register's name. Only tools show names: in the firmware image (feature `mcu`) it is empty
+/// and takes no space in the table (8 B a row).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Name(#[cfg(not(feature = "mcu"))] &'static str);
+
+impl Name {
+    /// The name tools show (empty in the firmware image).
+    pub const fn as_str(self) -> &'static str {
+        #[cfg(not(feature = "mcu"))]
+        return self.0;
+        #[cfg(feature = "mcu")]
+        ""
+    }
+}
+
 macro_rules! name {
-    ($name:literal) => {
-        if cfg!(feature = "mcu") { "" } else { $name }
-    };
+    ($name:literal) => {{
+        #[cfg(not(feature = "mcu"))]
+        let name = Name($name);
+        #[cfg(feature = "mcu")]
+        let name = Name();
+        name
+    }};
 }
 
 /// A plain setting: a [`Config`] field and the values it accepts.
@@ -486,7 +504,7 @@ pub struct Register {
 impl fmt::Display for Register {
     /// The full name: `bowden_mm`, `raw.hub.filament`, `lane.slot1`.
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.row.name)?;
+        f.write_str(self.row.name.as_str())?;
         match self.subject {
             Some(Subject::Sensor(sensor)) => write!(f, ".{sensor}"),
             Some(Subject::Slot(slot)) => write!(f, ".slot{slot}"),
