@@ -19,7 +19,6 @@ use core::ops::Range;
 use core::sync::atomic::{AtomicBool, Ordering};
 use core::task::Poll;
 
-use embassy_embedded_hal::adapter::BlockingAsync;
 use embassy_stm32::adc::{self, Adc, AdcChannel as _, AdcConfig, AnyAdcChannel, Averaging, SampleTime};
 use embassy_stm32::flash::{self, Blocking, Flash};
 use embassy_stm32::gpio::{AnyPin, Input, Level, Output, OutputType, Pin, Pull, Speed};
@@ -224,9 +223,9 @@ pub fn reset_cause() -> ResetCause {
 /// leaves it alone when the firmware is flashed again.
 pub const STORE_RANGE: Range<u32> = 0x1_8000..0x2_0000;
 
-/// The persisted state's flash, as `mmu_firmware::persist::Store` wants it (async NOR flash).
-/// The operations are blocking underneath: see [`WatchedFlash`].
-pub type StoreFlash = BlockingAsync<WatchedFlash>;
+/// The persisted state's flash, as `mmu_firmware::persist::Store` wants it (blocking NOR flash):
+/// see [`WatchedFlash`].
+pub type StoreFlash = WatchedFlash;
 
 /// The internal flash, reloading the watchdog before each program or erase it starts.
 ///
@@ -608,6 +607,6 @@ pub fn init() -> (Control, Sampler, StoreFlash) {
         dma: parts.adc_dma,
         inputs,
     };
-    let store = BlockingAsync::new(WatchedFlash(Flash::new_blocking(parts.flash)));
+    let store = WatchedFlash(Flash::new_blocking(parts.flash));
     (control, sampler, store)
 }

@@ -9,7 +9,6 @@
 //! `X42` forgets everything but the unit's identity (register 0x52); and the store never erases
 //! pages in a loop (at most [`MAX_ERASES_AFTER_CUT`] erases in the second after the restart).
 
-use embassy_futures::block_on;
 use mmu_firmware::persist::{FULL_CHECK_MS, Keeper, Snapshot, Store};
 use mmu_firmware::unit::Lane;
 use mmu_firmware::{App, BoardAction, Config, Instant, Samples};
@@ -130,7 +129,7 @@ impl Unit {
     /// Boot on `flash`, a store of `pages` pages, at `now`.
     pub fn boot(flash: Flash, pages: usize, now: Instant) -> Self {
         let mut app = App::new(Config::default());
-        let (keeper, _) = block_on(Keeper::boot(store(flash, pages), &mut app));
+        let (keeper, _) = Keeper::boot(store(flash, pages), &mut app);
         Unit {
             app,
             keeper,
@@ -223,14 +222,14 @@ impl Unit {
         };
         match board {
             Some(board) => {
-                let _ = self.measure(|unit| block_on(unit.keeper.before(board, &unit.app)));
+                let _ = self.measure(|unit| unit.keeper.before(board, &unit.app));
                 self.restart()
             }
             None => {
                 // The control loop compares lanes every step, the rest every FULL_CHECK_MS.
-                let _ = self.measure(|unit| block_on(unit.keeper.update(&unit.app, unit.now)));
+                let _ = self.measure(|unit| unit.keeper.update(&unit.app, unit.now));
                 self.now = Instant::from_millis(self.now.as_millis() + FULL_CHECK_MS);
-                let _ = self.measure(|unit| block_on(unit.keeper.update(&unit.app, unit.now)));
+                let _ = self.measure(|unit| unit.keeper.update(&unit.app, unit.now));
                 self
             }
         }
@@ -443,7 +442,7 @@ fn cut_once(
     unit.believe(|s| s.lanes = [Lane::Parked, Lane::Unknown, Lane::Empty]);
     for _ in 0..1000 {
         unit.now = Instant::from_millis(unit.now.as_millis() + 1);
-        let _ = block_on(unit.keeper.update(&unit.app, unit.now));
+        let _ = unit.keeper.update(&unit.app, unit.now);
     }
     let erases = unit.flash().wear().erases - erases_before;
     if erases > MAX_ERASES_AFTER_CUT {

@@ -3,7 +3,6 @@
 //! (register 0x52, the version an MK3S checks); a flash that fails is retried with pauses, its
 //! trouble reported once, and the erase rate stays bounded whatever the flash does.
 
-use embassy_futures::block_on;
 use mmu_firmware::Instant;
 use mmu_firmware::persist::{ERASE_BURST, ERASES_PER_HOUR, Health};
 use mmu_firmware::unit::Lane;
@@ -81,7 +80,7 @@ fn a_wiped_store_keeps_the_identity() {
     let mut unit = unit();
     unit = unit.act(10, &Action::Write(0x52, 2));
     unit = unit.act(10, &Action::Write(0x22, 500));
-    block_on(unit.keeper.store().wipe()).unwrap();
+    unit.keeper.store().wipe().unwrap();
     unit = unit.restart();
     assert!(
         revision(&mut unit).starts_with("S2 A2*"),
@@ -156,7 +155,7 @@ fn a_failing_flash_is_retried_with_pauses_and_a_bounded_erase_rate() {
             unit.believe(|s| s.lanes = lanes[(step / 100 % 2) as usize]);
         }
         let before = unit.flash().wear().erases;
-        let _ = block_on(unit.keeper.update(&unit.app, unit.now));
+        let _ = unit.keeper.update(&unit.app, unit.now);
         for _ in before..unit.flash().wear().erases {
             erases_at.push(step);
         }
@@ -186,7 +185,7 @@ fn a_failing_flash_is_retried_with_pauses_and_a_bounded_erase_rate() {
     unit.flash().set_broken(false);
     let later = start + 3 * 3_600_000 + 600_000;
     unit.now = Instant::from_millis(later);
-    let _ = block_on(unit.keeper.update(&unit.app, unit.now));
+    let _ = unit.keeper.update(&unit.app, unit.now);
     let recovered: Health = unit.keeper.take_news().expect("the recovery is reported");
     assert!(!recovered.failing);
     let lanes_now = unit.app.lanes();

@@ -4,7 +4,7 @@
 //! erases of any hour stay under [`ERASE_BURST`] + [`ERASES_PER_HOUR`] whatever happens (each
 //! erase stalls the CPU up to 40 ms on the STM32G0).
 
-use embedded_storage_async::nor_flash::NorFlash;
+use embedded_storage::nor_flash::NorFlash;
 
 use super::{Damage, Store, StoreError};
 use crate::app::{App, BoardAction};
@@ -70,8 +70,8 @@ pub struct Keeper<F: NorFlash, const N: usize> {
 impl<F: NorFlash, const N: usize> Keeper<F, N> {
     /// Restore into `app` (before its first step) what `store` holds. A store that cannot be read
     /// in places still gives every record it can (the newest complete copy of each).
-    pub async fn boot(mut store: Store<F, N>, app: &mut App<N>) -> (Self, Boot) {
-        let snapshot = store.load().await;
+    pub fn boot(mut store: Store<F, N>, app: &mut App<N>) -> (Self, Boot) {
+        let snapshot = store.load();
         app.restore(&snapshot);
         let damage = store.damage();
         let boot = if damage.is_none() {
@@ -100,7 +100,7 @@ impl<F: NorFlash, const N: usize> Keeper<F, N> {
     /// every [`FULL_CHECK_MS`] or when lanes changed. `Ok(true)` when it wrote (the flash may
     /// have stalled the CPU); a failed save leaves the previous records and is tried again after
     /// a pause (1 s, doubling up to [`RETRY_MAX_MS`]).
-    pub async fn update(&mut self, app: &App<N>, now: Instant) -> Result<bool, StoreError> {
+    pub fn update(&mut self, app: &App<N>, now: Instant) -> Result<bool, StoreError> {
         self.top_up(now);
         if self.retry_at.is_some_and(|at| now.as_millis() < at.as_millis()) {
             return Ok(false);
@@ -120,7 +120,7 @@ impl<F: NorFlash, const N: usize> Keeper<F, N> {
             return Ok(false);
         }
         self.store.set_erase_allowance(self.erase_credit);
-        let result = self.store.save(&snapshot, Some(now)).await;
+        let result = self.store.save(&snapshot, Some(now));
         self.settle(result.map(drop), now)?;
         self.lanes = lanes;
         Ok(true)
@@ -128,13 +128,13 @@ impl<F: NorFlash, const N: usize> Keeper<F, N> {
 
     /// Before the board carries out `action`: save everything (`X0`), or forget all but the
     /// identity (`X42`).
-    pub async fn before(&mut self, action: BoardAction, app: &App<N>) -> Result<(), StoreError> {
+    pub fn before(&mut self, action: BoardAction, app: &App<N>) -> Result<(), StoreError> {
         let now = self.refilled_at.unwrap_or(Instant::ZERO);
         self.store
             .set_erase_allowance(self.erase_credit.max(ERASES_BEFORE_RESET));
         let result = match action {
-            BoardAction::Reset => self.store.save(&app.snapshot(), None).await.map(drop),
-            BoardAction::EraseAndReset => self.store.forget().await,
+            BoardAction::Reset => self.store.save(&app.snapshot(), None).map(drop),
+            BoardAction::EraseAndReset => self.store.forget(),
         };
         self.settle(result, now)
     }
