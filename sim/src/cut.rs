@@ -107,19 +107,30 @@ pub struct Unit {
     /// The time of the last step.
     pub now: Instant,
     pages: usize,
-    /// The most double-word programs and page erases one call of the keeper has done.
+    /// The most flash work one save, and one call of the keeper, have done.
     pub worst_save: WorstSave,
 }
 
-/// The most flash work one save did: what stalls the CPU (each erase up to 40 ms, each
-/// double-word program up to 125 µs on the STM32G071).
+/// The most flash work one save did, whole and in one call of the keeper (one control step):
+/// what stalls the CPU (each erase up to 40 ms, each double-word program up to 125 µs on the
+/// STM32G071).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct WorstSave {
-    /// Double-word programs.
+    /// Double-word programs of one save.
     pub programs: u64,
-    /// Page erases.
+    /// Page erases of one save.
     pub erases: u64,
+    /// Calls of the keeper (1 ms steps) one save took.
+    pub steps: u64,
+    /// Double-word programs of one call.
+    pub programs_per_step: u64,
+    /// Page erases of one call.
+    pub erases_per_step: u64,
 }
+
+/// Calls of the keeper the simulated control loop makes for one save at most: a save that is
+/// still in progress then is a failure of the study (the store bounds its saves well below).
+const MAX_SAVE_STEPS: u64 = 500;
 
 fn store(flash: Flash, pages: usize) -> Store<Flash, SLOTS> {
     Store::new(flash, 0..(pages * G0_PAGE) as u32).unwrap_or_else(|_| unreachable!("a valid region"))
@@ -139,15 +150,46 @@ impl Unit {
         }
     }
 
-    /// Run one call of the keeper, noting its flash work.
-    fn measure<T>(&mut self, call: impl FnOnce(&mut Self) -> T) -> T {
-        let (operations, erases) = (self.flash().operations, self.flash().wear().erases);
-        let result = call(self);
-        let erased = self.flash().wear().erases - erases;
-        let programs = self.flash().operations - operations - erased;
-        self.worst_save.programs = self.worst_save.programs.max(programs);
-        self.worst_save.erases = self.worst_save.erases.max(erased);
-        result
+    /// The flash operations done so far: (double-word programs, page erases).
+    fn flash_work(&mut self) -> (u64, u64) {
+        let erases = self.flash().wear().erases;
+        (self.flash().operations - erases, erases)
+    }
+
+    /// The keeper's calls after a step, as the firmware's control loop makes them: one now, then
+    /// one per 1 ms step while a save is in progress. Notes the flash work of the save and of
+    /// each call.
+    pub fn save_steps(&mut self) {
+        let before = self.flash_work();
+        let mut steps = 0;
+        loop {
+            let call = self.flash_work();
+            let _ = self.keeper.update(&self.app, self.now);
+            let (programs, erases) = self.flash_work();
+            let worst = &mut self.worst_save;
+            worst.programs_per_step = worst.programs_per_step.max(programs - call.0);
+            worst.erases_per_step = worst.erases_per_step.max(erases - call.1);
+            steps += 1;
+            if !self.keeper.is_saving() || steps >= MAX_SAVE_STEPS {
+                break;
+            }
+            self.now = self.now + 1;
+        }
+        let (programs, erases) = self.flash_work();
+        let worst = &mut self.worst_save;
+        worst.programs = worst.programs.max(programs - before.0);
+        worst.erases = worst.erases.max(erases - before.1);
+        worst.steps = worst.steps.max(steps);
+    }
+
+    /// Save before `action` (whole, as the firmware does before a reset), noting the flash work.
+    fn save_before(&mut self, action: BoardAction) {
+        let before = self.flash_work();
+        let _ = self.keeper.before(action, &self.app);
+        let (programs, erases) = self.flash_work();
+        let worst = &mut self.worst_save;
+        worst.programs = worst.programs.max(programs - before.0);
+        worst.erases = worst.erases.max(erases - before.1);
     }
 
     /// The flash.
@@ -222,14 +264,14 @@ impl Unit {
         };
         match board {
             Some(board) => {
-                let _ = self.measure(|unit| unit.keeper.before(board, &unit.app));
+                self.save_before(board);
                 self.restart()
             }
             None => {
                 // The control loop compares lanes every step, the rest every FULL_CHECK_MS.
-                let _ = self.measure(|unit| unit.keeper.update(&unit.app, unit.now));
+                self.save_steps();
                 self.now = Instant::from_millis(self.now.as_millis() + FULL_CHECK_MS);
-                let _ = self.measure(|unit| unit.keeper.update(&unit.app, unit.now));
+                self.save_steps();
                 self
             }
         }

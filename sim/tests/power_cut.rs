@@ -86,7 +86,7 @@ fn soak_every_cut_of_many_lives() {
     let total = |f: fn(&CutReport) -> usize| reports.iter().map(f).sum::<usize>();
     let worst = |f: fn(&CutReport) -> u64| reports.iter().map(f).max().unwrap_or(0);
     println!(
-        "cut soak: {seeds} lives of 700 actions, {} flash operations ({} page erases); cuts: clean {}, torn {}, torn with unreadable double words {}; second cuts {}; failures {}; the largest save: {} double-word programs, {} page erases",
+        "cut soak: {seeds} lives of 700 actions, {} flash operations ({} page erases); cuts: clean {}, torn {}, torn with unreadable double words {}; second cuts {}; failures {}; the largest save: {} double-word programs, {} page erases, {} steps; the most in one step: {} double-word programs, {} page erases",
         total(|r| r.operations as usize),
         total(|r| r.erases_cut),
         total(|r| r.cuts[0]),
@@ -96,6 +96,9 @@ fn soak_every_cut_of_many_lives() {
         total(|r| r.failures.len()),
         worst(|r| r.worst_save.programs),
         worst(|r| r.worst_save.erases),
+        worst(|r| r.worst_save.steps),
+        worst(|r| r.worst_save.programs_per_step),
+        worst(|r| r.worst_save.erases_per_step),
     );
     check(&reports);
 }

@@ -185,7 +185,7 @@ fn a_failing_flash_is_retried_with_pauses_and_a_bounded_erase_rate() {
     unit.flash().set_broken(false);
     let later = start + 3 * 3_600_000 + 600_000;
     unit.now = Instant::from_millis(later);
-    let _ = unit.keeper.update(&unit.app, unit.now);
+    unit.save_steps();
     let recovered: Health = unit.keeper.take_news().expect("the recovery is reported");
     assert!(!recovered.failing);
     let lanes_now = unit.app.lanes();

@@ -96,12 +96,19 @@ impl<F: NorFlash, const N: usize> Keeper<F, N> {
         (keeper, boot)
     }
 
-    /// After a step: save what changed. Lanes are compared every step (cheap); the full snapshot
-    /// every [`FULL_CHECK_MS`] or when lanes changed. `Ok(true)` when it wrote (the flash may
-    /// have stalled the CPU); a failed save leaves the previous records and is tried again after
-    /// a pause (1 s, doubling up to [`RETRY_MAX_MS`]).
+    /// After a step: save what changed, a bounded piece per call. Lanes are compared every step
+    /// (cheap) and a lane change starts its save at once (a lane entry is one piece: it is
+    /// saved in the step it changed, unless the head page is full); the full snapshot is compared
+    /// every [`FULL_CHECK_MS`], and the save it starts runs in the calls that follow. While a
+    /// save is in progress each call does one piece of it ([`Store::step`]: one chunk of an
+    /// entry, a slice of a fresh page's erased check, or one page erase). `Ok(true)` when the
+    /// call programmed or erased (the flash stalled the CPU); a failed save leaves the previous
+    /// records and is tried again after a pause (1 s, doubling up to [`RETRY_MAX_MS`]).
     pub fn update(&mut self, app: &App<N>, now: Instant) -> Result<bool, StoreError> {
         self.top_up(now);
+        if self.store.is_saving() {
+            return self.advance(now);
+        }
         if self.retry_at.is_some_and(|at| now.as_millis() < at.as_millis()) {
             return Ok(false);
         }
@@ -113,23 +120,40 @@ impl<F: NorFlash, const N: usize> Keeper<F, N> {
         if lanes == self.lanes && !full_check {
             return Ok(false);
         }
-        self.checked_at = Some(now);
-        let snapshot = app.snapshot();
-        if !self.store.save_due(&snapshot, now) {
-            self.lanes = lanes;
-            return Ok(false);
-        }
-        self.store.set_erase_allowance(self.erase_credit);
-        let result = self.store.save(&snapshot, Some(now));
-        self.settle(result.map(drop), now)?;
         self.lanes = lanes;
-        Ok(true)
+        self.store.set_erase_allowance(self.erase_credit);
+        if !full_check {
+            if !self.store.begin_lanes(lanes) {
+                return Ok(false);
+            }
+            return self.advance(now);
+        }
+        self.checked_at = Some(now);
+        self.store.begin_save(&app.snapshot(), Some(now));
+        Ok(false)
     }
 
-    /// Before the board carries out `action`: save everything (`X0`), or forget all but the
-    /// identity (`X42`).
+    /// One piece of the save in progress; its outcome once it ends.
+    fn advance(&mut self, now: Instant) -> Result<bool, StoreError> {
+        match self.store.step() {
+            Ok(progress) => {
+                if progress.done {
+                    self.settle(Ok(()), now)?;
+                }
+                Ok(progress.wrote)
+            }
+            Err(error) => self.settle(Err(error), now).map(|()| true),
+        }
+    }
+
+    /// Before the board carries out `action`: finish the save in progress, then save everything
+    /// (`X0`), or forget all but the identity (`X42`), whole: the reset follows.
     pub fn before(&mut self, action: BoardAction, app: &App<N>) -> Result<(), StoreError> {
         let now = self.refilled_at.unwrap_or(Instant::ZERO);
+        if self.store.is_saving() {
+            let finished = self.store.finish();
+            let _ = self.settle(finished, now);
+        }
         self.store
             .set_erase_allowance(self.erase_credit.max(ERASES_BEFORE_RESET));
         let result = match action {
@@ -137,6 +161,11 @@ impl<F: NorFlash, const N: usize> Keeper<F, N> {
             BoardAction::EraseAndReset => self.store.forget(),
         };
         self.settle(result, now)
+    }
+
+    /// Whether a save is in progress: the next calls of [`Keeper::update`] carry it on.
+    pub fn is_saving(&self) -> bool {
+        self.store.is_saving()
     }
 
     /// Account for a save's erases and outcome.

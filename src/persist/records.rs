@@ -234,6 +234,16 @@ impl<const N: usize> Records<N> {
         }
     }
 
+    /// Take `record` from `from`.
+    pub(super) fn copy_record(&mut self, record: Record, from: &Records<N>) {
+        match record {
+            Record::Lanes => self.lanes = from.lanes,
+            Record::Counters => self.counters = from.counters,
+            Record::Settings => self.settings.clone_from(&from.settings),
+            Record::Identity => self.identity.clone_from(&from.identity),
+        }
+    }
+
     /// Take a record's newest stored bytes (`None`: it does not decode, back to its default).
     pub(super) fn decode(&mut self, record: Record, bytes: &[u8]) {
         match record {

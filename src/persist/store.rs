@@ -14,15 +14,18 @@
 //! interrupted erase or program leaves entries that are older than, or lose against, a complete
 //! one. A double word that does not read (ECC) costs the entry it belongs to, never the store.
 
+mod save;
+
 use embedded_storage::nor_flash::NorFlash;
 
-use super::entry::{COMMIT, DOUBLE_WORD, MAX_ENTRY, build_entry, entry_size, is_complete, parse_header};
+use super::entry::{COMMIT, DOUBLE_WORD, EntryWriter, MAX_ENTRY, entry_size, is_complete, parse_header};
 use super::records::{Bytes, Record, Records};
 use super::{Snapshot, StoreError};
 use crate::time::Instant;
 
-/// Page moves one save may try (each erases at most one page) before it gives up.
-const MOVES_PER_SAVE: usize = 2;
+use save::Job;
+pub use save::Progress;
+
 /// Counters are written at most this often, ms (they change while the unit works).
 pub const SLOW_RECORD_PERIOD_MS: u64 = 10_000;
 
@@ -75,7 +78,29 @@ pub struct Store<F: NorFlash, const N: usize> {
     /// Page erases done since it was made.
     erases: u32,
     damage: Damage,
+    /// The entry being programmed ([`Store::step`]), or scratch space for a load.
     buffer: [u8; MAX_ENTRY],
+    /// What the save in progress makes the stored records; between saves, the stored ones.
+    target: Records<N>,
+    /// The save in progress, advanced one bounded piece per [`Store::step`].
+    job: Option<Job>,
+    /// The entry of the save in progress being programmed, chunk by chunk.
+    writing: Option<Writing>,
+    /// Where the fresh page being opened holds each record so far.
+    placed: [Option<Newest>; 4],
+    /// When the save in progress writes counters: the time to note once it completes.
+    slow_due: Option<Option<Instant>>,
+    /// Whether the current step programmed or erased (and so stalled the CPU).
+    flash_work: bool,
+}
+
+/// An entry of the save in progress, programmed a chunk per step.
+#[derive(Clone)]
+struct Writing {
+    entry: EntryWriter,
+    key: u8,
+    /// Where it goes.
+    place: Newest,
 }
 
 fn page_size<F: NorFlash>() -> u32 {
@@ -111,6 +136,12 @@ impl<F: NorFlash, const N: usize> Store<F, N> {
             erases: 0,
             damage: Damage::default(),
             buffer: [0; MAX_ENTRY],
+            target: Records::blank(),
+            job: None,
+            writing: None,
+            placed: [None; 4],
+            slow_due: None,
+            flash_work: false,
         })
     }
 
@@ -152,6 +183,8 @@ impl<F: NorFlash, const N: usize> Store<F, N> {
         self.newest = [None; 4];
         self.head = None;
         self.damage = Damage::default();
+        self.job = None;
+        self.writing = None;
         let (mut newest_header, mut newest_commit) = (None::<u32>, None::<u32>);
         for page in 0..self.pages {
             let scan = self.scan_page(page);
@@ -170,6 +203,7 @@ impl<F: NorFlash, const N: usize> Store<F, N> {
                 self.saved.decode(record, &bytes);
             }
         }
+        self.target = self.saved.clone();
         self.saved.snapshot()
     }
 
@@ -321,193 +355,6 @@ impl<F: NorFlash, const N: usize> Store<F, N> {
         }
         let payload = self.buffer.get(DOUBLE_WORD..DOUBLE_WORD + len)?;
         Bytes::from_slice(payload).ok()
-    }
-
-    /// Whether [`Store::save`] would write something now.
-    pub fn save_due(&self, snapshot: &Snapshot<N>, now: Instant) -> bool {
-        !self
-            .changed(&Records::from_snapshot(snapshot), Some(now))
-            .is_empty()
-    }
-
-    /// The records of `next` that differ from the stored ones and are due.
-    fn changed(&self, next: &Records<N>, now: Option<Instant>) -> heapless::Vec<Record, 4> {
-        let slow_allowed = now.is_none_or(|now| {
-            self.slow_saved_at
-                .is_none_or(|at| now.millis_since(at) >= SLOW_RECORD_PERIOD_MS)
-        });
-        Record::ALL
-            .into_iter()
-            .filter(|&record| match record {
-                Record::Lanes => next.lanes != self.saved.lanes,
-                Record::Settings => next.settings != self.saved.settings,
-                Record::Identity => next.identity != self.saved.identity,
-                Record::Counters => next.counters != self.saved.counters && slow_allowed,
-            })
-            .collect()
-    }
-
-    /// Write what changed: lanes and settings at once, counters at most every
-    /// [`SLOW_RECORD_PERIOD_MS`] (`None`: now, whatever the period, e.g. before a reset).
-    /// Returns how many records were written. A save that fails leaves every record as it was
-    /// or as it was being written; the next one tries again on a fresh page.
-    pub fn save(&mut self, snapshot: &Snapshot<N>, now: Option<Instant>) -> Result<u8, StoreError> {
-        let mut next = Records::from_snapshot(snapshot);
-        let changed = self.changed(&next, now);
-        if changed.is_empty() {
-            return Ok(0);
-        }
-        if !changed.contains(&Record::Counters) {
-            next.counters = self.saved.counters;
-        }
-        self.write(&next, &changed)?;
-        if changed.contains(&Record::Counters) {
-            self.slow_saved_at = now;
-        }
-        Ok(changed.len() as u8)
-    }
-
-    /// Forget everything but the identity (`X42`): blank records (lanes unknown, counters zero,
-    /// no settings) written as ordinary entries, so a power cut leaves each record either as it
-    /// was or blank. (Erasing pages instead could bring old records back: a cut erase leaves old
-    /// entries behind.)
-    pub fn forget(&mut self) -> Result<(), StoreError> {
-        let blank = Records {
-            identity: self.saved.identity.clone(),
-            ..Records::blank()
-        };
-        self.write(&blank, &[Record::Settings, Record::Counters, Record::Lanes])
-    }
-
-    /// Erase the whole region, then write the identity this store knows (nothing before a
-    /// [`Store::load`]) and blank records. For a region that is past saving: unlike
-    /// [`Store::forget`], a cut during it can lose every record.
-    pub fn wipe(&mut self) -> Result<(), StoreError> {
-        for page in 0..self.pages {
-            self.erase(page)?;
-        }
-        self.newest = [None; 4];
-        self.head = None;
-        let blank = Records {
-            identity: self.saved.identity.clone(),
-            ..Records::blank()
-        };
-        self.open_fresh_page(&blank)
-    }
-
-    fn erase(&mut self, page: u32) -> Result<(), StoreError> {
-        if self.erase_allowance == 0 {
-            return Err(StoreError::EraseBudget);
-        }
-        self.erase_allowance -= 1;
-        self.erases = self.erases.saturating_add(1);
-        let start = self.page_address(page);
-        self.flash
-            .erase(start, start + page_size::<F>())
-            .map_err(|_| StoreError::Flash)
-    }
-
-    /// Make `next` the stored records: append `records` to the head page, or open a fresh page
-    /// when they do not fit or the head is damaged.
-    fn write(&mut self, next: &Records<N>, records: &[Record]) -> Result<(), StoreError> {
-        if let Some((page, Some(_))) = self.head
-            && self.append_to_head(page, next, records).is_ok()
-        {
-            return Ok(());
-        }
-        let mut result = Err(StoreError::Flash);
-        for _ in 0..MOVES_PER_SAVE {
-            result = self.open_fresh_page(next);
-            if result.is_ok() {
-                break;
-            }
-        }
-        result
-    }
-
-    /// Append `records` (as in `next`) to the committed head `page`: each is stored once its
-    /// entry is complete.
-    fn append_to_head(&mut self, page: u32, next: &Records<N>, records: &[Record]) -> Result<(), StoreError> {
-        for &record in records {
-            let place = self.append(page, record as u8, &next.encode(record))?;
-            self.newest[record.index()] = Some(place);
-            match record {
-                Record::Lanes => self.saved.lanes = next.lanes,
-                Record::Counters => self.saved.counters = next.counters,
-                Record::Settings => self.saved.settings = next.settings.clone(),
-                Record::Identity => self.saved.identity = next.identity.clone(),
-            }
-        }
-        Ok(())
-    }
-
-    /// Open the next page that holds no record's newest copy: erase it, write every record of
-    /// `next` there, then the commit. Until the commit is complete the records stay where they
-    /// were (on the flash and in this store's view).
-    fn open_fresh_page(&mut self, next: &Records<N>) -> Result<(), StoreError> {
-        let after = self.head.map_or(self.pages - 1, |(page, _)| page);
-        let page = (1..self.pages)
-            .map(|step| (after + step) % self.pages)
-            .find(|&page| self.newest.iter().flatten().all(|newest| newest.page != page))
-            .ok_or(StoreError::Flash)?;
-        // Whatever happens next, the page after this one is tried next.
-        self.head = Some((page, None));
-        if !self.is_erased(page) {
-            self.erase(page)?;
-        }
-        self.head = Some((page, Some(0)));
-        let mut placed = [None; 4];
-        for record in Record::ALL {
-            placed[record.index()] = Some(self.append(page, record as u8, &next.encode(record))?);
-        }
-        self.append(page, COMMIT, &[])?;
-        self.newest = placed;
-        self.saved = next.clone();
-        Ok(())
-    }
-
-    /// Whether every double word of `page` reads erased.
-    fn is_erased(&mut self, page: u32) -> bool {
-        let start = self.page_address(page);
-        let mut offset = 0;
-        while offset < page_size::<F>() {
-            let chunk = &mut self.buffer[..MAX_ENTRY.min((page_size::<F>() - offset) as usize)];
-            if self.flash.read(start + offset, chunk).is_err() || chunk.iter().any(|&b| b != 0xff) {
-                return false;
-            }
-            offset += chunk.len() as u32;
-        }
-        true
-    }
-
-    /// Append one entry (`key`, `payload`) at the head `page`'s tail; where it lies. On any
-    /// failure the head is closed, so that the next write opens a fresh page.
-    fn append(&mut self, page: u32, key: u8, payload: &[u8]) -> Result<Newest, StoreError> {
-        let Some((_, Some(offset))) = self.head else {
-            return Err(StoreError::Flash);
-        };
-        self.head = Some((page, None));
-        let size = entry_size(payload.len());
-        if offset as usize + size > F::ERASE_SIZE {
-            return Err(StoreError::Full);
-        }
-        let address = self.page_address(page) + offset;
-        // Only where it reads erased: a double word is programmed once (PROGERR otherwise).
-        let target = &mut self.buffer[..size];
-        if self.flash.read(address, target).is_err() || target.iter().any(|&b| b != 0xff) {
-            return Err(StoreError::Flash);
-        }
-        let sequence = self.next_sequence;
-        let entry = build_entry(&mut self.buffer, key, sequence, payload);
-        // Spent even if the program fails: a torn entry must not share its number.
-        self.next_sequence = sequence.wrapping_add(1);
-        self.flash.write(address, entry).map_err(|_| StoreError::Flash)?;
-        self.head = Some((page, Some(offset + size as u32)));
-        Ok(Newest {
-            sequence,
-            page,
-            offset,
-        })
     }
 }
 
