@@ -114,7 +114,10 @@ impl EntryWriter {
 
 #[cfg(test)]
 mod tests {
+    extern crate std;
+
     use super::*;
+    use std::vec::Vec;
 
     /// The entry's bytes, in the chunks a save programs them in.
     fn build_entry(key: u8, sequence: u32, payload: &[u8], chunk: usize) -> Vec<u8> {
