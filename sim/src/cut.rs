@@ -160,6 +160,12 @@ impl Unit {
     /// one per 1 ms step while a save is in progress. Notes the flash work of the save and of
     /// each call.
     pub fn save_steps(&mut self) {
+        self.save_steps_with(&mut |_| {});
+    }
+
+    /// As [`Unit::save_steps`], calling `between` after each call that leaves a save in
+    /// progress.
+    fn save_steps_with(&mut self, between: &mut dyn FnMut(&mut Unit)) {
         let before = self.flash_work();
         let mut steps = 0;
         loop {
@@ -173,6 +179,7 @@ impl Unit {
             if !self.keeper.is_saving() || steps >= MAX_SAVE_STEPS {
                 break;
             }
+            between(self);
             self.now = self.now + 1;
         }
         let (programs, erases) = self.flash_work();
@@ -238,7 +245,13 @@ impl Unit {
     }
 
     /// Carry out `action` `wait` ms after the last one, the way the firmware's control loop does.
-    pub fn act(mut self, wait: u64, action: &Action) -> Self {
+    pub fn act(self, wait: u64, action: &Action) -> Self {
+        self.act_with(wait, action, &mut |_| {})
+    }
+
+    /// As [`Unit::act`], calling `between` between two steps of a save in progress (where the
+    /// power may go as well as during a flash operation).
+    pub fn act_with(mut self, wait: u64, action: &Action, between: &mut dyn FnMut(&mut Unit)) -> Self {
         self.now = Instant::from_millis(self.now.as_millis() + wait);
         let board = match *action {
             Action::Lanes(lanes) => {
@@ -269,16 +282,16 @@ impl Unit {
             }
             None => {
                 // The control loop compares lanes every step, the rest every FULL_CHECK_MS.
-                self.save_steps();
+                self.save_steps_with(between);
                 self.now = Instant::from_millis(self.now.as_millis() + FULL_CHECK_MS);
-                self.save_steps();
+                self.save_steps_with(between);
                 self
             }
         }
     }
 
     /// What a unit booted on a copy of this flash restores.
-    fn stored(&mut self) -> Snapshot<SLOTS> {
+    pub fn stored(&mut self) -> Snapshot<SLOTS> {
         let copy = self.flash().clone();
         Unit::boot(copy, self.pages, self.now).app.snapshot()
     }

@@ -8,6 +8,7 @@ use embedded_storage::nor_flash::NorFlash;
 
 use super::{Damage, Store, StoreError};
 use crate::app::{App, BoardAction};
+use crate::config::Config;
 use crate::time::Instant;
 use crate::unit::Lane;
 
@@ -54,6 +55,9 @@ pub struct Keeper<F: NorFlash, const N: usize> {
     store: Store<F, N>,
     /// The lanes as of the last comparison with the flash.
     lanes: [Lane; N],
+    /// The configuration whose settings were last compared with the flash (`None`: compare them
+    /// at the next full check).
+    config: Option<Config>,
     /// When counters and settings were last compared.
     checked_at: Option<Instant>,
     /// Erases allowed now, and when the budget was last topped up.
@@ -82,6 +86,7 @@ impl<F: NorFlash, const N: usize> Keeper<F, N> {
         let keeper = Keeper {
             store,
             lanes: app.lanes(),
+            config: None,
             checked_at: None,
             erase_credit: ERASE_BURST,
             refilled_at: None,
@@ -122,15 +127,21 @@ impl<F: NorFlash, const N: usize> Keeper<F, N> {
         }
         self.lanes = lanes;
         self.store.set_erase_allowance(self.erase_credit);
-        if !full_check {
-            if !self.store.begin_lanes(lanes) {
+        if full_check {
+            self.checked_at = Some(now);
+            // The settings come from a snapshot (thousands of instructions): taken only when the
+            // configuration changed, in a call of its own; the save runs in the calls after it.
+            if self.config.as_ref() != Some(app.config()) {
+                self.config = Some(app.config().clone());
+                self.store.begin_save(&app.snapshot(), Some(now));
                 return Ok(false);
             }
-            return self.advance(now);
         }
-        self.checked_at = Some(now);
-        self.store.begin_save(&app.snapshot(), Some(now));
-        Ok(false)
+        let counters = full_check.then_some(&app.counters);
+        if !self.store.begin_changes(lanes, counters, now) {
+            return Ok(false);
+        }
+        self.advance(now)
     }
 
     /// One piece of the save in progress; its outcome once it ends.
@@ -185,6 +196,8 @@ impl<F: NorFlash, const N: usize> Keeper<F, N> {
                 self.retry_pause_ms = RETRY_MIN_MS;
             }
             Err(_) => {
+                // The settings may be what failed: compare them again at the next try.
+                self.config = None;
                 self.health.failed_saves = self.health.failed_saves.saturating_add(1);
                 if !self.health.failing {
                     self.health.failing = true;

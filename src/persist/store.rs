@@ -20,7 +20,7 @@ use embedded_storage::nor_flash::NorFlash;
 
 use super::entry::{COMMIT, DOUBLE_WORD, EntryWriter, MAX_ENTRY, entry_size, is_complete, parse_header};
 use super::records::{Bytes, Record, Records};
-use super::{Snapshot, StoreError};
+use super::{Counters, Snapshot, StoreError};
 use crate::time::Instant;
 
 use save::Job;
