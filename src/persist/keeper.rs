@@ -2,7 +2,8 @@
 //! boot; then lanes and settings saved in the step they change, counters as the store allows,
 //! everything before a reset. A flash that fails is retried with a growing pause, and the page
 //! erases of any hour stay under [`ERASE_BURST`] + [`ERASES_PER_HOUR`] whatever happens (each
-//! erase stalls the CPU up to 40 ms on the STM32G0).
+//! erase stalls the CPU up to 40 ms on the STM32G0). Each call of [`Keeper::update`] does one
+//! bounded piece of a save (at most 8 double words programmed or one page erased).
 
 use embedded_storage::nor_flash::NorFlash;
 

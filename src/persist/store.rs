@@ -13,6 +13,11 @@
 //! opened. So a page is only ever erased once every record in it has a newer copy, and an
 //! interrupted erase or program leaves entries that are older than, or lose against, a complete
 //! one. A double word that does not read (ECC) costs the entry it belongs to, never the store.
+//!
+//! A load is one call; a save runs a bounded piece per [`Store::step`] (module `save`), so that
+//! it fits a control step, and a power loss between two pieces is no different from one during a
+//! program. The store is synchronous over blocking NOR flash: the G0's flash stalls the CPU while
+//! it programs or erases anyway.
 
 mod save;
 
