@@ -77,19 +77,18 @@ impl<F: NorFlash, const N: usize> Store<F, N> {
     /// Returns how many records it will write (0: nothing to save, no save started). A save in
     /// progress is abandoned (what it completed stays saved).
     pub fn begin_save(&mut self, snapshot: &Snapshot<N>, now: Option<Instant>) -> u8 {
-        let mut next = Records::from_snapshot(snapshot);
-        let changed = self.changed(&next, now);
-        if changed == 0 {
-            return 0;
-        }
+        self.target.set_from_snapshot(snapshot);
+        let changed = self.changed(&self.target, now);
         if changed & bit(Record::Counters) == 0 {
-            next.counters = self.saved.counters;
+            // Not due (or unchanged): the target stays the stored records but for the changes.
+            self.target.counters = self.saved.counters;
             self.slow_due = None;
         } else {
             self.slow_due = Some(now);
         }
-        self.target = next;
-        self.begin(changed);
+        if changed != 0 {
+            self.begin(changed);
+        }
         changed.count_ones() as u8
     }
 
