@@ -233,9 +233,10 @@ pub type StoreFlash = WatchedFlash;
 /// or a double word programmed (85 µs typical), every fetch from flash stalls, so the CPU stops
 /// altogether: no task, no interrupt (the vectors are in flash too). The motors keep the last
 /// command applied; UART bytes that arrive meanwhile, past the receiver's own buffer, are lost
-/// (overrun; the printer's protocol retries); the timers and the ADC's DMA carry on. One save writes
-/// a few double words, and erases a page when the store opens a fresh one (at most two per save,
-/// see `mmu_firmware::persist`); erasing the whole store erases all its pages in a row. Each erase is shorter
+/// (overrun; the printer's protocol retries); the timers and the ADC's DMA carry on. One control
+/// step of a save programs at most 8 double words or erases one page (a save erases at most two,
+/// see `mmu_firmware::persist`); a save before a reset runs whole, and erasing the whole store
+/// erases all its pages in a row. Each erase is shorter
 /// than [`WATCHDOG_TIMEOUT_US`], so reloading before each operation keeps a long run of them from
 /// resetting the MCU, while a stall outside the flash (the control loop itself) still does.
 pub struct WatchedFlash(Flash<'static, Blocking>);
