@@ -1,5 +1,6 @@
 //! The persistence policy of a running unit, shared by the firmware and the simulator: restore at
-//! boot; then lanes and settings saved in the step they change, counters as the store allows,
+//! boot; then lanes saved in the step they change (within the steps of a page move when the head
+//! page is full), settings within a second, counters as the store allows,
 //! everything before a reset. A flash that fails is retried with a growing pause, and the page
 //! erases of any hour stay under [`ERASE_BURST`] + [`ERASES_PER_HOUR`] whatever happens (each
 //! erase stalls the CPU up to 40 ms on the STM32G0). Each call of [`Keeper::update`] does one
