@@ -3,7 +3,7 @@
 # flash against its budget, static RAM against 8 KiB, static RAM plus the worst-case stack against
 # the 36 KiB of RAM, and that no `core::fmt` is linked. The design brief's target is 32 KiB of
 # flash; the image is above it (persistence, issue #6), so the script reports the distance to that
-# target and fails above a budget of the last measured size plus 1 KiB, so that growth fails CI
+# target and fails above a budget of the last measured size plus a margin, so that growth fails CI
 # until the image is slimmed to the target (then the budget becomes the target).
 #
 #   scripts/firmware-size.sh          # build, report, fail (exit 1) above budget
@@ -17,7 +17,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-FLASH_BUDGET="${FLASH_BUDGET:-54340}" # 53316 B measured (2026-11-22, with the safe-motion and printer-truth logic) + 1 KiB
+FLASH_BUDGET="${FLASH_BUDGET:-52500}" # 51952 B measured (2026-11-22, synchronous incremental store) + 0.5 KiB
 FLASH_TARGET=32768
 RAM_BUDGET="${RAM_BUDGET:-8192}"
 RAM_TOTAL=36864 # the STM32G071RB's SRAM (memory.x)

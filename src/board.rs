@@ -19,7 +19,6 @@ use core::ops::Range;
 use core::sync::atomic::{AtomicBool, Ordering};
 use core::task::Poll;
 
-use embassy_embedded_hal::adapter::BlockingAsync;
 use embassy_stm32::adc::{self, Adc, AdcChannel as _, AdcConfig, AnyAdcChannel, Averaging, SampleTime};
 use embassy_stm32::flash::{self, Blocking, Flash};
 use embassy_stm32::gpio::{AnyPin, Input, Level, Output, OutputType, Pin, Pull, Speed};
@@ -224,9 +223,9 @@ pub fn reset_cause() -> ResetCause {
 /// leaves it alone when the firmware is flashed again.
 pub const STORE_RANGE: Range<u32> = 0x1_8000..0x2_0000;
 
-/// The persisted state's flash, as `mmu_firmware::persist::Store` wants it (async NOR flash).
-/// The operations are blocking underneath: see [`WatchedFlash`].
-pub type StoreFlash = BlockingAsync<WatchedFlash>;
+/// The persisted state's flash, as `mmu_firmware::persist::Store` wants it (blocking NOR flash):
+/// see [`WatchedFlash`].
+pub type StoreFlash = WatchedFlash;
 
 /// The internal flash, reloading the watchdog before each program or erase it starts.
 ///
@@ -234,9 +233,10 @@ pub type StoreFlash = BlockingAsync<WatchedFlash>;
 /// or a double word programmed (85 µs typical), every fetch from flash stalls, so the CPU stops
 /// altogether: no task, no interrupt (the vectors are in flash too). The motors keep the last
 /// command applied; UART bytes that arrive meanwhile, past the receiver's own buffer, are lost
-/// (overrun; the printer's protocol retries); the timers and the ADC's DMA carry on. One save writes
-/// a few double words, and erases a page when the store opens a fresh one (at most two per save,
-/// see `mmu_firmware::persist`); erasing the whole store erases all its pages in a row. Each erase is shorter
+/// (overrun; the printer's protocol retries); the timers and the ADC's DMA carry on. One control
+/// step of a save programs at most 8 double words or erases one page (a save erases at most two,
+/// see `mmu_firmware::persist`); a save before a reset runs whole, and erasing the whole store
+/// erases all its pages in a row. Each erase is shorter
 /// than [`WATCHDOG_TIMEOUT_US`], so reloading before each operation keeps a long run of them from
 /// resetting the MCU, while a stall outside the flash (the control loop itself) still does.
 pub struct WatchedFlash(Flash<'static, Blocking>);
@@ -608,6 +608,6 @@ pub fn init() -> (Control, Sampler, StoreFlash) {
         dma: parts.adc_dma,
         inputs,
     };
-    let store = BlockingAsync::new(WatchedFlash(Flash::new_blocking(parts.flash)));
+    let store = WatchedFlash(Flash::new_blocking(parts.flash));
     (control, sampler, store)
 }

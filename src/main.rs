@@ -30,7 +30,6 @@ use cortex_m_rt::{ExceptionFrame, entry, exception};
 use defmt::{error, info, unwrap, warn};
 use defmt_rtt as _;
 use embassy_executor::Executor;
-use embassy_futures::block_on;
 use embassy_time::{Duration, Instant as Clock, Ticker};
 use mmu_firmware::control::{self, ControlLoop, ResetBoard, Tick};
 use mmu_firmware::persist::{Boot, Keeper, Store};
@@ -202,10 +201,9 @@ fn log_stats(stats: &control::Stats) {
 
 /// The App's state in flash, kept by the policy the simulator runs too ([`Keeper`]).
 ///
-/// The store's futures never wait: every flash operation of [`board::StoreFlash`] completes,
-/// blocking, on the first poll. So they run under `block_on` in plain out-of-line functions:
-/// their state stays out of the control task's future (1.6 KiB less static RAM than awaiting
-/// them there, and less code).
+/// The store is synchronous: every flash operation of [`board::StoreFlash`] blocks (the CPU
+/// stalls anyway while the G0's flash programs or erases). Its calls are plain out-of-line
+/// functions, whose frames stay out of the control task's future.
 struct Persisted(Keeper<board::StoreFlash, SLOTS>);
 
 impl Persisted {
@@ -214,7 +212,7 @@ impl Persisted {
     #[inline(never)]
     fn boot(app: &mut App<SLOTS>, flash: board::StoreFlash) -> Self {
         let store = unwrap!(Store::new(flash, board::STORE_RANGE));
-        let (keeper, boot) = block_on(Keeper::boot(store, app));
+        let (keeper, boot) = Keeper::boot(store, app);
         Self::log_boot(app, boot);
         Persisted(keeper)
     }
@@ -249,7 +247,7 @@ impl Persisted {
     /// pause, and its health is logged once per change.
     #[inline(never)]
     fn update(&mut self, app: &App<SLOTS>, now: Clock) -> bool {
-        let wrote = block_on(self.0.update(app, Instant::from_millis(now.as_millis())));
+        let wrote = self.0.update(app, Instant::from_millis(now.as_millis()));
         if let Some(health) = self.0.take_news() {
             warn!("store: {}", health);
         }
@@ -259,7 +257,7 @@ impl Persisted {
     /// Saves everything before a reset, or forgets it for `X42`.
     #[inline(never)]
     fn before(&mut self, action: BoardAction, app: &App<SLOTS>) {
-        match block_on(self.0.before(action, app)) {
+        match self.0.before(action, app) {
             Ok(()) => info!("store: {} done", action),
             Err(e) => error!("store: {} failed: {}", action, e),
         }

@@ -9,7 +9,6 @@
 //! `X42` forgets everything but the unit's identity (register 0x52); and the store never erases
 //! pages in a loop (at most [`MAX_ERASES_AFTER_CUT`] erases in the second after the restart).
 
-use embassy_futures::block_on;
 use mmu_firmware::persist::{FULL_CHECK_MS, Keeper, Snapshot, Store};
 use mmu_firmware::unit::Lane;
 use mmu_firmware::{App, BoardAction, Config, Instant, Samples};
@@ -108,19 +107,30 @@ pub struct Unit {
     /// The time of the last step.
     pub now: Instant,
     pages: usize,
-    /// The most double-word programs and page erases one call of the keeper has done.
+    /// The most flash work one save, and one call of the keeper, have done.
     pub worst_save: WorstSave,
 }
 
-/// The most flash work one save did: what stalls the CPU (each erase up to 40 ms, each
-/// double-word program up to 125 µs on the STM32G071).
+/// The most flash work one save did, whole and in one call of the keeper (one control step):
+/// what stalls the CPU (each erase up to 40 ms, each double-word program up to 125 µs on the
+/// STM32G071).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct WorstSave {
-    /// Double-word programs.
+    /// Double-word programs of one save.
     pub programs: u64,
-    /// Page erases.
+    /// Page erases of one save.
     pub erases: u64,
+    /// Calls of the keeper (1 ms steps) one save took.
+    pub steps: u64,
+    /// Double-word programs of one call.
+    pub programs_per_step: u64,
+    /// Page erases of one call.
+    pub erases_per_step: u64,
 }
+
+/// Calls of the keeper the simulated control loop makes for one save at most: a save that is
+/// still in progress then is a failure of the study (the store bounds its saves well below).
+const MAX_SAVE_STEPS: u64 = 500;
 
 fn store(flash: Flash, pages: usize) -> Store<Flash, SLOTS> {
     Store::new(flash, 0..(pages * G0_PAGE) as u32).unwrap_or_else(|_| unreachable!("a valid region"))
@@ -130,7 +140,7 @@ impl Unit {
     /// Boot on `flash`, a store of `pages` pages, at `now`.
     pub fn boot(flash: Flash, pages: usize, now: Instant) -> Self {
         let mut app = App::new(Config::default());
-        let (keeper, _) = block_on(Keeper::boot(store(flash, pages), &mut app));
+        let (keeper, _) = Keeper::boot(store(flash, pages), &mut app);
         Unit {
             app,
             keeper,
@@ -140,15 +150,53 @@ impl Unit {
         }
     }
 
-    /// Run one call of the keeper, noting its flash work.
-    fn measure<T>(&mut self, call: impl FnOnce(&mut Self) -> T) -> T {
-        let (operations, erases) = (self.flash().operations, self.flash().wear().erases);
-        let result = call(self);
-        let erased = self.flash().wear().erases - erases;
-        let programs = self.flash().operations - operations - erased;
-        self.worst_save.programs = self.worst_save.programs.max(programs);
-        self.worst_save.erases = self.worst_save.erases.max(erased);
-        result
+    /// The flash operations done so far: (double-word programs, page erases).
+    fn flash_work(&mut self) -> (u64, u64) {
+        let erases = self.flash().wear().erases;
+        (self.flash().operations - erases, erases)
+    }
+
+    /// The keeper's calls after a step, as the firmware's control loop makes them: one now, then
+    /// one per 1 ms step while a save is in progress. Notes the flash work of the save and of
+    /// each call.
+    pub fn save_steps(&mut self) {
+        self.save_steps_with(&mut |_| {});
+    }
+
+    /// As [`Unit::save_steps`], calling `between` after each call that leaves a save in
+    /// progress.
+    fn save_steps_with(&mut self, between: &mut dyn FnMut(&mut Unit)) {
+        let before = self.flash_work();
+        let mut steps = 0;
+        loop {
+            let call = self.flash_work();
+            let _ = self.keeper.update(&self.app, self.now);
+            let (programs, erases) = self.flash_work();
+            let worst = &mut self.worst_save;
+            worst.programs_per_step = worst.programs_per_step.max(programs - call.0);
+            worst.erases_per_step = worst.erases_per_step.max(erases - call.1);
+            steps += 1;
+            if !self.keeper.is_saving() || steps >= MAX_SAVE_STEPS {
+                break;
+            }
+            between(self);
+            self.now = self.now + 1;
+        }
+        let (programs, erases) = self.flash_work();
+        let worst = &mut self.worst_save;
+        worst.programs = worst.programs.max(programs - before.0);
+        worst.erases = worst.erases.max(erases - before.1);
+        worst.steps = worst.steps.max(steps);
+    }
+
+    /// Save before `action` (whole, as the firmware does before a reset), noting the flash work.
+    fn save_before(&mut self, action: BoardAction) {
+        let before = self.flash_work();
+        let _ = self.keeper.before(action, &self.app);
+        let (programs, erases) = self.flash_work();
+        let worst = &mut self.worst_save;
+        worst.programs = worst.programs.max(programs - before.0);
+        worst.erases = worst.erases.max(erases - before.1);
     }
 
     /// The flash.
@@ -197,7 +245,13 @@ impl Unit {
     }
 
     /// Carry out `action` `wait` ms after the last one, the way the firmware's control loop does.
-    pub fn act(mut self, wait: u64, action: &Action) -> Self {
+    pub fn act(self, wait: u64, action: &Action) -> Self {
+        self.act_with(wait, action, &mut |_| {})
+    }
+
+    /// As [`Unit::act`], calling `between` between two steps of a save in progress (where the
+    /// power may go as well as during a flash operation).
+    pub fn act_with(mut self, wait: u64, action: &Action, between: &mut dyn FnMut(&mut Unit)) -> Self {
         self.now = Instant::from_millis(self.now.as_millis() + wait);
         let board = match *action {
             Action::Lanes(lanes) => {
@@ -223,21 +277,21 @@ impl Unit {
         };
         match board {
             Some(board) => {
-                let _ = self.measure(|unit| block_on(unit.keeper.before(board, &unit.app)));
+                self.save_before(board);
                 self.restart()
             }
             None => {
                 // The control loop compares lanes every step, the rest every FULL_CHECK_MS.
-                let _ = self.measure(|unit| block_on(unit.keeper.update(&unit.app, unit.now)));
+                self.save_steps_with(between);
                 self.now = Instant::from_millis(self.now.as_millis() + FULL_CHECK_MS);
-                let _ = self.measure(|unit| block_on(unit.keeper.update(&unit.app, unit.now)));
+                self.save_steps_with(between);
                 self
             }
         }
     }
 
     /// What a unit booted on a copy of this flash restores.
-    fn stored(&mut self) -> Snapshot<SLOTS> {
+    pub fn stored(&mut self) -> Snapshot<SLOTS> {
         let copy = self.flash().clone();
         Unit::boot(copy, self.pages, self.now).app.snapshot()
     }
@@ -443,7 +497,7 @@ fn cut_once(
     unit.believe(|s| s.lanes = [Lane::Parked, Lane::Unknown, Lane::Empty]);
     for _ in 0..1000 {
         unit.now = Instant::from_millis(unit.now.as_millis() + 1);
-        let _ = block_on(unit.keeper.update(&unit.app, unit.now));
+        let _ = unit.keeper.update(&unit.app, unit.now);
     }
     let erases = unit.flash().wear().erases - erases_before;
     if erases > MAX_ERASES_AFTER_CUT {

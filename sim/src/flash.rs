@@ -11,9 +11,7 @@
 //! double word of the page erased, old or unreadable, at random. After the cut every operation
 //! fails until [`MemFlash::power_on`].
 
-use embedded_storage_async::nor_flash::{
-    ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
-};
+use embedded_storage::nor_flash::{ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash};
 use mmu_model::Rng;
 
 /// Word size of a program: the STM32G0 programs 64-bit double words.
@@ -267,7 +265,7 @@ impl<const PAGE: usize> ErrorType for MemFlash<PAGE> {
 impl<const PAGE: usize> ReadNorFlash for MemFlash<PAGE> {
     const READ_SIZE: usize = 1;
 
-    async fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), FlashError> {
+    fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), FlashError> {
         let range = self.check(offset, bytes.len(), 1)?;
         let words = range.start / WRITE_SIZE..range.end.div_ceil(WRITE_SIZE);
         if let Some(bad) = words.clone().find(|&word| self.unreadable[word]) {
@@ -286,7 +284,7 @@ impl<const PAGE: usize> NorFlash for MemFlash<PAGE> {
     const WRITE_SIZE: usize = WRITE_SIZE;
     const ERASE_SIZE: usize = PAGE;
 
-    async fn erase(&mut self, from: u32, to: u32) -> Result<(), FlashError> {
+    fn erase(&mut self, from: u32, to: u32) -> Result<(), FlashError> {
         let range = self.check(from, (to.saturating_sub(from)) as usize, PAGE)?;
         for page_start in range.step_by(PAGE) {
             self.erase_page(page_start / PAGE)?;
@@ -294,7 +292,7 @@ impl<const PAGE: usize> NorFlash for MemFlash<PAGE> {
         Ok(())
     }
 
-    async fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), FlashError> {
+    fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), FlashError> {
         let range = self.check(offset, bytes.len(), WRITE_SIZE)?;
         for (index, data) in bytes.chunks_exact(WRITE_SIZE).enumerate() {
             self.program(range.start / WRITE_SIZE + index, data)?;
@@ -306,33 +304,28 @@ impl<const PAGE: usize> NorFlash for MemFlash<PAGE> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use embassy_futures::block_on;
 
     type Flash = MemFlash<64>;
 
     fn read(flash: &mut Flash, offset: u32) -> Result<[u8; 8], FlashError> {
         let mut word = [0; 8];
-        block_on(flash.read(offset, &mut word)).map(|()| word)
+        flash.read(offset, &mut word).map(|()| word)
     }
 
     #[test]
     fn a_double_word_is_programmed_once_between_erases() {
         let mut flash = Flash::new(2);
-        block_on(flash.write(8, &[1; 8])).unwrap();
-        assert_eq!(
-            block_on(flash.write(8, &[1; 8])),
-            Err(FlashError::Program(8)),
-            "PROGERR"
-        );
+        flash.write(8, &[1; 8]).unwrap();
+        assert_eq!(flash.write(8, &[1; 8]), Err(FlashError::Program(8)), "PROGERR");
         assert_eq!(
             read(&mut flash, 8),
             Ok([1; 8]),
             "a failed program changes nothing"
         );
-        block_on(flash.write(8, &[0; 8])).unwrap();
+        flash.write(8, &[0; 8]).unwrap();
         assert_eq!(read(&mut flash, 8), Ok([0; 8]), "all zeros may be written over");
-        block_on(flash.erase(0, 64)).unwrap();
-        block_on(flash.write(8, &[2; 8])).unwrap();
+        flash.erase(0, 64).unwrap();
+        flash.write(8, &[2; 8]).unwrap();
         assert_eq!(read(&mut flash, 8), Ok([2; 8]));
     }
 
@@ -340,23 +333,23 @@ mod tests {
     fn a_cut_program_leaves_an_unreadable_double_word_until_the_page_is_erased() {
         let mut flash = Flash::new(2);
         flash.cut_power_at(1, CutModel::Torn, 1);
-        assert_eq!(block_on(flash.write(0, &[3; 24])), Err(FlashError::PowerCut));
+        assert_eq!(flash.write(0, &[3; 24]), Err(FlashError::PowerCut));
         assert_eq!(read(&mut flash, 0), Err(FlashError::PowerCut), "no power");
         flash.power_on();
         assert_eq!(read(&mut flash, 0), Ok([3; 8]), "the first double word completed");
         assert_eq!(read(&mut flash, 8), Err(FlashError::Ecc(8)));
         assert_eq!(read(&mut flash, 16), Ok([0xff; 8]), "never started");
-        assert_eq!(block_on(flash.write(8, &[4; 8])), Err(FlashError::Program(8)));
-        block_on(flash.erase(0, 64)).unwrap();
+        assert_eq!(flash.write(8, &[4; 8]), Err(FlashError::Program(8)));
+        flash.erase(0, 64).unwrap();
         assert_eq!(read(&mut flash, 8), Ok([0xff; 8]));
     }
 
     #[test]
     fn a_cut_erase_leaves_a_mix_of_erased_old_and_unreadable_double_words() {
         let mut flash = Flash::new(1);
-        block_on(flash.write(0, &[0; 64])).unwrap();
+        flash.write(0, &[0; 64]).unwrap();
         flash.cut_power_at(0, CutModel::TornUnreadable, 7);
-        assert_eq!(block_on(flash.erase(0, 64)), Err(FlashError::PowerCut));
+        assert_eq!(flash.erase(0, 64), Err(FlashError::PowerCut));
         flash.power_on();
         let words: Vec<_> = (0..8).map(|w| read(&mut flash, w * 8)).collect();
         assert!(words.contains(&Ok([0xff; 8])), "{words:?}");

@@ -5,7 +5,6 @@
 //! [`Store`] that [`new_logic`] builds for any supported count. The flash outlives the logic: a
 //! restart takes it back with [`UnitLogic::into_flash`] and boots a new logic on it.
 
-use embassy_futures::block_on;
 use mmu_firmware::persist::{Keeper, Store};
 use mmu_firmware::runner::Status;
 use mmu_firmware::{App, BoardAction, Config, Instant, MAX_SLOTS, MotorCommand};
@@ -70,7 +69,7 @@ impl<const N: usize> PersistentApp<N> {
         let range = 0..(STORE_PAGES * G0_PAGE) as u32;
         let store = Store::new(flash, range).unwrap_or_else(|_| unreachable!("a valid region"));
         let mut app = App::new(config);
-        let (keeper, _) = block_on(Keeper::boot(store, &mut app));
+        let (keeper, _) = Keeper::boot(store, &mut app);
         PersistentApp {
             app,
             keeper,
@@ -93,8 +92,8 @@ impl<const N: usize> UnitLogic for PersistentApp<N> {
         tx.extend_from_slice(&out.tx);
         // A failed write leaves the old record; the keeper tries again.
         let _ = match out.action {
-            None => block_on(self.keeper.update(&self.app, now)).map(drop),
-            Some(action) => block_on(self.keeper.before(action, &self.app)),
+            None => self.keeper.update(&self.app, now).map(drop),
+            Some(action) => self.keeper.before(action, &self.app),
         };
         let motors = if out.action.is_some() {
             [MotorCommand::Coast; N]

@@ -8,7 +8,8 @@
 //! More seeds (release build, about a second per seed and model set):
 //! `MMU_CUT_SEEDS=100 cargo test -p mmu-sim --release --test power_cut -- --ignored --nocapture`.
 
-use mmu_sim::cut::{CutReport, Plan, study};
+use mmu_firmware::Instant;
+use mmu_sim::cut::{Action, CutReport, Flash, Plan, Unit, life, study};
 use mmu_sim::flash::CutModel;
 
 fn check(reports: &[CutReport]) {
@@ -64,6 +65,51 @@ fn a_cut_during_the_first_save_after_a_cut_leaves_old_or_new_records_too() {
     check(&[report]);
 }
 
+/// A save runs a bounded piece per 1 ms step: the power may also go between two steps of a save
+/// in progress (an entry half programmed, a fresh page checked or copied but not committed). A
+/// life of 400 actions on 3 pages, the flash looked at between every two steps of every save:
+/// each record restores as it was before the action or as the action left it; no step programs
+/// more than 8 double words or erases more than one page.
+#[test]
+fn the_power_going_between_two_steps_of_a_save_leaves_old_or_new_records() {
+    const PAGES: usize = 3;
+    let mut unit = Unit::boot(Flash::new(PAGES), PAGES, Instant::ZERO);
+    let (mut observed, mut failures) = (0, Vec::new());
+    for (index, (wait, action)) in life(5, 400).iter().enumerate() {
+        let before = unit.stored();
+        let after = unit.clone().act(*wait, action).stored();
+        let mut between = |unit: &mut Unit| {
+            observed += 1;
+            let restored = unit.stored();
+            let lanes = [&before.lanes, &after.lanes].contains(&&restored.lanes);
+            let counters = [&before.counters, &after.counters].contains(&&restored.counters);
+            let settings = [&before.settings, &after.settings].contains(&&restored.settings);
+            if !(lanes && counters && settings) {
+                failures.push(format!(
+                    "action {index} {action:?}: restored {restored:?}, expected {before:?} or {after:?}"
+                ));
+            }
+        };
+        unit = unit.act_with(*wait, action, &mut between);
+        assert!(!matches!(action, Action::PowerCycle) || !unit.keeper.is_saving());
+    }
+    let worst = unit.worst_save;
+    assert!(
+        failures.is_empty(),
+        "{} failures, first: {}",
+        failures.len(),
+        failures[0]
+    );
+    assert!(observed >= 300, "{observed} steps between");
+    // A fresh page's erased check alone takes 8 steps: some saves opened one.
+    assert!(
+        worst.steps >= 12,
+        "a fresh page was opened over many steps: {worst:?}"
+    );
+    assert!(worst.programs_per_step <= 8, "{worst:?}");
+    assert!(worst.erases_per_step <= 1, "{worst:?}");
+}
+
 /// The soak: `MMU_CUT_SEEDS` lives (default 20) of 700 actions on 3 pages, every operation cut
 /// under every model, and with `MMU_CUT_SECOND=24` each first save after a restart cut again at
 /// each of its first 24 operations; prints the counts the README quotes.
@@ -86,7 +132,7 @@ fn soak_every_cut_of_many_lives() {
     let total = |f: fn(&CutReport) -> usize| reports.iter().map(f).sum::<usize>();
     let worst = |f: fn(&CutReport) -> u64| reports.iter().map(f).max().unwrap_or(0);
     println!(
-        "cut soak: {seeds} lives of 700 actions, {} flash operations ({} page erases); cuts: clean {}, torn {}, torn with unreadable double words {}; second cuts {}; failures {}; the largest save: {} double-word programs, {} page erases",
+        "cut soak: {seeds} lives of 700 actions, {} flash operations ({} page erases); cuts: clean {}, torn {}, torn with unreadable double words {}; second cuts {}; failures {}; the largest save: {} double-word programs, {} page erases, {} steps; the most in one step: {} double-word programs, {} page erases",
         total(|r| r.operations as usize),
         total(|r| r.erases_cut),
         total(|r| r.cuts[0]),
@@ -96,6 +142,9 @@ fn soak_every_cut_of_many_lives() {
         total(|r| r.failures.len()),
         worst(|r| r.worst_save.programs),
         worst(|r| r.worst_save.erases),
+        worst(|r| r.worst_save.steps),
+        worst(|r| r.worst_save.programs_per_step),
+        worst(|r| r.worst_save.erases_per_step),
     );
     check(&reports);
 }

@@ -5,11 +5,48 @@
 //! and over in a 4-page map until the map erases a page to reuse it; that erase is cut.
 
 use embassy_futures::block_on;
-use mmu_sim::flash::{CutModel, MemFlash};
+use embedded_storage::nor_flash::{NorFlash as _, ReadNorFlash as _};
+use mmu_sim::flash::{CutModel, FlashError, MemFlash};
 use sequential_storage::cache::{Cache, Uncached};
 use sequential_storage::map::{MapConfig, MapStorage};
 
-type Flash = MemFlash<2048>;
+/// The flash model (blocking, as the unit's store uses it) with the async traits the crate wants.
+struct Flash(MemFlash<2048>);
+
+impl Flash {
+    fn new(pages: usize) -> Self {
+        Flash(MemFlash::new(pages))
+    }
+}
+
+impl embedded_storage_async::nor_flash::ErrorType for Flash {
+    type Error = FlashError;
+}
+
+impl embedded_storage_async::nor_flash::ReadNorFlash for Flash {
+    const READ_SIZE: usize = 1;
+
+    async fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), FlashError> {
+        self.0.read(offset, bytes)
+    }
+
+    fn capacity(&self) -> usize {
+        self.0.capacity()
+    }
+}
+
+impl embedded_storage_async::nor_flash::NorFlash for Flash {
+    const WRITE_SIZE: usize = mmu_sim::flash::WRITE_SIZE;
+    const ERASE_SIZE: usize = 2048;
+
+    async fn erase(&mut self, from: u32, to: u32) -> Result<(), FlashError> {
+        self.0.erase(from, to)
+    }
+
+    async fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), FlashError> {
+        self.0.write(offset, bytes)
+    }
+}
 const REGION: core::ops::Range<u32> = 0..4 * 2048;
 
 /// The value written the `n`th time.
@@ -38,20 +75,20 @@ fn torn_erase_outcomes() -> Vec<String> {
     // The uncut run: how many writes until the first erase, and its operation.
     let mut uncut = map(Flash::new(4));
     let mut writes = 0;
-    while uncut.flash().erase_operations.is_empty() {
+    while uncut.flash().0.erase_operations.is_empty() {
         write(&mut uncut, 1).expect("uncut");
         writes += 1;
     }
-    let erase = uncut.flash().erase_operations[0];
+    let erase = uncut.flash().0.erase_operations[0];
     let writes = writes + 40;
     let mut wrong = Vec::new();
     for seed in 0..32 {
         let mut flash = Flash::new(4);
-        flash.cut_power_at(erase, CutModel::Torn, seed);
+        flash.0.cut_power_at(erase, CutModel::Torn, seed);
         let mut cut = map(flash);
         let (failed, _) = write(&mut cut, writes).expect_err("the cut");
         let mut flash = cut.destroy().0;
-        flash.power_on();
+        flash.0.power_on();
         let mut rebooted = map(flash);
         let mut buffer = [0u8; 128];
         let fetched =

@@ -3,10 +3,9 @@
 //! (register 0x52, the version an MK3S checks); a flash that fails is retried with pauses, its
 //! trouble reported once, and the erase rate stays bounded whatever the flash does.
 
-use embassy_futures::block_on;
-use mmu_firmware::Instant;
-use mmu_firmware::persist::{ERASE_BURST, ERASES_PER_HOUR, Health};
+use mmu_firmware::persist::{ERASE_BURST, ERASES_PER_HOUR, FULL_CHECK_MS, Health};
 use mmu_firmware::unit::Lane;
+use mmu_firmware::{BoardAction, Instant};
 use mmu_protocol::{Request, RequestCode};
 use mmu_sim::cut::{Action, Flash, Plan, Unit, study};
 use mmu_sim::flash::CutModel;
@@ -76,12 +75,50 @@ fn x42_keeps_the_identity_an_mk3s_needs() {
     assert_eq!(snapshot.lanes, [Lane::Unknown; 3]);
 }
 
+/// A reset can come while a save is in progress (it runs a piece per step): `X0` finishes it and
+/// saves everything, `X42` finishes it and forgets all but the identity.
+#[test]
+fn a_reset_during_a_save_in_progress_saves_or_forgets_everything() {
+    for action in [BoardAction::Reset, BoardAction::EraseAndReset] {
+        let mut unit = unit();
+        unit = unit.act(10, &Action::Write(0x52, 2));
+        unit = unit.act(10, &Action::Lanes([Lane::Parked, Lane::Loaded, Lane::Empty]));
+        unit.ask(Request::write(0x22, 500));
+        unit.believe(|s| {
+            s.lanes = [Lane::Parked, Lane::Parked, Lane::Empty];
+            s.counters.tool_changes[1] += 1;
+        });
+        // The full check that finds the new setting starts a save that runs in the next steps.
+        unit.now = Instant::from_millis(unit.now.as_millis() + FULL_CHECK_MS);
+        let _ = unit.keeper.update(&unit.app, unit.now);
+        let _ = unit.keeper.update(&unit.app, unit.now + 1);
+        assert!(unit.keeper.is_saving(), "{action:?}: a save in progress");
+        let live = unit.app.snapshot();
+        unit.keeper.before(action, &unit.app).unwrap();
+        assert!(!unit.keeper.is_saving());
+        let unit = unit.restart();
+        let restored = unit.app.snapshot();
+        match action {
+            BoardAction::Reset => assert_eq!(restored, live, "X0 saves everything"),
+            _ => {
+                assert_eq!(
+                    restored.settings.as_slice(),
+                    &[(0x52, 2)],
+                    "X42 keeps the identity"
+                );
+                assert_eq!(restored.lanes, [Lane::Unknown; 3]);
+                assert_eq!(restored.counters, Default::default());
+            }
+        }
+    }
+}
+
 #[test]
 fn a_wiped_store_keeps_the_identity() {
     let mut unit = unit();
     unit = unit.act(10, &Action::Write(0x52, 2));
     unit = unit.act(10, &Action::Write(0x22, 500));
-    block_on(unit.keeper.store().wipe()).unwrap();
+    unit.keeper.store().wipe().unwrap();
     unit = unit.restart();
     assert!(
         revision(&mut unit).starts_with("S2 A2*"),
@@ -156,7 +193,7 @@ fn a_failing_flash_is_retried_with_pauses_and_a_bounded_erase_rate() {
             unit.believe(|s| s.lanes = lanes[(step / 100 % 2) as usize]);
         }
         let before = unit.flash().wear().erases;
-        let _ = block_on(unit.keeper.update(&unit.app, unit.now));
+        let _ = unit.keeper.update(&unit.app, unit.now);
         for _ in before..unit.flash().wear().erases {
             erases_at.push(step);
         }
@@ -186,7 +223,7 @@ fn a_failing_flash_is_retried_with_pauses_and_a_bounded_erase_rate() {
     unit.flash().set_broken(false);
     let later = start + 3 * 3_600_000 + 600_000;
     unit.now = Instant::from_millis(later);
-    let _ = block_on(unit.keeper.update(&unit.app, unit.now));
+    unit.save_steps();
     let recovered: Health = unit.keeper.take_news().expect("the recovery is reported");
     assert!(!recovered.failing);
     let lanes_now = unit.app.lanes();

@@ -4,7 +4,7 @@
 //! for the entry's length even when the rest is torn; an entry counts only when its trailer
 //! matches.
 
-use crc::{CRC_16_IBM_3740, CRC_32_ISO_HDLC, Crc};
+use crc::{CRC_16_IBM_3740, CRC_32_ISO_HDLC, Crc, Digest};
 
 use super::records::{MAX_RECORD, Record};
 
@@ -16,7 +16,8 @@ pub(super) const MAX_ENTRY: usize = DOUBLE_WORD + MAX_RECORD.next_multiple_of(DO
 pub(super) const COMMIT: u8 = 0x5c;
 
 const HEADER_CRC: Crc<u16> = Crc::<u16>::new(&CRC_16_IBM_3740);
-const ENTRY_CRC: Crc<u32> = Crc::<u32>::new(&CRC_32_ISO_HDLC);
+/// A static: an [`EntryWriter`] keeps a running digest of it between two chunks.
+static ENTRY_CRC: Crc<u32> = Crc::<u32>::new(&CRC_32_ISO_HDLC);
 
 /// The (key, payload length, sequence number) of a header double word that checks: the key is a
 /// record's or [`COMMIT`].
@@ -53,35 +54,88 @@ fn trailer(crc: u32) -> [u8; DOUBLE_WORD] {
     word
 }
 
-/// Lay out an entry in `buffer`; the bytes to program.
-pub(super) fn build_entry<'b>(
-    buffer: &'b mut [u8; MAX_ENTRY],
-    key: u8,
-    sequence: u32,
-    payload: &[u8],
-) -> &'b [u8] {
-    let size = entry_size(payload.len());
-    buffer.fill(0);
-    buffer[0] = key;
-    buffer[1] = payload.len() as u8;
-    buffer[2..6].copy_from_slice(&sequence.to_le_bytes());
-    let header_crc = HEADER_CRC.checksum(&buffer[..6]);
-    buffer[6..8].copy_from_slice(&header_crc.to_le_bytes());
-    buffer[DOUBLE_WORD..DOUBLE_WORD + payload.len()].copy_from_slice(payload);
-    let body = size - DOUBLE_WORD;
-    let crc = ENTRY_CRC.checksum(&buffer[..body]);
-    buffer[body..size].copy_from_slice(&trailer(crc));
-    &buffer[..size]
+/// An entry being programmed a chunk at a time, in order, so that one call of a save programs
+/// (and checksums) a bounded part of it. Its bytes wait in the store's buffer; the trailer is
+/// computed from the running CRC when the last chunk is handed out, so it is programmed last.
+/// Until then the entry does not count (a cut between two chunks is a program cut short).
+#[derive(Clone)]
+pub(super) struct EntryWriter {
+    size: usize,
+    written: usize,
+    digest: Digest<'static, u32>,
+}
+
+impl EntryWriter {
+    /// Lay out the header and the payload of an entry in `buffer` (the trailer comes with the
+    /// last chunk).
+    pub(super) fn new(buffer: &mut [u8; MAX_ENTRY], key: u8, sequence: u32, payload: &[u8]) -> Self {
+        let len = payload.len().min(MAX_RECORD);
+        let size = entry_size(len);
+        buffer[..size].fill(0);
+        buffer[0] = key;
+        buffer[1] = len as u8;
+        buffer[2..6].copy_from_slice(&sequence.to_le_bytes());
+        let header_crc = HEADER_CRC.checksum(&buffer[..6]);
+        buffer[6..8].copy_from_slice(&header_crc.to_le_bytes());
+        buffer[DOUBLE_WORD..DOUBLE_WORD + len].copy_from_slice(&payload[..len]);
+        EntryWriter {
+            size,
+            written: 0,
+            digest: ENTRY_CRC.digest(),
+        }
+    }
+
+    /// The entry's bytes.
+    pub(super) fn size(&self) -> usize {
+        self.size
+    }
+
+    /// The next chunk to program, at most `max` bytes (a multiple of [`DOUBLE_WORD`]): its
+    /// offset in the entry and its bytes in `buffer`; `None` once every chunk was handed out.
+    pub(super) fn next_chunk<'b>(
+        &mut self,
+        buffer: &'b mut [u8; MAX_ENTRY],
+        max: usize,
+    ) -> Option<(usize, &'b [u8])> {
+        let start = self.written;
+        if start >= self.size {
+            return None;
+        }
+        let end = self.size.min(start + max.max(DOUBLE_WORD));
+        let body = self.size - DOUBLE_WORD;
+        self.digest.update(&buffer[start..end.min(body)]);
+        if end == self.size {
+            buffer[body..end].copy_from_slice(&trailer(self.digest.clone().finalize()));
+        }
+        self.written = end;
+        Some((start, &buffer[start..end]))
+    }
 }
 
 #[cfg(test)]
 mod tests {
+    extern crate std;
+
     use super::*;
+    use std::vec::Vec;
+
+    /// The entry's bytes, in the chunks a save programs them in.
+    fn build_entry(key: u8, sequence: u32, payload: &[u8], chunk: usize) -> Vec<u8> {
+        let mut buffer = [0; MAX_ENTRY];
+        let mut writer = EntryWriter::new(&mut buffer, key, sequence, payload);
+        let mut entry = Vec::new();
+        while let Some((offset, bytes)) = writer.next_chunk(&mut buffer, chunk) {
+            assert_eq!(offset, entry.len(), "in order");
+            assert!(bytes.len() <= chunk.max(DOUBLE_WORD) && bytes.len() % DOUBLE_WORD == 0);
+            entry.extend_from_slice(bytes);
+        }
+        assert_eq!(entry.len(), writer.size());
+        entry
+    }
 
     #[test]
     fn an_entry_lays_out_header_payload_and_trailer_in_double_words() {
-        let mut buffer = [0; MAX_ENTRY];
-        let entry = build_entry(&mut buffer, Record::Lanes as u8, 7, &[1, 3, 2, 2, 5]).to_vec();
+        let entry = build_entry(Record::Lanes as u8, 7, &[1, 3, 2, 2, 5], 64);
         assert_eq!(entry.len(), 24);
         assert_eq!(entry[..6], [1, 5, 7, 0, 0, 0]);
         let header: [u8; DOUBLE_WORD] = entry[..8].try_into().unwrap();
@@ -89,12 +143,16 @@ mod tests {
         assert!(is_complete(&entry));
         let all = super::super::records::encode_settings(&[(1, 2); super::super::MAX_SETTINGS]);
         assert_eq!(entry_size(all.len()), MAX_ENTRY);
+        let whole = build_entry(3, 9, &all, MAX_ENTRY);
+        for chunk in [8, 16, 64] {
+            assert_eq!(build_entry(3, 9, &all, chunk), whole, "{chunk}-byte chunks");
+        }
+        assert!(is_complete(&whole));
     }
 
     #[test]
     fn a_torn_entry_or_header_does_not_count() {
-        let mut buffer = [0; MAX_ENTRY];
-        let entry = build_entry(&mut buffer, Record::Lanes as u8, 7, &[1, 3, 2, 2, 5]).to_vec();
+        let entry = build_entry(Record::Lanes as u8, 7, &[1, 3, 2, 2, 5], 8);
         let mut torn = entry.clone();
         torn[16..].fill(0xff);
         assert!(!is_complete(&torn), "trailer never written");

@@ -1,13 +1,16 @@
 //! The persistence policy of a running unit, shared by the firmware and the simulator: restore at
-//! boot; then lanes and settings saved in the step they change, counters as the store allows,
+//! boot; then lanes saved in the step they change (within the steps of a page move when the head
+//! page is full), settings within a second, counters as the store allows,
 //! everything before a reset. A flash that fails is retried with a growing pause, and the page
 //! erases of any hour stay under [`ERASE_BURST`] + [`ERASES_PER_HOUR`] whatever happens (each
-//! erase stalls the CPU up to 40 ms on the STM32G0).
+//! erase stalls the CPU up to 40 ms on the STM32G0). Each call of [`Keeper::update`] does one
+//! bounded piece of a save (at most 8 double words programmed or one page erased).
 
-use embedded_storage_async::nor_flash::NorFlash;
+use embedded_storage::nor_flash::NorFlash;
 
 use super::{Damage, Store, StoreError};
 use crate::app::{App, BoardAction};
+use crate::config::Config;
 use crate::time::Instant;
 use crate::unit::Lane;
 
@@ -54,6 +57,9 @@ pub struct Keeper<F: NorFlash, const N: usize> {
     store: Store<F, N>,
     /// The lanes as of the last comparison with the flash.
     lanes: [Lane; N],
+    /// The configuration whose settings were last compared with the flash (`None`: compare them
+    /// at the next full check).
+    config: Option<Config>,
     /// When counters and settings were last compared.
     checked_at: Option<Instant>,
     /// Erases allowed now, and when the budget was last topped up.
@@ -70,8 +76,8 @@ pub struct Keeper<F: NorFlash, const N: usize> {
 impl<F: NorFlash, const N: usize> Keeper<F, N> {
     /// Restore into `app` (before its first step) what `store` holds. A store that cannot be read
     /// in places still gives every record it can (the newest complete copy of each).
-    pub async fn boot(mut store: Store<F, N>, app: &mut App<N>) -> (Self, Boot) {
-        let snapshot = store.load().await;
+    pub fn boot(mut store: Store<F, N>, app: &mut App<N>) -> (Self, Boot) {
+        let snapshot = store.load();
         app.restore(&snapshot);
         let damage = store.damage();
         let boot = if damage.is_none() {
@@ -82,6 +88,7 @@ impl<F: NorFlash, const N: usize> Keeper<F, N> {
         let keeper = Keeper {
             store,
             lanes: app.lanes(),
+            config: None,
             checked_at: None,
             erase_credit: ERASE_BURST,
             refilled_at: None,
@@ -96,12 +103,19 @@ impl<F: NorFlash, const N: usize> Keeper<F, N> {
         (keeper, boot)
     }
 
-    /// After a step: save what changed. Lanes are compared every step (cheap); the full snapshot
-    /// every [`FULL_CHECK_MS`] or when lanes changed. `Ok(true)` when it wrote (the flash may
-    /// have stalled the CPU); a failed save leaves the previous records and is tried again after
-    /// a pause (1 s, doubling up to [`RETRY_MAX_MS`]).
-    pub async fn update(&mut self, app: &App<N>, now: Instant) -> Result<bool, StoreError> {
+    /// After a step: save what changed, a bounded piece per call. Lanes are compared every step
+    /// (cheap) and a lane change starts its save at once (a lane entry is one piece: it is
+    /// saved in the step it changed, unless the head page is full); the full snapshot is compared
+    /// every [`FULL_CHECK_MS`], and the save it starts runs in the calls that follow. While a
+    /// save is in progress each call does one piece of it ([`Store::step`]: one chunk of an
+    /// entry, a slice of a fresh page's erased check, or one page erase). `Ok(true)` when the
+    /// call programmed or erased (the flash stalled the CPU); a failed save leaves the previous
+    /// records and is tried again after a pause (1 s, doubling up to [`RETRY_MAX_MS`]).
+    pub fn update(&mut self, app: &App<N>, now: Instant) -> Result<bool, StoreError> {
         self.top_up(now);
+        if self.store.is_saving() {
+            return self.advance(now);
+        }
         if self.retry_at.is_some_and(|at| now.as_millis() < at.as_millis()) {
             return Ok(false);
         }
@@ -113,30 +127,58 @@ impl<F: NorFlash, const N: usize> Keeper<F, N> {
         if lanes == self.lanes && !full_check {
             return Ok(false);
         }
-        self.checked_at = Some(now);
-        let snapshot = app.snapshot();
-        if !self.store.save_due(&snapshot, now) {
-            self.lanes = lanes;
+        self.lanes = lanes;
+        self.store.set_erase_allowance(self.erase_credit);
+        if full_check {
+            self.checked_at = Some(now);
+            // The settings come from a snapshot (thousands of instructions): taken only when the
+            // configuration changed, in a call of its own; the save runs in the calls after it.
+            if self.config.as_ref() != Some(app.config()) {
+                self.config = Some(app.config().clone());
+                self.store.begin_save(&app.snapshot(), Some(now));
+                return Ok(false);
+            }
+        }
+        let counters = full_check.then_some(&app.counters);
+        if !self.store.begin_changes(lanes, counters, now) {
             return Ok(false);
         }
-        self.store.set_erase_allowance(self.erase_credit);
-        let result = self.store.save(&snapshot, Some(now)).await;
-        self.settle(result.map(drop), now)?;
-        self.lanes = lanes;
-        Ok(true)
+        self.advance(now)
     }
 
-    /// Before the board carries out `action`: save everything (`X0`), or forget all but the
-    /// identity (`X42`).
-    pub async fn before(&mut self, action: BoardAction, app: &App<N>) -> Result<(), StoreError> {
+    /// One piece of the save in progress; its outcome once it ends.
+    fn advance(&mut self, now: Instant) -> Result<bool, StoreError> {
+        match self.store.step() {
+            Ok(progress) => {
+                if progress.done {
+                    self.settle(Ok(()), now)?;
+                }
+                Ok(progress.wrote)
+            }
+            Err(error) => self.settle(Err(error), now).map(|()| true),
+        }
+    }
+
+    /// Before the board carries out `action`: finish the save in progress, then save everything
+    /// (`X0`), or forget all but the identity (`X42`), whole: the reset follows.
+    pub fn before(&mut self, action: BoardAction, app: &App<N>) -> Result<(), StoreError> {
         let now = self.refilled_at.unwrap_or(Instant::ZERO);
+        if self.store.is_saving() {
+            let finished = self.store.finish();
+            let _ = self.settle(finished, now);
+        }
         self.store
             .set_erase_allowance(self.erase_credit.max(ERASES_BEFORE_RESET));
         let result = match action {
-            BoardAction::Reset => self.store.save(&app.snapshot(), None).await.map(drop),
-            BoardAction::EraseAndReset => self.store.forget().await,
+            BoardAction::Reset => self.store.save(&app.snapshot(), None).map(drop),
+            BoardAction::EraseAndReset => self.store.forget(),
         };
         self.settle(result, now)
+    }
+
+    /// Whether a save is in progress: the next calls of [`Keeper::update`] carry it on.
+    pub fn is_saving(&self) -> bool {
+        self.store.is_saving()
     }
 
     /// Account for a save's erases and outcome.
@@ -156,6 +198,8 @@ impl<F: NorFlash, const N: usize> Keeper<F, N> {
                 self.retry_pause_ms = RETRY_MIN_MS;
             }
             Err(_) => {
+                // The settings may be what failed: compare them again at the next try.
+                self.config = None;
                 self.health.failed_saves = self.health.failed_saves.saturating_add(1);
                 if !self.health.failing {
                     self.health.failing = true;

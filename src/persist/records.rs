@@ -194,22 +194,20 @@ impl<const N: usize> Records<N> {
         }
     }
 
-    /// `snapshot`'s settings split into the identity and the rest.
-    pub(super) fn from_snapshot(snapshot: &Snapshot<N>) -> Self {
-        let (mut settings, mut identity) = (Settings::new(), Identity::new());
+    /// Become `snapshot`, its settings split into the identity and the rest (in place: no
+    /// copy of the records on the stack).
+    pub(super) fn set_from_snapshot(&mut self, snapshot: &Snapshot<N>) {
+        self.lanes = snapshot.lanes;
+        self.counters = snapshot.counters;
+        self.settings.clear();
+        self.identity.clear();
         for &(address, value) in &snapshot.settings {
             // Each holds what a snapshot can hold (a register appears once).
             let _ = if is_identity(address) {
-                identity.push((address, value))
+                self.identity.push((address, value))
             } else {
-                settings.push((address, value))
+                self.settings.push((address, value))
             };
-        }
-        Records {
-            lanes: snapshot.lanes,
-            counters: snapshot.counters,
-            settings,
-            identity,
         }
     }
 
@@ -231,6 +229,16 @@ impl<const N: usize> Records<N> {
             Record::Counters => encode_counters(&self.counters),
             Record::Settings => encode_settings(&self.settings),
             Record::Identity => encode_settings(&self.identity),
+        }
+    }
+
+    /// Take `record` from `from`.
+    pub(super) fn copy_record(&mut self, record: Record, from: &Records<N>) {
+        match record {
+            Record::Lanes => self.lanes = from.lanes,
+            Record::Counters => self.counters = from.counters,
+            Record::Settings => self.settings.clone_from(&from.settings),
+            Record::Identity => self.identity.clone_from(&from.identity),
         }
     }
 

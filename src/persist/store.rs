@@ -13,16 +13,24 @@
 //! opened. So a page is only ever erased once every record in it has a newer copy, and an
 //! interrupted erase or program leaves entries that are older than, or lose against, a complete
 //! one. A double word that does not read (ECC) costs the entry it belongs to, never the store.
+//!
+//! A load is one call; a save runs a bounded piece per [`Store::step`] (module `save`), so that
+//! it fits a control step, and a power loss between two pieces is no different from one during a
+//! program. The store is synchronous over blocking NOR flash: the G0's flash stalls the CPU while
+//! it programs or erases anyway.
 
-use embedded_storage_async::nor_flash::NorFlash;
+mod save;
 
-use super::entry::{COMMIT, DOUBLE_WORD, MAX_ENTRY, build_entry, entry_size, is_complete, parse_header};
+use embedded_storage::nor_flash::NorFlash;
+
+use super::entry::{COMMIT, DOUBLE_WORD, EntryWriter, MAX_ENTRY, entry_size, is_complete, parse_header};
 use super::records::{Bytes, Record, Records};
-use super::{Snapshot, StoreError};
+use super::{Counters, Snapshot, StoreError};
 use crate::time::Instant;
 
-/// Page moves one save may try (each erases at most one page) before it gives up.
-const MOVES_PER_SAVE: usize = 2;
+use save::Job;
+pub use save::Progress;
+
 /// Counters are written at most this often, ms (they change while the unit works).
 pub const SLOW_RECORD_PERIOD_MS: u64 = 10_000;
 
@@ -75,7 +83,29 @@ pub struct Store<F: NorFlash, const N: usize> {
     /// Page erases done since it was made.
     erases: u32,
     damage: Damage,
+    /// The entry being programmed ([`Store::step`]), or scratch space for a load.
     buffer: [u8; MAX_ENTRY],
+    /// What the save in progress makes the stored records; between saves, the stored ones.
+    target: Records<N>,
+    /// The save in progress, advanced one bounded piece per [`Store::step`].
+    job: Option<Job>,
+    /// The entry of the save in progress being programmed, chunk by chunk.
+    writing: Option<Writing>,
+    /// Where the fresh page being opened holds each record so far.
+    placed: [Option<Newest>; 4],
+    /// When the save in progress writes counters: the time to note once it completes.
+    slow_due: Option<Option<Instant>>,
+    /// Whether the current step programmed or erased (and so stalled the CPU).
+    flash_work: bool,
+}
+
+/// An entry of the save in progress, programmed a chunk per step.
+#[derive(Clone)]
+struct Writing {
+    entry: EntryWriter,
+    key: u8,
+    /// Where it goes.
+    place: Newest,
 }
 
 fn page_size<F: NorFlash>() -> u32 {
@@ -111,6 +141,12 @@ impl<F: NorFlash, const N: usize> Store<F, N> {
             erases: 0,
             damage: Damage::default(),
             buffer: [0; MAX_ENTRY],
+            target: Records::blank(),
+            job: None,
+            writing: None,
+            placed: [None; 4],
+            slow_due: None,
+            flash_work: false,
         })
     }
 
@@ -147,14 +183,16 @@ impl<F: NorFlash, const N: usize> Store<F, N> {
     /// What the flash holds: each record's newest complete copy in a committed page, or its
     /// default (lanes unknown, counters zero, no settings) when there is none or it does not
     /// decode. Never fails: a double word that does not read costs only the entry it belongs to.
-    pub async fn load(&mut self) -> Snapshot<N> {
+    pub fn load(&mut self) -> Snapshot<N> {
         self.saved = Records::blank();
         self.newest = [None; 4];
         self.head = None;
         self.damage = Damage::default();
+        self.job = None;
+        self.writing = None;
         let (mut newest_header, mut newest_commit) = (None::<u32>, None::<u32>);
         for page in 0..self.pages {
-            let scan = self.scan_page(page).await;
+            let scan = self.scan_page(page);
             newest_header = newest_header.max(scan.newest_header);
             if scan.committed && scan.newest_header > newest_commit {
                 newest_commit = scan.newest_header;
@@ -166,18 +204,19 @@ impl<F: NorFlash, const N: usize> Store<F, N> {
             let Some(newest) = self.newest[record.index()] else {
                 continue;
             };
-            if let Some(bytes) = self.find(newest, record).await {
+            if let Some(bytes) = self.find(newest, record) {
                 self.saved.decode(record, &bytes);
             }
         }
+        self.target = self.saved.clone();
         self.saved.snapshot()
     }
 
     /// Read the header double word at `address`: `Ok(None)` when erased, `Err` when it does not
     /// read or is not a header; the key is a record's or [`COMMIT`].
-    async fn header(&mut self, address: u32) -> Result<Option<(u8, usize, u32)>, ()> {
+    fn header(&mut self, address: u32) -> Result<Option<(u8, usize, u32)>, ()> {
         let mut word = [0u8; DOUBLE_WORD];
-        self.flash.read(address, &mut word).await.map_err(drop)?;
+        self.flash.read(address, &mut word).map_err(drop)?;
         if word == [0xff; DOUBLE_WORD] {
             return Ok(None);
         }
@@ -186,11 +225,11 @@ impl<F: NorFlash, const N: usize> Store<F, N> {
 
     /// Read the whole entry at `address` whose payload is `len` bytes into the buffer: whether it
     /// is complete (it reads and its trailer matches).
-    async fn entry_complete(&mut self, address: u32, len: usize) -> bool {
+    fn entry_complete(&mut self, address: u32, len: usize) -> bool {
         let Some(bytes) = self.buffer.get_mut(..entry_size(len)) else {
             return false;
         };
-        self.flash.read(address, bytes).await.is_ok() && is_complete(bytes)
+        self.flash.read(address, bytes).is_ok() && is_complete(bytes)
     }
 
     /// Walk one page's entries. In a committed page, note each record's newest complete copy and
@@ -199,30 +238,25 @@ impl<F: NorFlash, const N: usize> Store<F, N> {
     /// Only headers are read on the way; the entries that would be some record's newest are then
     /// checked whole, and only when one of them is torn is the page walked again for the
     /// record's newest complete copy.
-    async fn scan_page(&mut self, page: u32) -> PageScan {
+    fn scan_page(&mut self, page: u32) -> PageScan {
         let mut candidates: [Option<(Newest, usize)>; 4] = [None; 4];
         let mut commit = None;
         let mut newest_header = None;
         // Damage in a page that does not count (a torn erase's leftovers) is not reported.
         let damage_before = self.damage;
-        let tail = self
-            .walk(page, |key, len, place| {
-                newest_header = newest_header.max(Some(place.sequence));
-                if key == COMMIT {
-                    commit = Some((place, len));
-                } else if let Some(record) = Record::from_key(key) {
-                    let slot = &mut candidates[record.index()];
-                    if slot.is_none_or(|(c, _)| place.sequence > c.sequence) {
-                        *slot = Some((place, len));
-                    }
+        let tail = self.walk(page, |key, len, place| {
+            newest_header = newest_header.max(Some(place.sequence));
+            if key == COMMIT {
+                commit = Some((place, len));
+            } else if let Some(record) = Record::from_key(key) {
+                let slot = &mut candidates[record.index()];
+                if slot.is_none_or(|(c, _)| place.sequence > c.sequence) {
+                    *slot = Some((place, len));
                 }
-            })
-            .await;
-        let committed = match commit {
-            Some((place, len)) => {
-                self.entry_complete(self.page_address(page) + place.offset, len)
-                    .await
             }
+        });
+        let committed = match commit {
+            Some((place, len)) => self.entry_complete(self.page_address(page) + place.offset, len),
             None => false,
         };
         if !committed {
@@ -236,14 +270,11 @@ impl<F: NorFlash, const N: usize> Store<F, N> {
                 if known.is_some_and(|known| known.sequence >= candidate.sequence) {
                     continue;
                 }
-                if self
-                    .entry_complete(self.page_address(page) + candidate.offset, len)
-                    .await
-                {
+                if self.entry_complete(self.page_address(page) + candidate.offset, len) {
                     self.newest[record.index()] = Some(candidate);
                 } else {
                     self.damage.torn = self.damage.torn.saturating_add(1);
-                    self.newest_complete_in(page, record).await;
+                    self.newest_complete_in(page, record);
                 }
             }
         }
@@ -256,15 +287,15 @@ impl<F: NorFlash, const N: usize> Store<F, N> {
 
     /// Walk `page`'s entry headers, calling `visit` with each (key, payload length, place).
     /// Returns where an entry may be appended (`None`: full, or the walk ended on damage).
-    async fn walk(&mut self, page: u32, mut visit: impl FnMut(u8, usize, Newest)) -> Option<u32> {
+    fn walk(&mut self, page: u32, mut visit: impl FnMut(u8, usize, Newest)) -> Option<u32> {
         let (start, size) = (self.page_address(page), page_size::<F>());
         let mut offset = 0;
         while offset + DOUBLE_WORD as u32 <= size {
-            let (key, len, sequence) = match self.header(start + offset).await {
+            let (key, len, sequence) = match self.header(start + offset) {
                 Ok(Some(header)) => header,
                 Ok(None) => return Some(offset),
                 Err(()) => {
-                    self.note_unreadable_or_torn(start + offset).await;
+                    self.note_unreadable_or_torn(start + offset);
                     return None;
                 }
             };
@@ -289,17 +320,17 @@ impl<F: NorFlash, const N: usize> Store<F, N> {
 
     /// After `record`'s newest entry in `page` turned out torn: its newest complete one there, if
     /// newer than any known (entries follow each other in sequence order within a page).
-    async fn newest_complete_in(&mut self, page: u32, record: Record) {
+    fn newest_complete_in(&mut self, page: u32, record: Record) {
         let (start, size) = (self.page_address(page), page_size::<F>());
         let mut offset = 0;
         while offset + DOUBLE_WORD as u32 <= size {
-            let Ok(Some((key, len, sequence))) = self.header(start + offset).await else {
+            let Ok(Some((key, len, sequence))) = self.header(start + offset) else {
                 return;
             };
             let known = self.newest[record.index()];
             if key == record as u8
                 && known.is_none_or(|known| sequence > known.sequence)
-                && self.entry_complete(start + offset, len).await
+                && self.entry_complete(start + offset, len)
             {
                 self.newest[record.index()] = Some(Newest {
                     sequence,
@@ -311,9 +342,9 @@ impl<F: NorFlash, const N: usize> Store<F, N> {
         }
     }
 
-    async fn note_unreadable_or_torn(&mut self, address: u32) {
+    fn note_unreadable_or_torn(&mut self, address: u32) {
         let mut word = [0u8; DOUBLE_WORD];
-        if self.flash.read(address, &mut word).await.is_err() {
+        if self.flash.read(address, &mut word).is_err() {
             self.damage.unreadable = self.damage.unreadable.saturating_add(1);
         } else {
             self.damage.torn = self.damage.torn.saturating_add(1);
@@ -321,211 +352,14 @@ impl<F: NorFlash, const N: usize> Store<F, N> {
     }
 
     /// The payload of `record`'s newest entry.
-    async fn find(&mut self, newest: Newest, record: Record) -> Option<Bytes> {
+    fn find(&mut self, newest: Newest, record: Record) -> Option<Bytes> {
         let address = self.page_address(newest.page) + newest.offset;
-        let (key, len, sequence) = self.header(address).await.ok()??;
-        if key != record as u8 || sequence != newest.sequence || !self.entry_complete(address, len).await {
+        let (key, len, sequence) = self.header(address).ok()??;
+        if key != record as u8 || sequence != newest.sequence || !self.entry_complete(address, len) {
             return None;
         }
         let payload = self.buffer.get(DOUBLE_WORD..DOUBLE_WORD + len)?;
         Bytes::from_slice(payload).ok()
-    }
-
-    /// Whether [`Store::save`] would write something now.
-    pub fn save_due(&self, snapshot: &Snapshot<N>, now: Instant) -> bool {
-        !self
-            .changed(&Records::from_snapshot(snapshot), Some(now))
-            .is_empty()
-    }
-
-    /// The records of `next` that differ from the stored ones and are due.
-    fn changed(&self, next: &Records<N>, now: Option<Instant>) -> heapless::Vec<Record, 4> {
-        let slow_allowed = now.is_none_or(|now| {
-            self.slow_saved_at
-                .is_none_or(|at| now.millis_since(at) >= SLOW_RECORD_PERIOD_MS)
-        });
-        Record::ALL
-            .into_iter()
-            .filter(|&record| match record {
-                Record::Lanes => next.lanes != self.saved.lanes,
-                Record::Settings => next.settings != self.saved.settings,
-                Record::Identity => next.identity != self.saved.identity,
-                Record::Counters => next.counters != self.saved.counters && slow_allowed,
-            })
-            .collect()
-    }
-
-    /// Write what changed: lanes and settings at once, counters at most every
-    /// [`SLOW_RECORD_PERIOD_MS`] (`None`: now, whatever the period, e.g. before a reset).
-    /// Returns how many records were written. A save that fails leaves every record as it was
-    /// or as it was being written; the next one tries again on a fresh page.
-    pub async fn save(&mut self, snapshot: &Snapshot<N>, now: Option<Instant>) -> Result<u8, StoreError> {
-        let mut next = Records::from_snapshot(snapshot);
-        let changed = self.changed(&next, now);
-        if changed.is_empty() {
-            return Ok(0);
-        }
-        if !changed.contains(&Record::Counters) {
-            next.counters = self.saved.counters;
-        }
-        self.write(&next, &changed).await?;
-        if changed.contains(&Record::Counters) {
-            self.slow_saved_at = now;
-        }
-        Ok(changed.len() as u8)
-    }
-
-    /// Forget everything but the identity (`X42`): blank records (lanes unknown, counters zero,
-    /// no settings) written as ordinary entries, so a power cut leaves each record either as it
-    /// was or blank. (Erasing pages instead could bring old records back: a cut erase leaves old
-    /// entries behind.)
-    pub async fn forget(&mut self) -> Result<(), StoreError> {
-        let blank = Records {
-            identity: self.saved.identity.clone(),
-            ..Records::blank()
-        };
-        self.write(&blank, &[Record::Settings, Record::Counters, Record::Lanes])
-            .await
-    }
-
-    /// Erase the whole region, then write the identity this store knows (nothing before a
-    /// [`Store::load`]) and blank records. For a region that is past saving: unlike
-    /// [`Store::forget`], a cut during it can lose every record.
-    pub async fn wipe(&mut self) -> Result<(), StoreError> {
-        for page in 0..self.pages {
-            self.erase(page).await?;
-        }
-        self.newest = [None; 4];
-        self.head = None;
-        let blank = Records {
-            identity: self.saved.identity.clone(),
-            ..Records::blank()
-        };
-        self.open_fresh_page(&blank).await
-    }
-
-    async fn erase(&mut self, page: u32) -> Result<(), StoreError> {
-        if self.erase_allowance == 0 {
-            return Err(StoreError::EraseBudget);
-        }
-        self.erase_allowance -= 1;
-        self.erases = self.erases.saturating_add(1);
-        let start = self.page_address(page);
-        self.flash
-            .erase(start, start + page_size::<F>())
-            .await
-            .map_err(|_| StoreError::Flash)
-    }
-
-    /// Make `next` the stored records: append `records` to the head page, or open a fresh page
-    /// when they do not fit or the head is damaged.
-    async fn write(&mut self, next: &Records<N>, records: &[Record]) -> Result<(), StoreError> {
-        if let Some((page, Some(_))) = self.head
-            && self.append_to_head(page, next, records).await.is_ok()
-        {
-            return Ok(());
-        }
-        let mut result = Err(StoreError::Flash);
-        for _ in 0..MOVES_PER_SAVE {
-            result = self.open_fresh_page(next).await;
-            if result.is_ok() {
-                break;
-            }
-        }
-        result
-    }
-
-    /// Append `records` (as in `next`) to the committed head `page`: each is stored once its
-    /// entry is complete.
-    async fn append_to_head(
-        &mut self,
-        page: u32,
-        next: &Records<N>,
-        records: &[Record],
-    ) -> Result<(), StoreError> {
-        for &record in records {
-            let place = self.append(page, record as u8, &next.encode(record)).await?;
-            self.newest[record.index()] = Some(place);
-            match record {
-                Record::Lanes => self.saved.lanes = next.lanes,
-                Record::Counters => self.saved.counters = next.counters,
-                Record::Settings => self.saved.settings = next.settings.clone(),
-                Record::Identity => self.saved.identity = next.identity.clone(),
-            }
-        }
-        Ok(())
-    }
-
-    /// Open the next page that holds no record's newest copy: erase it, write every record of
-    /// `next` there, then the commit. Until the commit is complete the records stay where they
-    /// were (on the flash and in this store's view).
-    async fn open_fresh_page(&mut self, next: &Records<N>) -> Result<(), StoreError> {
-        let after = self.head.map_or(self.pages - 1, |(page, _)| page);
-        let page = (1..self.pages)
-            .map(|step| (after + step) % self.pages)
-            .find(|&page| self.newest.iter().flatten().all(|newest| newest.page != page))
-            .ok_or(StoreError::Flash)?;
-        // Whatever happens next, the page after this one is tried next.
-        self.head = Some((page, None));
-        if !self.is_erased(page).await {
-            self.erase(page).await?;
-        }
-        self.head = Some((page, Some(0)));
-        let mut placed = [None; 4];
-        for record in Record::ALL {
-            placed[record.index()] = Some(self.append(page, record as u8, &next.encode(record)).await?);
-        }
-        self.append(page, COMMIT, &[]).await?;
-        self.newest = placed;
-        self.saved = next.clone();
-        Ok(())
-    }
-
-    /// Whether every double word of `page` reads erased.
-    async fn is_erased(&mut self, page: u32) -> bool {
-        let start = self.page_address(page);
-        let mut offset = 0;
-        while offset < page_size::<F>() {
-            let chunk = &mut self.buffer[..MAX_ENTRY.min((page_size::<F>() - offset) as usize)];
-            if self.flash.read(start + offset, chunk).await.is_err() || chunk.iter().any(|&b| b != 0xff) {
-                return false;
-            }
-            offset += chunk.len() as u32;
-        }
-        true
-    }
-
-    /// Append one entry (`key`, `payload`) at the head `page`'s tail; where it lies. On any
-    /// failure the head is closed, so that the next write opens a fresh page.
-    async fn append(&mut self, page: u32, key: u8, payload: &[u8]) -> Result<Newest, StoreError> {
-        let Some((_, Some(offset))) = self.head else {
-            return Err(StoreError::Flash);
-        };
-        self.head = Some((page, None));
-        let size = entry_size(payload.len());
-        if offset as usize + size > F::ERASE_SIZE {
-            return Err(StoreError::Full);
-        }
-        let address = self.page_address(page) + offset;
-        // Only where it reads erased: a double word is programmed once (PROGERR otherwise).
-        let target = &mut self.buffer[..size];
-        if self.flash.read(address, target).await.is_err() || target.iter().any(|&b| b != 0xff) {
-            return Err(StoreError::Flash);
-        }
-        let sequence = self.next_sequence;
-        let entry = build_entry(&mut self.buffer, key, sequence, payload);
-        // Spent even if the program fails: a torn entry must not share its number.
-        self.next_sequence = sequence.wrapping_add(1);
-        self.flash
-            .write(address, entry)
-            .await
-            .map_err(|_| StoreError::Flash)?;
-        self.head = Some((page, Some(offset + size as u32)));
-        Ok(Newest {
-            sequence,
-            page,
-            offset,
-        })
     }
 }
 

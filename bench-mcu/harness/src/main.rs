@@ -13,8 +13,7 @@
 
 use core::panic::PanicInfo;
 
-use embassy_futures::block_on;
-use embedded_storage_async::nor_flash::{ErrorType, NorFlash, NorFlashErrorKind, ReadNorFlash};
+use embedded_storage::nor_flash::{ErrorType, NorFlash, NorFlashErrorKind, ReadNorFlash};
 use mmu_firmware::runner::Status;
 use mmu_firmware::persist::{Keeper, Store};
 use mmu_firmware::{App, Config, HubSamples, Instant, Outputs, Samples, SlotSamples};
@@ -72,7 +71,7 @@ struct EmulatedFlash;
 #[derive(Debug)]
 struct FlashError(NorFlashErrorKind);
 
-impl embedded_storage_async::nor_flash::NorFlashError for FlashError {
+impl embedded_storage::nor_flash::NorFlashError for FlashError {
     fn kind(&self) -> NorFlashErrorKind {
         self.0
     }
@@ -94,7 +93,7 @@ fn region(offset: u32, len: usize) -> Result<*mut u8, FlashError> {
 impl ReadNorFlash for EmulatedFlash {
     const READ_SIZE: usize = 1;
 
-    async fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), FlashError> {
+    fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), FlashError> {
         let from = region(offset, bytes.len())?;
         // SAFETY: inside the mapped store region (checked above), not aliased by Rust objects.
         unsafe { core::ptr::copy_nonoverlapping(from, bytes.as_mut_ptr(), bytes.len()) };
@@ -110,7 +109,7 @@ impl NorFlash for EmulatedFlash {
     const WRITE_SIZE: usize = 8;
     const ERASE_SIZE: usize = PAGE;
 
-    async fn erase(&mut self, from: u32, to: u32) -> Result<(), FlashError> {
+    fn erase(&mut self, from: u32, to: u32) -> Result<(), FlashError> {
         if from % PAGE as u32 != 0 || to % PAGE as u32 != 0 || to < from {
             return Err(FlashError(NorFlashErrorKind::NotAligned));
         }
@@ -120,7 +119,7 @@ impl NorFlash for EmulatedFlash {
         Ok(())
     }
 
-    async fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), FlashError> {
+    fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), FlashError> {
         if offset % 8 != 0 || bytes.len() % 8 != 0 {
             return Err(FlashError(NorFlashErrorKind::NotAligned));
         }
@@ -223,7 +222,7 @@ pub extern "C" fn bench_main() -> ! {
         halt();
     };
     let mut app = App::<SLOTS>::new(Config::default());
-    let (mut keeper, _) = block_on(Keeper::boot(store, &mut app));
+    let (mut keeper, _) = Keeper::boot(store, &mut app);
     mark(Mark::BootEnd, 0, 0, 0);
 
     let mut digest: u32 = 0x811c_9dc5;
@@ -242,9 +241,9 @@ pub extern "C" fn bench_main() -> ! {
         }
         mark(Mark::SaveBegin, index, 0, 0);
         let wrote = match out.action {
-            None => block_on(keeper.update(&app, now)).unwrap_or(true),
+            None => keeper.update(&app, now).unwrap_or(true),
             Some(action) => {
-                let _ = block_on(keeper.before(action, &app));
+                let _ = keeper.before(action, &app);
                 true
             }
         };

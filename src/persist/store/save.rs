@@ -1,0 +1,451 @@
+//! Saving, a bounded piece at a time: a save is a small state machine ([`Job`]) that
+//! [`Store::step`] advances by one piece per call (one chunk of an entry, a slice of a page's
+//! erased check, one page erase), so that a save fits the control step it runs in. Every piece
+//! keeps the guarantees of the store (module `store`): entries are programmed in order, their
+//! trailer last, only where the flash reads erased, and a fresh page counts only once its commit
+//! entry is complete. So a cut between two pieces is no different from a cut during one.
+
+use embedded_storage::nor_flash::NorFlash;
+
+use super::{COMMIT, EntryWriter, Newest, Record, Records, SLOW_RECORD_PERIOD_MS, Store, Writing};
+use super::{Counters, Snapshot, StoreError, entry_size, page_size};
+use crate::time::Instant;
+use crate::unit::Lane;
+
+/// Page moves one save may try (each erases at most one page) before it gives up.
+const MOVES_PER_SAVE: u8 = 2;
+/// Bytes of an entry programmed per step: 8 double words, at most 1 ms of CPU stall on the
+/// STM32G071 (125 µs each at most).
+const PROGRAM_CHUNK: usize = 64;
+/// Bytes of a fresh page checked for erased per step.
+const CHECK_CHUNK: usize = 256;
+/// An entry this small (the lanes' of up to 5 slots) is laid out and programmed in one step, so
+/// that a lane change is saved in the step it happens; a larger one is laid out (encoded) in a
+/// step of its own.
+const ONE_STEP_ENTRY: usize = 3 * super::DOUBLE_WORD;
+/// Steps of the largest entry: its layout, then its chunks.
+const ENTRY_STEPS: usize = 1 + super::MAX_ENTRY.div_ceil(PROGRAM_CHUNK);
+
+/// A save in progress.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Job {
+    /// Append the records whose bits ([`Record::index`]) are set to the head page, one entry
+    /// each; any failure moves to a fresh page.
+    Append { pending: u8 },
+    /// Pick the next page that holds no record's newest copy, for the `tries`th page move.
+    Move { tries: u8 },
+    /// Open `page` (the `tries`th move of this save): check that it reads erased, erase it if
+    /// not, copy every record, commit.
+    Open { page: u32, tries: u8, stage: Stage },
+}
+
+/// Where the opening of a fresh page stands.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum Stage {
+    /// Reading the page from `offset` for anything not erased.
+    Check {
+        offset: u32,
+    },
+    Erase,
+    /// Writing the full copy: the next record of [`Record::ALL`] (past the last: the commit).
+    Copy {
+        next: u8,
+    },
+}
+
+/// What one [`Store::step`] did.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Progress {
+    /// The save is complete (or there was none).
+    pub done: bool,
+    /// It programmed or erased the flash (which stalls the CPU on the STM32G0).
+    pub wrote: bool,
+}
+
+fn bit(record: Record) -> u8 {
+    1 << record.index()
+}
+
+impl<F: NorFlash, const N: usize> Store<F, N> {
+    /// Whether a save is in progress ([`Store::step`] advances it).
+    pub fn is_saving(&self) -> bool {
+        self.job.is_some()
+    }
+
+    /// Start saving what changed in `snapshot`: lanes and settings at once, counters at most
+    /// every [`SLOW_RECORD_PERIOD_MS`] (`now` `None`: whatever the period, e.g. before a reset).
+    /// Returns how many records it will write (0: nothing to save, no save started). A save in
+    /// progress is abandoned (what it completed stays saved).
+    pub fn begin_save(&mut self, snapshot: &Snapshot<N>, now: Option<Instant>) -> u8 {
+        self.target.set_from_snapshot(snapshot);
+        let changed = self.changed(&self.target, now);
+        if changed & bit(Record::Counters) == 0 {
+            // Not due (or unchanged): the target stays the stored records but for the changes.
+            self.target.counters = self.saved.counters;
+            self.slow_due = None;
+        } else {
+            self.slow_due = Some(now);
+        }
+        if changed != 0 {
+            self.begin(changed);
+        }
+        changed.count_ones() as u8
+    }
+
+    /// Start saving `lanes`, and `counters` when given and due (as in [`Store::begin_save`]),
+    /// the settings as stored: whether any differ from the stored ones (`false`: nothing to
+    /// save, no save started). Cheaper than a snapshot when the settings are known unchanged.
+    pub fn begin_changes(&mut self, lanes: [Lane; N], counters: Option<&Counters<N>>, now: Instant) -> bool {
+        let mut changed = 0;
+        if lanes != self.saved.lanes {
+            self.target.lanes = lanes;
+            changed |= bit(Record::Lanes);
+        }
+        self.slow_due = None;
+        if let Some(counters) = counters
+            && *counters != self.saved.counters
+            && self.slow_allowed(Some(now))
+        {
+            self.target.counters = *counters;
+            self.slow_due = Some(Some(now));
+            changed |= bit(Record::Counters);
+        }
+        if changed != 0 {
+            self.begin(changed);
+        }
+        changed != 0
+    }
+
+    /// Start forgetting everything but the identity (`X42`): blank records (lanes unknown,
+    /// counters zero, no settings) written as ordinary entries, so a power cut leaves each record
+    /// either as it was or blank. (Erasing pages instead could bring old records back: a cut
+    /// erase leaves old entries behind.)
+    pub fn begin_forget(&mut self) {
+        self.target = Records {
+            identity: self.saved.identity.clone(),
+            ..Records::blank()
+        };
+        self.slow_due = None;
+        self.begin(bit(Record::Settings) | bit(Record::Counters) | bit(Record::Lanes));
+    }
+
+    /// Append `records` to the head, or open a fresh page when there is no head to append to.
+    fn begin(&mut self, records: u8) {
+        self.writing = None;
+        self.job = Some(match self.head {
+            Some((_, Some(_))) => Job::Append { pending: records },
+            _ => Job::Move { tries: 0 },
+        });
+    }
+
+    /// Do one bounded piece of the save in progress. A save that fails leaves every record as it
+    /// was or as it was being written; the next one tries again on a fresh page.
+    pub fn step(&mut self) -> Result<Progress, StoreError> {
+        let Some(job) = self.job else {
+            return Ok(Progress {
+                done: true,
+                wrote: false,
+            });
+        };
+        self.flash_work = false;
+        let next = match self.advance(job) {
+            Ok(next) => Ok(next),
+            Err(error) => self.recover(job, error),
+        };
+        self.job = next.as_ref().ok().copied().flatten();
+        match next {
+            Ok(next) => {
+                if next.is_none()
+                    && let Some(at) = self.slow_due.take()
+                {
+                    self.slow_saved_at = at;
+                }
+                Ok(Progress {
+                    done: next.is_none(),
+                    wrote: self.flash_work,
+                })
+            }
+            Err(error) => {
+                self.writing = None;
+                self.slow_due = None;
+                // What the flash holds: the records the failed save did not complete.
+                self.target = self.saved.clone();
+                Err(error)
+            }
+        }
+    }
+
+    /// The most steps a save takes: appending all four records, then every page move it may
+    /// try (pick a page, check it, erase it, copy every record, commit).
+    pub fn max_steps_per_save() -> usize {
+        let check = page_size::<F>().div_ceil(CHECK_CHUNK as u32) as usize;
+        4 * ENTRY_STEPS + usize::from(MOVES_PER_SAVE) * (1 + check + 1 + 5 * ENTRY_STEPS)
+    }
+
+    /// Run the save in progress to its end ([`Store::max_steps_per_save`] steps at most: one
+    /// that does not end by then is given up).
+    pub fn finish(&mut self) -> Result<(), StoreError> {
+        for _ in 0..Self::max_steps_per_save() {
+            if self.step()?.done {
+                return Ok(());
+            }
+        }
+        self.job = None;
+        Err(StoreError::Flash)
+    }
+
+    /// Save what changed, whole (see [`Store::begin_save`]); how many records it wrote.
+    pub fn save(&mut self, snapshot: &Snapshot<N>, now: Option<Instant>) -> Result<u8, StoreError> {
+        let records = self.begin_save(snapshot, now);
+        self.finish()?;
+        Ok(records)
+    }
+
+    /// Forget everything but the identity, whole (see [`Store::begin_forget`]).
+    pub fn forget(&mut self) -> Result<(), StoreError> {
+        self.begin_forget();
+        self.finish()
+    }
+
+    /// Erase the whole region, then write the identity this store knows (nothing before a
+    /// [`Store::load`]) and blank records, whole. For a region that is past saving: unlike
+    /// [`Store::forget`], a cut during it can lose every record.
+    pub fn wipe(&mut self) -> Result<(), StoreError> {
+        self.job = None;
+        for page in 0..self.pages {
+            self.erase(page)?;
+        }
+        self.newest = [None; 4];
+        self.head = None;
+        self.target = Records {
+            identity: self.saved.identity.clone(),
+            ..Records::blank()
+        };
+        self.slow_due = None;
+        self.begin(0);
+        self.finish()
+    }
+
+    /// The records of `next` that differ from the stored ones and are due, as bits.
+    fn changed(&self, next: &Records<N>, now: Option<Instant>) -> u8 {
+        let slow_allowed = self.slow_allowed(now);
+        let saved = &self.saved;
+        let mut changed = 0;
+        for (record, differs) in [
+            (Record::Lanes, next.lanes != saved.lanes),
+            (Record::Settings, next.settings != saved.settings),
+            (Record::Identity, next.identity != saved.identity),
+            (Record::Counters, next.counters != saved.counters && slow_allowed),
+        ] {
+            if differs {
+                changed |= bit(record);
+            }
+        }
+        changed
+    }
+
+    /// Whether counters may be written at `now` (`None`: whenever).
+    fn slow_allowed(&self, now: Option<Instant>) -> bool {
+        now.is_none_or(|now| {
+            self.slow_saved_at
+                .is_none_or(|at| now.millis_since(at) >= SLOW_RECORD_PERIOD_MS)
+        })
+    }
+
+    /// One piece of `job`; the job left (`None`: the save is complete).
+    fn advance(&mut self, job: Job) -> Result<Option<Job>, StoreError> {
+        if self.writing.is_some() {
+            return self.program_chunk(job);
+        }
+        match job {
+            Job::Append { pending } => {
+                let (Some(record), Some((page, _))) = (
+                    Record::ALL.into_iter().find(|&r| pending & bit(r) != 0),
+                    self.head,
+                ) else {
+                    return Ok(None);
+                };
+                self.prepare(page, record as u8, Some(record))?;
+                self.program_small(Job::Append {
+                    pending: pending & !bit(record),
+                })
+            }
+            Job::Move { tries } => {
+                let after = self.head.map_or(self.pages - 1, |(page, _)| page);
+                let page = (1..self.pages)
+                    .map(|step| (after + step) % self.pages)
+                    .find(|&page| self.newest.iter().flatten().all(|newest| newest.page != page))
+                    .ok_or(StoreError::Flash)?;
+                // Whatever happens next, the page after this one is tried next.
+                self.head = Some((page, None));
+                self.placed = [None; 4];
+                Ok(Some(Job::Open {
+                    page,
+                    tries,
+                    stage: Stage::Check { offset: 0 },
+                }))
+            }
+            Job::Open { page, tries, stage } => {
+                let stage = match stage {
+                    Stage::Check { offset } => self.check_erased(page, offset),
+                    Stage::Erase => {
+                        self.erase(page)?;
+                        self.head = Some((page, Some(0)));
+                        Stage::Copy { next: 0 }
+                    }
+                    Stage::Copy { next } => {
+                        let record = Record::ALL.get(usize::from(next)).copied();
+                        self.prepare(page, record.map_or(COMMIT, |r| r as u8), record)?;
+                        return self.program_small(Job::Open {
+                            page,
+                            tries,
+                            stage: Stage::Copy { next: next + 1 },
+                        });
+                    }
+                };
+                Ok(Some(Job::Open { page, tries, stage }))
+            }
+        }
+    }
+
+    /// After a failed piece of `job`: move to a fresh page, unless this save has moved as often
+    /// as it may.
+    fn recover(&mut self, job: Job, error: StoreError) -> Result<Option<Job>, StoreError> {
+        self.writing = None;
+        let tries = match job {
+            Job::Append { .. } => 0,
+            Job::Move { tries } | Job::Open { tries, .. } => tries + 1,
+        };
+        if tries >= MOVES_PER_SAVE || error == StoreError::Layout {
+            return Err(error);
+        }
+        Ok(Some(Job::Move { tries }))
+    }
+
+    /// Check the next slice of `page` from `offset`: the stage that follows.
+    fn check_erased(&mut self, page: u32, offset: u32) -> Stage {
+        let size = page_size::<F>();
+        let mut slice = [0u8; CHECK_CHUNK];
+        let len = CHECK_CHUNK.min((size - offset) as usize);
+        let slice = &mut slice[..len];
+        let start = self.page_address(page) + offset;
+        // A fold, not `any`: no branch per byte (a third of the instructions on the M0+).
+        if self.flash.read(start, slice).is_err() || slice.iter().fold(0xff, |all, &b| all & b) != 0xff {
+            return Stage::Erase;
+        }
+        if offset + len as u32 >= size {
+            self.head = Some((page, Some(0)));
+            return Stage::Copy { next: 0 };
+        }
+        Stage::Check {
+            offset: offset + len as u32,
+        }
+    }
+
+    pub(super) fn erase(&mut self, page: u32) -> Result<(), StoreError> {
+        if self.erase_allowance == 0 {
+            return Err(StoreError::EraseBudget);
+        }
+        self.erase_allowance -= 1;
+        self.erases = self.erases.saturating_add(1);
+        self.flash_work = true;
+        let start = self.page_address(page);
+        self.flash
+            .erase(start, start + page_size::<F>())
+            .map_err(|_| StoreError::Flash)
+    }
+
+    /// Lay out the entry (`key`, `record` of the target, or no payload) for the head `page`'s
+    /// tail. The head is closed until the entry is complete, so that a save that fails on the way
+    /// leaves the next one to a fresh page.
+    fn prepare(&mut self, page: u32, key: u8, record: Option<Record>) -> Result<(), StoreError> {
+        let Some((_, Some(offset))) = self.head else {
+            return Err(StoreError::Flash);
+        };
+        self.head = Some((page, None));
+        let payload = record
+            .map(|record| self.target.encode(record))
+            .unwrap_or_default();
+        if offset as usize + entry_size(payload.len()) > F::ERASE_SIZE {
+            return Err(StoreError::Full);
+        }
+        let sequence = self.next_sequence;
+        // Spent even if the entry is never completed: a torn entry must not share its number.
+        self.next_sequence = sequence.wrapping_add(1);
+        self.writing = Some(Writing {
+            entry: EntryWriter::new(&mut self.buffer, key, sequence, &payload),
+            key,
+            place: Newest {
+                sequence,
+                page,
+                offset,
+            },
+        });
+        Ok(())
+    }
+
+    /// Right after [`Store::prepare`]: program the entry now if it is small, else in the next
+    /// step.
+    fn program_small(&mut self, job: Job) -> Result<Option<Job>, StoreError> {
+        match &self.writing {
+            Some(writing) if writing.entry.size() <= ONE_STEP_ENTRY => self.program_chunk(job),
+            _ => Ok(Some(job)),
+        }
+    }
+
+    /// Program the next chunk of the entry being written (only where the flash reads erased: a
+    /// double word is programmed once, PROGERR otherwise); once it is complete, account for it.
+    fn program_chunk(&mut self, job: Job) -> Result<Option<Job>, StoreError> {
+        let Some(writing) = self.writing.as_mut() else {
+            return Ok(Some(job));
+        };
+        let place = writing.place;
+        let Some((offset, bytes)) = writing.entry.next_chunk(&mut self.buffer, PROGRAM_CHUNK) else {
+            return Err(StoreError::Flash);
+        };
+        let done = offset + bytes.len() == writing.entry.size();
+        let address = self.base + place.page * page_size::<F>() + place.offset + offset as u32;
+        let mut target = [0u8; PROGRAM_CHUNK];
+        let target = &mut target[..bytes.len()];
+        if self.flash.read(address, target).is_err() || target.iter().any(|&b| b != 0xff) {
+            return Err(StoreError::Flash);
+        }
+        self.flash_work = true;
+        self.flash.write(address, bytes).map_err(|_| StoreError::Flash)?;
+        if !done {
+            return Ok(Some(job));
+        }
+        let size = writing.entry.size() as u32;
+        let key = writing.key;
+        self.writing = None;
+        self.head = Some((place.page, Some(place.offset + size)));
+        Ok(self.entry_written(job, key, place))
+    }
+
+    /// An entry of `job` is complete: the job left.
+    fn entry_written(&mut self, job: Job, key: u8, place: Newest) -> Option<Job> {
+        let record = Record::from_key(key);
+        match job {
+            Job::Append { pending } => {
+                if let Some(record) = record {
+                    self.newest[record.index()] = Some(place);
+                    self.saved.copy_record(record, &self.target);
+                }
+                (pending != 0).then_some(job)
+            }
+            Job::Open { .. } => match record {
+                Some(record) => {
+                    self.placed[record.index()] = Some(place);
+                    Some(job)
+                }
+                // The commit: the fresh page holds every record's newest copy.
+                None => {
+                    self.newest = self.placed;
+                    self.saved = self.target.clone();
+                    None
+                }
+            },
+            Job::Move { .. } => Some(job),
+        }
+    }
+}
