@@ -216,10 +216,14 @@ impl<F: NorFlash, const N: usize> Keeper<F, N> {
     fn top_up(&mut self, now: Instant) {
         const PERIOD_MS: u64 = 3_600_000 / ERASES_PER_HOUR as u64;
         let since = *self.refilled_at.get_or_insert(now);
-        let earned = now.millis_since(since) / PERIOD_MS;
         if self.erase_credit >= ERASE_BURST {
             self.refilled_at = Some(now);
-        } else if earned > 0 {
+            return;
+        }
+        // Divides (a 64-bit library call on the M0+) only once a period has passed.
+        let elapsed = now.millis_since(since);
+        if elapsed >= PERIOD_MS {
+            let earned = elapsed / PERIOD_MS;
             self.erase_credit = (self.erase_credit + earned as u32).min(ERASE_BURST);
             self.refilled_at = Some(Instant::from_millis(since.as_millis() + earned * PERIOD_MS));
         }
