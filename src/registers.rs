@@ -446,17 +446,18 @@ pub fn write(target: &mut Target, slots: usize, address: u8, value: u16) -> bool
 
 /// Every setting register of a unit with `slots` slots (writable, held in [`Config`]; not the
 /// printer's sensor state) whose value in `config` differs from `defaults`, in table order, as
-/// many as fit `settings`.
+/// many as fit `settings`. Settings read only the configuration: `hub` only completes the views
+/// (the unit's own, so that no default hub is built: the snapshot is taken within a control step).
 pub fn changed_settings<const CAP: usize>(
     config: &Config,
     defaults: &Config,
+    hub: &Hub,
     slots: usize,
     settings: &mut heapless::Vec<(u8, u16), CAP>,
 ) {
-    let hub = Hub::default();
     let view = |config| View {
         config,
-        hub: &hub,
+        hub,
         feeders: &[],
         lanes: &[],
         fsensor: 0,
