@@ -107,25 +107,21 @@ impl Window {
         sorted.sort_unstable();
         sorted.get(sorted.len() / 2).copied().unwrap_or(0)
     }
-
-    /// The mean, rounded down.
-    fn mean(&self) -> u16 {
-        let values = self.filled();
-        let sum: u32 = values.iter().map(|&v| u32::from(v)).sum();
-        divide_small(sum, values.len()) as u16
-    }
 }
 
-/// A [`Window`] that keeps its samples sorted as well, for the sliding median: in the steady
-/// state a new sample replaces the oldest one in the sorted copy by insertion (at most
-/// [`MAX_WINDOW`] moves), instead of copying and sorting the whole window every sample. Only while
-/// the window fills up or changes length is the sorted copy rebuilt from the ring (by insertion
-/// too: no sort routine in the image).
+/// A [`Window`] that keeps its samples sorted as well, for the sliding median of any length: in
+/// the steady state a new sample replaces the oldest one in the sorted copy by insertion (at most
+/// [`MAX_WINDOW`] moves), instead of copying and sorting the whole window every sample. The
+/// lengths the default filters use, 3 and 5, take their median from the ring directly with a
+/// few comparisons ([`median_of_3`], [`median_of_5`]); the sorted copy is then out of date and is
+/// rebuilt from the ring (by insertion too: no sort routine in the image) when the window next
+/// needs it, as it is while the window fills up or changes length.
 #[derive(Debug, Clone, Copy)]
 struct MedianWindow {
     ring: Window,
-    /// `ring.filled()` in ascending order.
+    /// `ring.filled()` in ascending order, unless `sorted_stale`.
     sorted: [u16; MAX_WINDOW],
+    sorted_stale: bool,
 }
 
 impl MedianWindow {
@@ -133,31 +129,80 @@ impl MedianWindow {
         MedianWindow {
             ring: Window::new(),
             sorted: [0; MAX_WINDOW],
+            sorted_stale: true,
         }
     }
 
     /// Adds a sample to a window of `capacity`; returns the new median (the upper one of an even
     /// count, as the sort-based median did).
+    #[inline(always)]
     fn push(&mut self, value: u16, capacity: usize) -> u16 {
         let len_before = self.ring.len;
         let replaced = self.ring.push(value, capacity);
         let len = self.ring.len;
+        let [a, b, c, d, e, ..] = self.ring.values;
+        match len {
+            1 => {
+                self.sorted_stale = true;
+                value
+            }
+            3 => {
+                self.sorted_stale = true;
+                median_of_3(a, b, c)
+            }
+            5 => {
+                self.sorted_stale = true;
+                median_of_5(a, b, c, d, e)
+            }
+            _ => self.sorted_median(
+                replaced.filter(|_| len == len_before && !self.sorted_stale),
+                value,
+            ),
+        }
+    }
+
+    /// The median from the sorted copy, after `new` replaced `replaced` in the ring (`None`: the
+    /// copy is rebuilt from the ring).
+    #[inline(never)]
+    fn sorted_median(&mut self, replaced: Option<u16>, new: u16) -> u16 {
+        let len = self.ring.len;
         let sorted = self.sorted.get_mut(..len).unwrap_or(&mut []);
         match replaced {
-            Some(old) if len == len_before => {
+            Some(old) => {
                 if let Some(gap) = sorted.iter().position(|&v| v == old) {
-                    settle(sorted, gap, value);
+                    settle(sorted, gap, new);
                 }
             }
             // Insertion sort of the ring, a sample at a time.
-            _ => {
+            None => {
                 for (end, &sample) in self.ring.filled().iter().enumerate() {
                     settle(sorted.get_mut(..=end).unwrap_or(&mut []), end, sample);
                 }
             }
         }
+        self.sorted_stale = false;
         sorted.get(len / 2).copied().unwrap_or(0)
     }
+}
+
+/// The median of three values.
+#[inline(always)]
+fn median_of_3(a: u16, b: u16, c: u16) -> u16 {
+    let (low, high) = if a < b { (a, b) } else { (b, a) };
+    low.max(high.min(c))
+}
+
+/// The median of five values in six comparisons: the smaller of two ordered pairs' lows is below
+/// three others, so it is not the median, which is then the second lowest of the other four.
+#[inline(always)]
+fn median_of_5(a: u16, b: u16, c: u16, d: u16, e: u16) -> u16 {
+    let (a, b) = if a < b { (a, b) } else { (b, a) };
+    let (c, d) = if c < d { (c, d) } else { (d, c) };
+    // Drop the lowest of a, b, c, d; the other pair's low joins e.
+    let (low, high, x) = if a < c { (c, d, b) } else { (a, b, d) };
+    let (x, y) = if x < e { (x, e) } else { (e, x) };
+    // The second lowest of the ordered pairs (low, high) and (x, y).
+    if low < x { high.min(x) } else { low.min(y) }
 }
 
 /// Puts `new` into the ascending `sorted`, whose element at `gap` is free (replaced), keeping it
@@ -177,6 +222,39 @@ fn settle(sorted: &mut [u16], mut gap: usize, new: u16) {
     }
 }
 
+/// A [`Window`] with the running sum of its samples, for the moving average: a sample adds
+/// itself and takes off the one it replaced, instead of the window being summed every sample.
+#[derive(Debug, Clone, Copy)]
+struct AverageWindow {
+    ring: Window,
+    /// The sum of `ring.filled()`.
+    sum: u32,
+}
+
+impl AverageWindow {
+    const fn new() -> Self {
+        AverageWindow {
+            ring: Window::new(),
+            sum: 0,
+        }
+    }
+
+    /// Adds a sample to a window of `capacity`; returns the new mean, rounded down.
+    #[inline(always)]
+    fn push(&mut self, value: u16, capacity: usize) -> u16 {
+        let len_before = self.ring.len;
+        let replaced = self.ring.push(value, capacity);
+        let len = self.ring.len;
+        self.sum = match replaced {
+            // The same window with one sample replaced (a window that changed length may have
+            // lost several: summed again).
+            Some(old) if len == len_before => self.sum.wrapping_sub(old.into()).wrapping_add(value.into()),
+            _ => self.ring.filled().iter().map(|&v| u32::from(v)).sum(),
+        };
+        divide_small(self.sum, len) as u16
+    }
+}
+
 /// `⌈2³² / d⌉` for every window length `d` from 2 to [`MAX_WINDOW`] (index `d`).
 const RECIPROCALS: [u32; MAX_WINDOW + 1] = {
     let mut table = [0; MAX_WINDOW + 1];
@@ -188,12 +266,19 @@ const RECIPROCALS: [u32; MAX_WINDOW + 1] = {
     table
 };
 
-/// `sum / len` for a sum of at most [`MAX_WINDOW`] `u16` values, without a division: exact for
-/// `sum < 2³² / MAX_WINDOW`, which such a sum always is (`len` 0 counts as 1).
+/// `sum / len` for a sum of at most [`MAX_WINDOW`] `u16` values, without a division: a shift for
+/// the lengths that are powers of two, else exact for `sum < 2³² / MAX_WINDOW`, which such a sum
+/// always is (`len` 0 counts as 1).
+#[inline(always)]
 fn divide_small(sum: u32, len: usize) -> u32 {
-    match RECIPROCALS.get(len) {
-        Some(&reciprocal) if len >= 2 => mul_high(sum, reciprocal),
-        _ => sum,
+    match len {
+        0 | 1 => sum,
+        2 => sum >> 1,
+        4 => sum >> 2,
+        8 => sum >> 3,
+        _ => RECIPROCALS
+            .get(len)
+            .map_or(sum, |&reciprocal| mul_high(sum, reciprocal)),
     }
 }
 
@@ -215,15 +300,57 @@ pub fn div1000(x: u32) -> u32 {
     mul_high(x, 0x1062_4dd3) >> 6
 }
 
+/// The part of the previous smoothed value a smoothing weight keeps, `⌊previous × (1000 − w) /
+/// 1000⌋`, prepared once per weight: when `1000 − w` is a multiple of 125 (w = 500 keeps four
+/// eighths) it is a multiplication and a shift, else [`div1000`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Decay {
+    /// The weight prepared for, per mille (0: none yet).
+    weight: u16,
+    /// `1000 − weight`.
+    keep: u32,
+    /// `keep / 125`, when that divides evenly: `keep / 1000` is this many eighths.
+    eighths: Option<u32>,
+}
+
+impl Decay {
+    const NONE: Decay = Decay {
+        weight: 0,
+        keep: 0,
+        eighths: None,
+    };
+
+    /// Prepared for `weight` (`1..=1000`).
+    fn new(weight: u16) -> Self {
+        let keep = 1000 - u32::from(weight.clamp(1, 1000));
+        Decay {
+            weight,
+            keep,
+            eighths: (keep % 125 == 0).then_some(keep / 125),
+        }
+    }
+
+    /// `⌊previous × keep / 1000⌋`, for a smoothed value of a sample up to [`mmu_hal_port::ADC_MAX`].
+    #[inline(always)]
+    fn kept(&self, previous: u32) -> u32 {
+        match self.eighths {
+            Some(eighths) => previous.wrapping_mul(eighths) >> 3,
+            None => div1000(previous.wrapping_mul(self.keep)),
+        }
+    }
+}
+
 /// Sliding median, then moving average, then exponential smoothing.
 #[derive(Debug, Clone, Copy)]
 pub struct Filter {
     medians: MedianWindow,
-    averages: Window,
+    averages: AverageWindow,
     /// The smoothed value in 1/1000 counts.
     smoothed_milli: Option<u32>,
     /// The smoothed value rounded to counts (0 before the first sample).
     value: u16,
+    /// The smoothing weight in use, prepared.
+    decay: Decay,
 }
 
 impl Default for Filter {
@@ -237,26 +364,34 @@ impl Filter {
     pub const fn new() -> Self {
         Filter {
             medians: MedianWindow::new(),
-            averages: Window::new(),
+            averages: AverageWindow::new(),
             smoothed_milli: None,
             value: 0,
+            decay: Decay::NONE,
         }
     }
 
     /// Feed one raw sample; returns the filtered value.
+    #[inline(always)]
     pub fn push(&mut self, raw: u16, config: &FilterConfig) -> u16 {
         let median = self.medians.push(raw, config.median.into());
-        self.averages.push(median, config.average.into());
-        let mean = u32::from(self.averages.mean());
-        let weight = u32::from(config.smoothing_permille.clamp(1, 1000));
-        // (previous × (1000 − w) + mean × 1000 × w) / 1000, with the exact part taken out.
-        let smoothed = match self.smoothed_milli {
-            Some(previous) if weight < 1000 => mean * weight + div1000(previous * (1000 - weight)),
-            _ => mean * 1000,
+        let mean = self.averages.push(median, config.average.into());
+        let weight = config.smoothing_permille.clamp(1, 1000);
+        // (previous × (1000 − w) + mean × 1000 × w) / 1000, with the exact part taken out; at
+        // w = 1000 (or on the first sample) it is the mean itself.
+        let (smoothed, value) = match self.smoothed_milli {
+            Some(previous) if weight < 1000 => {
+                if self.decay.weight != weight {
+                    self.decay = Decay::new(weight);
+                }
+                let smoothed = u32::from(mean) * u32::from(weight) + self.decay.kept(previous);
+                (smoothed, div1000(smoothed + 500) as u16)
+            }
+            _ => (u32::from(mean) * 1000, mean),
         };
         self.smoothed_milli = Some(smoothed);
-        self.value = div1000(smoothed + 500) as u16;
-        self.value
+        self.value = value;
+        value
     }
 
     /// The current filtered value (0 before the first sample).
@@ -613,6 +748,66 @@ mod tests {
                 reference.push(raw, &config),
                 "{config:?} at {i}"
             );
+        }
+    }
+
+    #[test]
+    fn medians_of_3_and_5_are_the_middle_of_the_sorted_values() {
+        // Every tuple over six levels: all orders, and every pattern of ties.
+        let levels = [0, 1, 2, 3, 2048, u16::MAX];
+        for &a in &levels {
+            for &b in &levels {
+                for &c in &levels {
+                    let mut sorted = [a, b, c];
+                    sorted.sort_unstable();
+                    assert_eq!(median_of_3(a, b, c), sorted[1], "{a} {b} {c}");
+                    for &d in &levels {
+                        for &e in &levels {
+                            let mut sorted = [a, b, c, d, e];
+                            sorted.sort_unstable();
+                            assert_eq!(median_of_5(a, b, c, d, e), sorted[2], "{a} {b} {c} {d} {e}");
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn every_window_and_weight_filters_as_the_divisions_did() {
+        // The weights whose kept part is a multiple of 125 (a shift) and some that are not, over
+        // every median and average length.
+        let weights = [1, 125, 250, 375, 400, 500, 625, 750, 875, 999, 1000];
+        for median in 1..=MAX_WINDOW as u8 {
+            for average in 1..=MAX_WINDOW as u8 {
+                for permille in weights {
+                    let config = FilterConfig {
+                        median,
+                        average,
+                        smoothing_permille: permille,
+                    };
+                    let mut filter = Filter::new();
+                    let mut reference = DividingFilter {
+                        medians: Window::new(),
+                        averages: Window::new(),
+                        smoothed: None,
+                    };
+                    let mut seed = u32::from(median) * 31 + u32::from(average);
+                    for i in 0..300u32 {
+                        seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                        let raw = if i % 100 < 50 {
+                            40 + (seed >> 28) as u16
+                        } else {
+                            (seed >> 20) as u16
+                        };
+                        assert_eq!(
+                            filter.push(raw, &config),
+                            reference.push(raw, &config),
+                            "{config:?} at {i}"
+                        );
+                    }
+                }
+            }
         }
     }
 
