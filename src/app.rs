@@ -342,7 +342,8 @@ impl<const N: usize> App<N> {
         for (slot, feeder) in self.unit.feeders.iter().enumerate() {
             let odometry = feeder.odometry_centi();
             let seen = core::mem::replace(&mut self.odometry_seen[slot], odometry);
-            if driving == Some(slot) {
+            // Only on a revolution: the millimetres are a 64-bit division.
+            if driving == Some(slot) && odometry != seen {
                 self.fed_centi[slot] += u64::from(odometry.abs_diff(seen));
                 self.counters.fed_mm[slot] = u32::try_from(self.fed_centi[slot] / 100).unwrap_or(u32::MAX);
             }

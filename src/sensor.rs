@@ -300,9 +300,11 @@ pub fn div1000(x: u32) -> u32 {
     mul_high(x, 0x1062_4dd3) >> 6
 }
 
-/// The part of the previous smoothed value a smoothing weight keeps, `⌊previous × (1000 − w) /
-/// 1000⌋`, prepared once per weight: when `1000 − w` is a multiple of 125 (w = 500 keeps four
-/// eighths) it is a multiplication and a shift, else [`div1000`].
+/// One step of the exponential smoothing for one weight `w`, prepared once per weight:
+/// `next = ⌊(previous × (1000 − w) + mean × 1000 × w) / 1000⌋` in 1/1000 counts, as the
+/// divisions computed it. A smoothed value is kept as whole counts and thousandths
+/// ([`Smoothed`]). When `1000 − w` is a multiple of 125 (w = 500 keeps four eighths) the step
+/// needs no division at all (see [`Decay::next`]); other weights take two [`div1000`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 struct Decay {
     /// The weight prepared for, per mille (0: none yet).
@@ -311,6 +313,13 @@ struct Decay {
     keep: u32,
     /// `keep / 125`, when that divides evenly: `keep / 1000` is this many eighths.
     eighths: Option<u32>,
+}
+
+/// A smoothed value `counts + thousandths / 1000`, `thousandths < 1000`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Smoothed {
+    counts: u32,
+    thousandths: u32,
 }
 
 impl Decay {
@@ -330,12 +339,39 @@ impl Decay {
         }
     }
 
-    /// `⌊previous × keep / 1000⌋`, for a smoothed value of a sample up to [`mmu_hal_port::ADC_MAX`].
+    /// The smoothed value after `previous` took in `mean`, for values of samples up to
+    /// [`mmu_hal_port::ADC_MAX`].
+    ///
+    /// With `keep = 125 k` and `previous = 1000 q + r`: `⌊previous × k / 8⌋ = 125 k q + ⌊r k / 8⌋`
+    /// and `mean × w = 1000 mean − 125 k mean`, so with `d = k (q − mean)` the next value is
+    /// `1000 (mean + ⌊d / 8⌋) + 125 (d mod 8) + ⌊r k / 8⌋`, whose last two terms are below 2000:
+    /// shifts, masks and at most one carry.
     #[inline(always)]
-    fn kept(&self, previous: u32) -> u32 {
+    fn next(&self, previous: Smoothed, mean: u16) -> Smoothed {
+        let mean = u32::from(mean);
         match self.eighths {
-            Some(eighths) => previous.wrapping_mul(eighths) >> 3,
-            None => div1000(previous.wrapping_mul(self.keep)),
+            Some(k) => {
+                let d = (previous.counts.wrapping_sub(mean) as i32).wrapping_mul(k as i32);
+                let counts = mean.wrapping_add((d >> 3) as u32);
+                let thousandths = 125 * (d & 7) as u32 + ((previous.thousandths * k) >> 3);
+                if thousandths >= 1000 {
+                    Smoothed {
+                        counts: counts + 1,
+                        thousandths: thousandths - 1000,
+                    }
+                } else {
+                    Smoothed { counts, thousandths }
+                }
+            }
+            None => {
+                let previous = previous.counts * 1000 + previous.thousandths;
+                let next = mean * u32::from(self.weight) + div1000(previous.wrapping_mul(self.keep));
+                let counts = div1000(next);
+                Smoothed {
+                    counts,
+                    thousandths: next - counts * 1000,
+                }
+            }
         }
     }
 }
@@ -345,8 +381,8 @@ impl Decay {
 pub struct Filter {
     medians: MedianWindow,
     averages: AverageWindow,
-    /// The smoothed value in 1/1000 counts.
-    smoothed_milli: Option<u32>,
+    /// The smoothed value (`None` before the first sample).
+    smoothed: Option<Smoothed>,
     /// The smoothed value rounded to counts (0 before the first sample).
     value: u16,
     /// The smoothing weight in use, prepared.
@@ -365,7 +401,7 @@ impl Filter {
         Filter {
             medians: MedianWindow::new(),
             averages: AverageWindow::new(),
-            smoothed_milli: None,
+            smoothed: None,
             value: 0,
             decay: Decay::NONE,
         }
@@ -377,21 +413,23 @@ impl Filter {
         let median = self.medians.push(raw, config.median.into());
         let mean = self.averages.push(median, config.average.into());
         let weight = config.smoothing_permille.clamp(1, 1000);
-        // (previous × (1000 − w) + mean × 1000 × w) / 1000, with the exact part taken out; at
-        // w = 1000 (or on the first sample) it is the mean itself.
-        let (smoothed, value) = match self.smoothed_milli {
+        // At w = 1000 (or on the first sample) the smoothed value is the mean itself.
+        let smoothed = match self.smoothed {
             Some(previous) if weight < 1000 => {
                 if self.decay.weight != weight {
                     self.decay = Decay::new(weight);
                 }
-                let smoothed = u32::from(mean) * u32::from(weight) + self.decay.kept(previous);
-                (smoothed, div1000(smoothed + 500) as u16)
+                self.decay.next(previous, mean)
             }
-            _ => (u32::from(mean) * 1000, mean),
+            _ => Smoothed {
+                counts: mean.into(),
+                thousandths: 0,
+            },
         };
-        self.smoothed_milli = Some(smoothed);
-        self.value = value;
-        value
+        self.smoothed = Some(smoothed);
+        // Rounded half up.
+        self.value = (smoothed.counts + u32::from(smoothed.thousandths >= 500)) as u16;
+        self.value
     }
 
     /// The current filtered value (0 before the first sample).
