@@ -2,7 +2,7 @@
 """Runs the step-cost harness (bench-mcu/harness, thumbv6m) in the Unicorn emulator on a
 recorded session and reports instructions per control step, per save and the stack they use.
 
-    run.py HARNESS_ELF SESSION_BIN [--max-worst N] [--max-idle N] [--exact-steps N]
+    run.py HARNESS_ELF SESSION_BIN [--max-worst N] [--max-step N] [--max-idle N] [--exact-steps N]
 
 Unicorn (PyPI `unicorn`) runs the ELF as a Cortex-M0 (ARMv6-M: an instruction the M0+ lacks
 faults). Counting is exact: every translated block is counted with its instructions (16-bit
@@ -287,6 +287,8 @@ def main():
     parser.add_argument("session")
     parser.add_argument("--max-worst", type=int, help="fail if the worst step + save exceeds this")
     parser.add_argument("--max-idle", type=int, help="fail if the idle median exceeds this")
+    parser.add_argument("--max-step", type=int,
+                        help="fail if the costliest App::step (a query burst included) exceeds this")
     parser.add_argument("--max-save", type=int, help="fail if the costliest save exceeds this")
     parser.add_argument("--profile", type=int, metavar="STEPS",
                         help="only list the functions App::step spends its instructions in over the first STEPS steps")
@@ -381,6 +383,7 @@ def main():
 
     status = 0
     for limit, value, what in ((args.max_worst, worst_tick, "worst step + save"),
+                               (args.max_step, worst_step[1], "costliest step"),
                                (args.max_idle, idle_median, "idle median"),
                                (args.max_save, save_max, "costliest save")):
         if limit is not None and value > limit:

@@ -24,8 +24,10 @@ use crate::runner::{Learned, Runner, Status};
 use crate::time::Instant;
 use crate::unit::{Lane, Unit};
 
-/// Room for the bytes one step may send (several complete responses).
-pub const TX_CAPACITY: usize = 96;
+/// Room for the bytes one step may send: the answers to every request the at most
+/// `control::MAX_RX_PER_STEP` bytes a step takes can complete (three, asserted in `control`).
+/// Kept small: the outputs are copied out of every step.
+pub const TX_CAPACITY: usize = 48;
 
 /// `X` value that erases persisted data before the reset.
 const ERASE_AND_RESET: u8 = 42;

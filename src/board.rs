@@ -51,8 +51,8 @@ pub const WATCHDOG_TIMEOUT_US: u32 = 100_000;
 const SAMPLE_TIME: SampleTime = SampleTime::CYCLES79_5;
 /// Printer UART ring buffers. RX holds what arrives while the control loop does not step for
 /// `control::RX_GAP_MS` with the printer sending without pause, plus what a step leaves waiting
-/// (a step takes at most `control::MAX_RX_PER_STEP` bytes); TX more than two steps' worth of
-/// responses (`mmu_firmware::TX_CAPACITY` = 96).
+/// (a step takes at most `control::MAX_RX_PER_STEP` bytes); TX more than five steps' worth of
+/// responses (`mmu_firmware::TX_CAPACITY` = 48).
 const RX_RING: usize = mmu_firmware::control::RX_RING;
 const TX_RING: usize = 256;
 
