@@ -11,7 +11,7 @@
 //! a division is a library call of about a hundred instructions, so a sample costs as little as
 //! the pipeline allows: medians of 3 and 5 by a few comparisons (longer windows stay sorted by
 //! insertion), the average from a running sum divided by a shift or a reciprocal
-//! ([`divide_small`]), the smoothing in whole counts and thousandths ([`Decay`]: shifts for the
+//! (`divide_small`), the smoothing in whole counts and thousandths (`Decay`: shifts for the
 //! usual weights, [`div1000`] for the others), and the default settings as constants the
 //! compiler folds. The results are exactly those of the sort and divisions they replace (see the
 //! tests).
