@@ -111,79 +111,50 @@ impl Window {
     }
 }
 
-/// A [`Window`] that keeps its samples sorted as well, for the sliding median of any length: in
-/// the steady state a new sample replaces the oldest one in the sorted copy by insertion (at most
-/// [`MAX_WINDOW`] moves), instead of copying and sorting the whole window every sample. The
-/// lengths the default filters use, 3 and 5, take their median from the ring directly with a
-/// few comparisons ([`median_of_3`], [`median_of_5`]); the sorted copy is then out of date and is
-/// rebuilt from the ring (by insertion too: no sort routine in the image) when the window next
-/// needs it, as it is while the window fills up or changes length.
+/// A [`Window`] for the sliding median. The lengths the default filters use, 3 and 5, take their
+/// median from the ring directly with a few comparisons ([`median_of_3`], [`median_of_5`]); any
+/// other length (a window filling up, other settings) sorts a copy of the window.
 #[derive(Debug, Clone, Copy)]
 struct MedianWindow {
     ring: Window,
-    /// `ring.filled()` in ascending order, unless `sorted_stale`.
-    sorted: [u16; MAX_WINDOW],
-    sorted_stale: bool,
 }
 
 impl MedianWindow {
     const fn new() -> Self {
-        MedianWindow {
-            ring: Window::new(),
-            sorted: [0; MAX_WINDOW],
-            sorted_stale: true,
-        }
+        MedianWindow { ring: Window::new() }
     }
 
     /// Adds a sample to a window of `capacity`; returns the new median (the upper one of an even
-    /// count, as the sort-based median did).
+    /// count).
     #[inline(always)]
     fn push(&mut self, value: u16, capacity: usize) -> u16 {
-        let len_before = self.ring.len;
-        let replaced = self.ring.push(value, capacity);
-        let len = self.ring.len;
+        self.ring.push(value, capacity);
         let [a, b, c, d, e, ..] = self.ring.values;
-        match len {
-            1 => {
-                self.sorted_stale = true;
-                value
-            }
-            3 => {
-                self.sorted_stale = true;
-                median_of_3(a, b, c)
-            }
-            5 => {
-                self.sorted_stale = true;
-                median_of_5(a, b, c, d, e)
-            }
-            _ => self.sorted_median(
-                replaced.filter(|_| len == len_before && !self.sorted_stale),
-                value,
-            ),
+        match self.ring.len {
+            1 => value,
+            3 => median_of_3(a, b, c),
+            5 => median_of_5(a, b, c, d, e),
+            _ => self.sorted_median(),
         }
     }
 
-    /// The median from the sorted copy, after `new` replaced `replaced` in the ring (`None`: the
-    /// copy is rebuilt from the ring).
+    /// The median of a sorted copy of the window (sorted by insertion: no sort routine in the
+    /// image).
     #[inline(never)]
-    fn sorted_median(&mut self, replaced: Option<u16>, new: u16) -> u16 {
-        let len = self.ring.len;
-        let sorted = self.sorted.get_mut(..len).unwrap_or(&mut []);
-        match replaced {
-            Some(old) => {
-                if let Some(gap) = sorted.iter().position(|&v| v == old) {
-                    settle(sorted, gap, new);
-                }
+    fn sorted_median(&self) -> u16 {
+        let mut sorted = [0u16; MAX_WINDOW];
+        let filled = self.ring.filled();
+        for (end, &sample) in filled.iter().enumerate() {
+            let mut at = end;
+            while at > 0 && sorted[at - 1] > sample {
+                sorted[at] = sorted[at - 1];
+                at -= 1;
             }
-            // Insertion sort of the ring, a sample at a time.
-            None => {
-                for (end, &sample) in self.ring.filled().iter().enumerate() {
-                    settle(sorted.get_mut(..=end).unwrap_or(&mut []), end, sample);
-                }
+            if let Some(slot) = sorted.get_mut(at) {
+                *slot = sample;
             }
         }
-        self.sorted_stale = false;
-        sorted.get(len / 2).copied().unwrap_or(0)
+        sorted.get(filled.len() / 2).copied().unwrap_or(0)
     }
 }
 
@@ -205,23 +176,6 @@ fn median_of_5(a: u16, b: u16, c: u16, d: u16, e: u16) -> u16 {
     let (x, y) = if x < e { (x, e) } else { (e, x) };
     // The second lowest of the ordered pairs (low, high) and (x, y).
     if low < x { high.min(x) } else { low.min(y) }
-}
-
-/// Puts `new` into the ascending `sorted`, whose element at `gap` is free (replaced), keeping it
-/// ascending: the gap moves to `new`'s place.
-#[inline(always)]
-fn settle(sorted: &mut [u16], mut gap: usize, new: u16) {
-    while gap + 1 < sorted.len() && sorted[gap + 1] < new {
-        sorted[gap] = sorted[gap + 1];
-        gap += 1;
-    }
-    while gap > 0 && gap < sorted.len() && sorted[gap - 1] > new {
-        sorted[gap] = sorted[gap - 1];
-        gap -= 1;
-    }
-    if let Some(slot) = sorted.get_mut(gap) {
-        *slot = new;
-    }
 }
 
 /// A [`Window`] with the running sum of its samples, for the moving average: a sample adds
@@ -317,20 +271,15 @@ struct Decay {
     eighths: Option<u32>,
 }
 
-/// A smoothed value `counts + thousandths / 1000`, `thousandths < 1000`.
+/// A smoothed value `counts + thousandths / 1000`, `thousandths < 1000` (a smoothed value is
+/// never above the largest sample).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 struct Smoothed {
-    counts: u32,
-    thousandths: u32,
+    counts: u16,
+    thousandths: u16,
 }
 
 impl Decay {
-    const NONE: Decay = Decay {
-        weight: 0,
-        keep: 0,
-        eighths: None,
-    };
-
     /// Prepared for `weight` (`1..=1000`).
     const fn new(weight: u16) -> Self {
         let keep = 1000
@@ -341,10 +290,19 @@ impl Decay {
             } else {
                 weight as u32
             };
+        // Without a division: other weights prepare it every sample.
+        let mut eighths = None;
+        let mut k = 0;
+        while k < 8 {
+            if k * 125 == keep {
+                eighths = Some(k);
+            }
+            k += 1;
+        }
         Decay {
             weight,
             keep,
-            eighths: if keep % 125 == 0 { Some(keep / 125) } else { None },
+            eighths,
         }
     }
 
@@ -357,6 +315,19 @@ impl Decay {
     /// shifts, masks and at most one carry.
     #[inline(always)]
     fn next(&self, previous: Smoothed, mean: u16) -> Smoothed {
+        let (counts, thousandths) = self.next_wide(u32::from(previous.counts), u32::from(previous.thousandths), mean);
+        Smoothed {
+            counts: counts as u16,
+            thousandths: thousandths as u16,
+        }
+    }
+
+    #[inline(always)]
+    fn next_wide(&self, previous_counts: u32, previous_thousandths: u32, mean: u16) -> (u32, u32) {
+        let previous = Smoothed32 {
+            counts: previous_counts,
+            thousandths: previous_thousandths,
+        };
         let mean = u32::from(mean);
         match self.eighths {
             Some(k) => {
@@ -364,25 +335,25 @@ impl Decay {
                 let counts = mean.wrapping_add((d >> 3) as u32);
                 let thousandths = 125 * (d & 7) as u32 + ((previous.thousandths * k) >> 3);
                 if thousandths >= 1000 {
-                    Smoothed {
-                        counts: counts + 1,
-                        thousandths: thousandths - 1000,
-                    }
+                    (counts + 1, thousandths - 1000)
                 } else {
-                    Smoothed { counts, thousandths }
+                    (counts, thousandths)
                 }
             }
             None => {
                 let previous = previous.counts * 1000 + previous.thousandths;
                 let next = mean * u32::from(self.weight) + div1000(previous.wrapping_mul(self.keep));
                 let counts = div1000(next);
-                Smoothed {
-                    counts,
-                    thousandths: next - counts * 1000,
-                }
+                (counts, next - counts * 1000)
             }
         }
     }
+}
+
+/// [`Smoothed`] widened for the arithmetic.
+struct Smoothed32 {
+    counts: u32,
+    thousandths: u32,
 }
 
 /// The presence sensors' default filter (`Config::default`).
@@ -392,6 +363,7 @@ const PRESENCE_DEFAULT: FilterConfig = FilterConfig {
     smoothing_permille: 500,
 };
 const PRESENCE_DECAY: Decay = Decay::new(PRESENCE_DEFAULT.smoothing_permille);
+const MOTOR_DECAY: Decay = Decay::new(MOTOR_DEFAULT.smoothing_permille);
 /// The motor Hall sensors' default filter (`Config::default`).
 const MOTOR_DEFAULT: FilterConfig = FilterConfig {
     median: 3,
@@ -408,8 +380,6 @@ pub struct Filter {
     smoothed: Option<Smoothed>,
     /// The smoothed value rounded to counts (0 before the first sample).
     value: u16,
-    /// The smoothing weight in use, prepared.
-    decay: Decay,
 }
 
 impl Default for Filter {
@@ -426,7 +396,6 @@ impl Filter {
             averages: AverageWindow::new(),
             smoothed: None,
             value: 0,
-            decay: Decay::NONE,
         }
     }
 
@@ -437,18 +406,26 @@ impl Filter {
         // their clamps, window dispatch and smoothing preparation away, a fifth of a sample's
         // instructions. Any other setting takes the same steps with its values.
         match *config {
-            PRESENCE_DEFAULT => self.push_with(raw, 5, 4, 500, Some(&PRESENCE_DECAY)),
-            MOTOR_DEFAULT => self.push_with(raw, 3, 1, 1000, None),
-            FilterConfig {
-                median,
-                average,
-                smoothing_permille,
-            } => self.push_with(raw, median.into(), average.into(), smoothing_permille, None),
+            PRESENCE_DEFAULT => self.push_with(raw, 5, 4, 500, PRESENCE_DECAY),
+            MOTOR_DEFAULT => self.push_with(raw, 3, 1, 1000, MOTOR_DECAY),
+            _ => self.push_any(raw, config),
         }
     }
 
-    /// [`Self::push`] with the settings spelled out; `decay`, when given, is the prepared
-    /// `smoothing_permille`.
+    /// [`Self::push`] with any settings, out of line (one copy of the pipeline for them).
+    #[inline(never)]
+    fn push_any(&mut self, raw: u16, config: &FilterConfig) -> u16 {
+        let decay = Decay::new(config.smoothing_permille);
+        self.push_with(
+            raw,
+            config.median.into(),
+            config.average.into(),
+            config.smoothing_permille,
+            decay,
+        )
+    }
+
+    /// [`Self::push`] with the settings spelled out; `decay` is `smoothing_permille` prepared.
     #[inline(always)]
     fn push_with(
         &mut self,
@@ -456,30 +433,22 @@ impl Filter {
         median: usize,
         average: usize,
         smoothing_permille: u16,
-        decay: Option<&Decay>,
+        decay: Decay,
     ) -> u16 {
         let median = self.medians.push(raw, median);
         let mean = self.averages.push(median, average);
         let weight = smoothing_permille.clamp(1, 1000);
         // At w = 1000 (or on the first sample) the smoothed value is the mean itself.
         let smoothed = match self.smoothed {
-            Some(previous) if weight < 1000 => match decay {
-                Some(decay) => decay.next(previous, mean),
-                None => {
-                    if self.decay.weight != weight {
-                        self.decay = Decay::new(weight);
-                    }
-                    self.decay.next(previous, mean)
-                }
-            },
+            Some(previous) if weight < 1000 => decay.next(previous, mean),
             _ => Smoothed {
-                counts: mean.into(),
+                counts: mean,
                 thousandths: 0,
             },
         };
         self.smoothed = Some(smoothed);
         // Rounded half up.
-        self.value = (smoothed.counts + u32::from(smoothed.thousandths >= 500)) as u16;
+        self.value = smoothed.counts + u16::from(smoothed.thousandths >= 500);
         self.value
     }
 
