@@ -14,15 +14,15 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 # The budget. The goal (issue 14) is a worst step incl. a burst and a save under 25 % of 1 ms
-# (7272 instructions at 2.2 cycles/instr, 64 MHz) and idle under 10 % (2909). The costliest step
-# alone (a query burst, taken at most control::MAX_RX_PER_STEP bytes a step) meets the 7272;
-# idle and the step + save do not yet: until they do, these hold the current figures plus a
-# margin (the counts are exact and deterministic), so a regression fails. Measured 2026-11-22:
-# idle 3205, costliest step 6705, worst step + save 44225, save 41028 (the costliest: the save
-# at step 1000, src/persist's own store).
-MAX_WORST="${MAX_WORST:-46000}"
+# (7272 instructions at 2.2 cycles/instr, 64 MHz) and idle under 10 % (2909). Idle and the
+# costliest step alone (a query burst, taken at most control::MAX_RX_PER_STEP bytes a step) meet
+# it and are held to it; a step with a save in the same millisecond does not yet: until it does,
+# MAX_WORST holds the current figure plus a margin (the counts are exact and deterministic), so a
+# regression fails. Measured 2026-11-22: idle 2730, costliest step 6238, worst step + save
+# 43238, save 40516 (the costliest: the save at step 1000, src/persist's own store).
+MAX_WORST="${MAX_WORST:-45000}"
 MAX_STEP="${MAX_STEP:-7272}"
-MAX_IDLE="${MAX_IDLE:-3400}"
+MAX_IDLE="${MAX_IDLE:-2909}"
 MAX_SAVE="${MAX_SAVE:-43000}"
 
 target_dir="${CARGO_TARGET_DIR:-target}"

@@ -315,7 +315,8 @@ impl Decay {
     /// shifts, masks and at most one carry.
     #[inline(always)]
     fn next(&self, previous: Smoothed, mean: u16) -> Smoothed {
-        let (counts, thousandths) = self.next_wide(u32::from(previous.counts), u32::from(previous.thousandths), mean);
+        let (counts, thousandths) =
+            self.next_wide(u32::from(previous.counts), u32::from(previous.thousandths), mean);
         Smoothed {
             counts: counts as u16,
             thousandths: thousandths as u16,

@@ -17,8 +17,8 @@ use core::panic::PanicInfo;
 use embassy_futures::block_on;
 use embedded_storage_async::nor_flash::{ErrorType, NorFlash, NorFlashErrorKind, ReadNorFlash};
 use mmu_firmware::control::{RX_RING, RxQueue};
-use mmu_firmware::runner::Status;
 use mmu_firmware::persist::{Keeper, Store};
+use mmu_firmware::runner::Status;
 use mmu_firmware::{App, Config, HubSamples, Instant, Outputs, Samples, SlotSamples};
 
 const SLOTS: usize = 3;
@@ -243,7 +243,12 @@ pub extern "C" fn bench_main() -> ! {
         mark(Mark::StepBegin, index, 0, 0);
         let out = step(&mut app, now, &samples, &rx);
         let (info, code) = context(&app, rx.len());
-        mark(Mark::StepEnd, index, info, code | ((waiting.min(0xffff) as u32) << 16));
+        mark(
+            Mark::StepEnd,
+            index,
+            info,
+            code | ((waiting.min(0xffff) as u32) << 16),
+        );
         for &byte in out.tx.iter() {
             digest = (digest ^ u32::from(byte)).wrapping_mul(0x0100_0193);
         }

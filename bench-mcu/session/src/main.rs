@@ -25,8 +25,8 @@ use std::collections::VecDeque;
 use std::error::Error;
 
 use mmu_firmware::control::{RX_RING, RxQueue};
-use mmu_firmware::runner::Status;
 use mmu_firmware::persist::Snapshot;
+use mmu_firmware::runner::Status;
 use mmu_firmware::{App, Config, Instant, Samples};
 use mmu_model::{Fault, FaultKind, Model, ModelConfig};
 use mmu_protocol::{ButtonCode, ErrorCode, ProgressCode, Request, RequestCode};
