@@ -280,16 +280,16 @@ struct Smoothed {
 }
 
 impl Decay {
-    /// Prepared for `weight` (`1..=1000`).
+    /// Prepared for `weight`, taken as `1..=1000`.
     const fn new(weight: u16) -> Self {
-        let keep = 1000
-            - if weight > 1000 {
-                1000
-            } else if weight < 1 {
-                1
-            } else {
-                weight as u32
-            };
+        let weight = if weight > 1000 {
+            1000
+        } else if weight < 1 {
+            1
+        } else {
+            weight
+        };
+        let keep = 1000 - weight as u32;
         // Without a division: other weights prepare it every sample.
         let mut eighths = None;
         let mut k = 0;
@@ -315,26 +315,13 @@ impl Decay {
     /// shifts, masks and at most one carry.
     #[inline(always)]
     fn next(&self, previous: Smoothed, mean: u16) -> Smoothed {
-        let (counts, thousandths) =
-            self.next_wide(u32::from(previous.counts), u32::from(previous.thousandths), mean);
-        Smoothed {
-            counts: counts as u16,
-            thousandths: thousandths as u16,
-        }
-    }
-
-    #[inline(always)]
-    fn next_wide(&self, previous_counts: u32, previous_thousandths: u32, mean: u16) -> (u32, u32) {
-        let previous = Smoothed32 {
-            counts: previous_counts,
-            thousandths: previous_thousandths,
-        };
+        let (counts, thousandths) = (u32::from(previous.counts), u32::from(previous.thousandths));
         let mean = u32::from(mean);
-        match self.eighths {
+        let (counts, thousandths) = match self.eighths {
             Some(k) => {
-                let d = (previous.counts.wrapping_sub(mean) as i32).wrapping_mul(k as i32);
+                let d = (counts.wrapping_sub(mean) as i32).wrapping_mul(k as i32);
                 let counts = mean.wrapping_add((d >> 3) as u32);
-                let thousandths = 125 * (d & 7) as u32 + ((previous.thousandths * k) >> 3);
+                let thousandths = 125 * (d & 7) as u32 + ((thousandths * k) >> 3);
                 if thousandths >= 1000 {
                     (counts + 1, thousandths - 1000)
                 } else {
@@ -342,19 +329,18 @@ impl Decay {
                 }
             }
             None => {
-                let previous = previous.counts * 1000 + previous.thousandths;
+                let previous = counts * 1000 + thousandths;
                 let next = mean * u32::from(self.weight) + div1000(previous.wrapping_mul(self.keep));
                 let counts = div1000(next);
                 (counts, next - counts * 1000)
             }
+        };
+        // Below the largest sample, so within 16 bits.
+        Smoothed {
+            counts: counts as u16,
+            thousandths: thousandths as u16,
         }
     }
-}
-
-/// [`Smoothed`] widened for the arithmetic.
-struct Smoothed32 {
-    counts: u32,
-    thousandths: u32,
 }
 
 /// The presence sensors' default filter (`Config::default`).
@@ -364,13 +350,13 @@ const PRESENCE_DEFAULT: FilterConfig = FilterConfig {
     smoothing_permille: 500,
 };
 const PRESENCE_DECAY: Decay = Decay::new(PRESENCE_DEFAULT.smoothing_permille);
-const MOTOR_DECAY: Decay = Decay::new(MOTOR_DEFAULT.smoothing_permille);
 /// The motor Hall sensors' default filter (`Config::default`).
 const MOTOR_DEFAULT: FilterConfig = FilterConfig {
     median: 3,
     average: 1,
     smoothing_permille: 1000,
 };
+const MOTOR_DECAY: Decay = Decay::new(MOTOR_DEFAULT.smoothing_permille);
 
 /// Sliding median, then moving average, then exponential smoothing.
 #[derive(Debug, Clone, Copy)]
@@ -843,7 +829,7 @@ mod tests {
     fn every_window_and_weight_filters_as_the_divisions_did() {
         // The weights whose kept part is a multiple of 125 (a shift) and some that are not, over
         // every median and average length.
-        let weights = [1, 125, 250, 375, 400, 500, 625, 750, 875, 999, 1000];
+        let weights = [0, 1, 125, 250, 375, 400, 500, 625, 750, 875, 999, 1000, 1001];
         for median in 1..=MAX_WINDOW as u8 {
             for average in 1..=MAX_WINDOW as u8 {
                 for permille in weights {
