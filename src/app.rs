@@ -24,8 +24,10 @@ use crate::runner::{Learned, Runner, Status};
 use crate::time::Instant;
 use crate::unit::{Lane, Unit};
 
-/// Room for the bytes one step may send (several complete responses).
-pub const TX_CAPACITY: usize = 96;
+/// Room for the bytes one step may send: the answers to every request the at most
+/// `control::MAX_RX_PER_STEP` bytes a step takes can complete (three, asserted in `control`).
+/// Kept small: the outputs are copied out of every step.
+pub const TX_CAPACITY: usize = 48;
 
 /// `X` value that erases persisted data before the reset.
 const ERASE_AND_RESET: u8 = 42;
@@ -342,7 +344,8 @@ impl<const N: usize> App<N> {
         for (slot, feeder) in self.unit.feeders.iter().enumerate() {
             let odometry = feeder.odometry_centi();
             let seen = core::mem::replace(&mut self.odometry_seen[slot], odometry);
-            if driving == Some(slot) {
+            // Only on a revolution: the millimetres are a 64-bit division.
+            if driving == Some(slot) && odometry != seen {
                 self.fed_centi[slot] += u64::from(odometry.abs_diff(seen));
                 self.counters.fed_mm[slot] = u32::try_from(self.fed_centi[slot] / 100).unwrap_or(u32::MAX);
             }

@@ -48,9 +48,11 @@ const PWM_KHZ: u32 = 20;
 pub const WATCHDOG_TIMEOUT_US: u32 = 100_000;
 /// ADC sample time per conversion (ADC clock 32 MHz): 2.5 µs, plenty for a Hall sensor output.
 const SAMPLE_TIME: SampleTime = SampleTime::CYCLES79_5;
-/// Printer UART ring buffers. RX holds 22 ms of back-to-back bytes at 115200 Bd, TX more than two
-/// steps' worth of responses (`mmu_firmware::TX_CAPACITY` = 96).
-const RX_RING: usize = 256;
+/// Printer UART ring buffers. RX holds what arrives while the control loop does not step for
+/// `control::RX_GAP_MS` with the printer sending without pause, plus what a step leaves waiting
+/// (a step takes at most `control::MAX_RX_PER_STEP` bytes); TX more than five steps' worth of
+/// responses (`mmu_firmware::TX_CAPACITY` = 48).
+const RX_RING: usize = mmu_firmware::control::RX_RING;
 const TX_RING: usize = 256;
 
 bind_interrupts!(struct Irqs {
@@ -450,9 +452,14 @@ impl Control {
         }
     }
 
-    /// Moves the bytes received from the printer since the last call into `buf`, without
-    /// waiting; returns how many. The USART interrupt fills a 256-byte ring in the background.
+    /// Moves the oldest bytes received from the printer into `buf`, at most
+    /// `control::MAX_RX_PER_STEP` (the rest wait for the next steps), without waiting; returns
+    /// how many. The USART interrupt fills a 256-byte ring in the background.
     pub fn receive(&mut self, buf: &mut [u8]) -> usize {
+        let limit = buf.len().min(mmu_firmware::control::MAX_RX_PER_STEP);
+        let Some(buf) = buf.get_mut(..limit) else {
+            return 0;
+        };
         if !matches!(self.rx.read_ready(), Ok(true)) {
             return 0;
         }

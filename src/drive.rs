@@ -59,6 +59,10 @@ struct Schedule {
     speed: u16,
     since: Instant,
     from_centi: i32,
+    /// [`open_loop_duty`] of `speed`, and the `full_duty_speed` it was computed for: a division
+    /// done when the move starts (or the setting changes), not every step of it.
+    open_loop: i32,
+    full_duty_speed: u16,
 }
 
 /// The budget of the motion in progress and where it began.
@@ -196,23 +200,29 @@ impl SlotDrive {
         config: &Config,
     ) {
         let odometry = feeder.odometry_centi();
-        let schedule = match self.schedule {
+        let mut schedule = match self.schedule {
             Some(schedule) if schedule.direction == direction && schedule.speed == speed => schedule,
             _ => Schedule {
                 direction,
                 speed,
                 since: now,
                 from_centi: odometry,
+                open_loop: open_loop_duty(speed, config.full_duty_speed),
+                full_duty_speed: config.full_duty_speed,
             },
         };
+        if schedule.full_duty_speed != config.full_duty_speed {
+            schedule.open_loop = open_loop_duty(speed, config.full_duty_speed);
+            schedule.full_duty_speed = config.full_duty_speed;
+        }
         self.schedule = Some(schedule);
         let moved_centi = match direction {
             Direction::Forward => i64::from(odometry) - i64::from(schedule.from_centi),
             Direction::Reverse => i64::from(schedule.from_centi) - i64::from(odometry),
         };
         let lag_mm = schedule_lag_mm(speed, now.millis_since(schedule.since), moved_centi);
-        let open_loop = i32::from(speed) * 1000 / i32::from(config.full_duty_speed.max(1));
-        let duty = (open_loop + CATCH_UP_GAIN * lag_mm).clamp(0, i32::from(config.max_duty.min(1000)));
+        let duty =
+            (schedule.open_loop + CATCH_UP_GAIN * lag_mm).clamp(0, i32::from(config.max_duty.min(1000)));
         self.set(
             MotorCommand::Drive {
                 direction,
@@ -271,11 +281,21 @@ fn schedule_lag_mm(speed: u16, elapsed_ms: u64, moved_centi: i64) -> i32 {
     (if lag_centi < 0 { -lag_mm } else { lag_mm }).clamp(-1000, 1000)
 }
 
+/// The duty that moves the filament at `speed` mm/s without feedback, per mille (not limited):
+/// `speed × 1000 / full_duty_speed`. A library division on the Cortex-M0+, except for the
+/// follower's `speed` 0, which it asks for every step.
+fn open_loop_duty(speed: u16, full_duty_speed: u16) -> i32 {
+    if speed == 0 {
+        return 0;
+    }
+    i32::from(speed) * 1000 / i32::from(full_duty_speed.max(1))
+}
+
 /// Duty that moves the filament at `speed` while keeping the Bowden tube at rest: more when the
 /// extruder pulls it taut, less when it is compressed. Without a healthy tension sensor it is the
 /// open-loop duty for `speed`.
 pub fn follow_duty(speed: u16, tension: Option<u16>, config: &Config) -> Duty {
-    let open_loop = i32::from(speed) * 1000 / i32::from(config.full_duty_speed.max(1));
+    let open_loop = open_loop_duty(speed, config.full_duty_speed);
     let correction = tension.map_or(0, |value| {
         let deviation = i32::from(value) - i32::from(config.tension_neutral);
         let deadband = i32::from(config.tension_deadband);

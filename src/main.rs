@@ -11,8 +11,9 @@
 //!
 //! The printer UART's receive path needs no task of its own: the USART interrupt moves every byte
 //! into a 256-byte ring as it arrives, whatever the tasks are doing (a byte could only be lost if
-//! interrupts stayed masked for a whole character time, 87 µs), and the control task empties the
-//! ring every step (the ring holds 22 ms of continuous traffic).
+//! interrupts stayed masked for a whole character time, 87 µs), and each step takes at most
+//! `control::MAX_RX_PER_STEP` bytes from it, more than arrive in a millisecond (the ring holds
+//! 20 ms of continuous traffic beyond that).
 //!
 //! Safety: [`board::emergency_stop`] runs first thing at boot, in the panic handler and in the
 //! HardFault handler, and before every reset; the independent watchdog resets the MCU (bridges
@@ -40,8 +41,8 @@ use board::SLOTS;
 
 /// Period of the control step.
 const CONTROL_PERIOD: Duration = Duration::from_millis(1);
-/// Most bytes handed to one step: 5x what 115200 Bd delivers per millisecond.
-const RX_CHUNK: usize = 64;
+/// Most bytes handed to one step (`board::Control::receive` takes no more).
+const RX_CHUNK: usize = control::MAX_RX_PER_STEP;
 /// The longest a reset waits for the last response to leave the UART.
 const FLUSH_BEFORE_RESET: Duration = Duration::from_millis(20);
 

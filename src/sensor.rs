@@ -8,11 +8,13 @@
 //! sensor is reported faulty instead of being believed.
 //!
 //! Every sensor is filtered in every 1 ms step on a core without a divider (Cortex-M0+), where
-//! a division is a library call of about a hundred instructions: the filters divide by
-//! multiplying with precomputed reciprocals ([`div1000`], [`Window::mean`]), skip the smoothing
-//! when it is off, and compute the filtered value once per sample; the median window stays sorted
-//! by insertion, so a sample costs a few moves instead of a copy and sort of the window. The
-//! results are exactly those of the sort and divisions they replace (see the tests).
+//! a division is a library call of about a hundred instructions, so a sample costs as little as
+//! the pipeline allows: medians of 3 and 5 by a few comparisons (longer windows stay sorted by
+//! insertion), the average from a running sum divided by a shift or a reciprocal
+//! (`divide_small`), the smoothing in whole counts and thousandths (`Decay`: shifts for the
+//! usual weights, [`div1000`] for the others), and the default settings as constants the
+//! compiler folds. The results are exactly those of the sort and divisions they replace (see the
+//! tests).
 
 use crate::time::Instant;
 
@@ -107,73 +109,105 @@ impl Window {
         sorted.sort_unstable();
         sorted.get(sorted.len() / 2).copied().unwrap_or(0)
     }
-
-    /// The mean, rounded down.
-    fn mean(&self) -> u16 {
-        let values = self.filled();
-        let sum: u32 = values.iter().map(|&v| u32::from(v)).sum();
-        divide_small(sum, values.len()) as u16
-    }
 }
 
-/// A [`Window`] that keeps its samples sorted as well, for the sliding median: in the steady
-/// state a new sample replaces the oldest one in the sorted copy by insertion (at most
-/// [`MAX_WINDOW`] moves), instead of copying and sorting the whole window every sample. Only while
-/// the window fills up or changes length is the sorted copy rebuilt from the ring (by insertion
-/// too: no sort routine in the image).
+/// A [`Window`] for the sliding median. The lengths the default filters use, 3 and 5, take their
+/// median from the ring directly with a few comparisons ([`median_of_3`], [`median_of_5`]); any
+/// other length (a window filling up, other settings) sorts a copy of the window.
 #[derive(Debug, Clone, Copy)]
 struct MedianWindow {
     ring: Window,
-    /// `ring.filled()` in ascending order.
-    sorted: [u16; MAX_WINDOW],
 }
 
 impl MedianWindow {
     const fn new() -> Self {
-        MedianWindow {
-            ring: Window::new(),
-            sorted: [0; MAX_WINDOW],
-        }
+        MedianWindow { ring: Window::new() }
     }
 
     /// Adds a sample to a window of `capacity`; returns the new median (the upper one of an even
-    /// count, as the sort-based median did).
+    /// count).
+    #[inline(always)]
+    fn push(&mut self, value: u16, capacity: usize) -> u16 {
+        self.ring.push(value, capacity);
+        let [a, b, c, d, e, ..] = self.ring.values;
+        match self.ring.len {
+            1 => value,
+            3 => median_of_3(a, b, c),
+            5 => median_of_5(a, b, c, d, e),
+            _ => self.sorted_median(),
+        }
+    }
+
+    /// The median of a sorted copy of the window (sorted by insertion: no sort routine in the
+    /// image).
+    #[inline(never)]
+    fn sorted_median(&self) -> u16 {
+        let mut sorted = [0u16; MAX_WINDOW];
+        let filled = self.ring.filled();
+        for (end, &sample) in filled.iter().enumerate() {
+            let mut at = end;
+            while at > 0 && sorted[at - 1] > sample {
+                sorted[at] = sorted[at - 1];
+                at -= 1;
+            }
+            if let Some(slot) = sorted.get_mut(at) {
+                *slot = sample;
+            }
+        }
+        sorted.get(filled.len() / 2).copied().unwrap_or(0)
+    }
+}
+
+/// The median of three values.
+#[inline(always)]
+fn median_of_3(a: u16, b: u16, c: u16) -> u16 {
+    let (low, high) = if a < b { (a, b) } else { (b, a) };
+    low.max(high.min(c))
+}
+
+/// The median of five values in six comparisons: the smaller of two ordered pairs' lows is below
+/// three others, so it is not the median, which is then the second lowest of the other four.
+#[inline(always)]
+fn median_of_5(a: u16, b: u16, c: u16, d: u16, e: u16) -> u16 {
+    let (a, b) = if a < b { (a, b) } else { (b, a) };
+    let (c, d) = if c < d { (c, d) } else { (d, c) };
+    // Drop the lowest of a, b, c, d; the other pair's low joins e.
+    let (low, high, x) = if a < c { (c, d, b) } else { (a, b, d) };
+    let (x, y) = if x < e { (x, e) } else { (e, x) };
+    // The second lowest of the ordered pairs (low, high) and (x, y).
+    if low < x { high.min(x) } else { low.min(y) }
+}
+
+/// A [`Window`] with the running sum of its samples, for the moving average: a sample adds
+/// itself and takes off the one it replaced, instead of the window being summed every sample.
+#[derive(Debug, Clone, Copy)]
+struct AverageWindow {
+    ring: Window,
+    /// The sum of `ring.filled()`.
+    sum: u32,
+}
+
+impl AverageWindow {
+    const fn new() -> Self {
+        AverageWindow {
+            ring: Window::new(),
+            sum: 0,
+        }
+    }
+
+    /// Adds a sample to a window of `capacity`; returns the new mean, rounded down.
+    #[inline(always)]
     fn push(&mut self, value: u16, capacity: usize) -> u16 {
         let len_before = self.ring.len;
         let replaced = self.ring.push(value, capacity);
         let len = self.ring.len;
-        let sorted = self.sorted.get_mut(..len).unwrap_or(&mut []);
-        match replaced {
-            Some(old) if len == len_before => {
-                if let Some(gap) = sorted.iter().position(|&v| v == old) {
-                    settle(sorted, gap, value);
-                }
-            }
-            // Insertion sort of the ring, a sample at a time.
-            _ => {
-                for (end, &sample) in self.ring.filled().iter().enumerate() {
-                    settle(sorted.get_mut(..=end).unwrap_or(&mut []), end, sample);
-                }
-            }
-        }
-        sorted.get(len / 2).copied().unwrap_or(0)
-    }
-}
-
-/// Puts `new` into the ascending `sorted`, whose element at `gap` is free (replaced), keeping it
-/// ascending: the gap moves to `new`'s place.
-#[inline(always)]
-fn settle(sorted: &mut [u16], mut gap: usize, new: u16) {
-    while gap + 1 < sorted.len() && sorted[gap + 1] < new {
-        sorted[gap] = sorted[gap + 1];
-        gap += 1;
-    }
-    while gap > 0 && gap < sorted.len() && sorted[gap - 1] > new {
-        sorted[gap] = sorted[gap - 1];
-        gap -= 1;
-    }
-    if let Some(slot) = sorted.get_mut(gap) {
-        *slot = new;
+        self.sum = match replaced {
+            // The same window with one sample replaced (a window that changed length may have
+            // lost several: summed again).
+            Some(old) if len == len_before => self.sum.wrapping_sub(old.into()).wrapping_add(value.into()),
+            _ => self.ring.filled().iter().map(|&v| u32::from(v)).sum(),
+        };
+        divide_small(self.sum, len) as u16
     }
 }
 
@@ -188,12 +222,19 @@ const RECIPROCALS: [u32; MAX_WINDOW + 1] = {
     table
 };
 
-/// `sum / len` for a sum of at most [`MAX_WINDOW`] `u16` values, without a division: exact for
-/// `sum < 2³² / MAX_WINDOW`, which such a sum always is (`len` 0 counts as 1).
+/// `sum / len` for a sum of at most [`MAX_WINDOW`] `u16` values, without a division: a shift for
+/// the lengths that are powers of two, else exact for `sum < 2³² / MAX_WINDOW`, which such a sum
+/// always is (`len` 0 counts as 1).
+#[inline(always)]
 fn divide_small(sum: u32, len: usize) -> u32 {
-    match RECIPROCALS.get(len) {
-        Some(&reciprocal) if len >= 2 => mul_high(sum, reciprocal),
-        _ => sum,
+    match len {
+        0 | 1 => sum,
+        2 => sum >> 1,
+        4 => sum >> 2,
+        8 => sum >> 3,
+        _ => RECIPROCALS
+            .get(len)
+            .map_or(sum, |&reciprocal| mul_high(sum, reciprocal)),
     }
 }
 
@@ -215,13 +256,115 @@ pub fn div1000(x: u32) -> u32 {
     mul_high(x, 0x1062_4dd3) >> 6
 }
 
+/// One step of the exponential smoothing for one weight `w`, prepared once per weight:
+/// `next = ⌊(previous × (1000 − w) + mean × 1000 × w) / 1000⌋` in 1/1000 counts, as the
+/// divisions computed it. A smoothed value is kept as whole counts and thousandths
+/// ([`Smoothed`]). When `1000 − w` is a multiple of 125 (w = 500 keeps four eighths) the step
+/// needs no division at all (see [`Decay::next`]); other weights take two [`div1000`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Decay {
+    /// The weight prepared for, per mille (0: none yet).
+    weight: u16,
+    /// `1000 − weight`.
+    keep: u32,
+    /// `keep / 125`, when that divides evenly: `keep / 1000` is this many eighths.
+    eighths: Option<u32>,
+}
+
+/// A smoothed value `counts + thousandths / 1000`, `thousandths < 1000` (a smoothed value is
+/// never above the largest sample).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Smoothed {
+    counts: u16,
+    thousandths: u16,
+}
+
+impl Decay {
+    /// Prepared for `weight`, taken as `1..=1000`.
+    const fn new(weight: u16) -> Self {
+        let weight = if weight > 1000 {
+            1000
+        } else if weight < 1 {
+            1
+        } else {
+            weight
+        };
+        let keep = 1000 - weight as u32;
+        // Without a division: other weights prepare it every sample.
+        let mut eighths = None;
+        let mut k = 0;
+        while k < 8 {
+            if k * 125 == keep {
+                eighths = Some(k);
+            }
+            k += 1;
+        }
+        Decay {
+            weight,
+            keep,
+            eighths,
+        }
+    }
+
+    /// The smoothed value after `previous` took in `mean`, for values of samples up to
+    /// [`mmu_hal_port::ADC_MAX`].
+    ///
+    /// With `keep = 125 k` and `previous = 1000 q + r`: `⌊previous × k / 8⌋ = 125 k q + ⌊r k / 8⌋`
+    /// and `mean × w = 1000 mean − 125 k mean`, so with `d = k (q − mean)` the next value is
+    /// `1000 (mean + ⌊d / 8⌋) + 125 (d mod 8) + ⌊r k / 8⌋`, whose last two terms are below 2000:
+    /// shifts, masks and at most one carry.
+    #[inline(always)]
+    fn next(&self, previous: Smoothed, mean: u16) -> Smoothed {
+        let (counts, thousandths) = (u32::from(previous.counts), u32::from(previous.thousandths));
+        let mean = u32::from(mean);
+        let (counts, thousandths) = match self.eighths {
+            Some(k) => {
+                let d = (counts.wrapping_sub(mean) as i32).wrapping_mul(k as i32);
+                let counts = mean.wrapping_add((d >> 3) as u32);
+                let thousandths = 125 * (d & 7) as u32 + ((thousandths * k) >> 3);
+                if thousandths >= 1000 {
+                    (counts + 1, thousandths - 1000)
+                } else {
+                    (counts, thousandths)
+                }
+            }
+            None => {
+                let previous = counts * 1000 + thousandths;
+                let next = mean * u32::from(self.weight) + div1000(previous.wrapping_mul(self.keep));
+                let counts = div1000(next);
+                (counts, next - counts * 1000)
+            }
+        };
+        // Below the largest sample, so within 16 bits.
+        Smoothed {
+            counts: counts as u16,
+            thousandths: thousandths as u16,
+        }
+    }
+}
+
+/// The presence sensors' default filter (`Config::default`).
+const PRESENCE_DEFAULT: FilterConfig = FilterConfig {
+    median: 5,
+    average: 4,
+    smoothing_permille: 500,
+};
+const PRESENCE_DECAY: Decay = Decay::new(PRESENCE_DEFAULT.smoothing_permille);
+/// The motor Hall sensors' default filter (`Config::default`).
+const MOTOR_DEFAULT: FilterConfig = FilterConfig {
+    median: 3,
+    average: 1,
+    smoothing_permille: 1000,
+};
+const MOTOR_DECAY: Decay = Decay::new(MOTOR_DEFAULT.smoothing_permille);
+
 /// Sliding median, then moving average, then exponential smoothing.
 #[derive(Debug, Clone, Copy)]
 pub struct Filter {
     medians: MedianWindow,
-    averages: Window,
-    /// The smoothed value in 1/1000 counts.
-    smoothed_milli: Option<u32>,
+    averages: AverageWindow,
+    /// The smoothed value (`None` before the first sample).
+    smoothed: Option<Smoothed>,
     /// The smoothed value rounded to counts (0 before the first sample).
     value: u16,
 }
@@ -237,25 +380,62 @@ impl Filter {
     pub const fn new() -> Self {
         Filter {
             medians: MedianWindow::new(),
-            averages: Window::new(),
-            smoothed_milli: None,
+            averages: AverageWindow::new(),
+            smoothed: None,
             value: 0,
         }
     }
 
     /// Feed one raw sample; returns the filtered value.
+    #[inline(always)]
     pub fn push(&mut self, raw: u16, config: &FilterConfig) -> u16 {
-        let median = self.medians.push(raw, config.median.into());
-        self.averages.push(median, config.average.into());
-        let mean = u32::from(self.averages.mean());
-        let weight = u32::from(config.smoothing_permille.clamp(1, 1000));
-        // (previous × (1000 − w) + mean × 1000 × w) / 1000, with the exact part taken out.
-        let smoothed = match self.smoothed_milli {
-            Some(previous) if weight < 1000 => mean * weight + div1000(previous * (1000 - weight)),
-            _ => mean * 1000,
+        // The default filters' settings (`Config::default`) as constants: the compiler folds
+        // their clamps, window dispatch and smoothing preparation away, a fifth of a sample's
+        // instructions. Any other setting takes the same steps with its values.
+        match *config {
+            PRESENCE_DEFAULT => self.push_with(raw, 5, 4, 500, PRESENCE_DECAY),
+            MOTOR_DEFAULT => self.push_with(raw, 3, 1, 1000, MOTOR_DECAY),
+            _ => self.push_any(raw, config),
+        }
+    }
+
+    /// [`Self::push`] with any settings, out of line (one copy of the pipeline for them).
+    #[inline(never)]
+    fn push_any(&mut self, raw: u16, config: &FilterConfig) -> u16 {
+        let decay = Decay::new(config.smoothing_permille);
+        self.push_with(
+            raw,
+            config.median.into(),
+            config.average.into(),
+            config.smoothing_permille,
+            decay,
+        )
+    }
+
+    /// [`Self::push`] with the settings spelled out; `decay` is `smoothing_permille` prepared.
+    #[inline(always)]
+    fn push_with(
+        &mut self,
+        raw: u16,
+        median: usize,
+        average: usize,
+        smoothing_permille: u16,
+        decay: Decay,
+    ) -> u16 {
+        let median = self.medians.push(raw, median);
+        let mean = self.averages.push(median, average);
+        let weight = smoothing_permille.clamp(1, 1000);
+        // At w = 1000 (or on the first sample) the smoothed value is the mean itself.
+        let smoothed = match self.smoothed {
+            Some(previous) if weight < 1000 => decay.next(previous, mean),
+            _ => Smoothed {
+                counts: mean,
+                thousandths: 0,
+            },
         };
-        self.smoothed_milli = Some(smoothed);
-        self.value = div1000(smoothed + 500) as u16;
+        self.smoothed = Some(smoothed);
+        // Rounded half up.
+        self.value = smoothed.counts + u16::from(smoothed.thousandths >= 500);
         self.value
     }
 
@@ -296,6 +476,7 @@ pub struct RailLimits {
 pub struct AnalogSensor {
     filter: Filter,
     raw: u16,
+    /// Samples filtered since start or the last fault, counted up to [`WARM_UP_SAMPLES`].
     samples: u16,
     at_rail_since: Option<(Rail, Instant)>,
     fault: Option<Rail>,
@@ -323,14 +504,20 @@ impl AnalogSensor {
             }
             (Some(rail), _) => self.at_rail_since = Some((rail, now)),
             (None, _) => {
-                self.at_rail_since = None;
-                if self.fault.take().is_some() {
+                if self.at_rail_since.is_some() {
+                    self.at_rail_since = None;
+                }
+                if self.fault.is_some() {
                     // Back from a fault: old samples say nothing about the reconnected sensor.
+                    self.fault = None;
                     self.filter.clear();
                     self.samples = 0;
                 }
                 self.filter.push(raw, filter);
-                self.samples = self.samples.saturating_add(1);
+                // Counted up to the warm-up only: all that is asked of the count.
+                if self.samples < WARM_UP_SAMPLES {
+                    self.samples += 1;
+                }
             }
         }
     }
@@ -614,6 +801,117 @@ mod tests {
                 "{config:?} at {i}"
             );
         }
+    }
+
+    #[test]
+    fn medians_of_3_and_5_are_the_middle_of_the_sorted_values() {
+        // Every tuple over six levels: all orders, and every pattern of ties.
+        let levels = [0, 1, 2, 3, 2048, u16::MAX];
+        for &a in &levels {
+            for &b in &levels {
+                for &c in &levels {
+                    let mut sorted = [a, b, c];
+                    sorted.sort_unstable();
+                    assert_eq!(median_of_3(a, b, c), sorted[1], "{a} {b} {c}");
+                    for &d in &levels {
+                        for &e in &levels {
+                            let mut sorted = [a, b, c, d, e];
+                            sorted.sort_unstable();
+                            assert_eq!(median_of_5(a, b, c, d, e), sorted[2], "{a} {b} {c} {d} {e}");
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn every_window_and_weight_filters_as_the_divisions_did() {
+        // The weights whose kept part is a multiple of 125 (a shift) and some that are not, over
+        // every median and average length.
+        let weights = [0, 1, 125, 250, 375, 400, 500, 625, 750, 875, 999, 1000, 1001];
+        for median in 1..=MAX_WINDOW as u8 {
+            for average in 1..=MAX_WINDOW as u8 {
+                for permille in weights {
+                    let config = FilterConfig {
+                        median,
+                        average,
+                        smoothing_permille: permille,
+                    };
+                    let mut filter = Filter::new();
+                    let mut reference = DividingFilter {
+                        medians: Window::new(),
+                        averages: Window::new(),
+                        smoothed: None,
+                    };
+                    let mut seed = u32::from(median) * 31 + u32::from(average);
+                    for i in 0..300u32 {
+                        seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                        let raw = if i % 100 < 50 {
+                            40 + (seed >> 28) as u16
+                        } else {
+                            (seed >> 20) as u16
+                        };
+                        assert_eq!(
+                            filter.push(raw, &config),
+                            reference.push(raw, &config),
+                            "{config:?} at {i}"
+                        );
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn switching_between_the_default_filters_and_others_filters_as_the_divisions_did() {
+        // The defaults take a path of their own (constants folded): switching to and from them
+        // mid-stream, with partly and fully filled windows, gives what the divisions gave.
+        let configs = [
+            PRESENCE_DEFAULT,
+            MOTOR_DEFAULT,
+            FilterConfig {
+                median: 5,
+                average: 4,
+                smoothing_permille: 400,
+            },
+            PRESENCE_DEFAULT,
+            FilterConfig {
+                median: 9,
+                average: 2,
+                smoothing_permille: 500,
+            },
+            MOTOR_DEFAULT,
+            FilterConfig {
+                median: 3,
+                average: 1,
+                smoothing_permille: 250,
+            },
+        ];
+        let mut filter = Filter::new();
+        let mut reference = DividingFilter {
+            medians: Window::new(),
+            averages: Window::new(),
+            smoothed: None,
+        };
+        let mut seed: u32 = 5;
+        for i in 0..5000u32 {
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            let raw = (seed >> 20) as u16;
+            let config = configs[(i / 29) as usize % configs.len()];
+            assert_eq!(
+                filter.push(raw, &config),
+                reference.push(raw, &config),
+                "{config:?} at {i}"
+            );
+        }
+    }
+
+    #[test]
+    fn the_default_filters_take_the_folded_path() {
+        let config = crate::Config::default();
+        assert_eq!(config.presence_filter, PRESENCE_DEFAULT);
+        assert_eq!(config.motor_filter, MOTOR_DEFAULT);
     }
 
     #[test]

@@ -2,9 +2,10 @@
 //! built for thumbv6m-none-eabi with the firmware's profile, replaying a recorded session in an
 //! emulator (`bench-mcu/run.py`).
 //!
-//! Every control step is done as the firmware's control loop does it: `App::step` with the
-//! step's time, samples and received bytes, then `Keeper::update` (or `Keeper::before` for a
-//! reset). The emulator counts the instructions between the calls to [`bench_mark`], which say
+//! Every control step is done as the firmware's control loop does it: the bytes that arrived on
+//! the line join the receive queue (`control::RxQueue`, the board's UART ring), `App::step` gets
+//! the step's time, samples and at most `control::MAX_RX_PER_STEP` of the waiting bytes, then
+//! `Keeper::update` (or `Keeper::before` for a reset). The emulator counts the instructions between the calls to [`bench_mark`], which say
 //! what is measured and give each step's context. No runtime, no interrupts: the emulator sets
 //! the stack pointer and starts at [`bench_main`].
 
@@ -14,8 +15,9 @@
 use core::panic::PanicInfo;
 
 use embedded_storage::nor_flash::{ErrorType, NorFlash, NorFlashErrorKind, ReadNorFlash};
-use mmu_firmware::runner::Status;
+use mmu_firmware::control::{RX_RING, RxQueue};
 use mmu_firmware::persist::{Keeper, Store};
+use mmu_firmware::runner::Status;
 use mmu_firmware::{App, Config, HubSamples, Instant, Outputs, Samples, SlotSamples};
 
 const SLOTS: usize = 3;
@@ -37,7 +39,7 @@ enum Mark {
     BootEnd = 4,
     StepBegin = 5,
     /// a: step, b: request code | value << 8 | status << 16 | rx length << 24, c: progress or
-    /// error code.
+    /// error code | bytes waiting before the step took its share << 16.
     StepEnd = 6,
     SaveBegin = 7,
     /// a: step, b: 1 when the flash was written.
@@ -135,7 +137,8 @@ impl NorFlash for EmulatedFlash {
     }
 }
 
-/// The recorded session (see `bench-mcu/session`): steps of samples and received bytes.
+/// The recorded session (see `bench-mcu/session`): steps of samples and the bytes that arrived
+/// on the line.
 struct Session {
     bytes: &'static [u8],
     at: usize,
@@ -210,7 +213,7 @@ pub extern "C" fn bench_main() -> ! {
         core::slice::from_raw_parts((SESSION + 4) as *const u8, length)
     };
     let mut session = Session { bytes, at: 0 };
-    if session.slice(4) != Some(b"MMUS".as_slice()) {
+    if session.slice(4) != Some(b"MMUQ".as_slice()) {
         mark(Mark::BadSession, 0, 0, 0);
         halt();
     }
@@ -226,16 +229,25 @@ pub extern "C" fn bench_main() -> ! {
     mark(Mark::BootEnd, 0, 0, 0);
 
     let mut digest: u32 = 0x811c_9dc5;
+    let mut received = RxQueue::<RX_RING>::new();
     for index in 0..steps {
-        let Some((samples, rx)) = session.step() else {
+        let Some((samples, line)) = session.step() else {
             mark(Mark::BadSession, 2, index, 0);
             halt();
         };
         let now = Instant::from_millis(u64::from(index));
+        received.receive(line);
+        let waiting = received.len();
+        let rx = received.take_step();
         mark(Mark::StepBegin, index, 0, 0);
-        let out = step(&mut app, now, &samples, rx);
+        let out = step(&mut app, now, &samples, &rx);
         let (info, code) = context(&app, rx.len());
-        mark(Mark::StepEnd, index, info, code);
+        mark(
+            Mark::StepEnd,
+            index,
+            info,
+            code | ((waiting.min(0xffff) as u32) << 16),
+        );
         for &byte in out.tx.iter() {
             digest = (digest ^ u32::from(byte)).wrapping_mul(0x0100_0193);
         }

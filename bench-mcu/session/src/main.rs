@@ -4,25 +4,29 @@
 //! unit logic (`App<3>`) steps against it once per millisecond while a scripted printer talks to
 //! it the way Prusa's firmware does (version handshake, settings writes, `Q0` heartbeat followed
 //! by `f` and the register poll, ramming before a command that needs the extruder empty,
-//! co-feeding at `FeedingToFSensor`, load to nozzle after `T`). Every step's raw samples and
-//! received bytes are written out; replaying them into the same logic built for thumbv6m gives
-//! the same steps, which the harness checks with a digest of everything the App sent.
+//! co-feeding at `FeedingToFSensor`, load to nozzle after `T`). Every step's raw samples and the
+//! bytes the printer put on the line in that millisecond are written out. The bytes reach the
+//! App as on the board: through a receive queue of which each step takes at most
+//! `control::MAX_RX_PER_STEP` (`control::RxQueue`); the harness replays the line through the same
+//! queue into the same logic built for thumbv6m, which gives the same steps: it checks that with
+//! a digest of everything the App sent.
 //!
 //! The script covers every command (`T L U E K H`), an error with its Retry, a sensor stuck at a
-//! rail, query bursts (64 bytes of requests in one step) while idle, feeding and in an error, and
-//! settings writes (each one a save).
+//! rail, query bursts (64 bytes of requests arriving at once, answered over four steps) while
+//! idle, feeding and in an error, and settings writes (each one a save).
 //!
 //!   mmu-bench-session OUT.bin
 //!
-//! Format (little endian): `MMUS`, u32 step count, then per step 9 × u16 samples (slot 0..2
-//! motor Hall and filament, hub filament, tension, cutter), u8 length and the received bytes;
-//! then u32 digest of every byte the App sent (FNV-1a).
+//! Format (little endian): `MMUQ`, u32 step count, then per step 9 × u16 samples (slot 0..2
+//! motor Hall and filament, hub filament, tension, cutter), u8 length and the bytes that arrived
+//! on the line; then u32 digest of every byte the App sent (FNV-1a).
 
 use std::collections::VecDeque;
 use std::error::Error;
 
-use mmu_firmware::runner::Status;
+use mmu_firmware::control::{RX_RING, RxQueue};
 use mmu_firmware::persist::Snapshot;
+use mmu_firmware::runner::Status;
 use mmu_firmware::{App, Config, Instant, Samples};
 use mmu_model::{Fault, FaultKind, Model, ModelConfig};
 use mmu_protocol::{ButtonCode, ErrorCode, ProgressCode, Request, RequestCode};
@@ -45,7 +49,7 @@ const SLOW_MM_S: u16 = 20;
 const FRESH_TIP_MM: f32 = -90.0;
 /// A command must end within this, ms.
 const COMMAND_LIMIT_MS: u64 = 120_000;
-/// A query burst: this many bytes of requests in one step.
+/// A query burst: this many bytes of requests arriving at once.
 const BURST_BYTES: usize = 64;
 
 /// What the scripted printer and user do next.
@@ -55,7 +59,7 @@ enum Act {
     Command(RequestCode, u8),
     /// Nothing but the heartbeat for a while.
     Idle(u64),
-    /// 64 bytes of whole requests in one step (a printer catching up after a stall).
+    /// 64 bytes of whole requests at once (a printer catching up after a stall).
     Burst,
     /// The version handshake (`S0`..`S3`).
     Handshake,
@@ -80,6 +84,8 @@ struct Recorder {
     digest: u32,
     /// Requests to send, one per step.
     queue: VecDeque<Request>,
+    /// Bytes on their way to the App, as in the board's UART ring.
+    received: RxQueue<RX_RING>,
     last_exchange: u64,
     reported_fsensor: Option<u8>,
     cofeeding: bool,
@@ -100,6 +106,7 @@ impl Recorder {
             steps: 0,
             digest: 0x811c_9dc5,
             queue: VecDeque::new(),
+            received: RxQueue::new(),
             last_exchange: 0,
             reported_fsensor: None,
             cofeeding: false,
@@ -111,9 +118,12 @@ impl Recorder {
         self.queue.push_back(request);
     }
 
-    /// One millisecond: `rx` reaches the App, the model moves with the App's motor commands.
-    fn step_with(&mut self, rx: Vec<u8>) {
+    /// One millisecond: `line` arrives, the App takes its share of what waits, the model moves
+    /// with the App's motor commands.
+    fn step_with(&mut self, line: Vec<u8>) {
         let samples: Samples<SLOTS> = self.model.samples();
+        self.received.receive(&line);
+        let rx = self.received.take_step();
         let out = self.app.step(Instant::from_millis(self.now), &samples, &rx);
         for slot in samples.slots {
             self.out.extend_from_slice(&slot.motor_hall.to_le_bytes());
@@ -122,8 +132,8 @@ impl Recorder {
         for value in [samples.hub.filament, samples.hub.tension, samples.hub.cutter] {
             self.out.extend_from_slice(&value.to_le_bytes());
         }
-        self.out.push(rx.len() as u8);
-        self.out.extend_from_slice(&rx);
+        self.out.push(line.len() as u8);
+        self.out.extend_from_slice(&line);
         for &byte in out.tx.iter() {
             self.digest = (self.digest ^ u32::from(byte)).wrapping_mul(0x0100_0193);
         }
@@ -153,7 +163,7 @@ impl Recorder {
 
     /// `f` at once on a change; `Q0`, `f` and the register poll after a second of quiet.
     fn heartbeat(&mut self) {
-        if !self.queue.is_empty() {
+        if !self.queue.is_empty() || !self.received.is_empty() {
             return;
         }
         let state = self.model.fsensor_state();
@@ -196,9 +206,9 @@ impl Recorder {
         }
     }
 
-    /// Send everything queued, one request per step.
+    /// Send everything queued, one request per step, until the App has taken it all.
     fn drain(&mut self) {
-        while !self.queue.is_empty() {
+        while !self.queue.is_empty() || !self.received.is_empty() {
             self.step();
         }
     }
@@ -288,8 +298,8 @@ impl Recorder {
         self.drain();
     }
 
-    /// 64 bytes of whole requests in one step: `Q0`, `P0` and the polled registers, as many
-    /// as fit exactly.
+    /// 64 bytes of whole requests at once: `Q0`, `P0` and the polled registers, as many as fit
+    /// exactly.
     fn burst(&mut self) {
         self.drain();
         let frames: Vec<Vec<u8>> = [
@@ -410,7 +420,10 @@ fn main() -> Result<(), Box<dyn Error>> {
         .ok_or("usage: mmu-bench-session OUT.bin")?;
     let mut recorder = Recorder::new();
     recorder.play(&script())?;
-    let mut file = b"MMUS".to_vec();
+    if recorder.received.lost() > 0 {
+        return Err(format!("{} received bytes lost to a full queue", recorder.received.lost()).into());
+    }
+    let mut file = b"MMUQ".to_vec();
     file.extend_from_slice(&recorder.steps.to_le_bytes());
     file.extend_from_slice(&recorder.out);
     file.extend_from_slice(&recorder.digest.to_le_bytes());
