@@ -208,6 +208,18 @@ impl Runner {
     fn retry_phase(&mut self) {
         self.notes.trust_sensors = true;
         self.run = None;
+        if let Some(Phase::FeedToNozzle { slot }) = self.phase() {
+            // Only `P1c` seen anew makes the printer push its extruder again, and only its push
+            // can show the gears taking the tip (printer-truth §8): the push into the extruder is
+            // retried from the printer's sensor.
+            if self
+                .plan
+                .insert(self.index, Phase::FeedToFsensor { slot })
+                .is_ok()
+            {
+                self.resume_goal_from = None;
+            }
+        }
         match self.phase() {
             Some(phase) => self.status = Status::Running(phase.progress()),
             // The command had done its work: planning it again would ask its question again
