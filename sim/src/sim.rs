@@ -504,6 +504,11 @@ impl Sim {
                 p.slow_mm_s = f32::from(request.value2);
             }
             code if code.is_command() => {
+                // The printer matches the answers against the command it sent (`ReqMsg()`),
+                // whether or not it heard the unit accept it: after a lost `A` it takes the unit
+                // reporting that command as running.
+                p.command = Some((code, request.value));
+                p.seen_progress = None;
                 self.model.set_printing(None);
                 let same_tool =
                     code == RequestCode::Tool && self.model.loaded_slot() == Some(usize::from(request.value));
