@@ -8,8 +8,8 @@
 mod common;
 
 use common::{FsensorReports, PrinterKind, Rig, error, finished, t};
-use mmu_model::{Fault, FaultKind};
-use mmu_protocol::{ErrorCode, ProgressCode as P};
+use mmu_model::{Fault, FaultKind, Model, ModelConfig};
+use mmu_protocol::{ErrorCode, ParamCode, ProgressCode as P};
 
 /// The printer's sensor sits at 360 mm, its extruder's gears at 364 mm (the model's defaults).
 const FSENSOR_MM: f32 = 360.0;
@@ -148,4 +148,45 @@ fn with_the_printers_sensor_unavailable_the_load_is_reported_done_only_with_the_
     let tip = rig.model.tip_mm(0).unwrap();
     assert_eq!(run.last, finished(t(0)), "tip at {tip} mm: {:?}", run.progress);
     assert!(tip >= gears_mm(&rig), "tip at {tip} mm");
+}
+
+#[test]
+fn a_jam_anywhere_between_the_sensor_and_the_gears_is_never_reported_loaded() {
+    // Every printer family, the jam from the printer's sensor to just short of the gears, with
+    // sensor noise from none to six times the usual (σ 0 to 90 counts): an error, never F0.
+    for seed in 0..4u64 {
+        for printer in [PrinterKind::Mk4, PrinterKind::Mk35, PrinterKind::Mk3s] {
+            for past_fsensor_mm in [0.0, 1.0, 2.0, 3.0, 3.8] {
+                let mut rig = Rig::<1>::new();
+                rig.model = Model::new(ModelConfig::default(), 1, seed);
+                rig.printer = printer;
+                rig.boot();
+                rig.issue(t(0));
+                rig.follow_until_model(
+                    t(0),
+                    |model| {
+                        model
+                            .tip_mm(0)
+                            .is_some_and(|tip| tip >= FSENSOR_MM + past_fsensor_mm)
+                    },
+                    120_000,
+                );
+                rig.inject(Fault::BowdenJam);
+                rig.inject(Fault::SensorNoise {
+                    sigma: seed as f32 * 30.0,
+                });
+                let run = rig.follow(t(0), 120_000);
+                let tip = rig.model.tip_mm(0).unwrap();
+                assert!(
+                    tip < gears_mm(&rig),
+                    "{printer:?}: the jam holds the tip at {tip} mm"
+                );
+                assert_eq!(
+                    run.last.param,
+                    ParamCode::Error,
+                    "{printer:?}, jam {past_fsensor_mm} mm past the sensor, noise seed {seed}: tip at {tip} mm"
+                );
+            }
+        }
+    }
 }
