@@ -208,17 +208,18 @@ impl Runner {
     fn retry_phase(&mut self) {
         self.notes.trust_sensors = true;
         self.run = None;
-        if let Some(Phase::FeedToNozzle { slot }) = self.phase() {
-            // Only `P1c` seen anew makes the printer push its extruder again, and only its push
-            // can show the gears taking the tip (printer-truth §8): the push into the extruder is
-            // retried from the printer's sensor.
-            // Pushed and swapped into place: `Vec::insert` alone links `memmove` (1.3 KiB).
-            if self.plan.push(Phase::FeedToFsensor { slot }).is_ok() {
-                for at in (self.index + 1..self.plan.len()).rev() {
-                    self.plan.swap(at - 1, at);
-                }
-                self.resume_goal_from = None;
-            }
+        // Only `P1c` seen anew makes the printer push its extruder again, and only its push can
+        // show the gears taking the tip (printer-truth §8): the push into the extruder is retried
+        // from the phase before it, the feed to the printer's sensor (every plan has one there).
+        let before = self.index.checked_sub(1);
+        if let (Some(Phase::FeedToNozzle { .. }), Some(before)) = (self.phase(), before)
+            && matches!(
+                self.plan.get(before),
+                Some(Phase::FeedToFsensor { .. } | Phase::SearchFsensor { .. })
+            )
+        {
+            self.index = before;
+            self.resume_goal_from = None;
         }
         match self.phase() {
             Some(phase) => self.status = Status::Running(phase.progress()),
