@@ -114,6 +114,7 @@ impl<const N: usize> App<N> {
             bowden_learned_mm: 0,
             printer: PrinterLink {
                 heard: Instant::ZERO,
+                polled: Instant::ZERO,
                 in_sync: true,
             },
         }
@@ -297,7 +298,11 @@ impl<const N: usize> App<N> {
             return Response::button(code, value, button);
         }
         match self.operation.status() {
-            Status::Running(progress) => Response::progress(code, value, progress),
+            Status::Running(progress) => {
+                // The printer acts on the progress it sees (its co-feed on `P1c`).
+                self.printer.polled = self.now;
+                Response::progress(code, value, progress)
+            }
             Status::Failed(error) => Response::error(code, value, error),
             Status::Finished => {
                 if code == RequestCode::Home {

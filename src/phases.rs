@@ -20,12 +20,21 @@ use crate::unit::{Lane, SensorId, Unit};
 const SLOT_PROBE_MM: i32 = 10;
 /// How long a check may wait for the sensors to settle after start, ms.
 const SENSOR_SETTLE_MS: u64 = 1000;
-/// How long the Bowden tube must stay compressed before the extruder's gears count as holding
-/// the tip, ms (one noisy reading is not enough).
-const HELD_CONFIRM_MS: u64 = 100;
-/// Extra travel allowed to the push into the extruder beyond twice its nominal distance, mm: the
-/// printer pushes its own extra load + 2 mm, and the tube takes up some before it holds.
+/// How long the Bowden tube must read compressed before the push into the extruder stops, ms:
+/// the tip has met something (the gears, turning or idle, or a jam), and the push must stop
+/// while the printer's own push still runs (one noisy reading is not enough).
+const MET_CONFIRM_MS: u64 = 10;
+/// How long the Bowden tube must read taut, pulled from the extruder's side against the braked
+/// slot motor, before the gears count as holding the tip, ms. A tube only ever goes taut
+/// that way when something pulls the filament on: a jam cannot, a stopped tube cannot.
+const GRIP_CONFIRM_MS: u64 = 100;
+/// How far the push into the extruder may go past the extra load distance (register 0x0b: how
+/// far past the printer's sensor its gears are and the tip is to go), mm, to meet the gears.
 const NOZZLE_PUSH_MARGIN_MM: u16 = 10;
+/// How long after the push began the printer's own push may still pull the filament on, beyond
+/// its nominal duration (extra load + 2 mm at the slow speed), ms: the printer starts it when it
+/// sees its sensor and `P1c` together, the unit when it hears both, within a few ms.
+const PRINTER_PUSH_MARGIN_MS: u64 = 600;
 
 /// How long the printer may stay silent before a phase that depends on it holds its motor, ms.
 /// While a command runs, Prusa's printer sends `Q0` one heartbeat (1 s, `heartBeatPeriod` in
@@ -71,7 +80,9 @@ pub enum Phase {
         /// The slot.
         slot: usize,
     },
-    /// `P7`: push the extra load distance at the slow speed, following the extruder's tension.
+    /// `P7`: push into the extruder's gears while the printer pushes with its own extruder, then
+    /// hold and see the gears pull the filament on (the tube turns taut): only that shows the
+    /// tip in the gears (a jam just before them stops it the same way).
     FeedToNozzle {
         /// The slot.
         slot: usize,
@@ -221,8 +232,10 @@ fn bounds(phase: Phase, config: &Config) -> Option<Bounds> {
             config.bowden_mm.saturating_add(config.fsensor_search_mm),
             ErrorCode::FSENSOR_DIDNT_SWITCH_ON,
         ),
+        // Faster than the printer's push (its slow feed), so a tip its turning gears hold
+        // compresses the tube at once and the push stops while they still pull.
         Phase::FeedToNozzle { .. } => forward(
-            config.slow_speed,
+            config.slow_speed.saturating_mul(2),
             config
                 .extra_load_mm
                 .saturating_mul(2)
@@ -271,6 +284,10 @@ pub struct PhaseRun {
     mark_centi: Option<i32>,
     /// Since when the Bowden tube reads compressed.
     compressed_since: Option<Instant>,
+    /// Since when the Bowden tube reads taut.
+    taut_since: Option<Instant>,
+    /// The push into the extruder is over: the tip met something, or went its distance.
+    pushed: bool,
     /// The budget of the motion in progress: when and where the drive's lease began, and what
     /// earlier leases of this attempt used (a hold ends a lease; the silence is not counted).
     lease: Lease,
@@ -350,6 +367,8 @@ pub struct Notes {
 pub struct PrinterLink {
     /// When a byte from the printer last arrived.
     pub heard: Instant,
+    /// When the printer's `Q0` was last answered with the progress of a running phase.
+    pub polled: Instant,
     /// False from a broken frame or the start of a handshake (`S0`) until the printer reports its
     /// sensor again (`f`) or polls (`Q0`): a frame was lost, and the printer's `f` with it, perhaps;
     /// it sends `f` again at the end of its handshake, before its next `Q0`
@@ -385,8 +404,8 @@ pub type SlotSet = u8;
 enum Goal {
     Reached,
     Drive,
-    /// Drive at the slow speed, corrected by the Bowden tension.
-    Follow,
+    /// Brake and wait (the lease ends: waiting counts against no bound).
+    Hold,
 }
 
 /// Advance `phase` by one step. `run` is its bookkeeping (`None` when it starts, or starts again
@@ -434,6 +453,8 @@ fn step_motion<const N: usize>(
                 goal_from_centi: resume_goal_from.unwrap_or(odometry),
                 mark_centi: None,
                 compressed_since: None,
+                taut_since: None,
+                pushed: false,
                 lease: Lease::new(now, odometry),
                 held: false,
             })
@@ -506,25 +527,28 @@ fn step_motion<const N: usize>(
             }
         }
         Phase::FeedToFsensor { .. } | Phase::SearchFsensor { .. } => {
-            if unit.fsensor_triggered() {
+            if !unit.fsensor_triggered() {
+                Goal::Drive
+            } else if notes.printer.polled > run.started {
                 Goal::Reached
             } else {
-                Goal::Drive
+                // The printer pushes its extruder for the load only once it has seen `P1c` with
+                // its sensor triggered (`OnMMUProgressMsgSame`, printer-truth §8): until its next
+                // `Q0` has seen this phase, the tip waits at the sensor.
+                Goal::Hold
             }
         }
-        Phase::FeedToNozzle { .. } => {
-            // The extruder has the filament when its gears hold the tip and the tube fills up
-            // behind it: after the printer's own push, or at once if that push came first.
-            // Odometry alone would be fooled by a slipping drive; it decides only without a
-            // tension reading.
-            // Known limit: a Bowden jam just before the gears compresses the tube the same way
-            // (README, "How the unit knows where the filament is").
-            let held = match unit.hub.tension.reading() {
-                Some(tension) => compressed_for(run, tension, now, config) >= HELD_CONFIRM_MS,
-                None => toward_goal_mm >= i32::from(config.extra_load_mm),
-            };
-            if held { Goal::Reached } else { Goal::Follow }
-        }
+        Phase::FeedToNozzle { .. } => match unit.hub.tension.reading() {
+            Some(tension) => match push_into_gears(run, tension, toward_goal_mm, now, config) {
+                Ok(goal) => goal,
+                Err(error) => return Outcome::Fail(error),
+            },
+            // Nothing else shows the gears holding the tip: no load is reported done blind.
+            None if unit.hub.tension.fault().is_some() => {
+                return Outcome::Fail(sensor_fault_error(SensorId::HubTension));
+            }
+            None => Goal::Hold,
+        },
         Phase::UnloadToHub { .. } => {
             // The printer's sensor must clear within the check distance of where the unload began
             // (Retry does not start the count again), and never after the tip has left the hub:
@@ -605,24 +629,22 @@ fn step_motion<const N: usize>(
             // another filament is there. Not parked.
             return Outcome::Fail(bounds.error);
         }
-        Goal::Drive => Motion::Run {
+        Goal::Drive if !(depends_on_printer(phase) && notes.printer.in_doubt(now)) => Motion::Run {
             direction: bounds.direction,
             speed: bounds.speed,
         },
-        Goal::Follow => Motion::Follow {
-            speed: config.slow_speed,
-        },
-    };
-    if depends_on_printer(phase) && notes.printer.in_doubt(now) {
-        // Hold: the printer's `f` may be lost and its co-feed has stopped. The lease ends, so the
-        // hold counts against no bound; what the phase used so far stays counted.
-        if !run.held {
-            run.lease.end(now, odometry);
-            run.held = true;
+        Goal::Drive | Goal::Hold => {
+            // Hold: the phase waits, or the printer's `f` may be lost and its co-feed has
+            // stopped. The lease ends, so the hold counts against no bound; what the phase used
+            // so far stays counted.
+            if !run.held {
+                run.lease.end(now, odometry);
+                run.held = true;
+            }
+            drive.brake(now);
+            return Outcome::Continue;
         }
-        drive.brake(now);
-        return Outcome::Continue;
-    }
+    };
     if run.held {
         run.held = false;
         drive.begin(
@@ -683,11 +705,58 @@ const fn depends_on_printer(phase: Phase) -> bool {
     )
 }
 
-/// How long the Bowden tube has read compressed past the follower's deadband (where
-/// [`crate::drive::follow_duty`] backs off, so the tube settles there when the tip is held), ms.
+/// `P7`, with a tension reading. Push until the tube reads compressed (the tip met the gears,
+/// turning or idle, or a jam) or the push distance is gone, then hold: the printer pushes the
+/// extra load distance + 2 mm after its sensor triggers (less on the MK3.5, whose sensor reports
+/// late), longer than the unit pushes, so gears that hold the tip pull the tube taut against the
+/// braked motor. Taut for [`GRIP_CONFIRM_MS`] is the only proof. None by the end of the
+/// printer's push is `8003`: the filament did not get into the extruder (a jam just before the
+/// gears, idle gears, a printer that never pushed), and Retry runs `P1c` again, whose `Q0`
+/// makes the printer push again.
+fn push_into_gears(
+    run: &mut PhaseRun,
+    tension: u16,
+    pushed_mm: i32,
+    now: Instant,
+    config: &Config,
+) -> Result<Goal, ErrorCode> {
+    if taut_for(run, tension, now, config) >= GRIP_CONFIRM_MS {
+        return Ok(Goal::Reached);
+    }
+    if !run.pushed {
+        let met = compressed_for(run, tension, now, config) >= MET_CONFIRM_MS;
+        let push_mm = config.extra_load_mm.saturating_add(NOZZLE_PUSH_MARGIN_MM);
+        run.pushed = met || pushed_mm >= i32::from(push_mm);
+    }
+    if !run.pushed {
+        return Ok(Goal::Drive);
+    }
+    let printer_push_ms = u64::from(config.extra_load_mm.saturating_add(2)) * 1000
+        / u64::from(config.slow_speed.max(1))
+        + PRINTER_PUSH_MARGIN_MS;
+    if now.millis_since(run.started) > printer_push_ms {
+        Err(ErrorCode::FSENSOR_DIDNT_SWITCH_ON)
+    } else {
+        Ok(Goal::Hold)
+    }
+}
+
+/// How long the Bowden tube has read taut past the follower's deadband (pulled from the
+/// extruder's side), ms. A reading at the supply rail is a loose wire, not a pull.
+fn taut_for(run: &mut PhaseRun, tension: u16, now: Instant, config: &Config) -> u64 {
+    let taut = u32::from(tension) > u32::from(config.tension_neutral) + u32::from(config.tension_deadband)
+        && tension < config.rail_high;
+    run.taut_since = if taut { run.taut_since.or(Some(now)) } else { None };
+    run.taut_since.map_or(0, |since| now.millis_since(since))
+}
+
+/// How long the Bowden tube has read compressed by more than half the follower's deadband, ms:
+/// the push stops as soon as the tip meets something, so the printer's push has the most left to
+/// pull (stopping early is the safe side: the tip may fall short, then no grip shows and Retry
+/// pushes again).
 fn compressed_for(run: &mut PhaseRun, tension: u16, now: Instant, config: &Config) -> u64 {
     let compressed =
-        u32::from(tension) + u32::from(config.tension_deadband) < u32::from(config.tension_neutral);
+        u32::from(tension) + u32::from(config.tension_deadband / 2) < u32::from(config.tension_neutral);
     run.compressed_since = if compressed {
         run.compressed_since.or(Some(now))
     } else {
@@ -726,6 +795,8 @@ fn check_sensors<const N: usize>(
                 goal_from_centi: 0,
                 mark_centi: None,
                 compressed_since: None,
+                taut_since: None,
+                pushed: false,
                 lease: Lease::new(now, 0),
                 held: false,
             })

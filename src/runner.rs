@@ -208,6 +208,19 @@ impl Runner {
     fn retry_phase(&mut self) {
         self.notes.trust_sensors = true;
         self.run = None;
+        // Only `P1c` seen anew makes the printer push its extruder again, and only its push can
+        // show the gears taking the tip (printer-truth §8): the push into the extruder is retried
+        // from the phase before it, the feed to the printer's sensor (every plan has one there).
+        let before = self.index.checked_sub(1);
+        if let (Some(Phase::FeedToNozzle { .. }), Some(before)) = (self.phase(), before)
+            && matches!(
+                self.plan.get(before),
+                Some(Phase::FeedToFsensor { .. } | Phase::SearchFsensor { .. })
+            )
+        {
+            self.index = before;
+            self.resume_goal_from = None;
+        }
         match self.phase() {
             Some(phase) => self.status = Status::Running(phase.progress()),
             // The command had done its work: planning it again would ask its question again

@@ -98,6 +98,9 @@ fn retry_after_a_stuck_printer_sensor_never_pulls_the_filament_out_of_its_drive(
     let mut rig = Rig::<3>::new();
     rig.boot();
     rig.command(t(0));
+    // The unit reports the load done once the printer's push shows the gears holding the tip:
+    // where the tip rests when that push is over.
+    rig.idle(1000);
     let loaded_tip = rig.model.tip_mm(0).unwrap();
     // The printer's sensor is stuck reporting filament.
     rig.fsensor = common::FsensorReports::Stuck(1);

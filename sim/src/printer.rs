@@ -18,7 +18,9 @@ use mmu_protocol::{
 pub const LINK_TIMEOUT_MS: u64 = 2000;
 /// `Q0` comes this long after the last activity, ms (`heartBeatPeriod`).
 pub const HEARTBEAT_MS: u64 = 1000;
-/// Consecutive link faults before the printer reports MMU_NOT_RESPONDING (`DropOutFilter`).
+/// Consecutive link faults before the printer reports MMU_NOT_RESPONDING or PROTOCOL_ERROR,
+/// whichever came first (`DropOutFilter`: one count for both, reset by every version answer
+/// the printer accepts, `ProcessVersionResponse` calls `ResetCommunicationTimeoutAttempts`).
 pub const MAX_DROPOUTS: u8 = 10;
 /// How long after its start the printer first talks to the unit, ms.
 const BOOT_WAIT_MS: u64 = 100;
@@ -260,8 +262,10 @@ pub struct Printer<L> {
     inbox: Vec<u8>,
     last_activity_ms: u64,
     reported_fsensor: Option<u8>,
-    /// Consecutive timeouts and garbled answers (the printer's two drop-out filters).
-    dropouts: [u8; 2],
+    /// Consecutive link faults since the last accepted version answer, and the first of them
+    /// (the printer's `DropOutFilter` and its initial cause).
+    dropouts: u8,
+    dropout_cause: Option<LinkFault>,
     /// The last values of [`POLLED_REGISTERS`].
     registers: [Option<u16>; POLLED_REGISTERS.len()],
 }
@@ -277,7 +281,8 @@ impl<L: Link> Printer<L> {
             inbox: Vec::new(),
             last_activity_ms: now,
             reported_fsensor: None,
-            dropouts: [0; 2],
+            dropouts: 0,
+            dropout_cause: None,
             registers: [None; POLLED_REGISTERS.len()],
         }
     }
@@ -624,10 +629,14 @@ impl<L: Link> Printer<L> {
                 }
                 continue;
             }
+            if part < 3 {
+                // A meaningful answer from the unit: the drop-out count starts again.
+                self.dropouts = 0;
+                self.dropout_cause = None;
+            }
             version[usize::from(part)] = got.unwrap_or(0);
             part += 1;
         }
-        self.dropouts = [0; 2];
         if !self.options.read_only {
             // `A` or `R`: the printer does not check.
             self.exchange(op, Request::write(0x0b, self.options.extra_load_mm))?;
@@ -647,14 +656,15 @@ impl<L: Link> Printer<L> {
         Ok(answer)
     }
 
-    /// Count a link fault; the tenth of a kind in a row ends the session. Then the printer drops
-    /// what is in flight (after a garbled answer it first waits out a heartbeat period).
+    /// Count a link fault; the tenth in a row without an accepted version answer between ends the
+    /// session with the first one's cause. Then the printer drops what is in flight (after a
+    /// garbled answer it first waits out a heartbeat period).
     fn link_lost(&mut self, op: &mut impl Operator<L>, why: LinkFault) -> Result<(), PrinterError> {
         op.event(&mut self.link, &PrinterEvent::LinkLost(why));
-        let count = &mut self.dropouts[why as usize];
-        *count += 1;
-        if *count >= MAX_DROPOUTS {
-            return Err(match why {
+        self.dropouts += 1;
+        let cause = *self.dropout_cause.get_or_insert(why);
+        if self.dropouts >= MAX_DROPOUTS {
+            return Err(match cause {
                 LinkFault::Timeout => PrinterError::NotResponding,
                 LinkFault::Garbled => PrinterError::ProtocolError,
             });

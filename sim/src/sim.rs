@@ -135,8 +135,10 @@ struct PrinterMechanics {
     slow_mm_s: f32,
     /// The command in progress, as the printer sees it.
     command: Option<(RequestCode, u8)>,
-    feeding_to_fsensor: bool,
-    cofeeding: bool,
+    /// The progress the printer last saw (`None` after an error or a finish).
+    seen_progress: Option<ProgressCode>,
+    /// The printer's `loadFilamentStarted`: set when it sees `P1c` begin, cleared by its push.
+    load_started: bool,
     print_mm_s: f32,
 }
 
@@ -188,8 +190,8 @@ impl Sim {
             extra_load_mm: f32::from(options.unit.extra_load_mm),
             slow_mm_s: f32::from(options.unit.slow_speed),
             command: None,
-            feeding_to_fsensor: false,
-            cofeeding: false,
+            seen_progress: None,
+            load_started: false,
             print_mm_s: options.print_mm_s,
             requests_quiet: QuietMs::default(),
             responses_quiet: QuietMs::default(),
@@ -502,6 +504,11 @@ impl Sim {
                 p.slow_mm_s = f32::from(request.value2);
             }
             code if code.is_command() => {
+                // The printer matches the answers against the command it sent (`ReqMsg()`),
+                // whether or not it heard the unit accept it: after a lost `A` it takes the unit
+                // reporting that command as running.
+                p.command = Some((code, request.value));
+                p.seen_progress = None;
                 self.model.set_printing(None);
                 let same_tool =
                     code == RequestCode::Tool && self.model.loaded_slot() == Some(usize::from(request.value));
@@ -554,7 +561,11 @@ impl Sim {
         match response.param {
             ParamCode::Processing => {
                 let progress = ProgressCode(response.param_value.unwrap_or(0) as u8);
-                p.feeding_to_fsensor = progress == ProgressCode::FEEDING_TO_FSENSOR;
+                if p.seen_progress != Some(progress) {
+                    // `OnMMUProgressMsgChanged`: `P1c` begins the load.
+                    p.load_started |= progress == ProgressCode::FEEDING_TO_FSENSOR;
+                    p.seen_progress = Some(progress);
+                }
                 let helps_unload = progress == ProgressCode::UNLOADING_TO_FINDA
                     && !matches!(response.code, RequestCode::Unload | RequestCode::Tool);
                 if helps_unload && self.model.fsensor_state() != 0 && !self.model.extruder_busy() {
@@ -567,7 +578,7 @@ impl Sim {
             }
             ParamCode::Finished => {
                 p.command = None;
-                p.feeding_to_fsensor = false;
+                p.seen_progress = None;
                 if response.code == RequestCode::Tool {
                     let rate = p.print_mm_s;
                     self.model.set_printing((rate > 0.0).then_some(rate));
@@ -580,25 +591,30 @@ impl Sim {
                     }
                 }
             }
-            _ => p.feeding_to_fsensor = false,
+            // `ERRWaitingForUser`: the next `P1c` is seen anew.
+            _ => p.seen_progress = None,
         }
     }
 
-    /// Co-feeding during `P1c` (spec §5.7).
+    /// Co-feeding during `P1c` (spec §5.7), as Prusa's printers do it
+    /// (`OnMMUProgressMsgSame`, printer-truth §8): while the printer last saw `P1c` and the load
+    /// it began is on, with its sensor clear it keeps a co-feed move going; once its sensor
+    /// triggers it aborts that and pushes the extra load distance + 2 mm, once.
     fn printer_mechanics(&mut self) {
         let state = self.model.fsensor_state();
         let p = &mut self.printer;
-        if p.cofeeding && state != 0 {
-            p.cofeeding = false;
-            p.feeding_to_fsensor = false;
+        if !p.load_started || p.seen_progress != Some(ProgressCode::FEEDING_TO_FSENSOR) {
+            return;
+        }
+        if state != 0 {
+            p.load_started = false;
             let (mm, speed) = (p.extra_load_mm + 2.0, p.slow_mm_s);
             self.model.extruder_move(mm, speed);
             self.event(EventKind::Extruder {
                 action: "extra-load",
                 mm,
             });
-        } else if p.feeding_to_fsensor && !p.cofeeding && state == 0 {
-            p.cofeeding = true;
+        } else if !self.model.extruder_busy() {
             let speed = p.slow_mm_s;
             self.model.extruder_move(COFEED_MM, speed);
             self.event(EventKind::Extruder {

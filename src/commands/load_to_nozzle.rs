@@ -1,8 +1,9 @@
 //! LoadToNozzle, the second half of a tool change: from before the hub into the extruder.
 //!
 //! `P5` feed to the hub sensor, `P6` fast through most of the Bowden tube, `P1c` slowly until
-//! the printer's sensor triggers (the printer co-feeds), `P7` push into the extruder's gears
-//! following the hub tension.
+//! the printer's sensor triggers (the printer co-feeds) and the printer has seen `P1c`, `P7` push
+//! into the extruder's gears while the printer pushes its own extruder: done only once that push
+//! pulls the Bowden tube taut ([`crate::phases::Phase::FeedToNozzle`]).
 
 use mmu_protocol::{ButtonCode, ErrorCode};
 
@@ -55,8 +56,9 @@ fn after_missed_hub(retry: &Retry, config: &Config) -> Option<Replanned> {
     Some(Replanned::plan(plan))
 }
 
-/// Retry after `8003`. The printer's sensor reads filament now (it works again, or the user
-/// pushed the tip to it): the search is over, the load goes on from there. The tip is still past
+/// Retry after `8003`. The printer's sensor reads filament now (it works again, the user pushed
+/// the tip to it, or the tip stopped between it and the extruder's gears in `P7`): the search is
+/// over, the load goes on from there (`P1c`, whose `Q0` makes the printer push again, then `P7`). The tip is still past
 /// the hub sensor: search again from where it is, slowly, over the whole Bowden length plus the
 /// search distance, not only what the first attempt left (the user may have pulled it back to
 /// look, a slipping drive fed less than it counted). The hub sensor sees nothing (the filament
@@ -123,7 +125,8 @@ pub const RECOVERY: &[Recovery] = &[
         action: Action::Replan(after_missed_hub),
     },
     // `8003`: the printer's sensor did not trigger within the search distance, or the filament
-    // stopped on its way there (a Bowden jam, the printer's idle extruder).
+    // stopped on its way there (a Bowden jam, the printer's idle extruder), or the printer's push
+    // did not pull it in after its sensor triggered (`P7`: a jam just before the gears).
     Recovery {
         error: ErrorCode::FSENSOR_DIDNT_SWITCH_ON,
         button: ButtonCode::MIDDLE,

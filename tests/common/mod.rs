@@ -89,6 +89,20 @@ pub enum FsensorReports {
     Stuck(u8),
 }
 
+/// Which printer firmware plays the printer's side of the load (they co-feed differently;
+/// printer-truth §8, Prusa-Firmware-Buddy `mmu2_mk4.cpp` and Prusa-Firmware `Firmware/mmu2.cpp`
+/// `OnMMUProgressMsgSame`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PrinterKind {
+    /// MK4, MK3.9, Core One (Buddy): co-feeds 189.9 mm moves, then pushes the extra load + 2 mm.
+    Mk4,
+    /// MK3.5 (Buddy): its sensor reports 0.175 mm per mm/s of the slow feed late (3.5 mm at
+    /// 20 mm/s), so it pushes that much less after it triggers.
+    Mk35,
+    /// MK3S (Prusa-Firmware 3.14): co-feeds 350 mm moves, then pushes the extra load + 2 mm.
+    Mk3s,
+}
+
 /// What a command run looked like from the printer's side.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Run {
@@ -107,7 +121,15 @@ pub struct Rig<const N: usize> {
     reported_fsensor: u8,
     /// Every motor command the App gave, per step.
     pub motor_log: Vec<[MotorCommand; N]>,
-    cofeeding: bool,
+    /// The printer's firmware.
+    pub printer: PrinterKind,
+    /// The progress the printer last saw (`None` between runs and after an error: the printer's
+    /// `ERRWaitingForUser`).
+    seen_progress: Option<ProgressCode>,
+    /// The printer's `loadFilamentStarted`: set when it sees `P1c` begin, cleared by its push.
+    load_started: bool,
+    /// The model's sensor state and since when (for a printer whose sensor reports late).
+    sensed: (u8, u64),
 }
 
 impl<const N: usize> Rig<N> {
@@ -124,7 +146,10 @@ impl<const N: usize> Rig<N> {
             decoder: ResponseDecoder::new(),
             reported_fsensor: 0,
             motor_log: Vec::new(),
-            cofeeding: false,
+            printer: PrinterKind::Mk4,
+            seen_progress: None,
+            load_started: false,
+            sensed: (0, 0),
         }
     }
 
@@ -193,9 +218,29 @@ impl<const N: usize> Rig<N> {
         answers
     }
 
-    fn printer_fsensor(&self) -> u8 {
+    /// The slow feed the printer co-feeds and pushes at (register 0x14, as it wrote it).
+    fn printer_slow_mm_s(&self) -> f32 {
+        f32::from(self.app.config().slow_speed)
+    }
+
+    fn printer_fsensor(&mut self) -> u8 {
         match self.fsensor {
-            FsensorReports::Truthful => self.model.fsensor_state(),
+            FsensorReports::Truthful => {
+                let state = self.model.fsensor_state();
+                if state != self.sensed.0 {
+                    self.sensed = (state, self.now);
+                }
+                let lag_ms = match self.printer {
+                    // 0.175 mm per mm/s of feed, at that feed: 175 ms whatever the speed.
+                    PrinterKind::Mk35 => 175,
+                    PrinterKind::Mk4 | PrinterKind::Mk3s => 0,
+                };
+                if self.now - self.sensed.1 >= lag_ms {
+                    state
+                } else {
+                    self.reported_fsensor
+                }
+            }
             FsensorReports::Stuck(state) => state,
         }
     }
@@ -287,28 +332,76 @@ impl<const N: usize> Rig<N> {
         }
     }
 
-    /// One step of the printer's side: report the sensor when it changed, co-feed on `P1c`.
+    /// One step of the printer's side: report the sensor when it changed, co-feed on `P1c`. As
+    /// Prusa's printers do (`OnMMUProgressMsgChanged`/`OnMMUProgressMsgSame`): `P1c` newly seen
+    /// starts the load; while it lasts, with its sensor clear the printer co-feeds, with it
+    /// triggered it aborts that and pushes the extra load distance + 2 mm once (less on an
+    /// MK3.5); with it unavailable (`f3`) it does nothing.
     pub fn printer_step(&mut self, progress: Option<ProgressCode>) {
+        if progress != self.seen_progress {
+            self.seen_progress = progress;
+            self.load_started |= progress == Some(ProgressCode::FEEDING_TO_FSENSOR);
+        }
         let state = self.printer_fsensor();
         if state != self.reported_fsensor {
             let answer = self.send(Request::new(RequestCode::FilamentSensor, state));
             assert_eq!(answer.map(|a| a.param), Some(ParamCode::Accepted));
             self.reported_fsensor = state;
-            if self.cofeeding && state != 0 {
-                // The printer aborts its search and pushes the extra load distance + 2 mm.
-                let extra = f32::from(self.app.config().extra_load_mm) + 2.0;
-                self.model
-                    .extruder_move(extra, f32::from(self.app.config().slow_speed));
-                self.cofeeding = false;
-            }
             return;
         }
-        if progress == Some(ProgressCode::FEEDING_TO_FSENSOR) && !self.cofeeding && state == 0 {
-            self.model
-                .extruder_move(189.9, f32::from(self.app.config().slow_speed));
-            self.cofeeding = true;
+        if self.load_started && progress == Some(ProgressCode::FEEDING_TO_FSENSOR) {
+            let slow = self.printer_slow_mm_s();
+            match state {
+                1 | 2 => {
+                    let compensation = match self.printer {
+                        PrinterKind::Mk35 => 0.175 * slow,
+                        PrinterKind::Mk4 | PrinterKind::Mk3s => 0.0,
+                    };
+                    let extra = f32::from(self.app.config().extra_load_mm) + 2.0 - compensation;
+                    self.model.extruder_move(extra, slow);
+                    self.load_started = false;
+                }
+                0 if !self.model.extruder_busy() => {
+                    let search = match self.printer {
+                        PrinterKind::Mk3s => 350.0,
+                        PrinterKind::Mk4 | PrinterKind::Mk35 => 189.9,
+                    };
+                    self.model.extruder_move(search, slow);
+                }
+                _ => {}
+            }
         }
         self.step_with(&[]);
+    }
+
+    /// Play the printer for the command in progress until `until` holds for the model (checked
+    /// every millisecond); `Q0` every [`POLL_MS`] as in [`Rig::follow`]. Panics if the command
+    /// ends first.
+    pub fn follow_until_model(&mut self, request: Request, until: impl Fn(&Model) -> bool, timeout_ms: u64) {
+        let mut progress: Vec<ProgressCode> = Vec::new();
+        let start = self.now;
+        while !until(&self.model) {
+            assert!(
+                self.now - start < timeout_ms,
+                "{request:?}: never got there; {progress:?}"
+            );
+            for _ in 0..POLL_MS / STEP_MS {
+                self.printer_step(progress.last().copied());
+                if until(&self.model) {
+                    return;
+                }
+            }
+            let answer = self.query();
+            match answer.param {
+                ParamCode::Processing => {
+                    let code = ProgressCode(answer.param_value.unwrap_or(0) as u8);
+                    if progress.last() != Some(&code) {
+                        progress.push(code);
+                    }
+                }
+                other => panic!("{request:?} ended before: {other:?} {answer:?}"),
+            }
+        }
     }
 
     pub fn inject(&mut self, fault: Fault) {
