@@ -715,6 +715,11 @@ mod tests {
         }
     }
 
+    /// The next number of a linear congruential sequence (noise for the equivalence tests).
+    fn next_random(seed: u32) -> u32 {
+        seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223)
+    }
+
     /// The pipeline as it was, with divisions: the reference for the division-free one.
     struct DividingFilter {
         medians: Window,
@@ -723,6 +728,14 @@ mod tests {
     }
 
     impl DividingFilter {
+        fn new() -> Self {
+            DividingFilter {
+                medians: Window::new(),
+                averages: Window::new(),
+                smoothed: None,
+            }
+        }
+
         fn push(&mut self, raw: u16, config: &FilterConfig) -> u16 {
             self.medians.push(raw, config.median.into());
             self.averages.push(self.medians.median(), config.average.into());
@@ -748,15 +761,11 @@ mod tests {
                 smoothing_permille: permille,
             };
             let mut filter = Filter::new();
-            let mut reference = DividingFilter {
-                medians: Window::new(),
-                averages: Window::new(),
-                smoothed: None,
-            };
+            let mut reference = DividingFilter::new();
             // Noisy levels switching between off and on, over the 12-bit ADC range.
             let mut seed: u32 = 7;
             for i in 0..4000u32 {
-                seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                seed = next_random(seed);
                 let noise = (seed >> 20) as u16 % 400;
                 let raw = if i % 500 < 250 { 1800 + noise } else { 3600 + noise };
                 assert_eq!(
@@ -773,14 +782,10 @@ mod tests {
         // Window lengths changing between samples (a `set` of the filter registers), growing and
         // shrinking while the windows are partly and fully filled, and a clear in between.
         let mut filter = Filter::new();
-        let mut reference = DividingFilter {
-            medians: Window::new(),
-            averages: Window::new(),
-            smoothed: None,
-        };
+        let mut reference = DividingFilter::new();
         let mut seed: u32 = 11;
         for i in 0..6000u32 {
-            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            seed = next_random(seed);
             let raw = (seed >> 20) as u16; // 0..4096, every value possible
             let config = FilterConfig {
                 median: [5, 9, 1, 3, 9, 2, 0, 12][(i / 37 % 8) as usize],
@@ -789,11 +794,7 @@ mod tests {
             };
             if i % 1000 == 999 {
                 filter.clear();
-                reference = DividingFilter {
-                    medians: Window::new(),
-                    averages: Window::new(),
-                    smoothed: None,
-                };
+                reference = DividingFilter::new();
             }
             assert_eq!(
                 filter.push(raw, &config),
@@ -839,14 +840,10 @@ mod tests {
                         smoothing_permille: permille,
                     };
                     let mut filter = Filter::new();
-                    let mut reference = DividingFilter {
-                        medians: Window::new(),
-                        averages: Window::new(),
-                        smoothed: None,
-                    };
+                    let mut reference = DividingFilter::new();
                     let mut seed = u32::from(median) * 31 + u32::from(average);
                     for i in 0..300u32 {
-                        seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                        seed = next_random(seed);
                         let raw = if i % 100 < 50 {
                             40 + (seed >> 28) as u16
                         } else {
@@ -889,14 +886,10 @@ mod tests {
             },
         ];
         let mut filter = Filter::new();
-        let mut reference = DividingFilter {
-            medians: Window::new(),
-            averages: Window::new(),
-            smoothed: None,
-        };
+        let mut reference = DividingFilter::new();
         let mut seed: u32 = 5;
         for i in 0..5000u32 {
-            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            seed = next_random(seed);
             let raw = (seed >> 20) as u16;
             let config = configs[(i / 29) as usize % configs.len()];
             assert_eq!(

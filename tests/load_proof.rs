@@ -23,6 +23,13 @@ fn gears_mm<const N: usize>(rig: &Rig<N>) -> f32 {
 fn load_until_past_fsensor(printer: PrinterKind, past_fsensor_mm: f32) -> Rig<1> {
     let mut rig = Rig::<1>::new();
     rig.printer = printer;
+    boot_and_load_until_past_fsensor(&mut rig, past_fsensor_mm);
+    rig
+}
+
+/// Boot `rig` and issue `T0`, until slot 0's tip is `past_fsensor_mm` beyond the printer's
+/// sensor.
+fn boot_and_load_until_past_fsensor(rig: &mut Rig<1>, past_fsensor_mm: f32) {
     rig.boot();
     rig.issue(t(0));
     rig.follow_until_model(
@@ -34,7 +41,6 @@ fn load_until_past_fsensor(printer: PrinterKind, past_fsensor_mm: f32) -> Rig<1>
         },
         120_000,
     );
-    rig
 }
 
 #[test]
@@ -160,17 +166,7 @@ fn a_jam_anywhere_between_the_sensor_and_the_gears_is_never_reported_loaded() {
                 let mut rig = Rig::<1>::new();
                 rig.model = Model::new(ModelConfig::default(), 1, seed);
                 rig.printer = printer;
-                rig.boot();
-                rig.issue(t(0));
-                rig.follow_until_model(
-                    t(0),
-                    |model| {
-                        model
-                            .tip_mm(0)
-                            .is_some_and(|tip| tip >= FSENSOR_MM + past_fsensor_mm)
-                    },
-                    120_000,
-                );
+                boot_and_load_until_past_fsensor(&mut rig, past_fsensor_mm);
                 rig.inject(Fault::BowdenJam);
                 rig.inject(Fault::SensorNoise {
                     sigma: seed as f32 * 30.0,
