@@ -13,7 +13,7 @@ use serde_json::Value;
 
 mod common;
 
-use common::{mmu, text};
+use common::{mmu, spawn_mmu, text};
 
 /// Longest wait for the simulator to say something.
 const WAIT: Duration = Duration::from_secs(20);
@@ -294,18 +294,15 @@ fn the_simulator_logs_what_it_serves() {
 /// `-q` silences the log.
 #[test]
 fn the_simulator_log_is_silenced_by_q() {
-    let output = Command::new(env!("CARGO_BIN_EXE_mmu"))
-        .args(["sim", "--stdio", "-q"])
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .and_then(|mut child| {
-            thread::sleep(BOOT);
-            child.stdin.take().expect("piped").write_all(b"S0*c6\nT1*00\n")?;
-            child.wait_with_output()
-        })
-        .expect("mmu sim runs");
+    let mut child = spawn_mmu(&["sim", "--stdio", "-q"]);
+    thread::sleep(BOOT);
+    child
+        .stdin
+        .take()
+        .expect("piped")
+        .write_all(b"S0*c6\nT1*00\n")
+        .expect("write");
+    let output = child.wait_with_output().expect("mmu sim ends");
     assert!(output.status.success());
     assert!(
         output.stderr.is_empty(),
@@ -364,13 +361,7 @@ fn the_simulator_log_leaves_out_unchanged_polls_unless_verbose() {
         if verbose {
             args.push("-v");
         }
-        let mut child = Command::new(env!("CARGO_BIN_EXE_mmu"))
-            .args(&args)
-            .stdin(Stdio::piped())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("mmu sim runs");
+        let mut child = spawn_mmu(&args);
         let mut stdin = child.stdin.take().expect("piped");
         thread::sleep(BOOT);
         for _ in 0..3 {
@@ -420,13 +411,7 @@ fn sensors_flag_a_stuck_sensor() {
 /// request is logged.
 #[test]
 fn the_simulator_log_reports_an_unfinished_frame_after_a_silence() {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_mmu"))
-        .args(["sim", "--stdio"])
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("mmu sim runs");
+    let mut child = spawn_mmu(&["sim", "--stdio"]);
     let mut stdin = child.stdin.take().expect("piped");
     thread::sleep(BOOT);
     stdin.write_all(b"T1").expect("write");

@@ -21,6 +21,10 @@ use mmu_protocol::{
 use serde_json::Value;
 use serialport::SerialPort;
 
+mod common;
+
+use common::spawn_mmu;
+
 /// Virtual ms per wall ms.
 const TIME_SCALE: u64 = 20;
 /// The printer's `Q0` period, one virtual second, in wall time.
@@ -42,15 +46,10 @@ struct SimProcess {
 
 impl SimProcess {
     fn spawn(args: &[&str]) -> SimProcess {
-        let child = Command::new(env!("CARGO_BIN_EXE_mmu"))
-            .arg("sim")
-            .args(args)
-            .stdin(Stdio::piped())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("the mmu binary runs");
-        SimProcess { child }
+        let args: Vec<&str> = ["sim"].into_iter().chain(args.iter().copied()).collect();
+        SimProcess {
+            child: spawn_mmu(&args),
+        }
     }
 
     /// Wait for the process to exit on its own; its stderr.

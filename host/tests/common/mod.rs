@@ -3,7 +3,7 @@
 #![allow(dead_code)] // each test file uses a different part
 
 use std::io::Write;
-use std::process::{Command, Output, Stdio};
+use std::process::{Child, Command, Output, Stdio};
 
 /// `mmu ARGS`, run to its end.
 pub fn mmu(args: &[&str]) -> Output {
@@ -13,15 +13,20 @@ pub fn mmu(args: &[&str]) -> Output {
         .expect("the mmu binary runs")
 }
 
-/// `mmu ARGS` with `input` on its stdin, run to its end.
-pub fn mmu_with_input(args: &[&str], input: &str) -> Output {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_mmu"))
+/// `mmu ARGS` started with stdin, stdout and stderr piped.
+pub fn spawn_mmu(args: &[&str]) -> Child {
+    Command::new(env!("CARGO_BIN_EXE_mmu"))
         .args(args)
         .stdin(Stdio::piped())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
-        .expect("the mmu binary runs");
+        .expect("the mmu binary runs")
+}
+
+/// `mmu ARGS` with `input` on its stdin, run to its end.
+pub fn mmu_with_input(args: &[&str], input: &str) -> Output {
+    let mut child = spawn_mmu(args);
     child
         .stdin
         .take()
