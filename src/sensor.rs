@@ -752,6 +752,35 @@ mod tests {
         }
     }
 
+    /// The division-free filter and its dividing reference, fed the same samples.
+    struct Twins {
+        filter: Filter,
+        reference: DividingFilter,
+    }
+
+    impl Twins {
+        fn new() -> Self {
+            Twins {
+                filter: Filter::new(),
+                reference: DividingFilter::new(),
+            }
+        }
+
+        /// Push `raw` (sample `i`) through both; they must agree.
+        fn push(&mut self, raw: u16, config: &FilterConfig, i: u32) {
+            assert_eq!(
+                self.filter.push(raw, config),
+                self.reference.push(raw, config),
+                "{config:?} at {i}"
+            );
+        }
+
+        fn clear(&mut self) {
+            self.filter.clear();
+            self.reference = DividingFilter::new();
+        }
+    }
+
     #[test]
     fn the_filter_computes_what_the_divisions_did() {
         for (median, average, permille) in [(5, 4, 500), (3, 1, 1000), (1, 1, 1), (9, 9, 333), (2, 7, 999)] {
@@ -760,19 +789,14 @@ mod tests {
                 average,
                 smoothing_permille: permille,
             };
-            let mut filter = Filter::new();
-            let mut reference = DividingFilter::new();
+            let mut twins = Twins::new();
             // Noisy levels switching between off and on, over the 12-bit ADC range.
             let mut seed: u32 = 7;
             for i in 0..4000u32 {
                 seed = next_random(seed);
                 let noise = (seed >> 20) as u16 % 400;
                 let raw = if i % 500 < 250 { 1800 + noise } else { 3600 + noise };
-                assert_eq!(
-                    filter.push(raw, &config),
-                    reference.push(raw, &config),
-                    "{config:?} at {i}"
-                );
+                twins.push(raw, &config, i);
             }
         }
     }
@@ -781,8 +805,7 @@ mod tests {
     fn the_filter_follows_window_changes_as_the_divisions_did() {
         // Window lengths changing between samples (a `set` of the filter registers), growing and
         // shrinking while the windows are partly and fully filled, and a clear in between.
-        let mut filter = Filter::new();
-        let mut reference = DividingFilter::new();
+        let mut twins = Twins::new();
         let mut seed: u32 = 11;
         for i in 0..6000u32 {
             seed = next_random(seed);
@@ -793,14 +816,9 @@ mod tests {
                 smoothing_permille: 400,
             };
             if i % 1000 == 999 {
-                filter.clear();
-                reference = DividingFilter::new();
+                twins.clear();
             }
-            assert_eq!(
-                filter.push(raw, &config),
-                reference.push(raw, &config),
-                "{config:?} at {i}"
-            );
+            twins.push(raw, &config, i);
         }
     }
 
@@ -839,8 +857,7 @@ mod tests {
                         average,
                         smoothing_permille: permille,
                     };
-                    let mut filter = Filter::new();
-                    let mut reference = DividingFilter::new();
+                    let mut twins = Twins::new();
                     let mut seed = u32::from(median) * 31 + u32::from(average);
                     for i in 0..300u32 {
                         seed = next_random(seed);
@@ -849,11 +866,7 @@ mod tests {
                         } else {
                             (seed >> 20) as u16
                         };
-                        assert_eq!(
-                            filter.push(raw, &config),
-                            reference.push(raw, &config),
-                            "{config:?} at {i}"
-                        );
+                        twins.push(raw, &config, i);
                     }
                 }
             }
@@ -885,18 +898,13 @@ mod tests {
                 smoothing_permille: 250,
             },
         ];
-        let mut filter = Filter::new();
-        let mut reference = DividingFilter::new();
+        let mut twins = Twins::new();
         let mut seed: u32 = 5;
         for i in 0..5000u32 {
             seed = next_random(seed);
             let raw = (seed >> 20) as u16;
             let config = configs[(i / 29) as usize % configs.len()];
-            assert_eq!(
-                filter.push(raw, &config),
-                reference.push(raw, &config),
-                "{config:?} at {i}"
-            );
+            twins.push(raw, &config, i);
         }
     }
 
