@@ -4,7 +4,12 @@
 //! `--slots` is a run-time value. [`UnitLogic`] is the object-safe face of an `App<N>` with its
 //! [`Store`] that [`new_logic`] builds for any supported count. The flash outlives the logic: a
 //! restart takes it back with [`UnitLogic::into_flash`] and boots a new logic on it.
+//!
+//! Received bytes reach the App as they reach it on the board: they wait in a receive ring of
+//! [`RX_RING`] bytes (what finds it full is lost, as in a UART overrun) and each step
+//! takes at most [`MAX_RX_PER_STEP`](mmu_firmware::control::MAX_RX_PER_STEP) of them ([`RxQueue`]).
 
+use mmu_firmware::control::{RX_RING, RxQueue};
 use mmu_firmware::persist::{Keeper, Store};
 use mmu_firmware::runner::Status;
 use mmu_firmware::{App, BoardAction, Config, Instant, MAX_SLOTS, MotorCommand};
@@ -25,7 +30,8 @@ pub fn blank_flash() -> UnitFlash {
 
 /// One App of any slot count, stepped against the model.
 pub trait UnitLogic: Send {
-    /// One control step at `now`: sample `model`, step the App with `rx`, append what it sends to
+    /// One control step at `now`: sample `model`, step the App with `rx` (as much of it and of
+    /// what waits from earlier steps as a board's step takes), append what it sends to
     /// `tx`, and run the model for `dt_ms` with the App's motor commands. Returns the board action
     /// the App asked for, if any.
     fn step(
@@ -61,6 +67,7 @@ struct PersistentApp<const N: usize> {
     app: App<N>,
     keeper: Keeper<UnitFlash, N>,
     motors: [MotorCommand; N],
+    received: RxQueue<RX_RING>,
 }
 
 impl<const N: usize> PersistentApp<N> {
@@ -74,6 +81,7 @@ impl<const N: usize> PersistentApp<N> {
             app,
             keeper,
             motors: mmu_firmware::drive::stopped(),
+            received: RxQueue::new(),
         }
     }
 }
@@ -88,7 +96,8 @@ impl<const N: usize> UnitLogic for PersistentApp<N> {
         tx: &mut Vec<u8>,
     ) -> Option<BoardAction> {
         let samples = model.samples::<N>();
-        let out = self.app.step(now, &samples, rx);
+        self.received.receive(rx);
+        let out = self.app.step(now, &samples, &self.received.take_step());
         tx.extend_from_slice(&out.tx);
         // A failed write leaves the old record; the keeper tries again.
         let _ = match out.action {
