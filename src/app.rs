@@ -87,6 +87,8 @@ pub struct App<const N: usize> {
     /// The link to the printer as the phases that depend on it see it (`P1c`, `P7` hold their
     /// motor while it is in doubt).
     printer: PrinterLink,
+    /// Moves (wrapping) whenever a setting may have changed: see [`App::settings_revision`].
+    settings_revision: u32,
 }
 
 impl<const N: usize> App<N> {
@@ -117,12 +119,20 @@ impl<const N: usize> App<N> {
                 polled: Instant::ZERO,
                 in_sync: true,
             },
+            settings_revision: 0,
         }
     }
 
     /// The settings in force.
     pub fn config(&self) -> &Config {
         &self.config
+    }
+
+    /// A number that changes whenever a setting may have changed (an accepted setting write, a
+    /// Bowden length learned by a Retry, a restore), so that the persistence keeper compares it
+    /// instead of every setting.
+    pub fn settings_revision(&self) -> u32 {
+        self.settings_revision
     }
 
     /// What the unit knows about its hardware.
@@ -220,6 +230,7 @@ impl<const N: usize> App<N> {
     fn note(&mut self, learned: Option<Learned>) {
         if let Some(Learned::BowdenMm(mm)) = learned {
             self.bowden_learned_mm = mm;
+            self.settings_revision = self.settings_revision.wrapping_add(1);
         }
     }
 
@@ -392,7 +403,11 @@ impl<const N: usize> App<N> {
             config: &mut self.config,
             fsensor: &mut self.unit.fsensor,
         };
-        registers::write(&mut target, N, address, value)
+        let accepted = registers::write(&mut target, N, address, value);
+        if accepted && address != registers::FSENSOR {
+            self.settings_revision = self.settings_revision.wrapping_add(1);
+        }
+        accepted
     }
 
     /// Every writable setting that differs from its default, and its value (only what differs:

@@ -213,6 +213,9 @@ macro_rules! block {
     };
 }
 
+/// The printer's filament sensor as it reports it (the Core One writes it instead of sending
+/// `f`): writable, but state, not a setting.
+pub const FSENSOR: u8 = 0x09;
 /// Extension: number of slots (read only).
 pub const SLOT_COUNT: u8 = 0x40;
 /// Extension: bitmask of sensors stuck at a rail, bit = diagnostic sensor index (read only).
@@ -274,7 +277,7 @@ pub static REGISTERS: &[Row] = &[
         v.hub.filament.present().unwrap_or(false).into()
     )),
     Row {
-        address: 0x09,
+        address: FSENSOR,
         span: Span::One,
         name: name!("fsensor"),
         range: Some((0, 255)),
@@ -475,7 +478,7 @@ pub fn changed_settings<const CAP: usize>(
     let (ours, theirs) = (view(config), view(defaults));
     for row in REGISTERS
         .iter()
-        .filter(|row| row.write.is_some() && row.address != 0x09)
+        .filter(|row| row.write.is_some() && row.address != FSENSOR)
     {
         let count = match row.span {
             Span::One => 1,

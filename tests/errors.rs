@@ -134,6 +134,7 @@ fn retry_after_8009_learns_the_bowden_length_and_finishes() {
         let run = rig.command(t(0));
         assert_eq!(run.last, error(t(0), ErrorCode::FSENSOR_TOO_EARLY), "{tube}");
         assert_eq!(rig.read(0x53), Some(0), "nothing learned yet");
+        let revision = rig.app.settings_revision();
         press(&mut rig, ButtonCode::MIDDLE);
         let run = rig.follow(t(0), 120_000);
         assert_eq!(run.last, finished(t(0)), "{tube}: {:?}", run.progress);
@@ -144,6 +145,12 @@ fn retry_after_8009_learns_the_bowden_length_and_finishes() {
             "0x22 learned {learned} mm on a {tube} mm tube"
         );
         assert_eq!(rig.read(0x53), Some(learned));
+        // The persistence keeper snapshots the settings only when their revision moved.
+        assert_ne!(
+            rig.app.settings_revision(),
+            revision,
+            "{tube}: a learned setting is a change"
+        );
         // What the persistence keeper saves brings it back after a restart.
         let mut restarted = mmu_firmware::App::<3>::new(mmu_firmware::Config::default());
         restarted.restore(&rig.app.snapshot());

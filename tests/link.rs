@@ -160,3 +160,31 @@ fn register_writes_are_validated() {
     );
     let _ = (Config::default(), ModelConfig::default(), ButtonCode::MIDDLE);
 }
+
+/// The persistence keeper snapshots the settings only when [`App::settings_revision`] moved: an
+/// accepted setting write moves it; a refused write and the printer's filament sensor (0x09, the
+/// Core One's `f`, written every few seconds) do not.
+///
+/// [`App::settings_revision`]: mmu_firmware::App::settings_revision
+#[test]
+fn only_an_accepted_setting_write_counts_as_a_settings_change() {
+    let mut rig = Rig::<3>::new();
+    rig.boot();
+    let mut revision = rig.app.settings_revision();
+    let mut write = |rig: &mut Rig<3>, address, value| {
+        rig.send(Request::write(address, value)).unwrap();
+        let moved = rig.app.settings_revision() != revision;
+        revision = rig.app.settings_revision();
+        moved
+    };
+    assert!(write(&mut rig, 0x22, 420), "a setting");
+    assert!(write(&mut rig, 0x52, 2), "the reported revision");
+    let hub_off = rig.read(0xa0).unwrap();
+    assert!(write(&mut rig, 0xa0, hub_off - 10), "a threshold");
+    assert!(!write(&mut rig, 0x22, 5), "refused: out of range");
+    assert!(!write(&mut rig, 0x00, 9), "refused: read only");
+    assert!(
+        !write(&mut rig, 0x09, 1),
+        "the printer's sensor is state, not a setting"
+    );
+}

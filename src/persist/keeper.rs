@@ -10,7 +10,6 @@ use embedded_storage::nor_flash::NorFlash;
 
 use super::{Damage, Store, StoreError};
 use crate::app::{App, BoardAction};
-use crate::config::Config;
 use crate::time::Instant;
 use crate::unit::Lane;
 
@@ -57,9 +56,9 @@ pub struct Keeper<F: NorFlash, const N: usize> {
     store: Store<F, N>,
     /// The lanes as of the last comparison with the flash.
     lanes: [Lane; N],
-    /// The configuration whose settings were last compared with the flash (`None`: compare them
-    /// at the next full check).
-    config: Option<Config>,
+    /// The [`App::settings_revision`] whose settings were last compared with the flash (`None`:
+    /// compare them at the next full check).
+    settings_seen: Option<u32>,
     /// When counters and settings were last compared.
     checked_at: Option<Instant>,
     /// Erases allowed now, and when the budget was last topped up.
@@ -88,7 +87,7 @@ impl<F: NorFlash, const N: usize> Keeper<F, N> {
         let keeper = Keeper {
             store,
             lanes: app.lanes(),
-            config: None,
+            settings_seen: None,
             checked_at: None,
             erase_credit: ERASE_BURST,
             refilled_at: None,
@@ -133,8 +132,8 @@ impl<F: NorFlash, const N: usize> Keeper<F, N> {
             self.checked_at = Some(now);
             // The settings come from a snapshot (thousands of instructions): taken only when the
             // configuration changed, in a call of its own; the save runs in the calls after it.
-            if self.config.as_ref() != Some(app.config()) {
-                self.config = Some(app.config().clone());
+            if self.settings_seen != Some(app.settings_revision()) {
+                self.settings_seen = Some(app.settings_revision());
                 self.store.begin_save(&app.snapshot(), Some(now));
                 return Ok(false);
             }
@@ -199,7 +198,7 @@ impl<F: NorFlash, const N: usize> Keeper<F, N> {
             }
             Err(_) => {
                 // The settings may be what failed: compare them again at the next try.
-                self.config = None;
+                self.settings_seen = None;
                 self.health.failed_saves = self.health.failed_saves.saturating_add(1);
                 if !self.health.failing {
                     self.health.failing = true;
