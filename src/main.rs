@@ -136,7 +136,8 @@ async fn control_task(
         // Last, just after the feed: a write stalls the CPU (see `board::WatchedFlash`; a page
         // erase up to 40 ms), the motors keeping this step's commands meanwhile. The ticks it
         // missed are dropped rather than caught up in a burst of late, unfed steps.
-        if persisted.update(control.app(), now) {
+        let busy = received > 0 || !step.out.tx.is_empty();
+        if persisted.update(control.app(), now, busy) {
             control.saved();
             ticker.reset();
             deadline = Clock::now() + CONTROL_PERIOD;
@@ -243,12 +244,15 @@ impl Persisted {
         }
     }
 
-    /// Writes what changed (see [`Keeper::update`]). Returns whether it wrote, i.e. stalled the
-    /// CPU. A failed write leaves the previous record in flash; the keeper tries again after a
-    /// pause, and its health is logged once per change.
+    /// Writes what changed (see [`Keeper::update_after`]): nothing after a step `busy` with the
+    /// printer (it took bytes or answered), unless several in a row were. Returns whether it
+    /// wrote, i.e. stalled the CPU. A failed write leaves the previous record in flash; the
+    /// keeper tries again after a pause, and its health is logged once per change.
     #[inline(never)]
-    fn update(&mut self, app: &App<SLOTS>, now: Clock) -> bool {
-        let wrote = self.0.update(app, Instant::from_millis(now.as_millis()));
+    fn update(&mut self, app: &App<SLOTS>, now: Clock, busy: bool) -> bool {
+        let wrote = self
+            .0
+            .update_after(app, Instant::from_millis(now.as_millis()), busy);
         if let Some(health) = self.0.take_news() {
             warn!("store: {}", health);
         }

@@ -66,18 +66,23 @@ pub(super) struct EntryWriter {
 }
 
 impl EntryWriter {
-    /// Lay out the header and the payload of an entry in `buffer` (the trailer comes with the
-    /// last chunk).
-    pub(super) fn new(buffer: &mut [u8; MAX_ENTRY], key: u8, sequence: u32, payload: &[u8]) -> Self {
-        let len = payload.len().min(MAX_RECORD);
+    /// The payload area of `buffer`: a record is encoded there, in place, before
+    /// [`EntryWriter::new`] lays out the rest of its entry.
+    pub(super) fn payload(buffer: &mut [u8; MAX_ENTRY]) -> &mut [u8] {
+        &mut buffer[DOUBLE_WORD..DOUBLE_WORD + MAX_RECORD]
+    }
+
+    /// Lay out the header and the padding of an entry in `buffer` whose first `len` payload bytes
+    /// are in place ([`EntryWriter::payload`]); the trailer comes with the last chunk.
+    pub(super) fn new(buffer: &mut [u8; MAX_ENTRY], key: u8, sequence: u32, len: usize) -> Self {
+        let len = len.min(MAX_RECORD);
         let size = entry_size(len);
-        buffer[..size].fill(0);
+        buffer[DOUBLE_WORD + len..size - DOUBLE_WORD].fill(0);
         buffer[0] = key;
         buffer[1] = len as u8;
         buffer[2..6].copy_from_slice(&sequence.to_le_bytes());
         let header_crc = HEADER_CRC.checksum(&buffer[..6]);
         buffer[6..8].copy_from_slice(&header_crc.to_le_bytes());
-        buffer[DOUBLE_WORD..DOUBLE_WORD + len].copy_from_slice(&payload[..len]);
         EntryWriter {
             size,
             written: 0,
@@ -121,8 +126,10 @@ mod tests {
 
     /// The entry's bytes, in the chunks a save programs them in.
     fn build_entry(key: u8, sequence: u32, payload: &[u8], chunk: usize) -> Vec<u8> {
-        let mut buffer = [0; MAX_ENTRY];
-        let mut writer = EntryWriter::new(&mut buffer, key, sequence, payload);
+        // Whatever an earlier entry left in the buffer must not show in this one.
+        let mut buffer = [0xa5; MAX_ENTRY];
+        EntryWriter::payload(&mut buffer)[..payload.len()].copy_from_slice(payload);
+        let mut writer = EntryWriter::new(&mut buffer, key, sequence, payload.len());
         let mut entry = Vec::new();
         while let Some((offset, bytes)) = writer.next_chunk(&mut buffer, chunk) {
             assert_eq!(offset, entry.len(), "in order");
@@ -141,7 +148,10 @@ mod tests {
         let header: [u8; DOUBLE_WORD] = entry[..8].try_into().unwrap();
         assert_eq!(parse_header(&header), Some((1, 5, 7)));
         assert!(is_complete(&entry));
-        let all = super::super::records::encode_settings(&[(1, 2); super::super::MAX_SETTINGS]);
+        let mut all = [0; MAX_RECORD];
+        let mut writer = super::super::records::Writer::new(&mut all);
+        super::super::records::encode_settings(&[(1, 2); super::super::MAX_SETTINGS], &mut writer);
+        assert_eq!(writer.len(), MAX_RECORD);
         assert_eq!(entry_size(all.len()), MAX_ENTRY);
         let whole = build_entry(3, 9, &all, MAX_ENTRY);
         for chunk in [8, 16, 64] {

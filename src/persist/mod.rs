@@ -12,13 +12,16 @@
 mod entry;
 mod keeper;
 mod records;
+mod settings;
 mod store;
 
 use heapless::Vec;
 
 use crate::unit::Lane;
 
-pub use keeper::{Boot, ERASE_BURST, ERASES_PER_HOUR, FULL_CHECK_MS, Health, Keeper, RETRY_MAX_MS};
+pub use keeper::{
+    Boot, ERASE_BURST, ERASES_PER_HOUR, FULL_CHECK_MS, Health, Keeper, MAX_DEFERRED_STEPS, RETRY_MAX_MS,
+};
 pub use store::{Damage, Progress, SLOW_RECORD_PERIOD_MS, Store};
 
 /// Settings registers a unit has at most (plain settings and two thresholds per sensor).

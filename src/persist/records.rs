@@ -49,6 +49,7 @@ impl Record {
 }
 
 /// One record's bytes.
+#[cfg(test)]
 pub(super) type Bytes = Vec<u8, MAX_RECORD>;
 
 fn lane_code(lane: Lane) -> u8 {
@@ -93,44 +94,61 @@ impl Reader<'_> {
     }
 }
 
-/// Append `bytes`; every record built here fits [`MAX_RECORD`].
-fn put(out: &mut Bytes, bytes: &[u8]) {
-    let _ = out.extend_from_slice(bytes);
+/// Writes a record's fields in order into an entry's payload, in place; bytes past the end are
+/// dropped (every record built here fits [`MAX_RECORD`]).
+pub(super) struct Writer<'a> {
+    out: &'a mut [u8],
+    len: usize,
 }
 
-fn header(entries: usize) -> Bytes {
-    let mut out = Bytes::new();
-    put(&mut out, &[FORMAT, entries as u8]);
-    out
+impl<'a> Writer<'a> {
+    /// A writer at the start of `out`.
+    pub(super) fn new(out: &'a mut [u8]) -> Self {
+        Writer { out, len: 0 }
+    }
+
+    /// The bytes written.
+    pub(super) fn len(&self) -> usize {
+        self.len
+    }
+
+    fn put(&mut self, bytes: &[u8]) {
+        let end = self.len + bytes.len();
+        if let Some(to) = self.out.get_mut(self.len..end) {
+            to.copy_from_slice(bytes);
+            self.len = end;
+        }
+    }
+
+    fn header(&mut self, entries: usize) {
+        self.put(&[FORMAT, entries as u8]);
+    }
 }
 
-pub(super) fn encode_lanes<const N: usize>(lanes: &[Lane; N]) -> Bytes {
-    let mut out = header(N);
+pub(super) fn encode_lanes<const N: usize>(lanes: &[Lane; N], out: &mut Writer) {
+    out.header(N);
     for &lane in lanes {
-        put(&mut out, &[lane_code(lane)]);
+        out.put(&[lane_code(lane)]);
     }
-    out
 }
 
-pub(super) fn encode_counters<const N: usize>(counters: &Counters<N>) -> Bytes {
-    let mut out = header(N);
-    put(&mut out, &counters.drive_errors.to_le_bytes());
+pub(super) fn encode_counters<const N: usize>(counters: &Counters<N>, out: &mut Writer) {
+    out.header(N);
+    out.put(&counters.drive_errors.to_le_bytes());
     for slot in 0..N {
-        put(&mut out, &counters.tool_changes[slot].to_le_bytes());
-        put(&mut out, &counters.failures[slot].to_le_bytes());
-        put(&mut out, &counters.fed_mm[slot].to_le_bytes());
+        out.put(&counters.tool_changes[slot].to_le_bytes());
+        out.put(&counters.failures[slot].to_le_bytes());
+        out.put(&counters.fed_mm[slot].to_le_bytes());
     }
-    out
 }
 
 /// Settings and identity records alike: (register, value) pairs.
-pub(super) fn encode_settings(settings: &[(u8, u16)]) -> Bytes {
-    let mut out = header(settings.len());
+pub(super) fn encode_settings(settings: &[(u8, u16)], out: &mut Writer) {
+    out.header(settings.len());
     for &(address, value) in settings {
-        put(&mut out, &[address]);
-        put(&mut out, &value.to_le_bytes());
+        let [low, high] = value.to_le_bytes();
+        out.put(&[address, low, high]);
     }
-    out
 }
 
 /// A reader past the header, when the record is of this format and for `count` entries.
@@ -223,13 +241,16 @@ impl<const N: usize> Records<N> {
         }
     }
 
-    pub(super) fn encode(&self, record: Record) -> Bytes {
+    /// Write `record`'s bytes into `out` (an entry's payload, in place): their length.
+    pub(super) fn encode(&self, record: Record, out: &mut [u8]) -> usize {
+        let mut writer = Writer::new(out);
         match record {
-            Record::Lanes => encode_lanes(&self.lanes),
-            Record::Counters => encode_counters(&self.counters),
-            Record::Settings => encode_settings(&self.settings),
-            Record::Identity => encode_settings(&self.identity),
+            Record::Lanes => encode_lanes(&self.lanes, &mut writer),
+            Record::Counters => encode_counters(&self.counters, &mut writer),
+            Record::Settings => encode_settings(&self.settings, &mut writer),
+            Record::Identity => encode_settings(&self.identity, &mut writer),
         }
+        writer.len()
     }
 
     /// Take `record` from `from`.
@@ -264,29 +285,48 @@ impl<const N: usize> Records<N> {
 mod tests {
     use super::*;
 
+    /// What the encoder writes, as bytes.
+    fn encoded(encode: impl FnOnce(&mut Writer)) -> Bytes {
+        let mut out = [0; MAX_RECORD];
+        let mut writer = Writer::new(&mut out);
+        encode(&mut writer);
+        let len = writer.len();
+        Bytes::from_slice(&out[..len]).unwrap()
+    }
+
     #[test]
     fn records_decode_to_what_was_encoded() {
         let lanes = [Lane::Parked, Lane::Loaded, Lane::Empty];
-        assert_eq!(decode_lanes::<3>(&encode_lanes(&lanes)), Some(lanes));
+        assert_eq!(
+            decode_lanes::<3>(&encoded(|w| encode_lanes(&lanes, w))),
+            Some(lanes)
+        );
         let counters = Counters::<3> {
             drive_errors: 7,
             tool_changes: [1, 2, 65535],
             failures: [0, 4, 0],
             fed_mm: [0, 123_456_789, 5],
         };
-        assert_eq!(decode_counters::<3>(&encode_counters(&counters)), Some(counters));
+        assert_eq!(
+            decode_counters::<3>(&encoded(|w| encode_counters(&counters, w))),
+            Some(counters)
+        );
         let settings = [(0x0b, 30), (0x22, 360), (0x90, 2600)];
         assert_eq!(
-            decode_settings(&encode_settings(&settings)).as_deref(),
+            decode_settings(&encoded(|w| encode_settings(&settings, w))).as_deref(),
             Some(&settings[..])
         );
         let all: Settings = (0..MAX_SETTINGS as u8).map(|a| (a, u16::MAX)).collect();
-        assert_eq!(encode_settings(&all).len(), MAX_RECORD, "the largest record fits");
+        assert_eq!(
+            encoded(|w| encode_settings(&all, w)).len(),
+            MAX_RECORD,
+            "the largest record fits"
+        );
     }
 
     #[test]
     fn records_of_another_shape_are_refused() {
-        let lanes = encode_lanes(&[Lane::Parked; 3]);
+        let lanes = encoded(|w| encode_lanes(&[Lane::Parked; 3], w));
         assert_eq!(decode_lanes::<4>(&lanes), None, "another slot count");
         let mut other_format = lanes.clone();
         other_format[0] = FORMAT + 1;

@@ -24,7 +24,7 @@ mod save;
 use embedded_storage::nor_flash::NorFlash;
 
 use super::entry::{COMMIT, DOUBLE_WORD, EntryWriter, MAX_ENTRY, entry_size, is_complete, parse_header};
-use super::records::{Bytes, Record, Records};
+use super::records::{Record, Records};
 use super::{Counters, Snapshot, StoreError};
 use crate::time::Instant;
 
@@ -204,8 +204,10 @@ impl<F: NorFlash, const N: usize> Store<F, N> {
             let Some(newest) = self.newest[record.index()] else {
                 continue;
             };
-            if let Some(bytes) = self.find(newest, record) {
-                self.saved.decode(record, &bytes);
+            if let Some(len) = self.find(newest, record)
+                && let Some(payload) = self.buffer.get(DOUBLE_WORD..DOUBLE_WORD + len)
+            {
+                self.saved.decode(record, payload);
             }
         }
         self.target = self.saved.clone();
@@ -351,15 +353,14 @@ impl<F: NorFlash, const N: usize> Store<F, N> {
         }
     }
 
-    /// The payload of `record`'s newest entry.
-    fn find(&mut self, newest: Newest, record: Record) -> Option<Bytes> {
+    /// Read `record`'s newest entry into the buffer: its payload's length.
+    fn find(&mut self, newest: Newest, record: Record) -> Option<usize> {
         let address = self.page_address(newest.page) + newest.offset;
         let (key, len, sequence) = self.header(address).ok()??;
         if key != record as u8 || sequence != newest.sequence || !self.entry_complete(address, len) {
             return None;
         }
-        let payload = self.buffer.get(DOUBLE_WORD..DOUBLE_WORD + len)?;
-        Bytes::from_slice(payload).ok()
+        Some(len)
     }
 }
 
