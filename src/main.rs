@@ -203,17 +203,17 @@ fn log_stats(stats: &control::Stats) {
 
 /// The App's state in flash, kept by the policy the simulator runs too ([`Keeper`]).
 ///
-/// The store is synchronous: every flash operation of [`board::StoreFlash`] blocks (the CPU
+/// The store is synchronous: every flash operation of [`board::WatchedFlash`] blocks (the CPU
 /// stalls anyway while the G0's flash programs or erases). Its calls are plain out-of-line
 /// functions, whose frames stay out of the control task's future.
-struct Persisted(Keeper<board::StoreFlash, SLOTS>);
+struct Persisted(Keeper<board::WatchedFlash, SLOTS, board::HardwareCrc>);
 
 impl Persisted {
     /// Restores into `app` what the flash holds, before its first step: each record's newest
     /// complete copy (a double word with an ECC error costs only its entry).
     #[inline(never)]
     fn boot(app: &mut App<SLOTS>, flash: board::StoreFlash) -> Self {
-        let store = unwrap!(Store::new(flash, board::STORE_RANGE));
+        let store = unwrap!(Store::with_crc(flash.flash, flash.crc, board::STORE_RANGE));
         let (keeper, boot) = Keeper::boot(store, app);
         Self::log_boot(app, boot);
         Persisted(keeper)

@@ -10,6 +10,7 @@
 
 use embedded_storage::nor_flash::NorFlash;
 
+use super::crc::{EntryCrc, SoftwareCrc};
 use super::settings::{Defaults, Scan};
 use super::{Damage, Snapshot, Store, StoreError};
 use crate::app::{App, BoardAction};
@@ -59,8 +60,8 @@ pub struct Health {
 
 /// The save policy over a [`Store`].
 #[derive(Clone)]
-pub struct Keeper<F: NorFlash, const N: usize> {
-    store: Store<F, N>,
+pub struct Keeper<F: NorFlash, const N: usize, C: EntryCrc = SoftwareCrc> {
+    store: Store<F, N, C>,
     /// The lanes as of the last comparison with the flash.
     lanes: [Lane; N],
     /// The configuration whose settings were last compared with the flash (`None`: compare them
@@ -85,10 +86,10 @@ pub struct Keeper<F: NorFlash, const N: usize> {
     news: bool,
 }
 
-impl<F: NorFlash, const N: usize> Keeper<F, N> {
+impl<F: NorFlash, const N: usize, C: EntryCrc> Keeper<F, N, C> {
     /// Restore into `app` (before its first step) what `store` holds. A store that cannot be read
     /// in places still gives every record it can (the newest complete copy of each).
-    pub fn boot(mut store: Store<F, N>, app: &mut App<N>) -> (Self, Boot) {
+    pub fn boot(mut store: Store<F, N, C>, app: &mut App<N>) -> (Self, Boot) {
         let snapshot = store.load();
         let defaults = Defaults::new(app);
         app.restore(&snapshot);
@@ -306,12 +307,12 @@ impl<F: NorFlash, const N: usize> Keeper<F, N> {
     }
 
     /// The store.
-    pub fn store(&mut self) -> &mut Store<F, N> {
+    pub fn store(&mut self) -> &mut Store<F, N, C> {
         &mut self.store
     }
 
     /// Give the store back (e.g. its flash, for the next boot in a simulation).
-    pub fn into_store(self) -> Store<F, N> {
+    pub fn into_store(self) -> Store<F, N, C> {
         self.store
     }
 }

@@ -9,6 +9,7 @@
 //! the policy the firmware and the simulator share: restore at boot, save as the App changes,
 //! recover from a flash that fails, and never erase more than [`ERASES_PER_HOUR`] (plus a burst).
 
+mod crc;
 mod entry;
 mod keeper;
 mod records;
@@ -19,6 +20,7 @@ use heapless::Vec;
 
 use crate::unit::Lane;
 
+pub use crc::{EntryCrc, SoftwareCrc, iso_hdlc};
 pub use keeper::{
     Boot, ERASE_BURST, ERASES_PER_HOUR, FULL_CHECK_MS, Health, Keeper, MAX_DEFERRED_STEPS, RETRY_MAX_MS,
 };

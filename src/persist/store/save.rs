@@ -8,7 +8,7 @@
 use embedded_storage::nor_flash::NorFlash;
 
 use super::{COMMIT, EntryWriter, Newest, Record, Records, SLOW_RECORD_PERIOD_MS, Store, Writing};
-use super::{Counters, Snapshot, StoreError, entry_size, page_size};
+use super::{Counters, EntryCrc, Snapshot, StoreError, entry_size, page_size};
 use crate::time::Instant;
 use crate::unit::Lane;
 
@@ -62,7 +62,7 @@ fn bit(record: Record) -> u8 {
     1 << record.index()
 }
 
-impl<F: NorFlash, const N: usize> Store<F, N> {
+impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
     /// Whether a save is in progress ([`Store::step`] advances it).
     pub fn is_saving(&self) -> bool {
         self.job.is_some()
@@ -386,7 +386,10 @@ impl<F: NorFlash, const N: usize> Store<F, N> {
             return Ok(Some(job));
         };
         let place = writing.place;
-        let Some((offset, bytes)) = writing.entry.next_chunk(&mut self.buffer, PROGRAM_CHUNK) else {
+        let Some((offset, bytes)) = writing
+            .entry
+            .next_chunk(&mut self.buffer, PROGRAM_CHUNK, &mut self.crc)
+        else {
             return Err(StoreError::Flash);
         };
         let done = offset + bytes.len() == writing.entry.size();
