@@ -152,35 +152,33 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Keeper<F, N, C> {
             return Ok(false);
         }
         let lanes = app.lanes();
-        if self.scan.is_some() && lanes == self.lanes {
-            return Ok(self.scan_settings(app, now));
-        }
-        let full_check = self.health.failing
-            || self
-                .checked_at
-                .is_none_or(|at| now.millis_since(at) >= FULL_CHECK_MS);
-        if lanes == self.lanes && !full_check {
+        // No full check while the settings are being compared: the one that started it is.
+        let full_check = self.scan.is_none()
+            && (self.health.failing
+                || self
+                    .checked_at
+                    .is_none_or(|at| now.millis_since(at) >= FULL_CHECK_MS));
+        if lanes == self.lanes && !full_check && self.scan.is_none() {
             return Ok(false);
         }
         self.lanes = lanes;
         self.store.set_erase_allowance(self.erase_credit);
-        if full_check && self.scan.is_none() {
+        let mut counters = None;
+        if full_check {
             self.checked_at = Some(now);
-            // A changed configuration: its settings are compared in the calls that follow.
-            if self.config.as_ref() != Some(app.config()) {
+            if self.config.as_ref() == Some(app.config()) {
+                counters = Some(&app.counters);
+            } else {
+                // A changed configuration: its settings are compared in this call and the
+                // following ones (after a lane change's save), then saved with the counters.
                 self.config = Some(app.config().clone());
                 self.scan = Some(Scan::default());
-                if self.store.begin_changes(lanes, None, now) {
-                    return self.advance(now);
-                }
-                return Ok(self.scan_settings(app, now));
             }
         }
-        let counters = (full_check && self.scan.is_none()).then_some(&app.counters);
-        if !self.store.begin_changes(lanes, counters, now) {
-            return Ok(false);
+        if self.store.begin_changes(lanes, counters, now) {
+            return self.advance(now);
         }
-        self.advance(now)
+        Ok(self.scan_settings(app, now))
     }
 
     /// Compare the next few settings; once all are, start saving them with the lanes and the
