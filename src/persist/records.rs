@@ -3,8 +3,6 @@
 //! and the unit starts that record from its defaults. [`Records`] is the store's view of all four,
 //! with the identity registers split from the other settings.
 
-use heapless::Vec;
-
 use super::{Counters, IDENTITY_REGISTERS, MAX_SETTINGS, Settings, Snapshot, is_identity};
 use crate::unit::Lane;
 
@@ -50,7 +48,7 @@ impl Record {
 
 /// One record's bytes.
 #[cfg(test)]
-pub(super) type Bytes = Vec<u8, MAX_RECORD>;
+pub(super) type Bytes = heapless::Vec<u8, MAX_RECORD>;
 
 fn lane_code(lane: Lane) -> u8 {
     match lane {
@@ -181,13 +179,23 @@ pub(super) fn decode_counters<const N: usize>(bytes: &[u8]) -> Option<Counters<N
     reader.0.is_empty().then_some(counters)
 }
 
-pub(super) fn decode_settings(bytes: &[u8]) -> Option<Settings> {
+/// Hand each (register, value) pair of a settings or identity record to `take` (`false`: the
+/// record does not decode); `None` when it does not decode.
+fn decode_pairs(bytes: &[u8], mut take: impl FnMut((u8, u16)) -> bool) -> Option<()> {
     let (mut reader, entries) = body(bytes, None)?;
-    let mut settings = Vec::new();
     for _ in 0..entries {
-        settings.push((reader.u8()?, reader.u16()?)).ok()?;
+        if !take((reader.u8()?, reader.u16()?)) {
+            return None;
+        }
     }
-    reader.0.is_empty().then_some(settings)
+    reader.0.is_empty().then_some(())
+}
+
+#[cfg(test)]
+pub(super) fn decode_settings(bytes: &[u8]) -> Option<Settings> {
+    let mut settings = Settings::new();
+    decode_pairs(bytes, |pair| settings.push(pair).is_ok())?;
+    Some(settings)
 }
 
 /// Every record as this store last wrote or read it.
@@ -268,14 +276,28 @@ impl<const N: usize> Records<N> {
         match record {
             Record::Lanes => self.lanes = decode_lanes(bytes).unwrap_or([Lane::Unknown; N]),
             Record::Counters => self.counters = decode_counters(bytes).unwrap_or_default(),
-            Record::Settings => self.settings = decode_settings(bytes).unwrap_or_default(),
+            // In place: no copy of a settings list on the stack.
+            Record::Settings => {
+                let settings = &mut self.settings;
+                settings.clear();
+                if decode_pairs(bytes, |pair| settings.push(pair).is_ok()).is_none() {
+                    settings.clear();
+                }
+            }
+            // What a settings record holds (at most MAX_SETTINGS pairs), but the identity's.
             Record::Identity => {
-                let stored = decode_settings(bytes).unwrap_or_default();
-                self.identity = stored
-                    .into_iter()
-                    .filter(|(address, _)| is_identity(*address))
-                    .take(IDENTITY_REGISTERS.len())
-                    .collect();
+                let (identity, mut pairs) = (&mut self.identity, 0);
+                identity.clear();
+                let decoded = decode_pairs(bytes, |pair| {
+                    pairs += 1;
+                    if is_identity(pair.0) {
+                        let _ = identity.push(pair);
+                    }
+                    pairs <= MAX_SETTINGS
+                });
+                if decoded.is_none() {
+                    identity.clear();
+                }
             }
         }
     }
@@ -322,6 +344,26 @@ mod tests {
             MAX_RECORD,
             "the largest record fits"
         );
+    }
+
+    #[test]
+    fn settings_and_identity_records_decode_in_place() {
+        let mut records = Records::<3>::blank();
+        let bytes = encoded(|w| encode_settings(&[(0x0b, 30), (0x52, 2), (0x22, 360)], w));
+        let cut = &bytes[..bytes.len() - 1];
+        records.decode(Record::Settings, &bytes);
+        assert_eq!(records.settings, [(0x0b, 30), (0x52, 2), (0x22, 360)]);
+        records.decode(Record::Identity, &bytes);
+        assert_eq!(records.identity, [(0x52, 2)], "only the identity's registers");
+        records.decode(Record::Settings, cut);
+        records.decode(Record::Identity, cut);
+        assert!(
+            records.settings.is_empty() && records.identity.is_empty(),
+            "cut short"
+        );
+        let all: Settings = (0..MAX_SETTINGS as u8).map(|a| (a + 0x20, 1)).collect();
+        records.decode(Record::Identity, &encoded(|w| encode_settings(&all, w)));
+        assert_eq!(records.identity, [(0x52, 1)], "a full settings record");
     }
 
     #[test]
