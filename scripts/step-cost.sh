@@ -18,10 +18,13 @@ cd "$(dirname "$0")/.."
 # step alone (a query burst, taken at most control::MAX_RX_PER_STEP bytes a step) and the worst
 # step plus the save piece in the same millisecond are held to it. A save is one bounded piece
 # per Keeper::update_after, and none after a step busy with the printer (it took bytes or
-# answered) unless persist::MAX_DEFERRED_STEPS busy steps in a row went without one; MAX_SAVE is
-# the costliest piece measured plus a margin (the counts are exact and deterministic), so a
-# costlier piece fails. Measured 2026-11-22: idle 2773, costliest step 6215, worst step + save
-# 6234 (that step, no piece after it), costliest save piece 2179 (a 64-byte chunk of an entry).
+# answered) unless persist::MAX_DEFERRED_STEPS busy steps in a row went without one. MAX_SAVE
+# holds the pieces that write to the costliest measured plus a margin (the counts are exact and
+# deterministic), so a costlier piece fails; the others (an entry's layout, a register of the
+# settings comparison, a slice of a page's erased check) are held by MAX_WORST with their step.
+# Measured 2026-11-22: idle 2773, costliest step 6215 (a query burst; no piece after it), worst
+# step + save 6559 (a counters entry laid out, 2439, after a step running a command, 4120),
+# costliest save piece 2291 (a 64-byte chunk of the settings entry).
 MAX_WORST="${MAX_WORST:-7272}"
 MAX_STEP="${MAX_STEP:-7272}"
 MAX_IDLE="${MAX_IDLE:-2909}"
