@@ -121,15 +121,15 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Keeper<F, N, C> {
     }
 
     /// After a step: save what changed, a bounded piece per call. Lanes are compared every step
-    /// (cheap) and a lane change starts its save at once (a lane entry is one piece: it is
-    /// saved in the step it changed, unless the head page is full); counters and the
-    /// configuration are compared every [`FULL_CHECK_MS`]; a changed configuration has its
-    /// settings compared with their defaults a few registers per call, and the save it starts
-    /// runs in the calls that follow. While a save is in progress each call does one piece of it
-    /// ([`Store::step`]: one chunk of an entry, a slice of a fresh page's erased check, or one
-    /// page erase). `Ok(true)` when the call programmed or erased (the flash stalled the CPU); a
-    /// failed save leaves the previous records and is tried again after a pause (1 s, doubling
-    /// up to [`RETRY_MAX_MS`]).
+    /// (cheap) and a lane change starts its save at once (a lane entry is two pieces, laid out
+    /// and programmed: it is saved by the step after the change, unless the head page is full);
+    /// counters and the configuration are compared every [`FULL_CHECK_MS`]; a changed
+    /// configuration has its settings compared with their defaults a register per call, and the
+    /// save it starts runs in the calls that follow. While a save is in progress each call does
+    /// one piece of it ([`Store::step`]: an entry laid out, one chunk of it, a slice of a fresh
+    /// page's erased check, or one page erase). `Ok(true)` when the call programmed or erased
+    /// (the flash stalled the CPU); a failed save leaves the previous records and is tried again
+    /// after a pause (1 s, doubling up to [`RETRY_MAX_MS`]).
     pub fn update(&mut self, app: &App<N>, now: Instant) -> Result<bool, StoreError> {
         self.update_after(app, now, false)
     }

@@ -1,7 +1,9 @@
-//! The settings part of a snapshot, gathered a few registers per call. [`App::snapshot`] reads
-//! every setting register of the unit and of a default configuration at once (about 4,000
+//! The settings part of a snapshot, gathered a register per call. [`App::snapshot`] reads every
+//! setting register of the unit and of a default configuration at once (about 4,000
 //! instructions on the M0+, more than a control step leaves); the keeper instead compares the
-//! registers a few per call against defaults read once at boot, and gets the same list.
+//! registers one per call against defaults read once at boot, and gets the same list. Which
+//! registers are settings follows `registers::changed_settings` (writable, not the printer's
+//! sensor state); a test holds the two lists equal.
 
 use heapless::Vec;
 
