@@ -3,6 +3,9 @@
 recorded session and reports instructions per control step, per save and the stack they use.
 
     run.py HARNESS_ELF SESSION_BIN [--max-worst N] [--max-step N] [--max-idle N] [--exact-steps N]
+    run.py HARNESS_ELF SESSION_BIN --profile STEPS          # where App::step spends its instructions
+    run.py HARNESS_ELF SESSION_BIN --profile-save STEPS [--profile-writes | --profile-at STEP]
+                                                          # where one Keeper::update spends them
 
 Unicorn (PyPI `unicorn`) runs the ELF as a Cortex-M0 (ARMv6-M: an instruction the M0+ lacks
 faults). Counting is exact: every translated block is counted with its instructions (16-bit
@@ -158,6 +161,11 @@ class Bench:
         self.exact = exact_steps is not None
         self.exact_steps = exact_steps
         self.profile = None
+        self.profile_call = "step"  # the calls --profile looks into: "step" or "save"
+        self.profile_writes_only = False  # profile only saves that wrote
+        self.profile_at = None  # profile only the save of this step
+        self.call_profile = {}  # one call's counts, while profiling saves
+        self.worst_call = (0, None, {})  # (instr, index, counts) of the costliest profiled save
         self.in_step = False
         mark_at = self.symbols["bench_mark"] & ~1
         self.native = None
@@ -207,7 +215,8 @@ class Bench:
     def on_instruction(self, uc, address, size, _):
         self.count += 1
         if self.profile is not None and self.in_step:
-            self.profile[address] = self.profile.get(address, 0) + 1
+            counts = self.call_profile if self.profile_call == "save" else self.profile
+            counts[address] = counts.get(address, 0) + 1
         if address == self.mark_at:
             self.on_mark(uc)
 
@@ -235,7 +244,7 @@ class Bench:
                                                   arm.UC_ARM_REG_R2, arm.UC_ARM_REG_R3))
         name = MARKS.get(kind, f"mark {kind}")
         sp = uc.reg_read(arm.UC_ARM_REG_SP)
-        self.in_step = name == "step_begin"
+        self.in_step = name == f"{self.profile_call}_begin"
         if name.endswith("_begin"):
             self.stack_used(sp)
             self.open[name[:-6]] = (self.count, sp)
@@ -251,10 +260,19 @@ class Bench:
                 self.boot = (instr, stack)
             elif what == "step":
                 self.steps.append((a, instr, b, c, stack))
-                if self.exact and len(self.steps) >= self.exact_steps:
+                if self.exact and len(self.steps) >= self.exact_steps and self.profile_call == "step":
                     uc.emu_stop()
             elif what == "save":
                 self.saves.append((a, instr, b, stack))
+                if self.profile is not None and self.profile_call == "save":
+                    if self.profile_at is not None:
+                        if a == self.profile_at:
+                            self.worst_call = (instr, a, self.call_profile)
+                    elif instr > self.worst_call[0] and (b or not self.profile_writes_only):
+                        self.worst_call = (instr, a, self.call_profile)
+                    self.call_profile = {}
+                    if self.exact and len(self.steps) >= self.exact_steps:
+                        uc.emu_stop()
             return
         if name == "done":
             self.done = (a, b, c)
@@ -292,14 +310,27 @@ def main():
     parser.add_argument("--max-save", type=int, help="fail if the costliest save exceeds this")
     parser.add_argument("--profile", type=int, metavar="STEPS",
                         help="only list the functions App::step spends its instructions in over the first STEPS steps")
+    parser.add_argument("--profile-save", type=int, metavar="STEPS",
+                        help="only list the functions the costliest Keeper::update of the first STEPS steps spends its instructions in")
+    parser.add_argument("--profile-writes", action="store_true",
+                        help="with --profile-save: only the saves that wrote to the flash")
+    parser.add_argument("--profile-at", type=int, metavar="STEP",
+                        help="with --profile-save: only the save of this step")
     parser.add_argument("--exact-steps", type=int, default=300,
                         help="recount this many first steps instruction by instruction (0: skip)")
     args = parser.parse_args()
     session = open(args.session, "rb").read()
-    if args.profile:
-        bench = Bench(args.elf, session, exact_steps=args.profile)
+    if args.profile or args.profile_save:
+        bench = Bench(args.elf, session, exact_steps=args.profile or args.profile_save)
         bench.profile = {}
+        if args.profile_save:
+            bench.profile_call = "save"
+            bench.profile_writes_only = args.profile_writes
+            bench.profile_at = args.profile_at
         bench.run()
+        if args.profile_save:
+            instr, index, bench.profile = bench.worst_call
+            print(f"the profiled Keeper::update of the first {len(bench.steps)} steps: {instr} instr at step {index}")
         demangle = shutil.which("rustfilt")
         totals = {}
         functions = sorted(FUNCTIONS)
@@ -310,6 +341,10 @@ def main():
             name = functions[i][2] if i >= 0 and address < starts[i] + functions[i][1] else hex(address)
             totals[name] = totals.get(name, 0) + n
         total = sum(totals.values())
+        if args.profile_save:
+            for name, n in sorted(totals.items(), key=lambda t: -t[1])[:25]:
+                print(f"  {100 * n / max(1, total):5.1f} %  {n:7}  {name[:110]}")
+            return
         print(f"App::step over {len(bench.steps)} steps: {total / max(1, len(bench.steps)):.0f} instr per step")
         for name, n in sorted(totals.items(), key=lambda t: -t[1])[:25]:
             print(f"  {100 * n / total:5.1f} %  {n / max(1, len(bench.steps)):7.0f}  {name[:110]}")

@@ -13,18 +13,22 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-# The budget. The goal (issue 14) is a worst step incl. a burst and a save under 25 % of 1 ms
-# (7272 instructions at 2.2 cycles/instr, 64 MHz) and idle under 10 % (2909). Idle and the
-# costliest step alone (a query burst, taken at most control::MAX_RX_PER_STEP bytes a step) meet
-# it and are held to it; a save is one bounded piece per Keeper::update. A step with a save
-# piece in the same millisecond does not meet it yet: MAX_WORST holds the current figure plus a
-# margin (the counts are exact and deterministic), so a regression fails. Measured 2026-11-22:
-# idle 2788, costliest step 6279, worst step + save 9064 (a lane save piece after a step that
-# answered a query), save 3509.
-MAX_WORST="${MAX_WORST:-9500}"
+# The budget, the goal of issue 14: a worst step incl. a burst and a save under 25 % of 1 ms
+# (7272 instructions at 2.2 cycles/instr, 64 MHz) and idle under 10 % (2909). Idle, the costliest
+# step alone (a query burst, taken at most control::MAX_RX_PER_STEP bytes a step) and the worst
+# step plus the save piece in the same millisecond are held to it. A save is one bounded piece
+# per Keeper::update_after, and none after a step busy with the printer (it took bytes or
+# answered) unless persist::MAX_DEFERRED_STEPS busy steps in a row went without one. MAX_SAVE
+# holds the pieces that write to the costliest measured plus a margin (the counts are exact and
+# deterministic), so a costlier piece fails; the others (an entry's layout, a register of the
+# settings comparison, a slice of a page's erased check) are held by MAX_WORST with their step.
+# Measured 2026-11-22: idle 2773, costliest step 6215 (a query burst; no piece after it), worst
+# step + save 6559 (a counters entry laid out, 2439, after a step running a command, 4120),
+# costliest save piece 2291 (a 64-byte chunk of the settings entry).
+MAX_WORST="${MAX_WORST:-7272}"
 MAX_STEP="${MAX_STEP:-7272}"
 MAX_IDLE="${MAX_IDLE:-2909}"
-MAX_SAVE="${MAX_SAVE:-3800}"
+MAX_SAVE="${MAX_SAVE:-2400}"
 
 target_dir="${CARGO_TARGET_DIR:-target}"
 case "$target_dir" in

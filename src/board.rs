@@ -20,6 +20,7 @@ use core::sync::atomic::{AtomicBool, Ordering};
 use core::task::Poll;
 
 use embassy_stm32::adc::{self, Adc, AdcChannel as _, AdcConfig, AnyAdcChannel, Averaging, SampleTime};
+use embassy_stm32::crc;
 use embassy_stm32::flash::{self, Blocking, Flash};
 use embassy_stm32::gpio::{AnyPin, Input, Level, Output, OutputType, Pin, Pull, Speed};
 use embassy_stm32::pac;
@@ -34,6 +35,7 @@ use embassy_stm32::{Peri, bind_interrupts, dma};
 use embassy_time::{Duration, with_timeout};
 use embedded_io_async::{Read as _, ReadReady as _, Write as _};
 use embedded_storage::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
+use mmu_firmware::persist::EntryCrc;
 use mmu_hal_port::tb6612::{Channel, Tb6612};
 use mmu_hal_port::{Button as _, MotorCommand, Samples, StatusLed as _};
 use static_cell::ConstStaticCell;
@@ -118,6 +120,7 @@ pin_map! {
         printer_uart: USART3, "Printer MMU port, 115200 8N1 (USART2 stays on the ST-LINK VCP)";
         watchdog: IWDG, "Independent watchdog, fed by the control loop";
         flash: FLASH, "Internal flash: the persisted state in its last 16 pages (STORE_RANGE)";
+        crc: CRC, "CRC unit: the CRC-32 of the persisted state's entries (HardwareCrc)";
     }
     pins {
         // field         pin    function      NUCLEO header   wired to                                   safe
@@ -225,9 +228,57 @@ pub fn reset_cause() -> ResetCause {
 /// leaves it alone when the firmware is flashed again.
 pub const STORE_RANGE: Range<u32> = 0x1_8000..0x2_0000;
 
-/// The persisted state's flash, as `mmu_firmware::persist::Store` wants it (blocking NOR flash):
-/// see [`WatchedFlash`].
-pub type StoreFlash = WatchedFlash;
+/// What `mmu_firmware::persist::Store` keeps the persisted state with: the flash (blocking NOR
+/// flash, see [`WatchedFlash`]) and the CRC unit that checks its entries ([`HardwareCrc`]).
+pub struct StoreFlash {
+    /// The internal flash.
+    pub flash: WatchedFlash,
+    /// The CRC unit.
+    pub crc: HardwareCrc,
+}
+
+/// The STM32G0's CRC unit computing the store's CRC-32/ISO-HDLC (`persist::iso_hdlc`, RM0444
+/// "Cyclic redundancy check calculation unit"): polynomial 0x04C11DB7 on 32 bits, initial value
+/// 0xFFFFFFFF, input bit-reversed by byte, output bit-reversed, the final XOR in software. No
+/// 1 KiB table in flash, and one register write per byte instead of a table lookup.
+///
+/// Untested on a board so far (the host tests check the software CRC, and a model of the unit set
+/// up as here, against CRC-32/ISO-HDLC). Should the unit compute another CRC, the store stays
+/// consistent all the same (every entry is written and checked by the same unit), but a store
+/// written by a build with the software CRC would read as empty (the unit would start as new).
+pub struct HardwareCrc(crc::Crc<'static>);
+
+impl HardwareCrc {
+    fn new(unit: Peri<'static, peripherals::CRC>) -> Self {
+        use crc::{Config, InputReverseConfig, PolySize};
+        use mmu_firmware::persist::iso_hdlc::{INIT, POLY};
+        // The polynomial is odd: the only thing the configuration refuses is an even one.
+        let config = defmt::unwrap!(Config::new(
+            InputReverseConfig::Byte,
+            true,
+            PolySize::Width32,
+            INIT,
+            POLY
+        ));
+        HardwareCrc(crc::Crc::new(unit, config))
+    }
+}
+
+impl EntryCrc for HardwareCrc {
+    /// Loads `CRC_INIT` into the data register.
+    fn start(&mut self) {
+        self.0.reset();
+    }
+
+    /// One 8-bit write of the data register per byte.
+    fn add(&mut self, bytes: &[u8]) {
+        self.0.feed_bytes(bytes);
+    }
+
+    fn value(&mut self) -> u32 {
+        self.0.read() ^ mmu_firmware::persist::iso_hdlc::FINAL_XOR
+    }
+}
 
 /// The internal flash, reloading the watchdog before each program or erase it starts.
 ///
@@ -615,6 +666,9 @@ pub fn init() -> (Control, Sampler, StoreFlash) {
         dma: parts.adc_dma,
         inputs,
     };
-    let store = WatchedFlash(Flash::new_blocking(parts.flash));
+    let store = StoreFlash {
+        flash: WatchedFlash(Flash::new_blocking(parts.flash)),
+        crc: HardwareCrc::new(parts.crc),
+    };
     (control, sampler, store)
 }

@@ -136,7 +136,8 @@ async fn control_task(
         // Last, just after the feed: a write stalls the CPU (see `board::WatchedFlash`; a page
         // erase up to 40 ms), the motors keeping this step's commands meanwhile. The ticks it
         // missed are dropped rather than caught up in a burst of late, unfed steps.
-        if persisted.update(control.app(), now) {
+        let busy = received > 0 || !step.out.tx.is_empty();
+        if persisted.update(control.app(), now, busy) {
             control.saved();
             ticker.reset();
             deadline = Clock::now() + CONTROL_PERIOD;
@@ -202,17 +203,17 @@ fn log_stats(stats: &control::Stats) {
 
 /// The App's state in flash, kept by the policy the simulator runs too ([`Keeper`]).
 ///
-/// The store is synchronous: every flash operation of [`board::StoreFlash`] blocks (the CPU
+/// The store is synchronous: every flash operation of [`board::WatchedFlash`] blocks (the CPU
 /// stalls anyway while the G0's flash programs or erases). Its calls are plain out-of-line
 /// functions, whose frames stay out of the control task's future.
-struct Persisted(Keeper<board::StoreFlash, SLOTS>);
+struct Persisted(Keeper<board::WatchedFlash, SLOTS, board::HardwareCrc>);
 
 impl Persisted {
     /// Restores into `app` what the flash holds, before its first step: each record's newest
     /// complete copy (a double word with an ECC error costs only its entry).
     #[inline(never)]
     fn boot(app: &mut App<SLOTS>, flash: board::StoreFlash) -> Self {
-        let store = unwrap!(Store::new(flash, board::STORE_RANGE));
+        let store = unwrap!(Store::with_crc(flash.flash, flash.crc, board::STORE_RANGE));
         let (keeper, boot) = Keeper::boot(store, app);
         Self::log_boot(app, boot);
         Persisted(keeper)
@@ -243,12 +244,15 @@ impl Persisted {
         }
     }
 
-    /// Writes what changed (see [`Keeper::update`]). Returns whether it wrote, i.e. stalled the
-    /// CPU. A failed write leaves the previous record in flash; the keeper tries again after a
-    /// pause, and its health is logged once per change.
+    /// Writes what changed (see [`Keeper::update_after`]): nothing after a step `busy` with the
+    /// printer (it took bytes or answered), unless several in a row were. Returns whether it
+    /// wrote, i.e. stalled the CPU. A failed write leaves the previous record in flash; the
+    /// keeper tries again after a pause, and its health is logged once per change.
     #[inline(never)]
-    fn update(&mut self, app: &App<SLOTS>, now: Clock) -> bool {
-        let wrote = self.0.update(app, Instant::from_millis(now.as_millis()));
+    fn update(&mut self, app: &App<SLOTS>, now: Clock, busy: bool) -> bool {
+        let wrote = self
+            .0
+            .update_after(app, Instant::from_millis(now.as_millis()), busy);
         if let Some(health) = self.0.take_news() {
             warn!("store: {}", health);
         }

@@ -4,8 +4,9 @@
 //! for the entry's length even when the rest is torn; an entry counts only when its trailer
 //! matches.
 
-use crc::{CRC_16_IBM_3740, CRC_32_ISO_HDLC, Crc, Digest};
+use crc::{CRC_16_IBM_3740, Crc, NoTable};
 
+use super::crc::EntryCrc;
 use super::records::{MAX_RECORD, Record};
 
 /// The STM32G0's programming unit: a 64-bit double word.
@@ -15,9 +16,8 @@ pub(super) const MAX_ENTRY: usize = DOUBLE_WORD + MAX_RECORD.next_multiple_of(DO
 /// The key of the entry that commits a fresh page's full copy (no payload).
 pub(super) const COMMIT: u8 = 0x5c;
 
-const HEADER_CRC: Crc<u16> = Crc::<u16>::new(&CRC_16_IBM_3740);
-/// A static: an [`EntryWriter`] keeps a running digest of it between two chunks.
-static ENTRY_CRC: Crc<u32> = Crc::<u32>::new(&CRC_32_ISO_HDLC);
+/// Bit by bit, without a table: 6 bytes a header, and 512 B less flash.
+const HEADER_CRC: Crc<u16, NoTable> = Crc::<u16, NoTable>::new(&CRC_16_IBM_3740);
 
 /// The (key, payload length, sequence number) of a header double word that checks: the key is a
 /// record's or [`COMMIT`].
@@ -33,12 +33,13 @@ pub(super) fn parse_header(word: &[u8; DOUBLE_WORD]) -> Option<(u8, usize, u32)>
 }
 
 /// Whether `entry` (all its bytes, header to trailer) is complete: its trailer matches.
-pub(super) fn is_complete(entry: &[u8]) -> bool {
+pub(super) fn is_complete(entry: &[u8], crc: &mut impl EntryCrc) -> bool {
     let Some(body) = entry.len().checked_sub(DOUBLE_WORD) else {
         return false;
     };
-    let crc = ENTRY_CRC.checksum(&entry[..body]);
-    entry[body..] == trailer(crc)
+    crc.start();
+    crc.add(&entry[..body]);
+    entry[body..] == trailer(crc.value())
 }
 
 /// The bytes of an entry of `len` payload bytes.
@@ -56,33 +57,34 @@ fn trailer(crc: u32) -> [u8; DOUBLE_WORD] {
 
 /// An entry being programmed a chunk at a time, in order, so that one call of a save programs
 /// (and checksums) a bounded part of it. Its bytes wait in the store's buffer; the trailer is
-/// computed from the running CRC when the last chunk is handed out, so it is programmed last.
+/// computed from the running CRC (the store's [`EntryCrc`], used for nothing else meanwhile)
+/// when the last chunk is handed out, so it is programmed last.
 /// Until then the entry does not count (a cut between two chunks is a program cut short).
 #[derive(Clone)]
 pub(super) struct EntryWriter {
     size: usize,
     written: usize,
-    digest: Digest<'static, u32>,
 }
 
 impl EntryWriter {
-    /// Lay out the header and the payload of an entry in `buffer` (the trailer comes with the
-    /// last chunk).
-    pub(super) fn new(buffer: &mut [u8; MAX_ENTRY], key: u8, sequence: u32, payload: &[u8]) -> Self {
-        let len = payload.len().min(MAX_RECORD);
+    /// The payload area of `buffer`: a record is encoded there, in place, before
+    /// [`EntryWriter::new`] lays out the rest of its entry.
+    pub(super) fn payload(buffer: &mut [u8; MAX_ENTRY]) -> &mut [u8] {
+        &mut buffer[DOUBLE_WORD..DOUBLE_WORD + MAX_RECORD]
+    }
+
+    /// Lay out the header and the padding of an entry in `buffer` whose first `len` payload bytes
+    /// are in place ([`EntryWriter::payload`]); the trailer comes with the last chunk.
+    pub(super) fn new(buffer: &mut [u8; MAX_ENTRY], key: u8, sequence: u32, len: usize) -> Self {
+        let len = len.min(MAX_RECORD);
         let size = entry_size(len);
-        buffer[..size].fill(0);
+        buffer[DOUBLE_WORD + len..size - DOUBLE_WORD].fill(0);
         buffer[0] = key;
         buffer[1] = len as u8;
         buffer[2..6].copy_from_slice(&sequence.to_le_bytes());
         let header_crc = HEADER_CRC.checksum(&buffer[..6]);
         buffer[6..8].copy_from_slice(&header_crc.to_le_bytes());
-        buffer[DOUBLE_WORD..DOUBLE_WORD + len].copy_from_slice(&payload[..len]);
-        EntryWriter {
-            size,
-            written: 0,
-            digest: ENTRY_CRC.digest(),
-        }
+        EntryWriter { size, written: 0 }
     }
 
     /// The entry's bytes.
@@ -96,6 +98,7 @@ impl EntryWriter {
         &mut self,
         buffer: &'b mut [u8; MAX_ENTRY],
         max: usize,
+        crc: &mut impl EntryCrc,
     ) -> Option<(usize, &'b [u8])> {
         let start = self.written;
         if start >= self.size {
@@ -103,9 +106,12 @@ impl EntryWriter {
         }
         let end = self.size.min(start + max.max(DOUBLE_WORD));
         let body = self.size - DOUBLE_WORD;
-        self.digest.update(&buffer[start..end.min(body)]);
+        if start == 0 {
+            crc.start();
+        }
+        crc.add(&buffer[start..end.min(body)]);
         if end == self.size {
-            buffer[body..end].copy_from_slice(&trailer(self.digest.clone().finalize()));
+            buffer[body..end].copy_from_slice(&trailer(crc.value()));
         }
         self.written = end;
         Some((start, &buffer[start..end]))
@@ -116,15 +122,23 @@ impl EntryWriter {
 mod tests {
     extern crate std;
 
+    use super::super::crc::SoftwareCrc;
     use super::*;
     use std::vec::Vec;
 
+    fn is_complete(entry: &[u8]) -> bool {
+        super::is_complete(entry, &mut SoftwareCrc::default())
+    }
+
     /// The entry's bytes, in the chunks a save programs them in.
     fn build_entry(key: u8, sequence: u32, payload: &[u8], chunk: usize) -> Vec<u8> {
-        let mut buffer = [0; MAX_ENTRY];
-        let mut writer = EntryWriter::new(&mut buffer, key, sequence, payload);
+        // Whatever an earlier entry left in the buffer must not show in this one.
+        let mut buffer = [0xa5; MAX_ENTRY];
+        EntryWriter::payload(&mut buffer)[..payload.len()].copy_from_slice(payload);
+        let mut writer = EntryWriter::new(&mut buffer, key, sequence, payload.len());
         let mut entry = Vec::new();
-        while let Some((offset, bytes)) = writer.next_chunk(&mut buffer, chunk) {
+        let mut crc = SoftwareCrc::default();
+        while let Some((offset, bytes)) = writer.next_chunk(&mut buffer, chunk, &mut crc) {
             assert_eq!(offset, entry.len(), "in order");
             assert!(bytes.len() <= chunk.max(DOUBLE_WORD) && bytes.len() % DOUBLE_WORD == 0);
             entry.extend_from_slice(bytes);
@@ -141,7 +155,10 @@ mod tests {
         let header: [u8; DOUBLE_WORD] = entry[..8].try_into().unwrap();
         assert_eq!(parse_header(&header), Some((1, 5, 7)));
         assert!(is_complete(&entry));
-        let all = super::super::records::encode_settings(&[(1, 2); super::super::MAX_SETTINGS]);
+        let mut all = [0; MAX_RECORD];
+        let mut writer = super::super::records::Writer::new(&mut all);
+        super::super::records::encode_settings(&[(1, 2); super::super::MAX_SETTINGS], &mut writer);
+        assert_eq!(writer.len(), MAX_RECORD);
         assert_eq!(entry_size(all.len()), MAX_ENTRY);
         let whole = build_entry(3, 9, &all, MAX_ENTRY);
         for chunk in [8, 16, 64] {

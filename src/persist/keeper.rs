@@ -4,11 +4,15 @@
 //! everything before a reset. A flash that fails is retried with a growing pause, and the page
 //! erases of any hour stay under [`ERASE_BURST`] + [`ERASES_PER_HOUR`] whatever happens (each
 //! erase stalls the CPU up to 40 ms on the STM32G0). Each call of [`Keeper::update`] does one
-//! bounded piece of a save (at most 8 double words programmed or one page erased).
+//! bounded piece of a save (at most 8 double words programmed or one page erased), and none
+//! after a step that was busy with the printer (up to [`MAX_DEFERRED_STEPS`] in a row), so that
+//! a step and the save piece after it fit a quarter of the 1 ms period together.
 
 use embedded_storage::nor_flash::NorFlash;
 
-use super::{Damage, Store, StoreError};
+use super::crc::{EntryCrc, SoftwareCrc};
+use super::settings::{Defaults, Scan};
+use super::{Damage, Snapshot, Store, StoreError};
 use crate::app::{App, BoardAction};
 use crate::time::Instant;
 use crate::unit::Lane;
@@ -25,6 +29,9 @@ const RETRY_MIN_MS: u64 = 1000;
 pub const RETRY_MAX_MS: u64 = 600_000;
 /// A reset (`X0`, `X42`) may always erase this many pages (one save's page moves).
 const ERASES_BEFORE_RESET: u32 = 2;
+/// Busy steps in a row after which [`Keeper::update_after`] does its piece anyway: a printer
+/// that never pauses delays a save by at most this many steps, ms, per piece.
+pub const MAX_DEFERRED_STEPS: u8 = 8;
 
 /// What [`Keeper::boot`] found in the flash.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -52,13 +59,19 @@ pub struct Health {
 
 /// The save policy over a [`Store`].
 #[derive(Clone)]
-pub struct Keeper<F: NorFlash, const N: usize> {
-    store: Store<F, N>,
+pub struct Keeper<F: NorFlash, const N: usize, C: EntryCrc = SoftwareCrc> {
+    store: Store<F, N, C>,
     /// The lanes as of the last comparison with the flash.
     lanes: [Lane; N],
     /// The [`App::settings_revision`] whose settings were last compared with the flash (`None`:
     /// compare them at the next full check).
     settings_seen: Option<u32>,
+    /// Every setting register and its default value.
+    defaults: Defaults,
+    /// The comparison of the settings in progress, a few registers per call.
+    scan: Option<Scan>,
+    /// Busy steps in a row after which no piece ran.
+    deferred: u8,
     /// When counters and settings were last compared.
     checked_at: Option<Instant>,
     /// Erases allowed now, and when the budget was last topped up.
@@ -72,11 +85,12 @@ pub struct Keeper<F: NorFlash, const N: usize> {
     news: bool,
 }
 
-impl<F: NorFlash, const N: usize> Keeper<F, N> {
+impl<F: NorFlash, const N: usize, C: EntryCrc> Keeper<F, N, C> {
     /// Restore into `app` (before its first step) what `store` holds. A store that cannot be read
     /// in places still gives every record it can (the newest complete copy of each).
-    pub fn boot(mut store: Store<F, N>, app: &mut App<N>) -> (Self, Boot) {
+    pub fn boot(mut store: Store<F, N, C>, app: &mut App<N>) -> (Self, Boot) {
         let snapshot = store.load();
+        let defaults = Defaults::new(app);
         app.restore(&snapshot);
         let damage = store.damage();
         let boot = if damage.is_none() {
@@ -88,6 +102,9 @@ impl<F: NorFlash, const N: usize> Keeper<F, N> {
             store,
             lanes: app.lanes(),
             settings_seen: None,
+            defaults,
+            scan: None,
+            deferred: 0,
             checked_at: None,
             erase_credit: ERASE_BURST,
             refilled_at: None,
@@ -103,14 +120,29 @@ impl<F: NorFlash, const N: usize> Keeper<F, N> {
     }
 
     /// After a step: save what changed, a bounded piece per call. Lanes are compared every step
-    /// (cheap) and a lane change starts its save at once (a lane entry is one piece: it is
-    /// saved in the step it changed, unless the head page is full); the full snapshot is compared
-    /// every [`FULL_CHECK_MS`], and the save it starts runs in the calls that follow. While a
-    /// save is in progress each call does one piece of it ([`Store::step`]: one chunk of an
-    /// entry, a slice of a fresh page's erased check, or one page erase). `Ok(true)` when the
-    /// call programmed or erased (the flash stalled the CPU); a failed save leaves the previous
-    /// records and is tried again after a pause (1 s, doubling up to [`RETRY_MAX_MS`]).
+    /// (cheap) and a lane change starts its save at once (a lane entry is two pieces, laid out
+    /// and programmed: it is saved by the step after the change, unless the head page is full);
+    /// counters and [`App::settings_revision`] are compared every [`FULL_CHECK_MS`]; when the
+    /// revision moved, the settings are compared with their defaults a register per call, and the
+    /// save it starts runs in the calls that follow. While a save is in progress each call does
+    /// one piece of it ([`Store::step`]: an entry laid out, one chunk of it, a slice of a fresh
+    /// page's erased check, or one page erase). `Ok(true)` when the call programmed or erased
+    /// (the flash stalled the CPU); a failed save leaves the previous records and is tried again
+    /// after a pause (1 s, doubling up to [`RETRY_MAX_MS`]).
     pub fn update(&mut self, app: &App<N>, now: Instant) -> Result<bool, StoreError> {
+        self.update_after(app, now, false)
+    }
+
+    /// [`Keeper::update`] after a step that was `busy` with the printer (it took received bytes
+    /// or answered): such a step leaves too little of the millisecond for a save piece, so none
+    /// runs after it, unless [`MAX_DEFERRED_STEPS`] busy steps in a row went without one. So a
+    /// printer that never pauses delays each piece by at most that many steps.
+    pub fn update_after(&mut self, app: &App<N>, now: Instant, busy: bool) -> Result<bool, StoreError> {
+        if busy && self.deferred < MAX_DEFERRED_STEPS {
+            self.deferred += 1;
+            return Ok(false);
+        }
+        self.deferred = 0;
         self.top_up(now);
         if self.store.is_saving() {
             return self.advance(now);
@@ -119,30 +151,59 @@ impl<F: NorFlash, const N: usize> Keeper<F, N> {
             return Ok(false);
         }
         let lanes = app.lanes();
-        let full_check = self.health.failing
-            || self
-                .checked_at
-                .is_none_or(|at| now.millis_since(at) >= FULL_CHECK_MS);
-        if lanes == self.lanes && !full_check {
+        // No full check while the settings are being compared: the one that started it is.
+        let full_check = self.scan.is_none()
+            && (self.health.failing
+                || self
+                    .checked_at
+                    .is_none_or(|at| now.millis_since(at) >= FULL_CHECK_MS));
+        if lanes == self.lanes && !full_check && self.scan.is_none() {
             return Ok(false);
         }
         self.lanes = lanes;
         self.store.set_erase_allowance(self.erase_credit);
+        let mut counters = None;
         if full_check {
             self.checked_at = Some(now);
-            // The settings come from a snapshot (thousands of instructions): taken only when the
-            // configuration changed, in a call of its own; the save runs in the calls after it.
-            if self.settings_seen != Some(app.settings_revision()) {
+            if self.settings_seen == Some(app.settings_revision()) {
+                counters = Some(&app.counters);
+            } else {
+                // Changed settings: compared in this call and the following ones (after a lane
+                // change's save), then saved with the counters.
                 self.settings_seen = Some(app.settings_revision());
-                self.store.begin_save(&app.snapshot(), Some(now));
-                return Ok(false);
+                self.scan = Some(Scan::default());
             }
         }
-        let counters = full_check.then_some(&app.counters);
-        if !self.store.begin_changes(lanes, counters, now) {
-            return Ok(false);
+        if self.store.begin_changes(lanes, counters, now) {
+            return self.advance(now);
         }
-        self.advance(now)
+        Ok(self.scan_settings(app, now))
+    }
+
+    /// Compare the next few settings; once all are, start saving them with the lanes and the
+    /// counters (settings that changed meanwhile are compared again from the start).
+    /// Never writes.
+    fn scan_settings(&mut self, app: &App<N>, now: Instant) -> bool {
+        let Some(scan) = self.scan.as_mut() else {
+            return false;
+        };
+        let Some(settings) = scan.step(app, &self.defaults) else {
+            return false;
+        };
+        if self.settings_seen != Some(app.settings_revision()) {
+            self.settings_seen = Some(app.settings_revision());
+            self.scan = Some(Scan::default());
+            return false;
+        }
+        self.scan = None;
+        let snapshot = Snapshot {
+            lanes: self.lanes,
+            counters: app.counters,
+            settings,
+        };
+        self.store.set_erase_allowance(self.erase_credit);
+        self.store.begin_save(&snapshot, Some(now));
+        false
     }
 
     /// One piece of the save in progress; its outcome once it ends.
@@ -162,6 +223,8 @@ impl<F: NorFlash, const N: usize> Keeper<F, N> {
     /// (`X0`), or forget all but the identity (`X42`), whole: the reset follows.
     pub fn before(&mut self, action: BoardAction, app: &App<N>) -> Result<(), StoreError> {
         let now = self.refilled_at.unwrap_or(Instant::ZERO);
+        // The whole snapshot is saved below.
+        self.scan = None;
         if self.store.is_saving() {
             let finished = self.store.finish();
             let _ = self.settle(finished, now);
@@ -175,9 +238,10 @@ impl<F: NorFlash, const N: usize> Keeper<F, N> {
         self.settle(result, now)
     }
 
-    /// Whether a save is in progress: the next calls of [`Keeper::update`] carry it on.
+    /// Whether a save is in progress (or the settings it saves are being compared): the next
+    /// calls of [`Keeper::update`] carry it on.
     pub fn is_saving(&self) -> bool {
-        self.store.is_saving()
+        self.scan.is_some() || self.store.is_saving()
     }
 
     /// Account for a save's erases and outcome.
@@ -240,12 +304,165 @@ impl<F: NorFlash, const N: usize> Keeper<F, N> {
     }
 
     /// The store.
-    pub fn store(&mut self) -> &mut Store<F, N> {
+    pub fn store(&mut self) -> &mut Store<F, N, C> {
         &mut self.store
     }
 
     /// Give the store back (e.g. its flash, for the next boot in a simulation).
-    pub fn into_store(self) -> Store<F, N> {
+    pub fn into_store(self) -> Store<F, N, C> {
         self.store
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    extern crate std;
+
+    use crate::config::Config;
+    use std::vec::Vec;
+
+    use embedded_storage::nor_flash::{ErrorType, NorFlashErrorKind, ReadNorFlash};
+
+    use super::*;
+
+    const PAGE: usize = 2048;
+
+    /// A NOR flash in RAM: erased to 0xff, programmed by double words that only clear bits.
+    #[derive(Clone)]
+    struct RamFlash(Vec<u8>);
+
+    impl ErrorType for RamFlash {
+        type Error = NorFlashErrorKind;
+    }
+
+    impl ReadNorFlash for RamFlash {
+        const READ_SIZE: usize = 1;
+
+        fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
+            let from = self.0.get(offset as usize..offset as usize + bytes.len());
+            bytes.copy_from_slice(from.ok_or(NorFlashErrorKind::OutOfBounds)?);
+            Ok(())
+        }
+
+        fn capacity(&self) -> usize {
+            self.0.len()
+        }
+    }
+
+    impl NorFlash for RamFlash {
+        const WRITE_SIZE: usize = 8;
+        const ERASE_SIZE: usize = PAGE;
+
+        fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
+            let page = self.0.get_mut(from as usize..to as usize);
+            page.ok_or(NorFlashErrorKind::OutOfBounds)?.fill(0xff);
+            Ok(())
+        }
+
+        fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
+            let to = self.0.get_mut(offset as usize..offset as usize + bytes.len());
+            for (to, byte) in to.ok_or(NorFlashErrorKind::OutOfBounds)?.iter_mut().zip(bytes) {
+                *to &= byte;
+            }
+            Ok(())
+        }
+    }
+
+    struct Unit {
+        app: App<3>,
+        keeper: Keeper<RamFlash, 3>,
+        now: Instant,
+    }
+
+    impl Unit {
+        fn boot() -> Self {
+            let flash = RamFlash(std::vec![0xff; 3 * PAGE]);
+            let mut app = App::new(Config::default());
+            let store = Store::new(flash, 0..3 * PAGE as u32).unwrap();
+            let (keeper, _) = Keeper::boot(store, &mut app);
+            let mut unit = Unit {
+                app,
+                keeper,
+                now: Instant::ZERO,
+            };
+            // The first save (it opens a page: the flash is blank), then quiet.
+            let lanes = [Lane::Empty; 3];
+            unit.change_lanes(lanes);
+            unit.steps_until_stored(false, |s| s.lanes == lanes);
+            unit
+        }
+
+        /// What a restart would restore.
+        fn stored(&mut self) -> Snapshot<3> {
+            let flash = self.keeper.store().flash().clone();
+            Store::<_, 3>::new(flash, 0..3 * PAGE as u32).unwrap().load()
+        }
+
+        /// Steps (each `busy` or not) until the flash holds what `done` wants and no save is in
+        /// progress: how many.
+        fn steps_until_stored(&mut self, busy: bool, done: impl Fn(&Snapshot<3>) -> bool) -> usize {
+            for steps in 1..=5000 {
+                self.keeper.update_after(&self.app, self.now, busy).unwrap();
+                self.now = self.now + 1;
+                if !self.keeper.is_saving() && done(&self.stored()) {
+                    return steps;
+                }
+            }
+            panic!("never saved");
+        }
+
+        fn change_lanes(&mut self, lanes: [Lane; 3]) {
+            let snapshot = Snapshot {
+                lanes,
+                ..self.app.snapshot()
+            };
+            self.app.restore(&snapshot);
+        }
+    }
+
+    /// A printer that talks in every step (a query each millisecond) defers each piece of a save
+    /// by at most [`MAX_DEFERRED_STEPS`] steps: the save still completes, a lane change as
+    /// (K + 1) times the steps it takes alone, a changed setting (its registers compared one
+    /// per call) likewise.
+    #[test]
+    fn a_save_completes_under_a_printer_that_talks_in_every_step() {
+        let bound = usize::from(MAX_DEFERRED_STEPS) + 1;
+        let lanes = [Lane::Parked, Lane::Loaded, Lane::Empty];
+        let mut quiet = Unit::boot();
+        quiet.change_lanes(lanes);
+        let alone = quiet.steps_until_stored(false, |s| s.lanes == lanes);
+        let mut talking = Unit::boot();
+        talking.change_lanes(lanes);
+        let busy = talking.steps_until_stored(true, |s| s.lanes == lanes);
+        assert_eq!(alone, 2, "laid out, then programmed");
+        assert_eq!(
+            busy,
+            alone * bound,
+            "lanes: {alone} pieces, each after {bound} busy steps"
+        );
+
+        // A setting: saved at the next full check, its registers compared a call each.
+        let setting = |s: &Snapshot<3>| s.settings.contains(&(0x22, 777));
+        for unit in [&mut quiet, &mut talking] {
+            unit.now = unit.now + FULL_CHECK_MS;
+            assert!(unit.app.write_register(0x22, 777));
+        }
+        let alone = quiet.steps_until_stored(false, setting);
+        let busy = talking.steps_until_stored(true, setting);
+        assert!(alone > 20, "{alone} steps alone");
+        assert_eq!(busy, alone * bound, "settings: {alone} pieces");
+    }
+
+    /// A step that is not busy runs its piece at once, whatever came before.
+    #[test]
+    fn a_quiet_step_saves_at_once() {
+        let lanes = [Lane::Empty, Lane::Parked, Lane::InHub];
+        let mut unit = Unit::boot();
+        unit.change_lanes(lanes);
+        for _ in 0..3 {
+            unit.keeper.update_after(&unit.app, unit.now, true).unwrap();
+            assert_ne!(unit.stored().lanes, lanes, "deferred after a busy step");
+        }
+        assert_eq!(unit.steps_until_stored(false, |s| s.lanes == lanes), 2);
     }
 }

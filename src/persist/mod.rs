@@ -9,16 +9,21 @@
 //! the policy the firmware and the simulator share: restore at boot, save as the App changes,
 //! recover from a flash that fails, and never erase more than [`ERASES_PER_HOUR`] (plus a burst).
 
+mod crc;
 mod entry;
 mod keeper;
 mod records;
+mod settings;
 mod store;
 
 use heapless::Vec;
 
 use crate::unit::Lane;
 
-pub use keeper::{Boot, ERASE_BURST, ERASES_PER_HOUR, FULL_CHECK_MS, Health, Keeper, RETRY_MAX_MS};
+pub use crc::{EntryCrc, SoftwareCrc, iso_hdlc};
+pub use keeper::{
+    Boot, ERASE_BURST, ERASES_PER_HOUR, FULL_CHECK_MS, Health, Keeper, MAX_DEFERRED_STEPS, RETRY_MAX_MS,
+};
 pub use store::{Damage, Progress, SLOW_RECORD_PERIOD_MS, Store};
 
 /// Settings registers a unit has at most (plain settings and two thresholds per sensor).

@@ -3,8 +3,6 @@
 //! and the unit starts that record from its defaults. [`Records`] is the store's view of all four,
 //! with the identity registers split from the other settings.
 
-use heapless::Vec;
-
 use super::{Counters, IDENTITY_REGISTERS, MAX_SETTINGS, Settings, Snapshot, is_identity};
 use crate::unit::Lane;
 
@@ -49,7 +47,8 @@ impl Record {
 }
 
 /// One record's bytes.
-pub(super) type Bytes = Vec<u8, MAX_RECORD>;
+#[cfg(test)]
+pub(super) type Bytes = heapless::Vec<u8, MAX_RECORD>;
 
 fn lane_code(lane: Lane) -> u8 {
     match lane {
@@ -93,44 +92,61 @@ impl Reader<'_> {
     }
 }
 
-/// Append `bytes`; every record built here fits [`MAX_RECORD`].
-fn put(out: &mut Bytes, bytes: &[u8]) {
-    let _ = out.extend_from_slice(bytes);
+/// Writes a record's fields in order into an entry's payload, in place; bytes past the end are
+/// dropped (every record built here fits [`MAX_RECORD`]).
+pub(super) struct Writer<'a> {
+    out: &'a mut [u8],
+    len: usize,
 }
 
-fn header(entries: usize) -> Bytes {
-    let mut out = Bytes::new();
-    put(&mut out, &[FORMAT, entries as u8]);
-    out
+impl<'a> Writer<'a> {
+    /// A writer at the start of `out`.
+    pub(super) fn new(out: &'a mut [u8]) -> Self {
+        Writer { out, len: 0 }
+    }
+
+    /// The bytes written.
+    pub(super) fn len(&self) -> usize {
+        self.len
+    }
+
+    fn put(&mut self, bytes: &[u8]) {
+        let end = self.len + bytes.len();
+        if let Some(to) = self.out.get_mut(self.len..end) {
+            to.copy_from_slice(bytes);
+            self.len = end;
+        }
+    }
+
+    fn header(&mut self, entries: usize) {
+        self.put(&[FORMAT, entries as u8]);
+    }
 }
 
-pub(super) fn encode_lanes<const N: usize>(lanes: &[Lane; N]) -> Bytes {
-    let mut out = header(N);
+pub(super) fn encode_lanes<const N: usize>(lanes: &[Lane; N], out: &mut Writer) {
+    out.header(N);
     for &lane in lanes {
-        put(&mut out, &[lane_code(lane)]);
+        out.put(&[lane_code(lane)]);
     }
-    out
 }
 
-pub(super) fn encode_counters<const N: usize>(counters: &Counters<N>) -> Bytes {
-    let mut out = header(N);
-    put(&mut out, &counters.drive_errors.to_le_bytes());
+pub(super) fn encode_counters<const N: usize>(counters: &Counters<N>, out: &mut Writer) {
+    out.header(N);
+    out.put(&counters.drive_errors.to_le_bytes());
     for slot in 0..N {
-        put(&mut out, &counters.tool_changes[slot].to_le_bytes());
-        put(&mut out, &counters.failures[slot].to_le_bytes());
-        put(&mut out, &counters.fed_mm[slot].to_le_bytes());
+        out.put(&counters.tool_changes[slot].to_le_bytes());
+        out.put(&counters.failures[slot].to_le_bytes());
+        out.put(&counters.fed_mm[slot].to_le_bytes());
     }
-    out
 }
 
 /// Settings and identity records alike: (register, value) pairs.
-pub(super) fn encode_settings(settings: &[(u8, u16)]) -> Bytes {
-    let mut out = header(settings.len());
+pub(super) fn encode_settings(settings: &[(u8, u16)], out: &mut Writer) {
+    out.header(settings.len());
     for &(address, value) in settings {
-        put(&mut out, &[address]);
-        put(&mut out, &value.to_le_bytes());
+        let [low, high] = value.to_le_bytes();
+        out.put(&[address, low, high]);
     }
-    out
 }
 
 /// A reader past the header, when the record is of this format and for `count` entries.
@@ -163,13 +179,23 @@ pub(super) fn decode_counters<const N: usize>(bytes: &[u8]) -> Option<Counters<N
     reader.0.is_empty().then_some(counters)
 }
 
-pub(super) fn decode_settings(bytes: &[u8]) -> Option<Settings> {
+/// Hand each (register, value) pair of a settings or identity record to `take` (`false`: the
+/// record does not decode); `None` when it does not decode.
+fn decode_pairs(bytes: &[u8], mut take: impl FnMut((u8, u16)) -> bool) -> Option<()> {
     let (mut reader, entries) = body(bytes, None)?;
-    let mut settings = Vec::new();
     for _ in 0..entries {
-        settings.push((reader.u8()?, reader.u16()?)).ok()?;
+        if !take((reader.u8()?, reader.u16()?)) {
+            return None;
+        }
     }
-    reader.0.is_empty().then_some(settings)
+    reader.0.is_empty().then_some(())
+}
+
+#[cfg(test)]
+pub(super) fn decode_settings(bytes: &[u8]) -> Option<Settings> {
+    let mut settings = Settings::new();
+    decode_pairs(bytes, |pair| settings.push(pair).is_ok())?;
+    Some(settings)
 }
 
 /// Every record as this store last wrote or read it.
@@ -223,13 +249,16 @@ impl<const N: usize> Records<N> {
         }
     }
 
-    pub(super) fn encode(&self, record: Record) -> Bytes {
+    /// Write `record`'s bytes into `out` (an entry's payload, in place): their length.
+    pub(super) fn encode(&self, record: Record, out: &mut [u8]) -> usize {
+        let mut writer = Writer::new(out);
         match record {
-            Record::Lanes => encode_lanes(&self.lanes),
-            Record::Counters => encode_counters(&self.counters),
-            Record::Settings => encode_settings(&self.settings),
-            Record::Identity => encode_settings(&self.identity),
+            Record::Lanes => encode_lanes(&self.lanes, &mut writer),
+            Record::Counters => encode_counters(&self.counters, &mut writer),
+            Record::Settings => encode_settings(&self.settings, &mut writer),
+            Record::Identity => encode_settings(&self.identity, &mut writer),
         }
+        writer.len()
     }
 
     /// Take `record` from `from`.
@@ -247,14 +276,28 @@ impl<const N: usize> Records<N> {
         match record {
             Record::Lanes => self.lanes = decode_lanes(bytes).unwrap_or([Lane::Unknown; N]),
             Record::Counters => self.counters = decode_counters(bytes).unwrap_or_default(),
-            Record::Settings => self.settings = decode_settings(bytes).unwrap_or_default(),
+            // In place: no copy of a settings list on the stack.
+            Record::Settings => {
+                let settings = &mut self.settings;
+                settings.clear();
+                if decode_pairs(bytes, |pair| settings.push(pair).is_ok()).is_none() {
+                    settings.clear();
+                }
+            }
+            // What a settings record holds (at most MAX_SETTINGS pairs), but the identity's.
             Record::Identity => {
-                let stored = decode_settings(bytes).unwrap_or_default();
-                self.identity = stored
-                    .into_iter()
-                    .filter(|(address, _)| is_identity(*address))
-                    .take(IDENTITY_REGISTERS.len())
-                    .collect();
+                let (identity, mut pairs) = (&mut self.identity, 0);
+                identity.clear();
+                let decoded = decode_pairs(bytes, |pair| {
+                    pairs += 1;
+                    if is_identity(pair.0) {
+                        let _ = identity.push(pair);
+                    }
+                    pairs <= MAX_SETTINGS
+                });
+                if decoded.is_none() {
+                    identity.clear();
+                }
             }
         }
     }
@@ -264,29 +307,68 @@ impl<const N: usize> Records<N> {
 mod tests {
     use super::*;
 
+    /// What the encoder writes, as bytes.
+    fn encoded(encode: impl FnOnce(&mut Writer)) -> Bytes {
+        let mut out = [0; MAX_RECORD];
+        let mut writer = Writer::new(&mut out);
+        encode(&mut writer);
+        let len = writer.len();
+        Bytes::from_slice(&out[..len]).unwrap()
+    }
+
     #[test]
     fn records_decode_to_what_was_encoded() {
         let lanes = [Lane::Parked, Lane::Loaded, Lane::Empty];
-        assert_eq!(decode_lanes::<3>(&encode_lanes(&lanes)), Some(lanes));
+        assert_eq!(
+            decode_lanes::<3>(&encoded(|w| encode_lanes(&lanes, w))),
+            Some(lanes)
+        );
         let counters = Counters::<3> {
             drive_errors: 7,
             tool_changes: [1, 2, 65535],
             failures: [0, 4, 0],
             fed_mm: [0, 123_456_789, 5],
         };
-        assert_eq!(decode_counters::<3>(&encode_counters(&counters)), Some(counters));
+        assert_eq!(
+            decode_counters::<3>(&encoded(|w| encode_counters(&counters, w))),
+            Some(counters)
+        );
         let settings = [(0x0b, 30), (0x22, 360), (0x90, 2600)];
         assert_eq!(
-            decode_settings(&encode_settings(&settings)).as_deref(),
+            decode_settings(&encoded(|w| encode_settings(&settings, w))).as_deref(),
             Some(&settings[..])
         );
         let all: Settings = (0..MAX_SETTINGS as u8).map(|a| (a, u16::MAX)).collect();
-        assert_eq!(encode_settings(&all).len(), MAX_RECORD, "the largest record fits");
+        assert_eq!(
+            encoded(|w| encode_settings(&all, w)).len(),
+            MAX_RECORD,
+            "the largest record fits"
+        );
+    }
+
+    #[test]
+    fn settings_and_identity_records_decode_in_place() {
+        let mut records = Records::<3>::blank();
+        let bytes = encoded(|w| encode_settings(&[(0x0b, 30), (0x52, 2), (0x22, 360)], w));
+        let cut = &bytes[..bytes.len() - 1];
+        records.decode(Record::Settings, &bytes);
+        assert_eq!(records.settings, [(0x0b, 30), (0x52, 2), (0x22, 360)]);
+        records.decode(Record::Identity, &bytes);
+        assert_eq!(records.identity, [(0x52, 2)], "only the identity's registers");
+        records.decode(Record::Settings, cut);
+        records.decode(Record::Identity, cut);
+        assert!(
+            records.settings.is_empty() && records.identity.is_empty(),
+            "cut short"
+        );
+        let all: Settings = (0..MAX_SETTINGS as u8).map(|a| (a + 0x20, 1)).collect();
+        records.decode(Record::Identity, &encoded(|w| encode_settings(&all, w)));
+        assert_eq!(records.identity, [(0x52, 1)], "a full settings record");
     }
 
     #[test]
     fn records_of_another_shape_are_refused() {
-        let lanes = encode_lanes(&[Lane::Parked; 3]);
+        let lanes = encoded(|w| encode_lanes(&[Lane::Parked; 3], w));
         assert_eq!(decode_lanes::<4>(&lanes), None, "another slot count");
         let mut other_format = lanes.clone();
         other_format[0] = FORMAT + 1;

@@ -23,8 +23,9 @@ mod save;
 
 use embedded_storage::nor_flash::NorFlash;
 
+use super::crc::{EntryCrc, SoftwareCrc};
 use super::entry::{COMMIT, DOUBLE_WORD, EntryWriter, MAX_ENTRY, entry_size, is_complete, parse_header};
-use super::records::{Bytes, Record, Records};
+use super::records::{Record, Records};
 use super::{Counters, Snapshot, StoreError};
 use crate::time::Instant;
 
@@ -60,10 +61,11 @@ impl Damage {
     }
 }
 
-/// The persisted state in a region of NOR flash.
+/// The persisted state in a region of NOR flash, its entries checked with the CRC `C`.
 #[derive(Clone)]
-pub struct Store<F: NorFlash, const N: usize> {
+pub struct Store<F: NorFlash, const N: usize, C: EntryCrc = SoftwareCrc> {
     flash: F,
+    crc: C,
     /// The region: its first address and its pages.
     base: u32,
     pages: u32,
@@ -113,9 +115,16 @@ fn page_size<F: NorFlash>() -> u32 {
 }
 
 impl<F: NorFlash, const N: usize> Store<F, N> {
-    /// A store over `range` of `flash`: page aligned, at least three pages, on a flash that
-    /// programs whole double words (or less) and reads bytes.
+    /// A store over `range` of `flash` (see [`Store::with_crc`]), its CRC computed in software.
     pub fn new(flash: F, range: core::ops::Range<u32>) -> Result<Self, StoreError> {
+        Store::with_crc(flash, SoftwareCrc::default(), range)
+    }
+}
+
+impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
+    /// A store over `range` of `flash`: page aligned, at least three pages, on a flash that
+    /// programs whole double words (or less) and reads bytes; `crc` computes its entries' CRC.
+    pub fn with_crc(flash: F, crc: C, range: core::ops::Range<u32>) -> Result<Self, StoreError> {
         let page = page_size::<F>();
         let fits = page > 0
             && range.start.is_multiple_of(page)
@@ -130,6 +139,7 @@ impl<F: NorFlash, const N: usize> Store<F, N> {
         }
         Ok(Store {
             flash,
+            crc,
             base: range.start,
             pages: (range.end - range.start) / page,
             saved: Records::blank(),
@@ -204,8 +214,10 @@ impl<F: NorFlash, const N: usize> Store<F, N> {
             let Some(newest) = self.newest[record.index()] else {
                 continue;
             };
-            if let Some(bytes) = self.find(newest, record) {
-                self.saved.decode(record, &bytes);
+            if let Some(len) = self.find(newest, record)
+                && let Some(payload) = self.buffer.get(DOUBLE_WORD..DOUBLE_WORD + len)
+            {
+                self.saved.decode(record, payload);
             }
         }
         self.target = self.saved.clone();
@@ -229,7 +241,7 @@ impl<F: NorFlash, const N: usize> Store<F, N> {
         let Some(bytes) = self.buffer.get_mut(..entry_size(len)) else {
             return false;
         };
-        self.flash.read(address, bytes).is_ok() && is_complete(bytes)
+        self.flash.read(address, bytes).is_ok() && is_complete(bytes, &mut self.crc)
     }
 
     /// Walk one page's entries. In a committed page, note each record's newest complete copy and
@@ -351,15 +363,14 @@ impl<F: NorFlash, const N: usize> Store<F, N> {
         }
     }
 
-    /// The payload of `record`'s newest entry.
-    fn find(&mut self, newest: Newest, record: Record) -> Option<Bytes> {
+    /// Read `record`'s newest entry into the buffer: its payload's length.
+    fn find(&mut self, newest: Newest, record: Record) -> Option<usize> {
         let address = self.page_address(newest.page) + newest.offset;
         let (key, len, sequence) = self.header(address).ok()??;
         if key != record as u8 || sequence != newest.sequence || !self.entry_complete(address, len) {
             return None;
         }
-        let payload = self.buffer.get(DOUBLE_WORD..DOUBLE_WORD + len)?;
-        Bytes::from_slice(payload).ok()
+        Some(len)
     }
 }
 

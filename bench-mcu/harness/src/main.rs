@@ -5,7 +5,8 @@
 //! Every control step is done as the firmware's control loop does it: the bytes that arrived on
 //! the line join the receive queue (`control::RxQueue`, the board's UART ring), `App::step` gets
 //! the step's time, samples and at most `control::MAX_RX_PER_STEP` of the waiting bytes, then
-//! `Keeper::update` (or `Keeper::before` for a reset). The emulator counts the instructions between the calls to [`bench_mark`], which say
+//! `Keeper::update_after` (or `Keeper::before` for a reset), told whether the step was busy with
+//! the printer (took bytes or answered) as the firmware tells it. The emulator counts the instructions between the calls to [`bench_mark`], which say
 //! what is measured and give each step's context. No runtime, no interrupts: the emulator sets
 //! the stack pointer and starts at [`bench_main`].
 
@@ -251,9 +252,11 @@ pub extern "C" fn bench_main() -> ! {
         for &byte in out.tx.iter() {
             digest = (digest ^ u32::from(byte)).wrapping_mul(0x0100_0193);
         }
+        // As the firmware's control loop: no save piece after a step busy with the printer.
+        let busy = !rx.is_empty() || !out.tx.is_empty();
         mark(Mark::SaveBegin, index, 0, 0);
         let wrote = match out.action {
-            None => keeper.update(&app, now).unwrap_or(true),
+            None => keeper.update_after(&app, now, busy).unwrap_or(true),
             Some(action) => {
                 let _ = keeper.before(action, &app);
                 true

@@ -8,7 +8,7 @@
 use embedded_storage::nor_flash::NorFlash;
 
 use super::{COMMIT, EntryWriter, Newest, Record, Records, SLOW_RECORD_PERIOD_MS, Store, Writing};
-use super::{Counters, Snapshot, StoreError, entry_size, page_size};
+use super::{Counters, EntryCrc, Snapshot, StoreError, entry_size, page_size};
 use crate::time::Instant;
 use crate::unit::Lane;
 
@@ -19,10 +19,6 @@ const MOVES_PER_SAVE: u8 = 2;
 const PROGRAM_CHUNK: usize = 64;
 /// Bytes of a fresh page checked for erased per step.
 const CHECK_CHUNK: usize = 256;
-/// An entry this small (the lanes' of up to 5 slots) is laid out and programmed in one step, so
-/// that a lane change is saved in the step it happens; a larger one is laid out (encoded) in a
-/// step of its own.
-const ONE_STEP_ENTRY: usize = 3 * super::DOUBLE_WORD;
 /// Steps of the largest entry: its layout, then its chunks.
 const ENTRY_STEPS: usize = 1 + super::MAX_ENTRY.div_ceil(PROGRAM_CHUNK);
 
@@ -66,7 +62,7 @@ fn bit(record: Record) -> u8 {
     1 << record.index()
 }
 
-impl<F: NorFlash, const N: usize> Store<F, N> {
+impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
     /// Whether a save is in progress ([`Store::step`] advances it).
     pub fn is_saving(&self) -> bool {
         self.job.is_some()
@@ -265,10 +261,12 @@ impl<F: NorFlash, const N: usize> Store<F, N> {
                 ) else {
                     return Ok(None);
                 };
+                // Laid out (encoded) in a step of its own, programmed in the next ones: a lane
+                // change takes two steps, each well within what a control step leaves.
                 self.prepare(page, record as u8, Some(record))?;
-                self.program_small(Job::Append {
+                Ok(Some(Job::Append {
                     pending: pending & !bit(record),
-                })
+                }))
             }
             Job::Move { tries } => {
                 let after = self.head.map_or(self.pages - 1, |(page, _)| page);
@@ -296,11 +294,7 @@ impl<F: NorFlash, const N: usize> Store<F, N> {
                     Stage::Copy { next } => {
                         let record = Record::ALL.get(usize::from(next)).copied();
                         self.prepare(page, record.map_or(COMMIT, |r| r as u8), record)?;
-                        return self.program_small(Job::Open {
-                            page,
-                            tries,
-                            stage: Stage::Copy { next: next + 1 },
-                        });
+                        Stage::Copy { next: next + 1 }
                     }
                 };
                 Ok(Some(Job::Open { page, tries, stage }))
@@ -363,17 +357,18 @@ impl<F: NorFlash, const N: usize> Store<F, N> {
             return Err(StoreError::Flash);
         };
         self.head = Some((page, None));
-        let payload = record
-            .map(|record| self.target.encode(record))
-            .unwrap_or_default();
-        if offset as usize + entry_size(payload.len()) > F::ERASE_SIZE {
+        // Encoded in place: no copy of the record on its way to the flash.
+        let len = record.map_or(0, |record| {
+            self.target.encode(record, EntryWriter::payload(&mut self.buffer))
+        });
+        if offset as usize + entry_size(len) > F::ERASE_SIZE {
             return Err(StoreError::Full);
         }
         let sequence = self.next_sequence;
         // Spent even if the entry is never completed: a torn entry must not share its number.
         self.next_sequence = sequence.wrapping_add(1);
         self.writing = Some(Writing {
-            entry: EntryWriter::new(&mut self.buffer, key, sequence, &payload),
+            entry: EntryWriter::new(&mut self.buffer, key, sequence, len),
             key,
             place: Newest {
                 sequence,
@@ -384,15 +379,6 @@ impl<F: NorFlash, const N: usize> Store<F, N> {
         Ok(())
     }
 
-    /// Right after [`Store::prepare`]: program the entry now if it is small, else in the next
-    /// step.
-    fn program_small(&mut self, job: Job) -> Result<Option<Job>, StoreError> {
-        match &self.writing {
-            Some(writing) if writing.entry.size() <= ONE_STEP_ENTRY => self.program_chunk(job),
-            _ => Ok(Some(job)),
-        }
-    }
-
     /// Program the next chunk of the entry being written (only where the flash reads erased: a
     /// double word is programmed once, PROGERR otherwise); once it is complete, account for it.
     fn program_chunk(&mut self, job: Job) -> Result<Option<Job>, StoreError> {
@@ -400,7 +386,10 @@ impl<F: NorFlash, const N: usize> Store<F, N> {
             return Ok(Some(job));
         };
         let place = writing.place;
-        let Some((offset, bytes)) = writing.entry.next_chunk(&mut self.buffer, PROGRAM_CHUNK) else {
+        let Some((offset, bytes)) = writing
+            .entry
+            .next_chunk(&mut self.buffer, PROGRAM_CHUNK, &mut self.crc)
+        else {
             return Err(StoreError::Flash);
         };
         let done = offset + bytes.len() == writing.entry.size();

@@ -1,0 +1,144 @@
+//! The CRC-32 of the store's entries behind a trait, so that the store stays hardware-agnostic:
+//! the firmware computes it on the STM32G0's CRC unit (`board::HardwareCrc`: no 1 KiB table in
+//! flash, one register write per byte), the host and the benchmark in software ([`SoftwareCrc`],
+//! table-driven). Both compute CRC-32/ISO-HDLC, so a store written by one reads with the other;
+//! and whichever a unit uses, it both writes and checks its own entries with it, so its store is
+//! consistent by itself (an entry counts only when its trailer matches what the same unit
+//! computes over it).
+
+use crc::{CRC_32_ISO_HDLC, Crc, Digest};
+
+/// CRC-32/ISO-HDLC (the CRC of zip and Ethernet), as the STM32G0's CRC unit is set up for it
+/// (RM0444, "Cyclic redundancy check calculation unit"): the polynomial (`CRC_POL`, 32 bits),
+/// the initial value (`CRC_INIT`), input bit-reversed by byte (`REV_IN` = 01), output
+/// bit-reversed (`REV_OUT`), and the final XOR, which the unit does not do, in software.
+pub mod iso_hdlc {
+    /// The polynomial, in the unit's (MSB first) form.
+    pub const POLY: u32 = 0x04c1_1db7;
+    /// The initial value.
+    pub const INIT: u32 = 0xffff_ffff;
+    /// XORed with the unit's output.
+    pub const FINAL_XOR: u32 = 0xffff_ffff;
+}
+
+/// The CRC-32/ISO-HDLC of one entry, computed a chunk at a time: started, fed the entry's bytes
+/// in order (possibly over several calls of a save), then read. One entry at a time.
+pub trait EntryCrc {
+    /// Start a new CRC.
+    fn start(&mut self);
+    /// Add `bytes` to it.
+    fn add(&mut self, bytes: &[u8]);
+    /// The CRC of the bytes added since [`EntryCrc::start`].
+    fn value(&mut self) -> u32;
+}
+
+/// A static: a [`SoftwareCrc`] keeps a running digest of it.
+static TABLE_CRC: Crc<u32> = Crc::<u32>::new(&CRC_32_ISO_HDLC);
+
+/// CRC-32/ISO-HDLC in software, with the `crc` crate's 1 KiB table: the host and the benchmark.
+#[derive(Clone)]
+pub struct SoftwareCrc(Digest<'static, u32>);
+
+impl Default for SoftwareCrc {
+    fn default() -> Self {
+        SoftwareCrc(TABLE_CRC.digest())
+    }
+}
+
+impl EntryCrc for SoftwareCrc {
+    fn start(&mut self) {
+        self.0 = TABLE_CRC.digest();
+    }
+
+    fn add(&mut self, bytes: &[u8]) {
+        self.0.update(bytes);
+    }
+
+    fn value(&mut self) -> u32 {
+        self.0.clone().finalize()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// CRC-32/ISO-HDLC bit by bit, from its definition (reflected: polynomial 0xedb88320,
+    /// init and final XOR 0xffffffff).
+    fn reference(bytes: &[u8]) -> u32 {
+        let mut crc = 0xffff_ffffu32;
+        for &byte in bytes {
+            crc ^= u32::from(byte);
+            for _ in 0..8 {
+                crc = if crc & 1 != 0 {
+                    (crc >> 1) ^ 0xedb8_8320
+                } else {
+                    crc >> 1
+                };
+            }
+        }
+        !crc
+    }
+
+    /// The STM32G0's CRC unit as RM0444 describes it, set up with [`iso_hdlc`]: a 32-bit MSB-first
+    /// shift register loaded with `CRC_INIT`, each byte written to `CRC_DR` bit-reversed first
+    /// (`REV_IN` by byte), the register read bit-reversed (`REV_OUT`), then the final XOR.
+    fn unit_model(bytes: &[u8]) -> u32 {
+        let mut register = iso_hdlc::INIT;
+        for &byte in bytes {
+            register ^= u32::from(byte.reverse_bits()) << 24;
+            for _ in 0..8 {
+                register = if register & 0x8000_0000 != 0 {
+                    (register << 1) ^ iso_hdlc::POLY
+                } else {
+                    register << 1
+                };
+            }
+        }
+        register.reverse_bits() ^ iso_hdlc::FINAL_XOR
+    }
+
+    fn software(chunks: &[&[u8]]) -> u32 {
+        let mut crc = SoftwareCrc::default();
+        crc.add(b"left over from a previous entry");
+        crc.start();
+        for chunk in chunks {
+            crc.add(chunk);
+        }
+        crc.value()
+    }
+
+    #[test]
+    fn the_software_crc_is_crc32_iso_hdlc() {
+        // The catalogue's check value: the CRC of "123456789".
+        assert_eq!(software(&[b"123456789"]), 0xcbf4_3926);
+        assert_eq!(CRC_32_ISO_HDLC.check, 0xcbf4_3926);
+        let mut state = 0x1234_5678u32;
+        let data: [u8; 200] = core::array::from_fn(|_| {
+            state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (state >> 24) as u8
+        });
+        for len in [0, 1, 7, 8, 24, 64, 200] {
+            let bytes = &data[..len];
+            assert_eq!(software(&[bytes]), reference(bytes), "{len} bytes");
+            for split in [0, 1.min(len), len / 2, len] {
+                let (a, b) = bytes.split_at(split);
+                assert_eq!(
+                    software(&[a, b]),
+                    reference(bytes),
+                    "{len} bytes split at {split}"
+                );
+            }
+        }
+    }
+
+    /// The hardware's set-up (not the hardware: there is no board here) gives the same CRC.
+    #[test]
+    fn the_crc_unit_set_up_as_the_board_does_computes_crc32_iso_hdlc() {
+        assert_eq!(unit_model(b"123456789"), 0xcbf4_3926);
+        let data: [u8; 64] = core::array::from_fn(|i| (i * 37 + 11) as u8);
+        for len in [1, 5, 8, 64] {
+            assert_eq!(unit_model(&data[..len]), reference(&data[..len]), "{len} bytes");
+        }
+    }
+}

@@ -1,0 +1,159 @@
+//! The settings part of a snapshot, gathered a register per call. [`App::snapshot`] reads every
+//! setting register of the unit and of a default configuration at once (about 4,000
+//! instructions on the M0+, more than a control step leaves); the keeper instead compares the
+//! registers one per call against defaults read once at boot, and gets the same list. Which
+//! registers are settings follows `registers::changed_settings` (writable, not the printer's
+//! sensor state); a test holds the two lists equal.
+
+use heapless::Vec;
+
+use super::{MAX_SETTINGS, Settings};
+use crate::app::App;
+use crate::config::Config;
+use crate::registers::{self, Access, REGISTERS, Span, View};
+use crate::runner::Status;
+use crate::time::Instant;
+
+/// Setting registers compared per call: one [`App::read_register`] costs up to about 1,000
+/// instructions on the M0+ (the register table is searched by address).
+pub(super) const REGISTERS_PER_CALL: usize = 1;
+
+/// Every setting register of a unit with `N` slots and its value in the default configuration,
+/// in the register table's order (the order of [`App::snapshot`]'s settings).
+#[derive(Clone)]
+pub(super) struct Defaults(Vec<(u8, u16), MAX_SETTINGS>);
+
+impl Defaults {
+    /// Read the defaults through the register table (once, at boot). `app` only completes the
+    /// view (its slots decide which registers exist): setting registers read only the
+    /// configuration.
+    pub(super) fn new<const N: usize>(app: &App<N>) -> Self {
+        let config = Config::default();
+        let view = View {
+            config: &config,
+            hub: &app.unit().hub,
+            feeders: &app.unit().feeders,
+            lanes: &[],
+            fsensor: 0,
+            path_slot: None,
+            driving_slot: None,
+            status: Status::Finished,
+            drive_errors: 0,
+            tool_changes: &[],
+            failures: &[],
+            fed_mm: &[],
+            dropped_responses: 0,
+            bowden_learned_mm: 0,
+            now: Instant::ZERO,
+        };
+        let mut defaults = Vec::new();
+        let settings = REGISTERS
+            .iter()
+            .filter(|row| row.access() == Access::ReadWrite && row.address != registers::FSENSOR);
+        for row in settings {
+            let count = match row.span {
+                Span::One => 1,
+                Span::Sensors => 3 + 2 * N,
+                Span::Slots => N,
+            };
+            for index in 0..count {
+                let address = row.address.wrapping_add(index as u8);
+                if let Some(value) = registers::read(&view, address) {
+                    // MAX_SETTINGS holds every setting of a 5-slot unit.
+                    let _ = defaults.push((address, value));
+                }
+            }
+        }
+        Defaults(defaults)
+    }
+}
+
+/// A comparison of the unit's settings with their defaults in progress.
+#[derive(Clone, Default)]
+pub(super) struct Scan {
+    /// The next register, as an index into [`Defaults`].
+    next: usize,
+    /// The settings that differ so far.
+    settings: Settings,
+}
+
+impl Scan {
+    /// Compare the next [`REGISTERS_PER_CALL`] registers; once every one is compared, the
+    /// settings that differ (in a call that compares none: handing them over costs a save's
+    /// start).
+    pub(super) fn step<const N: usize>(&mut self, app: &App<N>, defaults: &Defaults) -> Option<Settings> {
+        let next = defaults.0.get(self.next..).unwrap_or_default();
+        if next.is_empty() {
+            return Some(core::mem::take(&mut self.settings));
+        }
+        for &(address, default) in next.iter().take(REGISTERS_PER_CALL) {
+            if let Some(value) = app.read_register(address).filter(|&value| value != default) {
+                let _ = self.settings.push((address, value));
+            }
+            self.next += 1;
+        }
+        None
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    extern crate std;
+
+    use super::*;
+
+    /// The whole scan, a call at a time.
+    fn scanned<const N: usize>(app: &App<N>, defaults: &Defaults) -> Settings {
+        let mut scan = Scan::default();
+        for _ in 0..=MAX_SETTINGS + 1 {
+            if let Some(settings) = scan.step(app, defaults) {
+                return settings;
+            }
+        }
+        panic!("the scan does not end");
+    }
+
+    /// Every setting register of the unit, changed or not, as (address, a valid other value).
+    fn every_setting<const N: usize>(app: &App<N>) -> std::vec::Vec<(u8, u16)> {
+        registers::all(N)
+            .filter(|r| r.row.access() == Access::ReadWrite && r.address != registers::FSENSOR)
+            .filter_map(|r| {
+                let (min, max) = r.row.range?;
+                let value = app.read_register(r.address)?;
+                Some((
+                    r.address,
+                    if value > min {
+                        value - 1
+                    } else {
+                        max.min(value + 1)
+                    },
+                ))
+            })
+            .collect()
+    }
+
+    fn check<const N: usize>() {
+        let mut app = App::<N>::new(Config::default());
+        let defaults = Defaults::new(&app);
+        assert!(defaults.0.len() > 20, "{} setting registers", defaults.0.len());
+        assert_eq!(
+            scanned(&app, &defaults),
+            app.snapshot().settings,
+            "nothing changed"
+        );
+        // Change the settings one more at a time: the scan must see what the snapshot sees.
+        for (address, value) in every_setting(&app) {
+            app.write_register(address, value);
+            let settings = app.snapshot().settings;
+            assert_eq!(scanned(&app, &defaults), settings, "after writing {address:#04x}");
+        }
+        assert!(app.snapshot().settings.len() > 20, "most settings changed");
+    }
+
+    #[test]
+    fn the_scan_finds_the_settings_the_snapshot_holds() {
+        check::<3>();
+        check::<1>();
+        check::<5>();
+    }
+}
