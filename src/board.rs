@@ -61,8 +61,9 @@ bind_interrupts!(struct Irqs {
 });
 
 /// Declares the board's pin map once and derives from it: the [`Parts`] struct that takes every
-/// used singleton out of the HAL's `Peripherals`, and [`emergency_stop_pins`], which lists the
-/// rows marked `stby`, then the rows marked `off`, for [`emergency_stop`] to drive low.
+/// used singleton out of the HAL's `Peripherals`, and the constants [`STOP_STBY`] and [`STOP_OFF`]:
+/// the pins of the rows marked `stby` and of the rows marked `off`, for [`emergency_stop`] to
+/// drive low in that order.
 ///
 /// Row layout: `field: PIN, "function", "NUCLEO header", "wired to", safe-state;`
 /// where safe-state is `stby` (standby pins, forced low first), `off` (PWM and IN pins, forced low
@@ -85,17 +86,13 @@ macro_rules! pin_map {
             }
         }
 
-        /// The motor pins in the order the emergency stop forces them low: STBY first, then PWM
-        /// and IN (see [`emergency_stop`]).
-        fn emergency_stop_pins() -> impl Iterator<Item = Peri<'static, AnyPin>> {
-            // SAFETY: only used to force pins low on the way to a reset or a halt.
-            let stby = [$( pin_map!(@stop stby $safe $pin) ),*];
-            let off = [$( pin_map!(@stop off $safe $pin) ),*];
-            stby.into_iter().chain(off).flatten()
-        }
+        /// The TB6612 standby pins, forced low first (see [`emergency_stop`]).
+        const STOP_STBY: StopPins = StopPins::of(&[$( pin_map!(@stop stby $safe $pin) ),*]);
+        /// The PWM and IN pins, forced low next.
+        const STOP_OFF: StopPins = StopPins::of(&[$( pin_map!(@stop off $safe $pin) ),*]);
     };
-    (@stop stby stby $pin:ident) => { Some(unsafe { peripherals::$pin::steal() }.into()) };
-    (@stop off off $pin:ident) => { Some(unsafe { peripherals::$pin::steal() }.into()) };
+    (@stop stby stby $pin:ident) => { Some(stringify!($pin)) };
+    (@stop off off $pin:ident) => { Some(stringify!($pin)) };
     (@stop $pass:ident $safe:tt $pin:ident) => { None };
 }
 
@@ -149,15 +146,66 @@ pin_map! {
 }
 // ==================================================================================================
 
-/// Drives one pin low as a push-pull output through raw register writes: its port clock on, the
-/// output latch low (BSRR), then output mode. Works before and after the HAL starts.
-#[inline(never)]
-fn force_low(pin: Peri<'static, AnyPin>) {
-    let (gpio, n) = (pin.block(), usize::from(pin.pin()));
-    pac::RCC.gpioenr().modify(|w| w.0 |= 1 << pin.port());
-    gpio.bsrr().write(|w| w.set_br(n, true));
-    gpio.moder()
-        .modify(|w| w.set_moder(n, pac::gpio::vals::Moder::OUTPUT));
+/// GPIO ports of the STM32G071RB that the HAL numbers: A (0) to F (5).
+const GPIO_PORTS: usize = 6;
+
+/// A set of pins to force low, as one bit mask of pin numbers per GPIO port.
+struct StopPins([u16; GPIO_PORTS]);
+
+impl StopPins {
+    /// The pins named (`"PC2"`: port C, pin 2), numbered as the HAL numbers them: the port from
+    /// the letter (GPIOA = 0, its register blocks 0x400 apart), the pin from the digits
+    /// (embassy-stm32 0.6.0 `build.rs`, `pin_port = port_num * 16 + pin_num`). A name that is not
+    /// a pin fails the build.
+    const fn of(names: &[Option<&str>]) -> Self {
+        let mut masks = [0u16; GPIO_PORTS];
+        let mut i = 0;
+        while i < names.len() {
+            if let Some(name) = names[i] {
+                let name = name.as_bytes();
+                assert!(name.len() >= 3 && name[0] == b'P' && name[1] >= b'A');
+                let port = (name[1] - b'A') as usize;
+                assert!(port < GPIO_PORTS);
+                let mut pin = 0u32;
+                let mut digit = 2;
+                while digit < name.len() {
+                    assert!(name[digit].is_ascii_digit());
+                    pin = pin * 10 + (name[digit] - b'0') as u32;
+                    digit += 1;
+                }
+                assert!(pin < 16);
+                masks[port] |= 1 << pin;
+            }
+            i += 1;
+        }
+        StopPins(masks)
+    }
+
+    /// Drives every pin of the set low as a push-pull output through raw register writes, one
+    /// port at a time: its clock on (RCC_IOPENR), the output latches low (GPIOx_BSRR, the BRy
+    /// bits: atomic), then output mode (GPIOx_MODER = 01 for each pin; OTYPER is left at
+    /// push-pull, its reset value and what the HAL sets; RM0444, RCC and GPIO register
+    /// descriptions). Works before and after the HAL starts.
+    #[inline(never)]
+    fn force_low(&self) {
+        for (port, &mask) in self.0.iter().enumerate() {
+            if mask == 0 {
+                continue;
+            }
+            let pins = u32::from(mask);
+            // MODER has two bits per pin: 01 (output) in each pin's pair, both bits cleared first.
+            let mut moder_output = 0u32;
+            for pin in 0..16 {
+                moder_output |= ((pins >> pin) & 1) << (2 * pin);
+            }
+            let moder_mask = moder_output * 0b11;
+            // SAFETY: only the port's register block is taken, never a pin driver.
+            let gpio = unsafe { AnyPin::steal(16 * port as u8) }.block();
+            pac::RCC.gpioenr().modify(|w| w.0 |= 1 << port);
+            gpio.bsrr().write_value(pac::gpio::regs::Bsrr(pins << 16));
+            gpio.moder().modify(|w| w.0 = (w.0 & !moder_mask) | moder_output);
+        }
+    }
 }
 
 /// Turns every motor bridge off at once, without the HAL and without allocation: both TB6612 STBY
@@ -170,7 +218,8 @@ fn force_low(pin: Peri<'static, AnyPin>) {
 /// It does not take ownership: the HAL drivers that own these pins must not be used afterwards
 /// (every caller resets or halts).
 pub fn emergency_stop() {
-    emergency_stop_pins().for_each(force_low);
+    STOP_STBY.force_low();
+    STOP_OFF.force_low();
 }
 
 /// Why the MCU last started.
