@@ -29,7 +29,6 @@ use embassy_stm32::time::khz;
 use embassy_stm32::timer::low_level::CountingMode;
 use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm, SimplePwmChannel};
 use embassy_stm32::usart::{self, BufferedUart, BufferedUartRx, BufferedUartTx};
-use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_stm32::{Peri, bind_interrupts, dma};
 use embassy_time::{Duration, with_timeout};
 use embedded_io_async::{Read as _, ReadReady as _, Write as _};
@@ -292,10 +291,47 @@ pub type StoreFlash = WatchedFlash;
 /// resetting the MCU, while a stall outside the flash (the control loop itself) still does.
 pub struct WatchedFlash(Flash<'static, Blocking>);
 
-/// Reloads the independent watchdog: the register write of `IndependentWatchdog::pet`, for the
-/// flash, which cannot own the driver ([`Control`] does).
+/// Reloads the independent watchdog (IWDG_KR = 0xAAAA): the register write of embassy-stm32's
+/// `IndependentWatchdog::pet`, for [`Control`] and for the flash.
 fn reload_watchdog() {
     pac::IWDG.kr().write(|w| w.set_key(pac::iwdg::vals::Key::RESET));
+}
+
+/// The IWDG prescaler register value (PR) and reload value (RLR) for [`WATCHDOG_TIMEOUT_US`],
+/// computed at compile time exactly as embassy-stm32 0.6.0's `IndependentWatchdog::new` computes
+/// them at run time (`wdg/mod.rs`: `get_timeout_us`, `reload_value`): the smallest prescaler
+/// 2^p, p = 2..=8, whose longest period (reload 0xFFF) reaches the timeout, then the reload for
+/// it, with the LSI at the HAL's nominal `LSI_FREQ` (32 kHz on the G0). For 100 ms: PR 0
+/// (prescaler 4), RLR 799.
+const WATCHDOG_PR_RLR: (u8, u16) = {
+    const MAX_RL: u16 = 0xFFF;
+    let lsi = embassy_stm32::rcc::LSI_FREQ.0;
+    let mut psc_power = 2;
+    while psc_power <= 8 {
+        let psc = 1u32 << psc_power;
+        if WATCHDOG_TIMEOUT_US <= 1_000_000 * (MAX_RL as u32 + 1) / (lsi / psc) {
+            break;
+        }
+        psc_power += 1;
+    }
+    assert!(psc_power <= 8, "the watchdog timeout is beyond the IWDG's range");
+    let psc = 1u32 << psc_power;
+    let rl = (WATCHDOG_TIMEOUT_US / psc * lsi / 1_000_000) as u16 - 1;
+    ((psc_power - 2) as u8, rl)
+};
+const _: () = assert!(WATCHDOG_PR_RLR.0 == 0 && WATCHDOG_PR_RLR.1 == 799);
+
+/// Starts the independent watchdog with [`WATCHDOG_PR_RLR`]: the register writes of embassy-stm32
+/// 0.6.0's `IndependentWatchdog::new` and `unleash`, in their order (IWDG_KR = 0x5555 to unlock PR
+/// and RLR, PR, RLR, then IWDG_KR = 0xCCCC to start; RM0444, IWDG chapter). Once started, only a
+/// reset stops it. Taking the peripheral keeps anything else from configuring it.
+fn start_watchdog(_iwdg: Peri<'static, peripherals::IWDG>) {
+    use pac::iwdg::vals::{Key, Pr};
+    let (pr, rl) = WATCHDOG_PR_RLR;
+    pac::IWDG.kr().write(|w| w.set_key(Key::ENABLE));
+    pac::IWDG.pr().write(|w| w.set_pr(Pr::from_bits(pr)));
+    pac::IWDG.rlr().write(|w| w.set_rl(rl));
+    pac::IWDG.kr().write(|w| w.set_key(Key::START));
 }
 
 impl ErrorType for WatchedFlash {
@@ -472,7 +508,6 @@ pub struct Control {
     tx: BufferedUartTx<'static>,
     led: Output<'static>,
     button: Input<'static>,
-    watchdog: IndependentWatchdog<'static, peripherals::IWDG>,
 }
 
 impl Control {
@@ -542,7 +577,7 @@ impl Control {
 
     /// Reloads the independent watchdog.
     pub fn feed_watchdog(&mut self) {
-        self.watchdog.pet();
+        reload_watchdog();
     }
 }
 
@@ -569,8 +604,7 @@ pub fn init() -> (Control, Sampler, StoreFlash) {
     let parts = Parts::take(embassy_stm32::init(config));
 
     // The watchdog first: from here on a stalled init resets the MCU too.
-    let mut watchdog = IndependentWatchdog::new(parts.watchdog, WATCHDOG_TIMEOUT_US);
-    watchdog.unleash();
+    start_watchdog(parts.watchdog);
 
     // Motors: duty 0 on every channel before the pins switch to the timer, STBY and IN low.
     let pwm = SimplePwm::new(
@@ -657,7 +691,6 @@ pub fn init() -> (Control, Sampler, StoreFlash) {
         tx,
         led: Output::new(parts.status_led, Level::Low, Speed::Low),
         button: Input::new(parts.button, Pull::Up),
-        watchdog,
     };
     let sampler = Sampler {
         adc,
