@@ -437,9 +437,12 @@ const ANALOG_INPUTS: usize = 2 * SLOTS + 3;
 pub struct Sampler {
     adc: Adc<'static, ADC1>,
     dma: Peri<'static, peripherals::DMA1_CH1>,
-    /// The channels in scan order. The G0 ADC converts the selected channels (CHSELR) in
-    /// ascending channel number whatever order they are listed in, so they are kept sorted.
+    /// The channels, each with what it measures.
     inputs: [(Sensor, AnyAdcChannel<'static, ADC1>); ANALOG_INPUTS],
+    /// Where each input's conversion lands in a scan's results. The G0 ADC converts the selected
+    /// channels (CHSELR) in ascending channel number whatever order they are listed in (RM0444,
+    /// ADC: CHSELRMOD = 0, SCANDIR = 0), so it is the number of inputs on a lower channel.
+    scan_positions: [u8; ANALOG_INPUTS],
 }
 
 impl Sampler {
@@ -456,8 +459,10 @@ impl Sampler {
             )
             .await;
         let mut samples = Samples::default();
-        for ((sensor, _), value) in self.inputs.iter().zip(raw) {
-            sensor.store(&mut samples, value);
+        for ((sensor, _), &position) in self.inputs.iter().zip(&self.scan_positions) {
+            if let Some(&value) = raw.get(usize::from(position)) {
+                sensor.store(&mut samples, value);
+            }
         }
         samples
     }
@@ -588,6 +593,10 @@ fn low(pin: Peri<'static, impl Pin>) -> Output<'static> {
 
 /// Starts the clocks and every peripheral of the board. The bridges come up in standby with both
 /// inputs low and duty 0; the watchdog is running when this returns.
+///
+/// Out of line, so that its frame is gone before `main`'s `new_logic` builds the unit logic
+/// (the deepest boot path, `scripts/firmware-size.sh`).
+#[inline(never)]
 pub fn init() -> (Control, Sampler, StoreFlash) {
     let mut config = embassy_stm32::Config::default();
     // 64 MHz from the internal 16 MHz oscillator: VCO 16 x 8 = 128 MHz, R / 2.
@@ -670,7 +679,7 @@ pub fn init() -> (Control, Sampler, StoreFlash) {
         ..AdcConfig::default()
     };
     let adc = Adc::new_with_config(parts.adc, adc_config);
-    let mut inputs = [
+    let inputs = [
         (Sensor::MotorHall(0), parts.slot0_hall.degrade_adc()),
         (Sensor::SlotFilament(0), parts.slot0_filament.degrade_adc()),
         (Sensor::MotorHall(1), parts.slot1_hall.degrade_adc()),
@@ -681,7 +690,12 @@ pub fn init() -> (Control, Sampler, StoreFlash) {
         (Sensor::HubTension, parts.hub_tension.degrade_adc()),
         (Sensor::HubCutter, parts.hub_cutter.degrade_adc()),
     ];
-    inputs.sort_unstable_by_key(|(_, channel)| channel.get_hw_channel());
+    let mut scan_positions = [0u8; ANALOG_INPUTS];
+    for (position, (_, own)) in scan_positions.iter_mut().zip(&inputs) {
+        for (_, other) in &inputs {
+            *position += u8::from(other.get_hw_channel() < own.get_hw_channel());
+        }
+    }
 
     let control = Control {
         chip1,
@@ -696,6 +710,7 @@ pub fn init() -> (Control, Sampler, StoreFlash) {
         adc,
         dma: parts.adc_dma,
         inputs,
+        scan_positions,
     };
     let store = WatchedFlash(Flash::new_blocking(parts.flash));
     (control, sampler, store)
