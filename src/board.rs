@@ -31,7 +31,8 @@ use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm, SimplePwmChannel};
 use embassy_stm32::usart::{self, BufferedUart, BufferedUartRx, BufferedUartTx};
 use embassy_stm32::{Peri, bind_interrupts, dma};
 use embassy_time::{Duration, with_timeout};
-use embedded_io_async::{Read as _, ReadReady as _, Write as _};
+use embedded_io::Read as _;
+use embedded_io_async::{ReadReady as _, Write as _};
 use embedded_storage::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
 use mmu_hal_port::tb6612::{Channel, Tb6612};
 use mmu_hal_port::{Button as _, MotorCommand, Samples, StatusLed as _};
@@ -549,13 +550,11 @@ impl Control {
         let Some(buf) = buf.get_mut(..limit) else {
             return 0;
         };
+        // Ready: the read returns at once (embedded-io `ReadReady`), without a future.
         if !matches!(self.rx.read_ready(), Ok(true)) {
             return 0;
         }
-        match embassy_futures::poll_once(self.rx.read(buf)) {
-            Poll::Ready(Ok(n)) => n,
-            Poll::Ready(Err(_)) | Poll::Pending => 0,
-        }
+        self.rx.read(buf).unwrap_or(0)
     }
 
     /// Queues `bytes` for the printer without waiting. Returns false (nothing queued) when the
