@@ -35,7 +35,7 @@ use embedded_io::Read as _;
 use embedded_io_async::{ReadReady as _, Write as _};
 use embedded_storage::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
 use mmu_hal_port::tb6612::{Channel, Tb6612};
-use mmu_hal_port::{Button as _, MotorCommand, Samples, StatusLed as _};
+use mmu_hal_port::{Button as _, HubSamples, MotorCommand, Samples, SlotSamples, StatusLed as _};
 use static_cell::ConstStaticCell;
 
 /// Filament slots on this board.
@@ -409,37 +409,19 @@ pub fn reset() -> ! {
     cortex_m::peripheral::SCB::sys_reset()
 }
 
-/// What one ADC channel measures.
-#[derive(Debug, Clone, Copy)]
-enum Sensor {
-    MotorHall(usize),
-    SlotFilament(usize),
-    HubFilament,
-    HubTension,
-    HubCutter,
-}
-
-impl Sensor {
-    fn store(self, samples: &mut Samples<SLOTS>, raw: u16) {
-        match self {
-            Sensor::MotorHall(slot) => samples.slots[slot].motor_hall = raw,
-            Sensor::SlotFilament(slot) => samples.slots[slot].filament = raw,
-            Sensor::HubFilament => samples.hub.filament = raw,
-            Sensor::HubTension => samples.hub.tension = raw,
-            Sensor::HubCutter => samples.hub.cutter = raw,
-        }
-    }
-}
-
-/// Analog inputs: two per slot and three on the hub.
+/// Analog inputs: two per slot and three on the hub, in this order: slot `s`'s motor Hall sensor
+/// at `2 s`, its filament sensor at `2 s + 1`, then the hub's filament, tension and cutter
+/// sensors from [`HUB_INPUTS`].
 const ANALOG_INPUTS: usize = 2 * SLOTS + 3;
+/// The first hub input.
+const HUB_INPUTS: usize = 2 * SLOTS;
 
 /// The ADC half of the board: one DMA scan of all nine Hall sensors per call.
 pub struct Sampler {
     adc: Adc<'static, ADC1>,
     dma: Peri<'static, peripherals::DMA1_CH1>,
-    /// The channels, each with what it measures.
-    inputs: [(Sensor, AnyAdcChannel<'static, ADC1>); ANALOG_INPUTS],
+    /// The channels, in the order of [`ANALOG_INPUTS`].
+    inputs: [AnyAdcChannel<'static, ADC1>; ANALOG_INPUTS],
     /// Where each input's conversion lands in a scan's results. The G0 ADC converts the selected
     /// channels (CHSELR) in ascending channel number whatever order they are listed in (RM0444,
     /// ADC: CHSELRMOD = 0, SCANDIR = 0), so it is the number of inputs on a lower channel.
@@ -455,17 +437,26 @@ impl Sampler {
             .read(
                 self.dma.reborrow(),
                 Irqs,
-                self.inputs.iter_mut().map(|(_, channel)| (channel, SAMPLE_TIME)),
+                self.inputs.iter_mut().map(|channel| (channel, SAMPLE_TIME)),
                 &mut raw,
             )
             .await;
-        let mut samples = Samples::default();
-        for ((sensor, _), &position) in self.inputs.iter().zip(&self.scan_positions) {
-            if let Some(&value) = raw.get(usize::from(position)) {
-                sensor.store(&mut samples, value);
-            }
+        let positions = &self.scan_positions;
+        let input = |index: usize| {
+            let position = positions.get(index).map_or(usize::MAX, |&at| usize::from(at));
+            raw.get(position).copied().unwrap_or_default()
+        };
+        Samples {
+            slots: core::array::from_fn(|slot| SlotSamples {
+                motor_hall: input(2 * slot),
+                filament: input(2 * slot + 1),
+            }),
+            hub: HubSamples {
+                filament: input(HUB_INPUTS),
+                tension: input(HUB_INPUTS + 1),
+                cutter: input(HUB_INPUTS + 2),
+            },
         }
-        samples
     }
 }
 
@@ -678,20 +669,21 @@ pub fn init() -> (Control, Sampler, StoreFlash) {
         ..AdcConfig::default()
     };
     let adc = Adc::new_with_config(parts.adc, adc_config);
+    // In the order of ANALOG_INPUTS.
     let inputs = [
-        (Sensor::MotorHall(0), parts.slot0_hall.degrade_adc()),
-        (Sensor::SlotFilament(0), parts.slot0_filament.degrade_adc()),
-        (Sensor::MotorHall(1), parts.slot1_hall.degrade_adc()),
-        (Sensor::SlotFilament(1), parts.slot1_filament.degrade_adc()),
-        (Sensor::MotorHall(2), parts.slot2_hall.degrade_adc()),
-        (Sensor::SlotFilament(2), parts.slot2_filament.degrade_adc()),
-        (Sensor::HubFilament, parts.hub_filament.degrade_adc()),
-        (Sensor::HubTension, parts.hub_tension.degrade_adc()),
-        (Sensor::HubCutter, parts.hub_cutter.degrade_adc()),
+        parts.slot0_hall.degrade_adc(),
+        parts.slot0_filament.degrade_adc(),
+        parts.slot1_hall.degrade_adc(),
+        parts.slot1_filament.degrade_adc(),
+        parts.slot2_hall.degrade_adc(),
+        parts.slot2_filament.degrade_adc(),
+        parts.hub_filament.degrade_adc(),
+        parts.hub_tension.degrade_adc(),
+        parts.hub_cutter.degrade_adc(),
     ];
     let mut scan_positions = [0u8; ANALOG_INPUTS];
-    for (position, (_, own)) in scan_positions.iter_mut().zip(&inputs) {
-        for (_, other) in &inputs {
+    for (position, own) in scan_positions.iter_mut().zip(&inputs) {
+        for other in &inputs {
             *position += u8::from(other.get_hw_channel() < own.get_hw_channel());
         }
     }
