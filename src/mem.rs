@@ -13,9 +13,9 @@
 //! firmware's copies are almost all of word-aligned structs). Written in assembly: a Rust loop
 //! here could be turned back into a call to `memcpy` by LLVM's loop-idiom pass.
 //!
-//! Checked on the linked firmware by `scripts/check-mem-routines.py` (every length 0..=40 at every
-//! alignment, in the Unicorn emulator, against a reference) from `scripts/firmware-size.sh`; the
-//! step-cost benchmark (`scripts/step-cost.sh`) runs the logic with them and compares every byte
+//! Checked on the linked firmware by `scripts/check-runtime-routines.py` (every length 0..=40 at
+//! every alignment, in the Unicorn emulator, against a reference) from `scripts/firmware-size.sh`;
+//! the step-cost benchmark (`scripts/step-cost.sh`) runs the logic with them and compares every byte
 //! it sends with the host's.
 
 core::arch::global_asm!(
