@@ -653,8 +653,8 @@ pub fn init() -> (Control, Sampler, StoreFlash) {
         parts.printer_uart,
         parts.printer_rx,
         parts.printer_tx,
-        TX_BUF.take(),
-        RX_BUF.take(),
+        defmt::unwrap!(TX_BUF.try_take()),
+        defmt::unwrap!(RX_BUF.try_take()),
         Irqs,
         uart_config,
     ));

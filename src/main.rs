@@ -57,7 +57,8 @@ fn main() -> ! {
     );
 
     static EXECUTOR: StaticCell<Executor> = StaticCell::new();
-    EXECUTOR.init(Executor::new()).run(|spawner| {
+    // `try_init` and defmt's `unwrap!` rather than `init`: its panic message would stay in flash.
+    unwrap!(EXECUTOR.try_init(Executor::new())).run(|spawner| {
         let (control, sampler, flash) = board::init();
         let logic = new_logic();
         spawner.spawn(unwrap!(control_task(control, sampler, flash, logic)));
@@ -71,10 +72,10 @@ fn main() -> ! {
 #[inline(never)]
 fn new_logic() -> &'static mut ControlLoop<SLOTS> {
     static LOGIC: StaticCell<ControlLoop<SLOTS>> = StaticCell::new();
-    LOGIC.init(ControlLoop::new(
+    unwrap!(LOGIC.try_init(ControlLoop::new(
         App::new(Config::default()),
         millis(Clock::now()),
-    ))
+    )))
 }
 
 #[embassy_executor::task]
