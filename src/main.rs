@@ -280,20 +280,36 @@ impl Persisted {
 #[allow(unused_attributes)]
 #[inline(always)]
 fn panic(info: &PanicInfo) -> ! {
-    static PANICKED: AtomicBool = AtomicBool::new(false);
-    cortex_m::interrupt::disable();
-    board::emergency_stop();
-    // thumbv6m has no atomic swap; interrupts are off, so load + store cannot be torn apart.
-    if !PANICKED.load(Ordering::Relaxed) {
-        PANICKED.store(true, Ordering::Relaxed);
-        // The location only (see above). Panics raised through defmt (`unwrap!`, `panic!`) have
-        // logged their message.
+    if stop_on_first_panic() {
+        // The location only (see above).
         match info.location() {
             Some(at) => error!("panic at {=str}:{=u32}", at.file(), at.line()),
             None => error!("panic"),
         }
     }
     cortex_m::asm::udf()
+}
+
+/// A panic raised through defmt (`unwrap!`, `panic!`, `assert!`), which has logged its message:
+/// the same stop as [`panic`]. (defmt's default handler calls `core::panic!()`, whose location is
+/// always defmt's own `lib.rs`, logged as a second, useless line, and whose message and path took
+/// flash.)
+#[defmt::panic_handler]
+fn defmt_panic() -> ! {
+    stop_on_first_panic();
+    cortex_m::asm::udf()
+}
+
+/// Masks interrupts and stops every motor; returns true on the first panic only, so that a panic
+/// while reporting one is not reported again.
+fn stop_on_first_panic() -> bool {
+    static PANICKED: AtomicBool = AtomicBool::new(false);
+    cortex_m::interrupt::disable();
+    board::emergency_stop();
+    // thumbv6m has no atomic swap; interrupts are off, so load + store cannot be torn apart.
+    let first = !PANICKED.load(Ordering::Relaxed);
+    PANICKED.store(true, Ordering::Relaxed);
+    first
 }
 
 /// The NMI: on this part a double ECC error reading the flash (see
