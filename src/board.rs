@@ -30,14 +30,14 @@ use embassy_stm32::time::khz;
 use embassy_stm32::timer::low_level::CountingMode;
 use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm, SimplePwmChannel};
 use embassy_stm32::usart::{self, BufferedUart, BufferedUartRx, BufferedUartTx};
-use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_stm32::{Peri, bind_interrupts, dma};
 use embassy_time::{Duration, with_timeout};
-use embedded_io_async::{Read as _, ReadReady as _, Write as _};
+use embedded_io::Read as _;
+use embedded_io_async::{ReadReady as _, Write as _};
 use embedded_storage::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
 use mmu_firmware::persist::EntryCrc;
 use mmu_hal_port::tb6612::{Channel, Tb6612};
-use mmu_hal_port::{Button as _, MotorCommand, Samples, StatusLed as _};
+use mmu_hal_port::{Button as _, HubSamples, MotorCommand, Samples, SlotSamples, StatusLed as _};
 use static_cell::ConstStaticCell;
 
 /// Filament slots on this board.
@@ -63,8 +63,9 @@ bind_interrupts!(struct Irqs {
 });
 
 /// Declares the board's pin map once and derives from it: the [`Parts`] struct that takes every
-/// used singleton out of the HAL's `Peripherals`, and [`emergency_stop_pins`], which lists the
-/// rows marked `stby`, then the rows marked `off`, for [`emergency_stop`] to drive low.
+/// used singleton out of the HAL's `Peripherals`, and the constants [`STOP_STBY`] and [`STOP_OFF`]:
+/// the pins of the rows marked `stby` and of the rows marked `off`, for [`emergency_stop`] to
+/// drive low in that order.
 ///
 /// Row layout: `field: PIN, "function", "NUCLEO header", "wired to", safe-state;`
 /// where safe-state is `stby` (standby pins, forced low first), `off` (PWM and IN pins, forced low
@@ -87,17 +88,13 @@ macro_rules! pin_map {
             }
         }
 
-        /// The motor pins in the order the emergency stop forces them low: STBY first, then PWM
-        /// and IN (see [`emergency_stop`]).
-        fn emergency_stop_pins() -> impl Iterator<Item = Peri<'static, AnyPin>> {
-            // SAFETY: only used to force pins low on the way to a reset or a halt.
-            let stby = [$( pin_map!(@stop stby $safe $pin) ),*];
-            let off = [$( pin_map!(@stop off $safe $pin) ),*];
-            stby.into_iter().chain(off).flatten()
-        }
+        /// The TB6612 standby pins, forced low first (see [`emergency_stop`]).
+        const STOP_STBY: StopPins = StopPins::of(&[$( pin_map!(@stop stby $safe $pin) ),*]);
+        /// The PWM and IN pins, forced low next.
+        const STOP_OFF: StopPins = StopPins::of(&[$( pin_map!(@stop off $safe $pin) ),*]);
     };
-    (@stop stby stby $pin:ident) => { Some(unsafe { peripherals::$pin::steal() }.into()) };
-    (@stop off off $pin:ident) => { Some(unsafe { peripherals::$pin::steal() }.into()) };
+    (@stop stby stby $pin:ident) => { Some(stringify!($pin)) };
+    (@stop off off $pin:ident) => { Some(stringify!($pin)) };
     (@stop $pass:ident $safe:tt $pin:ident) => { None };
 }
 
@@ -152,15 +149,66 @@ pin_map! {
 }
 // ==================================================================================================
 
-/// Drives one pin low as a push-pull output through raw register writes: its port clock on, the
-/// output latch low (BSRR), then output mode. Works before and after the HAL starts.
-#[inline(never)]
-fn force_low(pin: Peri<'static, AnyPin>) {
-    let (gpio, n) = (pin.block(), usize::from(pin.pin()));
-    pac::RCC.gpioenr().modify(|w| w.0 |= 1 << pin.port());
-    gpio.bsrr().write(|w| w.set_br(n, true));
-    gpio.moder()
-        .modify(|w| w.set_moder(n, pac::gpio::vals::Moder::OUTPUT));
+/// GPIO ports of the STM32G071RB that the HAL numbers: A (0) to F (5).
+const GPIO_PORTS: usize = 6;
+
+/// A set of pins to force low, as one bit mask of pin numbers per GPIO port.
+struct StopPins([u16; GPIO_PORTS]);
+
+impl StopPins {
+    /// The pins named (`"PC2"`: port C, pin 2), numbered as the HAL numbers them: the port from
+    /// the letter (GPIOA = 0, its register blocks 0x400 apart), the pin from the digits
+    /// (embassy-stm32 0.6.0 `build.rs`, `pin_port = port_num * 16 + pin_num`). A name that is not
+    /// a pin fails the build.
+    const fn of(names: &[Option<&str>]) -> Self {
+        let mut masks = [0u16; GPIO_PORTS];
+        let mut i = 0;
+        while i < names.len() {
+            if let Some(name) = names[i] {
+                let name = name.as_bytes();
+                assert!(name.len() >= 3 && name[0] == b'P' && name[1] >= b'A');
+                let port = (name[1] - b'A') as usize;
+                assert!(port < GPIO_PORTS);
+                let mut pin = 0u32;
+                let mut digit = 2;
+                while digit < name.len() {
+                    assert!(name[digit].is_ascii_digit());
+                    pin = pin * 10 + (name[digit] - b'0') as u32;
+                    digit += 1;
+                }
+                assert!(pin < 16);
+                masks[port] |= 1 << pin;
+            }
+            i += 1;
+        }
+        StopPins(masks)
+    }
+
+    /// Drives every pin of the set low as a push-pull output through raw register writes, one
+    /// port at a time: its clock on (RCC_IOPENR), the output latches low (GPIOx_BSRR, the BRy
+    /// bits: atomic), then output mode (GPIOx_MODER = 01 for each pin; OTYPER is left at
+    /// push-pull, its reset value and what the HAL sets; RM0444, RCC and GPIO register
+    /// descriptions). Works before and after the HAL starts.
+    #[inline(never)]
+    fn force_low(&self) {
+        for (port, &mask) in self.0.iter().enumerate() {
+            if mask == 0 {
+                continue;
+            }
+            let pins = u32::from(mask);
+            // MODER has two bits per pin: 01 (output) in each pin's pair, both bits cleared first.
+            let mut moder_output = 0u32;
+            for pin in 0..16 {
+                moder_output |= ((pins >> pin) & 1) << (2 * pin);
+            }
+            let moder_mask = moder_output * 0b11;
+            // SAFETY: only the port's register block is taken, never a pin driver.
+            let gpio = unsafe { AnyPin::steal(16 * port as u8) }.block();
+            pac::RCC.gpioenr().modify(|w| w.0 |= 1 << port);
+            gpio.bsrr().write_value(pac::gpio::regs::Bsrr(pins << 16));
+            gpio.moder().modify(|w| w.0 = (w.0 & !moder_mask) | moder_output);
+        }
+    }
 }
 
 /// Turns every motor bridge off at once, without the HAL and without allocation: both TB6612 STBY
@@ -173,7 +221,8 @@ fn force_low(pin: Peri<'static, AnyPin>) {
 /// It does not take ownership: the HAL drivers that own these pins must not be used afterwards
 /// (every caller resets or halts).
 pub fn emergency_stop() {
-    emergency_stop_pins().for_each(force_low);
+    STOP_STBY.force_low();
+    STOP_OFF.force_low();
 }
 
 /// Why the MCU last started.
@@ -294,10 +343,47 @@ impl EntryCrc for HardwareCrc {
 /// resetting the MCU, while a stall outside the flash (the control loop itself) still does.
 pub struct WatchedFlash(Flash<'static, Blocking>);
 
-/// Reloads the independent watchdog: the register write of `IndependentWatchdog::pet`, for the
-/// flash, which cannot own the driver ([`Control`] does).
+/// Reloads the independent watchdog (IWDG_KR = 0xAAAA): the register write of embassy-stm32's
+/// `IndependentWatchdog::pet`, for [`Control`] and for the flash.
 fn reload_watchdog() {
     pac::IWDG.kr().write(|w| w.set_key(pac::iwdg::vals::Key::RESET));
+}
+
+/// The IWDG prescaler register value (PR) and reload value (RLR) for [`WATCHDOG_TIMEOUT_US`],
+/// computed at compile time exactly as embassy-stm32 0.6.0's `IndependentWatchdog::new` computes
+/// them at run time (`wdg/mod.rs`: `get_timeout_us`, `reload_value`): the smallest prescaler
+/// 2^p, p = 2..=8, whose longest period (reload 0xFFF) reaches the timeout, then the reload for
+/// it, with the LSI at the HAL's nominal `LSI_FREQ` (32 kHz on the G0). For 100 ms: PR 0
+/// (prescaler 4), RLR 799.
+const WATCHDOG_PR_RLR: (u8, u16) = {
+    const MAX_RL: u16 = 0xFFF;
+    let lsi = embassy_stm32::rcc::LSI_FREQ.0;
+    let mut psc_power = 2;
+    while psc_power <= 8 {
+        let psc = 1u32 << psc_power;
+        if WATCHDOG_TIMEOUT_US <= 1_000_000 * (MAX_RL as u32 + 1) / (lsi / psc) {
+            break;
+        }
+        psc_power += 1;
+    }
+    assert!(psc_power <= 8, "the watchdog timeout is beyond the IWDG's range");
+    let psc = 1u32 << psc_power;
+    let rl = (WATCHDOG_TIMEOUT_US / psc * lsi / 1_000_000) as u16 - 1;
+    ((psc_power - 2) as u8, rl)
+};
+const _: () = assert!(WATCHDOG_PR_RLR.0 == 0 && WATCHDOG_PR_RLR.1 == 799);
+
+/// Starts the independent watchdog with [`WATCHDOG_PR_RLR`]: the register writes of embassy-stm32
+/// 0.6.0's `IndependentWatchdog::new` and `unleash`, in their order (IWDG_KR = 0x5555 to unlock PR
+/// and RLR, PR, RLR, then IWDG_KR = 0xCCCC to start; RM0444, IWDG chapter). Once started, only a
+/// reset stops it. Taking the peripheral keeps anything else from configuring it.
+fn start_watchdog(_iwdg: Peri<'static, peripherals::IWDG>) {
+    use pac::iwdg::vals::{Key, Pr};
+    let (pr, rl) = WATCHDOG_PR_RLR;
+    pac::IWDG.kr().write(|w| w.set_key(Key::ENABLE));
+    pac::IWDG.pr().write(|w| w.set_pr(Pr::from_bits(pr)));
+    pac::IWDG.rlr().write(|w| w.set_rl(rl));
+    pac::IWDG.kr().write(|w| w.set_key(Key::START));
 }
 
 impl ErrorType for WatchedFlash {
@@ -374,38 +460,23 @@ pub fn reset() -> ! {
     cortex_m::peripheral::SCB::sys_reset()
 }
 
-/// What one ADC channel measures.
-#[derive(Debug, Clone, Copy)]
-enum Sensor {
-    MotorHall(usize),
-    SlotFilament(usize),
-    HubFilament,
-    HubTension,
-    HubCutter,
-}
-
-impl Sensor {
-    fn store(self, samples: &mut Samples<SLOTS>, raw: u16) {
-        match self {
-            Sensor::MotorHall(slot) => samples.slots[slot].motor_hall = raw,
-            Sensor::SlotFilament(slot) => samples.slots[slot].filament = raw,
-            Sensor::HubFilament => samples.hub.filament = raw,
-            Sensor::HubTension => samples.hub.tension = raw,
-            Sensor::HubCutter => samples.hub.cutter = raw,
-        }
-    }
-}
-
-/// Analog inputs: two per slot and three on the hub.
+/// Analog inputs: two per slot and three on the hub, in this order: slot `s`'s motor Hall sensor
+/// at `2 s`, its filament sensor at `2 s + 1`, then the hub's filament, tension and cutter
+/// sensors from [`HUB_INPUTS`].
 const ANALOG_INPUTS: usize = 2 * SLOTS + 3;
+/// The first hub input.
+const HUB_INPUTS: usize = 2 * SLOTS;
 
 /// The ADC half of the board: one DMA scan of all nine Hall sensors per call.
 pub struct Sampler {
     adc: Adc<'static, ADC1>,
     dma: Peri<'static, peripherals::DMA1_CH1>,
-    /// The channels in scan order. The G0 ADC converts the selected channels (CHSELR) in
-    /// ascending channel number whatever order they are listed in, so they are kept sorted.
-    inputs: [(Sensor, AnyAdcChannel<'static, ADC1>); ANALOG_INPUTS],
+    /// The channels, in the order of [`ANALOG_INPUTS`].
+    inputs: [AnyAdcChannel<'static, ADC1>; ANALOG_INPUTS],
+    /// Where each input's conversion lands in a scan's results. The G0 ADC converts the selected
+    /// channels (CHSELR) in ascending channel number whatever order they are listed in (RM0444,
+    /// ADC: CHSELRMOD = 0, SCANDIR = 0), so it is the number of inputs on a lower channel.
+    scan_positions: [u8; ANALOG_INPUTS],
 }
 
 impl Sampler {
@@ -417,15 +488,26 @@ impl Sampler {
             .read(
                 self.dma.reborrow(),
                 Irqs,
-                self.inputs.iter_mut().map(|(_, channel)| (channel, SAMPLE_TIME)),
+                self.inputs.iter_mut().map(|channel| (channel, SAMPLE_TIME)),
                 &mut raw,
             )
             .await;
-        let mut samples = Samples::default();
-        for ((sensor, _), value) in self.inputs.iter().zip(raw) {
-            sensor.store(&mut samples, value);
+        let positions = &self.scan_positions;
+        let input = |index: usize| {
+            let position = positions.get(index).map_or(usize::MAX, |&at| usize::from(at));
+            raw.get(position).copied().unwrap_or_default()
+        };
+        Samples {
+            slots: core::array::from_fn(|slot| SlotSamples {
+                motor_hall: input(2 * slot),
+                filament: input(2 * slot + 1),
+            }),
+            hub: HubSamples {
+                filament: input(HUB_INPUTS),
+                tension: input(HUB_INPUTS + 1),
+                cutter: input(HUB_INPUTS + 2),
+            },
         }
-        samples
     }
 }
 
@@ -474,7 +556,6 @@ pub struct Control {
     tx: BufferedUartTx<'static>,
     led: Output<'static>,
     button: Input<'static>,
-    watchdog: IndependentWatchdog<'static, peripherals::IWDG>,
 }
 
 impl Control {
@@ -511,13 +592,11 @@ impl Control {
         let Some(buf) = buf.get_mut(..limit) else {
             return 0;
         };
+        // Ready: the read returns at once (embedded-io `ReadReady`), without a future.
         if !matches!(self.rx.read_ready(), Ok(true)) {
             return 0;
         }
-        match embassy_futures::poll_once(self.rx.read(buf)) {
-            Poll::Ready(Ok(n)) => n,
-            Poll::Ready(Err(_)) | Poll::Pending => 0,
-        }
+        self.rx.read(buf).unwrap_or(0)
     }
 
     /// Queues `bytes` for the printer without waiting. Returns false (nothing queued) when the
@@ -544,7 +623,7 @@ impl Control {
 
     /// Reloads the independent watchdog.
     pub fn feed_watchdog(&mut self) {
-        self.watchdog.pet();
+        reload_watchdog();
     }
 }
 
@@ -555,6 +634,10 @@ fn low(pin: Peri<'static, impl Pin>) -> Output<'static> {
 
 /// Starts the clocks and every peripheral of the board. The bridges come up in standby with both
 /// inputs low and duty 0; the watchdog is running when this returns.
+///
+/// Out of line, so that its frame is gone before `main`'s `new_logic` builds the unit logic
+/// (the deepest boot path, `scripts/firmware-size.sh`).
+#[inline(never)]
 pub fn init() -> (Control, Sampler, StoreFlash) {
     let mut config = embassy_stm32::Config::default();
     // 64 MHz from the internal 16 MHz oscillator: VCO 16 x 8 = 128 MHz, R / 2.
@@ -571,8 +654,7 @@ pub fn init() -> (Control, Sampler, StoreFlash) {
     let parts = Parts::take(embassy_stm32::init(config));
 
     // The watchdog first: from here on a stalled init resets the MCU too.
-    let mut watchdog = IndependentWatchdog::new(parts.watchdog, WATCHDOG_TIMEOUT_US);
-    watchdog.unleash();
+    start_watchdog(parts.watchdog);
 
     // Motors: duty 0 on every channel before the pins switch to the timer, STBY and IN low.
     let pwm = SimplePwm::new(
@@ -622,8 +704,8 @@ pub fn init() -> (Control, Sampler, StoreFlash) {
         parts.printer_uart,
         parts.printer_rx,
         parts.printer_tx,
-        TX_BUF.take(),
-        RX_BUF.take(),
+        defmt::unwrap!(TX_BUF.try_take()),
+        defmt::unwrap!(RX_BUF.try_take()),
         Irqs,
         uart_config,
     ));
@@ -638,18 +720,24 @@ pub fn init() -> (Control, Sampler, StoreFlash) {
         ..AdcConfig::default()
     };
     let adc = Adc::new_with_config(parts.adc, adc_config);
-    let mut inputs = [
-        (Sensor::MotorHall(0), parts.slot0_hall.degrade_adc()),
-        (Sensor::SlotFilament(0), parts.slot0_filament.degrade_adc()),
-        (Sensor::MotorHall(1), parts.slot1_hall.degrade_adc()),
-        (Sensor::SlotFilament(1), parts.slot1_filament.degrade_adc()),
-        (Sensor::MotorHall(2), parts.slot2_hall.degrade_adc()),
-        (Sensor::SlotFilament(2), parts.slot2_filament.degrade_adc()),
-        (Sensor::HubFilament, parts.hub_filament.degrade_adc()),
-        (Sensor::HubTension, parts.hub_tension.degrade_adc()),
-        (Sensor::HubCutter, parts.hub_cutter.degrade_adc()),
+    // In the order of ANALOG_INPUTS.
+    let inputs = [
+        parts.slot0_hall.degrade_adc(),
+        parts.slot0_filament.degrade_adc(),
+        parts.slot1_hall.degrade_adc(),
+        parts.slot1_filament.degrade_adc(),
+        parts.slot2_hall.degrade_adc(),
+        parts.slot2_filament.degrade_adc(),
+        parts.hub_filament.degrade_adc(),
+        parts.hub_tension.degrade_adc(),
+        parts.hub_cutter.degrade_adc(),
     ];
-    inputs.sort_unstable_by_key(|(_, channel)| channel.get_hw_channel());
+    let mut scan_positions = [0u8; ANALOG_INPUTS];
+    for (position, own) in scan_positions.iter_mut().zip(&inputs) {
+        for other in &inputs {
+            *position += u8::from(other.get_hw_channel() < own.get_hw_channel());
+        }
+    }
 
     let control = Control {
         chip1,
@@ -659,12 +747,12 @@ pub fn init() -> (Control, Sampler, StoreFlash) {
         tx,
         led: Output::new(parts.status_led, Level::Low, Speed::Low),
         button: Input::new(parts.button, Pull::Up),
-        watchdog,
     };
     let sampler = Sampler {
         adc,
         dma: parts.adc_dma,
         inputs,
+        scan_positions,
     };
     let store = StoreFlash {
         flash: WatchedFlash(Flash::new_blocking(parts.flash)),

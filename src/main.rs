@@ -57,7 +57,8 @@ fn main() -> ! {
     );
 
     static EXECUTOR: StaticCell<Executor> = StaticCell::new();
-    EXECUTOR.init(Executor::new()).run(|spawner| {
+    // `try_init` and defmt's `unwrap!` rather than `init`: its panic message would stay in flash.
+    unwrap!(EXECUTOR.try_init(Executor::new())).run(|spawner| {
         let (control, sampler, flash) = board::init();
         let logic = new_logic();
         spawner.spawn(unwrap!(control_task(control, sampler, flash, logic)));
@@ -71,10 +72,10 @@ fn main() -> ! {
 #[inline(never)]
 fn new_logic() -> &'static mut ControlLoop<SLOTS> {
     static LOGIC: StaticCell<ControlLoop<SLOTS>> = StaticCell::new();
-    LOGIC.init(ControlLoop::new(
+    unwrap!(LOGIC.try_init(ControlLoop::new(
         App::new(Config::default()),
         millis(Clock::now()),
-    ))
+    )))
 }
 
 #[embassy_executor::task]
@@ -283,20 +284,36 @@ impl Persisted {
 #[allow(unused_attributes)]
 #[inline(always)]
 fn panic(info: &PanicInfo) -> ! {
-    static PANICKED: AtomicBool = AtomicBool::new(false);
-    cortex_m::interrupt::disable();
-    board::emergency_stop();
-    // thumbv6m has no atomic swap; interrupts are off, so load + store cannot be torn apart.
-    if !PANICKED.load(Ordering::Relaxed) {
-        PANICKED.store(true, Ordering::Relaxed);
-        // The location only (see above). Panics raised through defmt (`unwrap!`, `panic!`) have
-        // logged their message.
+    if stop_on_first_panic() {
+        // The location only (see above).
         match info.location() {
             Some(at) => error!("panic at {=str}:{=u32}", at.file(), at.line()),
             None => error!("panic"),
         }
     }
     cortex_m::asm::udf()
+}
+
+/// A panic raised through defmt (`unwrap!`, `panic!`, `assert!`), which has logged its message:
+/// the same stop as [`panic`]. (defmt's default handler calls `core::panic!()`, whose location is
+/// always defmt's own `lib.rs`, logged as a second, useless line, and whose message and path took
+/// flash.)
+#[defmt::panic_handler]
+fn defmt_panic() -> ! {
+    stop_on_first_panic();
+    cortex_m::asm::udf()
+}
+
+/// Masks interrupts and stops every motor; returns true on the first panic only, so that a panic
+/// while reporting one is not reported again.
+fn stop_on_first_panic() -> bool {
+    static PANICKED: AtomicBool = AtomicBool::new(false);
+    cortex_m::interrupt::disable();
+    board::emergency_stop();
+    // thumbv6m has no atomic swap; interrupts are off, so load + store cannot be torn apart.
+    let first = !PANICKED.load(Ordering::Relaxed);
+    PANICKED.store(true, Ordering::Relaxed);
+    first
 }
 
 /// The NMI: on this part a double ECC error reading the flash (see
