@@ -8,7 +8,9 @@ Cortex-M0), against Python:
 - division (src/div.rs): __aeabi_uidivmod, __aeabi_idivmod, __aeabi_uldivmod, __aeabi_ldivmod on
   edge values (0, 1, powers of two and their neighbours, the extremes) crossed with each other
   and on random operands of every width, quotient and remainder (Rust's truncating semantics);
-- every call: the callee-saved registers (r4-r11) and the stack pointer restored.
+- every call: the callee-saved registers (r4-r11) and the stack pointer restored, no halfword
+  or word access at an unaligned address (the Cortex-M0+ faults on one; Unicorn does not), and
+  every entry (also from another routine) with the stack 8-byte aligned (AAPCS).
 
     check-runtime-routines.py ELF
 
@@ -144,6 +146,24 @@ def main():
     rng = random.Random(14)
     failures = []
     calls = 0
+
+    # The Cortex-M0+ faults on a halfword or word access (ldm/stm included) at an address that is
+    # not a multiple of its size; Unicorn's Cortex-M0 carries it out. So every access is checked.
+    def on_access(uc_, access, address, size, value, data):
+        if size > 1 and address % size:
+            failures.append(f"unaligned {size}-byte access at {address:#x} "
+                            f"(pc {uc_.reg_read(arm.UC_ARM_REG_PC):#x}): a HardFault on the MCU")
+    uc.hook_add(unicorn.UC_HOOK_MEM_READ | unicorn.UC_HOOK_MEM_WRITE, on_access)
+
+    # Every entry, also from another routine (the 64-bit division calls the 32-bit one), finds
+    # the stack 8-byte aligned, as the AAPCS requires at a public interface.
+    def on_entry(uc_, address, size, data):
+        sp = uc_.reg_read(arm.UC_ARM_REG_SP)
+        if sp % 8:
+            failures.append(f"entered {data} with the stack at {sp:#x}, not 8-byte aligned")
+    for name in COPIES + CLEARS + DIVISIONS:
+        entry = symbols[name] & ~1
+        uc.hook_add(unicorn.UC_HOOK_CODE, on_entry, name, entry, entry)
 
     def call(name, *args):
         """Runs `name(args)`; returns r0, after checking the registers it must restore."""

@@ -80,8 +80,10 @@ core::arch::global_asm!(
     ".thumb_func",
     "__aeabi_uldivmod:",
     // r1:r0 numerator (becomes the remainder), r3:r2 denominator, r5:r4 quotient, r6 shift
-    // count, r7 scratch.
+    // count, r7 scratch. Five registers pushed and 4 bytes more: the stack stays 8-byte aligned
+    // for the call below (AAPCS).
     "    push {{r4, r5, r6, r7, lr}}",
+    "    sub sp, #4",
     "    mov r7, r1", // both high words zero: the 32-bit division
     "    orrs r7, r3",
     "    bne 8f",
@@ -90,6 +92,7 @@ core::arch::global_asm!(
     "    mov r2, r1",
     "    movs r1, #0",
     "    movs r3, #0",
+    "    add sp, #4",
     "    pop {{r4, r5, r6, r7, pc}}",
     "8:  movs r4, #0",
     "    movs r5, #0",
@@ -126,6 +129,7 @@ core::arch::global_asm!(
     "    mov r3, r1",
     "    mov r0, r4",
     "    mov r1, r5",
+    "    add sp, #4",
     "    pop {{r4, r5, r6, r7, pc}}",
     ".size __aeabi_uldivmod, . - __aeabi_uldivmod",
     ".section .text.mmu_ldivmod,\"ax\",%progbits",
