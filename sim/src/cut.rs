@@ -331,7 +331,8 @@ fn old_or_new<T: PartialEq + core::fmt::Debug>(
     }
 }
 
-/// Lanes and settings are saved in the step they change: what a copy of the flash restores.
+/// Lanes and settings are saved by the save that follows their change (the calls of
+/// [`Unit::save_steps`]): what a copy of the flash restores.
 fn saved_now(unit: &mut Unit) -> Result<(), String> {
     let stored = unit.stored();
     let live = unit.app.snapshot();

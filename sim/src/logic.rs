@@ -97,11 +97,15 @@ impl<const N: usize> UnitLogic for PersistentApp<N> {
     ) -> Option<BoardAction> {
         let samples = model.samples::<N>();
         self.received.receive(rx);
-        let out = self.app.step(now, &samples, &self.received.take_step());
+        let taken = self.received.take_step();
+        let out = self.app.step(now, &samples, &taken);
         tx.extend_from_slice(&out.tx);
-        // A failed write leaves the old record; the keeper tries again.
+        // As the firmware's control loop: no save piece after a step busy with the printer (up
+        // to `persist::MAX_DEFERRED_STEPS` in a row). A failed write leaves the old record; the
+        // keeper tries again.
+        let busy = !taken.is_empty() || !out.tx.is_empty();
         let _ = match out.action {
-            None => self.keeper.update(&self.app, now).map(drop),
+            None => self.keeper.update_after(&self.app, now, busy).map(drop),
             Some(action) => self.keeper.before(action, &self.app),
         };
         let motors = if out.action.is_some() {

@@ -1,12 +1,16 @@
 //! The persistence policy of a running unit, shared by the firmware and the simulator: restore at
-//! boot; then lanes saved in the step they change (within the steps of a page move when the head
-//! page is full), settings within a second, counters as the store allows,
-//! everything before a reset. A flash that fails is retried with a growing pause, and the page
-//! erases of any hour stay under [`ERASE_BURST`] + [`ERASES_PER_HOUR`] whatever happens (each
-//! erase stalls the CPU up to 40 ms on the STM32G0). Each call of [`Keeper::update`] does one
-//! bounded piece of a save (at most 8 double words programmed or one page erased), and none
-//! after a step that was busy with the printer (up to [`MAX_DEFERRED_STEPS`] in a row), so that
-//! a step and the save piece after it fit a quarter of the 1 ms period together.
+//! boot; then lanes saved in the calls right after they change (an entry is laid out in one piece
+//! and programmed in the next; more steps when the head page is full), settings about a second
+//! after they change (compared a register per call), counters as the store allows, everything
+//! before a reset. A flash that fails is retried with a growing pause, and the page erases of
+//! any hour stay under [`ERASE_BURST`] + [`ERASES_PER_HOUR`] whatever happens (each erase stalls
+//! the CPU up to 40 ms on the STM32G0). Each call of [`Keeper::update`] does one bounded piece
+//! of a save (at most 8 double words programmed or one page erased). [`Keeper::update_after`]
+//! runs none after a step that was busy with the printer, so that a step and the piece after it
+//! fit a quarter of the 1 ms period together; after [`MAX_DEFERRED_STEPS`] busy steps in a row
+//! it runs one anyway (a save must end): only a printer that sends without a pause for 8 ms
+//! (Prusa's waits for each answer) makes that millisecond the costliest step plus the costliest
+//! piece (README, "Step cost on the MCU").
 
 use embedded_storage::nor_flash::NorFlash;
 
@@ -68,7 +72,7 @@ pub struct Keeper<F: NorFlash, const N: usize, C: EntryCrc = SoftwareCrc> {
     settings_seen: Option<u32>,
     /// Every setting register and its default value.
     defaults: Defaults,
-    /// The comparison of the settings in progress, a few registers per call.
+    /// The comparison of the settings in progress, a register per call.
     scan: Option<Scan>,
     /// Busy steps in a row after which no piece ran.
     deferred: u8,

@@ -1,6 +1,6 @@
 //! Saving, a bounded piece at a time: a save is a small state machine ([`Job`]) that
-//! [`Store::step`] advances by one piece per call (one chunk of an entry, a slice of a page's
-//! erased check, one page erase), so that a save fits the control step it runs in. Every piece
+//! [`Store::step`] advances by one piece per call (an entry laid out in the buffer, one chunk of
+//! it programmed, a slice of a page's erased check, one page erase), so that a save fits the control step it runs in. Every piece
 //! keeps the guarantees of the store (module `store`): entries are programmed in order, their
 //! trailer last, only where the flash reads erased, and a fresh page counts only once its commit
 //! entry is complete. So a cut between two pieces is no different from a cut during one.
