@@ -298,18 +298,37 @@ pub struct StoreFlash {
 pub struct HardwareCrc(crc::Crc<'static>);
 
 impl HardwareCrc {
+    /// Set up as `persist::iso_hdlc` says (the host tests check a model of the unit with the
+    /// same values), then checked on the catalogue's check value: a unit that computes another
+    /// CRC is reported at boot (its store stays consistent, see above).
     fn new(unit: Peri<'static, peripherals::CRC>) -> Self {
         use crc::{Config, InputReverseConfig, PolySize};
-        use mmu_firmware::persist::iso_hdlc::{INIT, POLY};
+        use mmu_firmware::persist::iso_hdlc::{CHECK, INIT, POLY, REVERSE_INPUT_BYTES, REVERSE_OUTPUT};
+        let reverse_input = if REVERSE_INPUT_BYTES {
+            InputReverseConfig::Byte
+        } else {
+            InputReverseConfig::None
+        };
         // The polynomial is odd: the only thing the configuration refuses is an even one.
         let config = defmt::unwrap!(Config::new(
-            InputReverseConfig::Byte,
-            true,
+            reverse_input,
+            REVERSE_OUTPUT,
             PolySize::Width32,
             INIT,
             POLY
         ));
-        HardwareCrc(crc::Crc::new(unit, config))
+        let mut crc = HardwareCrc(crc::Crc::new(unit, config));
+        crc.start();
+        crc.add(b"123456789");
+        let check = crc.value();
+        if check != CHECK {
+            defmt::error!(
+                "CRC unit: {=u32:#x} for the check value, not {=u32:#x}: CRC-32/ISO-HDLC set up wrong",
+                check,
+                CHECK
+            );
+        }
+        crc
     }
 }
 
