@@ -447,6 +447,81 @@ fn the_reported_version_is_a_setting_kept_across_restarts() {
     printer.connect(&mut op).unwrap();
 }
 
+/// Notes the errors the printer retried by itself (FSENSOR TOO EARLY: the unit learns the
+/// Bowden length); gives up on any it asks about.
+#[derive(Default)]
+struct RetriesTooEarly {
+    seen: Vec<ErrorCode>,
+}
+
+impl Operator<SimLink> for RetriesTooEarly {
+    fn event(&mut self, _link: &mut SimLink, event: &PrinterEvent) {
+        if let PrinterEvent::AutoRetry(error, _) = event {
+            self.seen.push(*error);
+        }
+    }
+
+    fn decide(&mut self, _link: &mut SimLink, _request: Request, error: ErrorCode) -> Decision {
+        self.seen.push(error);
+        Decision::GiveUp
+    }
+}
+
+/// A Bowden length the Retry of FSENSOR TOO EARLY learned is a setting like one the printer
+/// writes: the persistence keeper saves it within seconds, without a reset, and a power cut then
+/// brings it back (the keeper notices it by the App's settings revision).
+#[test]
+fn a_learned_bowden_length_survives_a_power_cut() {
+    // Not the default 360 mm: a setting equal to its default is not stored (the default applies
+    // after a restart), and this simulated unit starts from 420 mm instead of the default.
+    let tube = 330.0;
+    let options = SimOptions {
+        unit: mmu_firmware::Config {
+            bowden_mm: 420,
+            ..mmu_firmware::Config::default()
+        },
+        model: mmu_model::ModelConfig {
+            bowden_length_mm: tube,
+            extruder_gears_mm: tube + 4.0,
+            nozzle_mm: tube + 60.0,
+            ..mmu_model::ModelConfig::default()
+        },
+        ..SimOptions::default()
+    };
+    let mut printer = Printer::new(
+        SimLink::new(Sim::new(options).unwrap()),
+        PrinterOptions::default(),
+    );
+    let mut op = RetriesTooEarly::default();
+    printer.connect(&mut op).unwrap();
+    let outcome = printer
+        .command(&mut op, Request::new(RequestCode::Tool, 0))
+        .unwrap();
+    assert_eq!(outcome, OK, "{:?}", op.seen);
+    assert_eq!(op.seen, [ErrorCode::FSENSOR_TOO_EARLY]);
+    let read = |printer: &mut Printer<SimLink>, op: &mut RetriesTooEarly, address| {
+        printer
+            .request(op, Request::new(RequestCode::Read, address))
+            .unwrap()
+            .param_value
+            .unwrap()
+    };
+    let learned = read(&mut printer, &mut op, 0x22);
+    assert!((f32::from(learned) - tube).abs() <= 8.0, "learned {learned} mm");
+    printer.link_mut().idle(3_000);
+    printer
+        .link_mut()
+        .sim_mut()
+        .inject(mmu_sim::SimFault::PowerLoss { off_ms: 500 });
+    printer.connect(&mut op).unwrap();
+    assert_eq!(read(&mut printer, &mut op, 0x22), learned);
+    assert_eq!(
+        read(&mut printer, &mut op, 0x53),
+        0,
+        "learned since this start: nothing"
+    );
+}
+
 #[test]
 fn counters_are_saved_before_a_reset() {
     let (mut printer, mut op) = connected();
