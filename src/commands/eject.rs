@@ -16,7 +16,10 @@ pub fn plan<const N: usize>(slot: usize, unit: &Unit<N>) -> Plan {
     if unit.active() == Some(slot) {
         extend(&mut plan, &unload_from_nozzle::phases(slot));
     }
-    extend(&mut plan, &[Phase::EjectFromSlot { slot }, Phase::AwaitContinue]);
+    extend(
+        &mut plan,
+        &[Phase::EjectFromSlot { slot: slot as u8 }, Phase::AwaitContinue],
+    );
     plan
 }
 

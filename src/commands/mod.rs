@@ -233,8 +233,8 @@ pub(crate) fn clear_hub<const N: usize>(plan: &mut Plan, unit: &Unit<N>) -> Resu
             extend(
                 plan,
                 &[
-                    Phase::ProveOwner { slot: active },
-                    Phase::RetractToPark { slot: active },
+                    Phase::ProveOwner { slot: active as u8 },
+                    Phase::RetractToPark { slot: active as u8 },
                 ],
             );
             Ok(())

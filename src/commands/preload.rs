@@ -24,7 +24,13 @@ pub fn plan<const N: usize>(slot: usize, unit: &Unit<N>, config: &Config) -> Res
 
 /// Feed `slot` until the hub sensor sees its tip (at most `max_mm`), then park it.
 pub const fn phases(slot: usize, max_mm: u16) -> [Phase; 2] {
-    [Phase::FeedToHub { slot, max_mm }, Phase::RetractToPark { slot }]
+    [
+        Phase::FeedToHub {
+            slot: slot as u8,
+            max_mm,
+        },
+        Phase::RetractToPark { slot: slot as u8 },
+    ]
 }
 
 /// What each error of the preload means and what Retry does.

@@ -12,7 +12,10 @@ use crate::unit::Unit;
 
 /// Pull `slot`'s filament out of the printer and the hub, and park it.
 pub const fn phases(slot: usize) -> [Phase; 2] {
-    [Phase::UnloadToHub { slot }, Phase::RetractToPark { slot }]
+    [
+        Phase::UnloadToHub { slot: slot as u8 },
+        Phase::RetractToPark { slot: slot as u8 },
+    ]
 }
 
 /// The plan for `U0`.
