@@ -121,7 +121,8 @@ pub enum Phase {
 }
 
 impl Phase {
-    /// The progress code the printer sees while this phase runs.
+    /// The progress code the printer sees while this phase runs. Out of line: a dozen callers.
+    #[inline(never)]
     pub const fn progress(self) -> ProgressCode {
         match self {
             Phase::FeedToHub { .. } => ProgressCode::FEEDING_TO_FINDA,
@@ -192,6 +193,8 @@ impl Bounds {
     }
 }
 
+// Out of line: its table of bounds is one function rather than code inside the step.
+#[inline(never)]
 fn bounds(phase: Phase, config: &Config) -> Option<Bounds> {
     let forward = |speed, max_mm, error| {
         Some(Bounds {
