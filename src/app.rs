@@ -155,6 +155,8 @@ impl<const N: usize> App<N> {
 
     /// Advance the unit to `now` with the latest sensor samples and the bytes received since the
     /// last step.
+    // Out of line, although `ControlLoop::step` is its one caller on the board: smaller.
+    #[inline(never)]
     pub fn step(&mut self, now: Instant, samples: &Samples<N>, rx: &[u8]) -> Outputs<N> {
         let mut out = Outputs {
             motors: drive::stopped(),
@@ -506,6 +508,8 @@ impl<const N: usize> App<N> {
 /// `mm` whole millimetres and `centi` hundredths (below 100) after `more` hundredths more, the
 /// millimetres saturating at `u32::MAX`: in 32 bits, without a division (a sum kept in 64-bit
 /// hundredths took a 64-bit division every revolution).
+// Out of line: smaller (measured), and called only on a revolution.
+#[inline(never)]
 fn add_centi(mm: u32, centi: u8, more: u32) -> (u32, u8) {
     // ⌈2³⁷ / 100⌉: `x / 100` for every u32.
     let more_mm = crate::sensor::mul_high(more, 0x51eb_851f) >> 5;
