@@ -102,6 +102,7 @@ pub struct Replanned {
 
 impl Replanned {
     /// Just a plan.
+    #[inline(never)]
     pub fn plan(plan: Plan) -> Self {
         Replanned {
             plan,
@@ -142,6 +143,7 @@ const MOTION: &[Recovery] = &[
 
 impl Command {
     /// The command a request starts, if it is one.
+    #[inline(never)]
     pub const fn of(code: RequestCode) -> Option<Command> {
         Some(match code {
             RequestCode::Tool => Command::ToolChange,
