@@ -204,11 +204,15 @@ impl Command {
 
     /// What `button` does after this command failed with `error`.
     pub fn on_button(self, error: ErrorCode, button: ButtonCode) -> Option<Action> {
-        self.recovery()
-            .iter()
-            .flat_map(|table| table.iter())
-            .find(|row| row.error == error && row.button == button)
-            .map(|row| row.action)
+        // Plain loops: the iterator chain (`flat_map`, `find`) took more flash.
+        for table in self.recovery() {
+            for row in *table {
+                if row.error == error && row.button == button {
+                    return Some(row.action);
+                }
+            }
+        }
+        None
     }
 }
 
