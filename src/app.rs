@@ -103,7 +103,11 @@ impl<const N: usize> App<N> {
         App {
             config,
             unit: Unit::default(),
-            operation: Runner::new((RequestCode::Reset, 0), &crate::commands::start_up::plan()),
+            operation: Runner::new((RequestCode::Reset, 0), &{
+                let mut plan = crate::commands::Plan::new();
+                crate::commands::start_up::plan(&mut plan);
+                plan
+            }),
             counters: Counters::default(),
             dropped_responses: 0,
             odometry_seen: [0; N],

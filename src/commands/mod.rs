@@ -157,9 +157,16 @@ impl Command {
         })
     }
 
-    /// The plan for this command with argument `value` (a slot for `T L E K`), or the error it
+    /// The plan for this command with argument `value` (a slot for `T L E K`), appended to `plan`
+    /// (built in place: a plan returned by value was copied at every level), or the error it
     /// fails with before anything moves. An empty plan finishes at once.
-    pub fn plan<const N: usize>(self, value: u8, unit: &Unit<N>, config: &Config) -> Result<Plan, ErrorCode> {
+    pub fn plan<const N: usize>(
+        self,
+        value: u8,
+        unit: &Unit<N>,
+        config: &Config,
+        plan: &mut Plan,
+    ) -> Result<(), ErrorCode> {
         let slot = usize::from(value);
         let needs_slot = matches!(
             self,
@@ -169,13 +176,22 @@ impl Command {
             return Err(ErrorCode::INVALID_TOOL);
         }
         match self {
-            Command::StartUp => Ok(start_up::plan()),
-            Command::ToolChange => tool_change::plan(slot, unit, config),
-            Command::Preload => preload::plan(slot, unit, config),
-            Command::UnloadFromNozzle => unload_from_nozzle::plan(unit),
-            Command::Eject => Ok(eject::plan(slot, unit)),
-            Command::Cut => cut::plan(slot, unit, config),
-            Command::Home => Ok(home::plan()),
+            Command::StartUp => {
+                start_up::plan(plan);
+                Ok(())
+            }
+            Command::ToolChange => tool_change::plan(slot, unit, config, plan),
+            Command::Preload => preload::plan(slot, unit, config, plan),
+            Command::UnloadFromNozzle => unload_from_nozzle::plan(unit, plan),
+            Command::Eject => {
+                eject::plan(slot, unit, plan);
+                Ok(())
+            }
+            Command::Cut => cut::plan(slot, unit, config, plan),
+            Command::Home => {
+                home::plan(plan);
+                Ok(())
+            }
         }
     }
 

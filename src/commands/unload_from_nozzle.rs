@@ -18,11 +18,9 @@ pub const fn phases(slot: usize) -> [Phase; 2] {
     ]
 }
 
-/// The plan for `U0`.
-pub fn plan<const N: usize>(unit: &Unit<N>) -> Result<Plan, ErrorCode> {
-    let mut plan = Plan::new();
-    clear_hub(&mut plan, unit)?;
-    Ok(plan)
+/// The plan for `U0`, appended to `plan`.
+pub fn plan<const N: usize>(unit: &Unit<N>, plan: &mut Plan) -> Result<(), ErrorCode> {
+    clear_hub(plan, unit)
 }
 
 /// What each error of the unload means and what Retry does.
