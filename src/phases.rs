@@ -138,6 +138,7 @@ impl Phase {
     }
 
     /// The slot whose motor this phase drives.
+    // Out of line: smaller in flash (measured with scripts/firmware-size.sh).
     #[inline(never)]
     pub const fn slot(self) -> Option<usize> {
         match self {
@@ -156,6 +157,7 @@ impl Phase {
     }
 
     /// Where the slot's filament is once this phase is done.
+    // Out of line: smaller in flash (measured with scripts/firmware-size.sh).
     #[inline(never)]
     const fn arrival(self) -> Option<Lane> {
         match self {
@@ -273,6 +275,7 @@ fn bounds(phase: Phase, config: &Config) -> Option<Bounds> {
 
 /// The error a faulty sensor raises: the hub's sensors show INSPECT FINDA, a slot's sensors
 /// show PULLEY CANNOT MOVE (the slot's drive needs a look).
+// Out of line: smaller in flash (measured with scripts/firmware-size.sh).
 #[inline(never)]
 pub const fn sensor_fault_error(sensor: SensorId) -> ErrorCode {
     match sensor {
@@ -750,6 +753,7 @@ fn push_into_gears(
 
 /// How long the Bowden tube has read taut past the follower's deadband (pulled from the
 /// extruder's side), ms. A reading at the supply rail is a loose wire, not a pull.
+// Out of line: smaller in flash (measured with scripts/firmware-size.sh).
 #[inline(never)]
 fn taut_for(run: &mut PhaseRun, tension: u16, now: Instant, config: &Config) -> u64 {
     let taut = u32::from(tension) > u32::from(config.tension_neutral) + u32::from(config.tension_deadband)

@@ -102,6 +102,7 @@ pub struct Replanned {
 
 impl Replanned {
     /// Just a plan.
+    // Out of line: smaller in flash (measured with scripts/firmware-size.sh).
     #[inline(never)]
     pub fn plan(plan: Plan) -> Self {
         Replanned {
@@ -143,6 +144,7 @@ const MOTION: &[Recovery] = &[
 
 impl Command {
     /// The command a request starts, if it is one.
+    // Out of line: smaller in flash (measured with scripts/firmware-size.sh).
     #[inline(never)]
     pub const fn of(code: RequestCode) -> Option<Command> {
         Some(match code {
