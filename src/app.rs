@@ -67,9 +67,11 @@ pub struct App<const N: usize> {
     pub(crate) counters: Counters<N>,
     /// Responses that did not fit a step's transmit buffer (not persisted).
     pub(crate) dropped_responses: u16,
-    /// Odometry of each slot at the last step, and the motion driven since start, 1/100 mm.
+    /// Odometry of each slot at the last step, 1/100 mm.
     odometry_seen: [i32; N],
-    fed_centi: [u64; N],
+    /// The hundredths of a millimetre each slot drove beyond its whole millimetres in
+    /// `counters.fed_mm` (below 100).
+    fed_centi_beyond_mm: [u8; N],
     decoder: RequestDecoder,
     /// The time of the current step.
     pub(crate) now: Instant,
@@ -101,11 +103,15 @@ impl<const N: usize> App<N> {
         App {
             config,
             unit: Unit::default(),
-            operation: Runner::new((RequestCode::Reset, 0), &crate::commands::start_up::plan()),
+            operation: Runner::new((RequestCode::Reset, 0), &{
+                let mut plan = crate::commands::Plan::new();
+                crate::commands::start_up::plan(&mut plan);
+                plan
+            }),
             counters: Counters::default(),
             dropped_responses: 0,
             odometry_seen: [0; N],
-            fed_centi: [0; N],
+            fed_centi_beyond_mm: [0; N],
             // The printer may be mid-frame when the unit starts: only a newline or a silence
             // starts the first frame.
             decoder: RequestDecoder::new_mid_line(),
@@ -129,8 +135,8 @@ impl<const N: usize> App<N> {
     }
 
     /// A number that changes whenever a setting may have changed (an accepted setting write, a
-    /// Bowden length learned by a Retry, a restore), so that the persistence keeper compares it
-    /// instead of every setting.
+    /// restore, any button acted on in an error: a Retry may learn the Bowden length), so that
+    /// the persistence keeper compares it instead of every setting.
     pub fn settings_revision(&self) -> u32 {
         self.settings_revision
     }
@@ -153,6 +159,8 @@ impl<const N: usize> App<N> {
 
     /// Advance the unit to `now` with the latest sensor samples and the bytes received since the
     /// last step.
+    // Out of line, although `ControlLoop::step` is its one caller on the board: smaller.
+    #[inline(never)]
     pub fn step(&mut self, now: Instant, samples: &Samples<N>, rx: &[u8]) -> Outputs<N> {
         let mut out = Outputs {
             motors: drive::stopped(),
@@ -220,17 +228,18 @@ impl<const N: usize> App<N> {
         if self.operation.request.0 == RequestCode::Tool {
             self.pending_button = Some(button);
         } else {
-            let learned = self.operation.press(button, &self.unit, &mut self.config);
-            self.note(learned);
+            self.act_on_button(button);
         }
     }
 
-    /// Keep what a recovery learned where the registers show it (the setting itself is already
-    /// in the config, which the persistence keeper saves).
-    fn note(&mut self, learned: Option<Learned>) {
-        if let Some(Learned::BowdenMm(mm)) = learned {
+    /// Hand `button` to the command in its error. Its recovery may change a setting (a Bowden
+    /// length learned by a Retry), so every press that lends it the configuration moves the
+    /// settings revision (the keeper then compares the settings); what it learned is also kept
+    /// where register 0x53 shows it.
+    fn act_on_button(&mut self, button: ButtonCode) {
+        self.settings_revision = self.settings_revision.wrapping_add(1);
+        if let Some(Learned::BowdenMm(mm)) = self.operation.press(button, &self.unit, &mut self.config) {
             self.bowden_learned_mm = mm;
-            self.settings_revision = self.settings_revision.wrapping_add(1);
         }
     }
 
@@ -282,10 +291,7 @@ impl<const N: usize> App<N> {
                 Response::rejected(request)
             }),
             RequestCode::Button => {
-                let learned = self
-                    .operation
-                    .press(ButtonCode(request.value), &self.unit, &mut self.config);
-                self.note(learned);
+                self.act_on_button(ButtonCode(request.value));
                 Some(Response::accepted(request))
             }
             RequestCode::FilamentSensor => {
@@ -360,10 +366,12 @@ impl<const N: usize> App<N> {
         for (slot, feeder) in self.unit.feeders.iter().enumerate() {
             let odometry = feeder.odometry_centi();
             let seen = core::mem::replace(&mut self.odometry_seen[slot], odometry);
-            // Only on a revolution: the millimetres are a 64-bit division.
             if driving == Some(slot) && odometry != seen {
-                self.fed_centi[slot] += u64::from(odometry.abs_diff(seen));
-                self.counters.fed_mm[slot] = u32::try_from(self.fed_centi[slot] / 100).unwrap_or(u32::MAX);
+                (self.counters.fed_mm[slot], self.fed_centi_beyond_mm[slot]) = add_centi(
+                    self.counters.fed_mm[slot],
+                    self.fed_centi_beyond_mm[slot],
+                    odometry.abs_diff(seen),
+                );
             }
         }
     }
@@ -441,7 +449,7 @@ impl<const N: usize> App<N> {
             self.unit.set_lane(slot, lane);
         }
         self.counters = snapshot.counters;
-        self.fed_centi = snapshot.counters.fed_mm.map(|mm| u64::from(mm) * 100);
+        self.fed_centi_beyond_mm = [0; N];
         // Twice: a pair of thresholds may only be valid once both are in.
         for _ in 0..2 {
             for &(address, value) in &snapshot.settings {
@@ -499,8 +507,65 @@ impl<const N: usize> App<N> {
     }
 }
 
+/// `mm` whole millimetres and `centi` hundredths (below 100) after `more` hundredths more, the
+/// millimetres saturating at `u32::MAX`: in 32 bits, without a division (a sum kept in 64-bit
+/// hundredths took a 64-bit division every revolution).
+// Out of line: smaller (measured), and called only on a revolution.
+#[inline(never)]
+fn add_centi(mm: u32, centi: u8, more: u32) -> (u32, u8) {
+    // ⌈2³⁷ / 100⌉: `x / 100` for every u32.
+    let more_mm = crate::sensor::mul_high(more, 0x51eb_851f) >> 5;
+    let centi = more - more_mm * 100 + u32::from(centi);
+    let carry = u32::from(centi >= 100);
+    // Below 100 after the carry; `more_mm + carry` is below 2³².
+    (mm.saturating_add(more_mm + carry), (centi - carry * 100) as u8)
+}
+
 impl<const N: usize> Default for App<N> {
     fn default() -> Self {
         Self::new(Config::default())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::add_centi;
+
+    /// The fed distance as it was counted: a 64-bit sum of hundredths, divided for the register.
+    fn dividing_add(total_centi: u64, more: u32) -> (u64, u32) {
+        let total = total_centi + u64::from(more);
+        (total, u32::try_from(total / 100).unwrap_or(u32::MAX))
+    }
+
+    #[test]
+    fn the_fed_millimetres_are_what_the_64_bit_sum_gave() {
+        let steps = [0, 1, 99, 100, 101, 199, 200, 201, 65_535, 4_294_967_199, u32::MAX];
+        let starts = [
+            0u64,
+            1,
+            99,
+            12_345,
+            429_496_729_500,
+            429_496_729_599,
+            u64::from(u32::MAX) * 100 + 99,
+        ];
+        for start in starts {
+            for more in steps {
+                for again in steps {
+                    let (mut total, mut mm, mut centi) = (
+                        start,
+                        u32::try_from(start / 100).unwrap_or(u32::MAX),
+                        (start % 100) as u8,
+                    );
+                    for step in [more, again] {
+                        let expected;
+                        (total, expected) = dividing_add(total, step);
+                        (mm, centi) = add_centi(mm, centi, step);
+                        assert_eq!(mm, expected, "{start} + {more} + {again}");
+                        assert!(centi < 100);
+                    }
+                }
+            }
+        }
     }
 }

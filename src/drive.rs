@@ -284,6 +284,8 @@ fn schedule_lag_mm(speed: u16, elapsed_ms: u64, moved_centi: i64) -> i32 {
 /// The duty that moves the filament at `speed` mm/s without feedback, per mille (not limited):
 /// `speed × 1000 / full_duty_speed`. A library division on the Cortex-M0+, except for the
 /// follower's `speed` 0, which it asks for every step.
+// Out of line: three callers, one copy.
+#[inline(never)]
 fn open_loop_duty(speed: u16, full_duty_speed: u16) -> i32 {
     if speed == 0 {
         return 0;

@@ -47,50 +47,51 @@ const PRINTER_PUSH_MARGIN_MS: u64 = 600;
 /// slot motor could count as stalled.
 pub const PRINTER_SILENT_MS: u64 = 1100;
 
-/// One bounded step of a command.
+/// One bounded step of a command. Its slot is a `u8` (a unit has at most [`crate::MAX_SLOTS`]):
+/// a phase takes 4 bytes, and every plan, copied whole when a command starts, half the room.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Phase {
     /// `P5`: feed until the hub sensor sees the tip, at most `max_mm`.
     FeedToHub {
         /// The slot.
-        slot: usize,
+        slot: u8,
         /// Distance bound.
         max_mm: u16,
     },
     /// `P19`: pull back until the hub sensor clears, then the park distance.
     RetractToPark {
         /// The slot.
-        slot: usize,
+        slot: u8,
     },
     /// `P6`: fast feed through most of the Bowden tube; the printer's sensor must stay off.
     FeedThroughBowden {
         /// The slot.
-        slot: usize,
+        slot: u8,
     },
     /// `P1c`: slow feed until the printer's sensor triggers; the printer co-feeds.
     FeedToFsensor {
         /// The slot.
-        slot: usize,
+        slot: u8,
     },
     /// `P1c` after Retry of `8003`: the same slow feed from wherever the tip is past the hub
     /// sensor, at most the whole Bowden length plus the search distance (the tip may be anywhere
     /// in the tube: the user may have moved it, a slipping drive may have fed less than counted).
     SearchFsensor {
         /// The slot.
-        slot: usize,
+        slot: u8,
     },
     /// `P7`: push into the extruder's gears while the printer pushes with its own extruder, then
     /// hold and see the gears pull the filament on (the tube turns taut): only that shows the
     /// tip in the gears (a jam just before them stops it the same way).
     FeedToNozzle {
         /// The slot.
-        slot: usize,
+        slot: u8,
     },
     /// `P3`: pull back until the printer's sensor and then the hub sensor clear.
     UnloadToHub {
         /// The slot.
-        slot: usize,
+        slot: u8,
     },
     /// `P3`, for a slot only believed to hold the hub path (a stored lane): pull back at most the
     /// hub search distance, which leaves a parked filament in its drive gear whichever slot it
@@ -98,7 +99,7 @@ pub enum Phase {
     /// `8008`: someone has to look.
     ProveOwner {
         /// The slot.
-        slot: usize,
+        slot: u8,
     },
     /// `P19`, for a parked slot or one whose tip nobody knows (after `X42` or a wiped store),
     /// when another slot's feed stalls where the slot paths join: pull back the park distance
@@ -106,12 +107,12 @@ pub enum Phase {
     /// merge cannot block it.
     ClearMerge {
         /// The slot.
-        slot: usize,
+        slot: u8,
     },
     /// `P18`: pull back until the slot sensor clears.
     EjectFromSlot {
         /// The slot.
-        slot: usize,
+        slot: u8,
     },
     /// `P1a`: the sensors must be healthy and agree with the known lanes.
     CheckSensors,
@@ -120,7 +121,8 @@ pub enum Phase {
 }
 
 impl Phase {
-    /// The progress code the printer sees while this phase runs.
+    /// The progress code the printer sees while this phase runs. Out of line: a dozen callers.
+    #[inline(never)]
     pub const fn progress(self) -> ProgressCode {
         match self {
             Phase::FeedToHub { .. } => ProgressCode::FEEDING_TO_FINDA,
@@ -136,6 +138,8 @@ impl Phase {
     }
 
     /// The slot whose motor this phase drives.
+    // Out of line: smaller in flash (measured with scripts/firmware-size.sh).
+    #[inline(never)]
     pub const fn slot(self) -> Option<usize> {
         match self {
             Phase::FeedToHub { slot, .. }
@@ -147,12 +151,14 @@ impl Phase {
             | Phase::UnloadToHub { slot }
             | Phase::ProveOwner { slot }
             | Phase::ClearMerge { slot }
-            | Phase::EjectFromSlot { slot } => Some(slot),
+            | Phase::EjectFromSlot { slot } => Some(slot as usize),
             Phase::CheckSensors | Phase::AwaitContinue => None,
         }
     }
 
     /// Where the slot's filament is once this phase is done.
+    // Out of line: smaller in flash (measured with scripts/firmware-size.sh).
+    #[inline(never)]
     const fn arrival(self) -> Option<Lane> {
         match self {
             Phase::FeedToHub { .. }
@@ -191,6 +197,8 @@ impl Bounds {
     }
 }
 
+// Out of line: its table of bounds is one function rather than code inside the step.
+#[inline(never)]
 fn bounds(phase: Phase, config: &Config) -> Option<Bounds> {
     let forward = |speed, max_mm, error| {
         Some(Bounds {
@@ -267,6 +275,8 @@ fn bounds(phase: Phase, config: &Config) -> Option<Bounds> {
 
 /// The error a faulty sensor raises: the hub's sensors show INSPECT FINDA, a slot's sensors
 /// show PULLEY CANNOT MOVE (the slot's drive needs a look).
+// Out of line: smaller in flash (measured with scripts/firmware-size.sh).
+#[inline(never)]
 pub const fn sensor_fault_error(sensor: SensorId) -> ErrorCode {
     match sensor {
         SensorId::HubFilament | SensorId::HubTension | SensorId::HubCutter => ErrorCode::FINDA_FLICKERS,
@@ -743,6 +753,8 @@ fn push_into_gears(
 
 /// How long the Bowden tube has read taut past the follower's deadband (pulled from the
 /// extruder's side), ms. A reading at the supply rail is a loose wire, not a pull.
+// Out of line: smaller in flash (measured with scripts/firmware-size.sh).
+#[inline(never)]
 fn taut_for(run: &mut PhaseRun, tension: u16, now: Instant, config: &Config) -> u64 {
     let taut = u32::from(tension) > u32::from(config.tension_neutral) + u32::from(config.tension_deadband)
         && tension < config.rail_high;

@@ -107,6 +107,12 @@ pub enum Subject {
     Slot(usize),
 }
 
+/// How a row reads its register: the view, the row's (first) address, the index in the block.
+type Read = fn(&View, u8, usize) -> Option<u16>;
+/// How a row writes its register: the target, the row's (first) address, the index in the
+/// block, the value; false when the value is refused.
+type Write = fn(&mut Target, u8, usize, u16) -> bool;
+
 /// One row of the register table.
 pub struct Row {
     /// The (first) address.
@@ -118,8 +124,8 @@ pub struct Row {
     pub name: Name,
     /// The values a write accepts (`None`: read only).
     pub range: Option<(u16, u16)>,
-    read: fn(&View, usize) -> Option<u16>,
-    write: Option<fn(&mut Target, usize, u16) -> bool>,
+    read: Read,
+    write: Option<Write>,
 }
 
 impl Row {
@@ -168,21 +174,92 @@ macro_rules! name {
     }};
 }
 
-/// A plain setting: a [`Config`] field and the values it accepts.
+/// A plain setting: a `u16` field of [`Config`] (listed in [`settings!`]) and the values it
+/// accepts. Every setting row shares one read and one write function, which find the field by
+/// the address (a closure per row and field took 0.6 KiB of flash).
 macro_rules! setting {
-    ($address:literal, $name:literal, $min:literal..=$max:literal, $field:ident) => {
+    ($address:literal, $name:literal, $min:literal..=$max:literal) => {
         Row {
             address: $address,
             span: Span::One,
             name: name!($name),
             range: Some(($min, $max)),
-            read: |v, _| Some(v.config.$field),
-            write: Some(|t, _, value| {
-                t.config.$field = value;
-                true
-            }),
+            read: read_setting,
+            write: Some(write_setting),
         }
     };
+}
+
+/// The [`Config`] field of each plain setting, by address: [`setting_field`] and
+/// [`setting_field_mut`] (the same machine code, folded into one by the linker).
+macro_rules! settings {
+    ($($address:literal => $field:ident,)*) => {
+        /// The field of the plain setting at `address`. Out of line, like the next, so that the
+        /// linker folds the two.
+        #[inline(never)]
+        fn setting_field(config: &Config, address: u8) -> Option<&u16> {
+            match address {
+                $($address => Some(&config.$field),)*
+                _ => None,
+            }
+        }
+
+        /// The field of the plain setting at `address`, to write.
+        #[inline(never)]
+        fn setting_field_mut(config: &mut Config, address: u8) -> Option<&mut u16> {
+            match address {
+                $($address => Some(&mut config.$field),)*
+                _ => None,
+            }
+        }
+
+        /// The name of the field of the plain setting at `address`.
+        #[cfg(test)]
+        fn setting_field_name(address: u8) -> Option<&'static str> {
+            match address {
+                $($address => Some(stringify!($field)),)*
+                _ => None,
+            }
+        }
+    };
+}
+
+settings! {
+    0x0b => extra_load_mm,
+    0x0c => unload_check_mm,
+    0x0d => unload_speed,
+    0x11 => load_speed,
+    0x14 => slow_speed,
+    0x22 => bowden_mm,
+    0x41 => park_mm,
+    0x42 => mm_per_rev_centi,
+    0x43 => max_duty,
+    0x44 => stall_min_duty,
+    0x45 => stall_timeout_ms,
+    0x46 => preload_max_mm,
+    0x47 => hub_search_mm,
+    0x48 => fsensor_search_mm,
+    0x49 => eject_max_mm,
+    0x4a => bowden_slowdown_mm,
+    0x4b => full_duty_speed,
+    0x4c => tension_neutral,
+    0x4d => tension_deadband,
+    0x4e => tension_gain,
+    0x4f => tension_max_duty,
+}
+
+fn read_setting(v: &View, address: u8, _: usize) -> Option<u16> {
+    setting_field(v.config, address).copied()
+}
+
+fn write_setting(t: &mut Target, address: u8, _: usize, value: u16) -> bool {
+    match setting_field_mut(t.config, address) {
+        Some(field) => {
+            *field = value;
+            true
+        }
+        None => false,
+    }
 }
 
 /// A read-only register of one address.
@@ -251,29 +328,33 @@ pub const FED_METRES: u8 = 0xe0;
 /// The register map, MMU3 registers first. A `static`, not a `const`: each use of a `const` slice
 /// may get its own copy in the image (two copies of this table cost 1.5 KiB).
 pub static REGISTERS: &[Row] = &[
-    read_only!(0x00, "version.major", |v, _| Some(v.config.version.major.into())),
-    read_only!(0x01, "version.minor", |v, _| Some(v.config.version.minor.into())),
-    read_only!(0x02, "version.revision", |v, _| Some(
+    read_only!(0x00, "version.major", |v, _, _| Some(
+        v.config.version.major.into()
+    )),
+    read_only!(0x01, "version.minor", |v, _, _| Some(
+        v.config.version.minor.into()
+    )),
+    read_only!(0x02, "version.revision", |v, _, _| Some(
         v.config.version.revision.into()
     )),
-    read_only!(0x03, "version.build", |v, _| Some(v.config.version.build)),
-    read_only!(0x04, "errors", |v, _| Some(v.drive_errors)),
-    read_only!(0x05, "progress", |v, _| Some(match v.status {
+    read_only!(0x03, "version.build", |v, _, _| Some(v.config.version.build)),
+    read_only!(0x04, "errors", |v, _, _| Some(v.drive_errors)),
+    read_only!(0x05, "progress", |v, _, _| Some(match v.status {
         Status::Running(progress) => progress.0.into(),
         Status::Failed(_) => ProgressCode::ERR_WAITING_FOR_USER.0.into(),
         Status::Finished => 0,
     })),
-    read_only!(0x06, "error", |v, _| Some(match v.status {
+    read_only!(0x06, "error", |v, _, _| Some(match v.status {
         Status::Failed(error) => error.0,
         Status::Running(_) => ErrorCode::RUNNING.0,
         Status::Finished => ErrorCode::OK.0,
     })),
-    read_only!(0x07, "filament_state", |v, _| Some(
+    read_only!(0x07, "filament_state", |v, _, _| Some(
         v.path_slot
             .and_then(|slot| v.lanes.get(slot))
             .map_or(0, |lane| lane.mmu3_state())
     )),
-    read_only!(0x08, "hub.present", |v, _| Some(
+    read_only!(0x08, "hub.present", |v, _, _| Some(
         v.hub.filament.present().unwrap_or(false).into()
     )),
     Row {
@@ -281,9 +362,9 @@ pub static REGISTERS: &[Row] = &[
         span: Span::One,
         name: name!("fsensor"),
         range: Some((0, 255)),
-        read: |v, _| Some(u16::from(v.fsensor != 0)),
+        read: |v, _, _| Some(u16::from(v.fsensor != 0)),
         // The Core One reports its filament sensor this way instead of `f`.
-        write: Some(|t, _, value| match u8::try_from(value) {
+        write: Some(|t, _, _, value| match u8::try_from(value) {
             Ok(state) => {
                 *t.fsensor = state;
                 true
@@ -291,48 +372,48 @@ pub static REGISTERS: &[Row] = &[
             Err(_) => false,
         }),
     },
-    read_only!(0x0a, "motor_mode", |_, _| Some(0)),
-    setting!(0x0b, "extra_load_mm", 0..=255, extra_load_mm),
-    setting!(0x0c, "unload_check_mm", 0..=255, unload_check_mm),
-    setting!(0x0d, "unload_speed", 1..=1000, unload_speed),
-    setting!(0x11, "load_speed", 1..=1000, load_speed),
-    setting!(0x14, "slow_speed", 1..=1000, slow_speed),
-    read_only!(0x1a, "odometry", |v, _| Some(
+    read_only!(0x0a, "motor_mode", |_, _, _| Some(0)),
+    setting!(0x0b, "extra_load_mm", 0..=255),
+    setting!(0x0c, "unload_check_mm", 0..=255),
+    setting!(0x0d, "unload_speed", 1..=1000),
+    setting!(0x11, "load_speed", 1..=1000),
+    setting!(0x14, "slow_speed", 1..=1000),
+    read_only!(0x1a, "odometry", |v, _, _| Some(
         v.path_slot
             .and_then(|slot| v.feeders.get(slot))
             .map_or(0, |f| f.odometry_mm().clamp(0, i32::from(u16::MAX)) as u16)
     )),
-    read_only!(0x1b, "selector_slot", |v, _| Some(
+    read_only!(0x1b, "selector_slot", |v, _, _| Some(
         v.path_slot.map_or(5, |slot| slot as u16)
     )),
-    read_only!(0x1c, "idler_slot", |v, _| Some(
+    read_only!(0x1c, "idler_slot", |v, _, _| Some(
         v.driving_slot.map_or(5, |slot| slot as u16)
     )),
-    setting!(0x22, "bowden_mm", 50..=2000, bowden_mm),
-    read_only!(0x40, "slots", |v, _| Some(v.feeders.len() as u16)),
-    setting!(0x41, "park_mm", 1..=200, park_mm),
-    setting!(0x42, "mm_per_rev_centi", 10..=5000, mm_per_rev_centi),
-    setting!(0x43, "max_duty", 100..=1000, max_duty),
-    setting!(0x44, "stall_min_duty", 0..=1000, stall_min_duty),
-    setting!(0x45, "stall_timeout_ms", 50..=10000, stall_timeout_ms),
-    setting!(0x46, "preload_max_mm", 10..=2000, preload_max_mm),
-    setting!(0x47, "hub_search_mm", 5..=500, hub_search_mm),
-    setting!(0x48, "fsensor_search_mm", 10..=2000, fsensor_search_mm),
-    setting!(0x49, "eject_max_mm", 10..=2000, eject_max_mm),
-    setting!(0x4a, "bowden_slowdown_mm", 0..=500, bowden_slowdown_mm),
-    setting!(0x4b, "full_duty_speed", 10..=2000, full_duty_speed),
-    setting!(0x4c, "tension_neutral", 0..=4095, tension_neutral),
-    setting!(0x4d, "tension_deadband", 0..=2000, tension_deadband),
-    setting!(0x4e, "tension_gain", 0..=100, tension_gain),
-    setting!(0x4f, "tension_max_duty", 0..=1000, tension_max_duty),
-    read_only!(0x50, "sensor_faults", |v, _| Some(
+    setting!(0x22, "bowden_mm", 50..=2000),
+    read_only!(0x40, "slots", |v, _, _| Some(v.feeders.len() as u16)),
+    setting!(0x41, "park_mm", 1..=200),
+    setting!(0x42, "mm_per_rev_centi", 10..=5000),
+    setting!(0x43, "max_duty", 100..=1000),
+    setting!(0x44, "stall_min_duty", 0..=1000),
+    setting!(0x45, "stall_timeout_ms", 50..=10000),
+    setting!(0x46, "preload_max_mm", 10..=2000),
+    setting!(0x47, "hub_search_mm", 5..=500),
+    setting!(0x48, "fsensor_search_mm", 10..=2000),
+    setting!(0x49, "eject_max_mm", 10..=2000),
+    setting!(0x4a, "bowden_slowdown_mm", 0..=500),
+    setting!(0x4b, "full_duty_speed", 10..=2000),
+    setting!(0x4c, "tension_neutral", 0..=4095),
+    setting!(0x4d, "tension_deadband", 0..=2000),
+    setting!(0x4e, "tension_gain", 0..=100),
+    setting!(0x4f, "tension_max_duty", 0..=1000),
+    read_only!(0x50, "sensor_faults", |v, _, _| Some(
         (0..v.sensor_count())
             .filter(|&i| v
                 .sensor(SensorId::from_index(i))
                 .is_some_and(|s| s.fault().is_some()))
             .fold(0u16, |mask, i| mask | (1 << i))
     )),
-    read_only!(0x51, "dropped_responses", |v, _| Some(v.dropped_responses)),
+    read_only!(0x51, "dropped_responses", |v, _, _| Some(v.dropped_responses)),
     // The revision the first `S2` reports; asked again, the unit offers the other wire-compatible
     // revisions (app.rs), so every printer family finds its own.
     Row {
@@ -340,17 +421,17 @@ pub static REGISTERS: &[Row] = &[
         span: Span::One,
         name: name!("reported_revision"),
         range: Some((0, 255)),
-        read: |v, _| Some(v.config.version.revision.into()),
-        write: Some(|t, _, value| {
+        read: |v, _, _| Some(v.config.version.revision.into()),
+        write: Some(|t, _, _, value| {
             t.config.version.revision = value as u8;
             true
         }),
     },
-    read_only!(0x53, "learned_bowden_mm", |v, _| Some(v.bowden_learned_mm)),
-    block!(RAW, Sensors, "raw", |v, i| Some(
+    read_only!(0x53, "learned_bowden_mm", |v, _, _| Some(v.bowden_learned_mm)),
+    block!(RAW, Sensors, "raw", |v, _, i| Some(
         v.sensor(SensorId::from_index(i))?.raw()
     )),
-    block!(FILTERED, Sensors, "filtered", |v, i| Some(
+    block!(FILTERED, Sensors, "filtered", |v, _, i| Some(
         v.sensor(SensorId::from_index(i))?.filtered()
     )),
     Row {
@@ -358,30 +439,30 @@ pub static REGISTERS: &[Row] = &[
         span: Span::Sensors,
         name: name!("threshold_on"),
         range: Some((0, 4095)),
-        read: |v, i| Some(thresholds(v.config, SensorId::from_index(i))?.on),
-        write: Some(|t, i, value| set_threshold(t.config, SensorId::from_index(i), |th| th.on = value)),
+        read: |v, _, i| Some(thresholds(v.config, SensorId::from_index(i))?.on),
+        write: Some(|t, _, i, value| set_threshold(t.config, SensorId::from_index(i), |th| th.on = value)),
     },
     Row {
         address: THRESHOLD_OFF,
         span: Span::Sensors,
         name: name!("threshold_off"),
         range: Some((0, 4095)),
-        read: |v, i| Some(thresholds(v.config, SensorId::from_index(i))?.off),
-        write: Some(|t, i, value| set_threshold(t.config, SensorId::from_index(i), |th| th.off = value)),
+        read: |v, _, i| Some(thresholds(v.config, SensorId::from_index(i))?.off),
+        write: Some(|t, _, i, value| set_threshold(t.config, SensorId::from_index(i), |th| th.off = value)),
     },
-    block!(ODOMETRY, Slots, "odometry", |v, k| Some(
+    block!(ODOMETRY, Slots, "odometry", |v, _, k| Some(
         v.feeders.get(k)?.odometry_mm() as i16 as u16
     )),
-    block!(LANE, Slots, "lane", |v, k| Some(v.lanes.get(k)?.mmu3_state())),
-    block!(TOOL_CHANGES, Slots, "tool_changes", |v, k| v
+    block!(LANE, Slots, "lane", |v, _, k| Some(v.lanes.get(k)?.mmu3_state())),
+    block!(TOOL_CHANGES, Slots, "tool_changes", |v, _, k| v
         .tool_changes
         .get(k)
         .copied()),
-    block!(FAILURES, Slots, "failures", |v, k| v.failures.get(k).copied()),
-    block!(SPEED, Slots, "speed", |v, k| Some(
+    block!(FAILURES, Slots, "failures", |v, _, k| v.failures.get(k).copied()),
+    block!(SPEED, Slots, "speed", |v, _, k| Some(
         v.feeders.get(k)?.speed_mm_s(v.now, v.config)
     )),
-    block!(FED_METRES, Slots, "fed_metres", |v, k| Some(
+    block!(FED_METRES, Slots, "fed_metres", |v, _, k| Some(
         u16::try_from(*v.fed_mm.get(k)? / 1000).unwrap_or(u16::MAX)
     )),
 ];
@@ -432,7 +513,7 @@ fn find(address: u8, slots: usize) -> Option<(&'static Row, usize)> {
 /// The value of register `address`, or `None` when the unit has no such register.
 pub fn read(view: &View, address: u8) -> Option<u16> {
     let (row, index) = find(address, view.feeders.len())?;
-    (row.read)(view, index)
+    (row.read)(view, row.address, index)
 }
 
 /// Write `value` to register `address` of a unit with `slots` slots; false (answered `R`) when
@@ -444,7 +525,7 @@ pub fn write(target: &mut Target, slots: usize, address: u8, value: u16) -> bool
     let (Some(write), Some((min, max))) = (row.write, row.range) else {
         return false;
     };
-    (min..=max).contains(&value) && write(target, index, value)
+    (min..=max).contains(&value) && write(target, row.address, index, value)
 }
 
 /// Every setting register of a unit with `slots` slots (writable, held in [`Config`]; not the
@@ -486,8 +567,8 @@ pub fn changed_settings<const CAP: usize>(
             Span::Slots => slots,
         };
         for index in 0..count {
-            let value = (row.read)(&ours, index);
-            if let Some(value) = value.filter(|&v| Some(v) != (row.read)(&theirs, index)) {
+            let value = (row.read)(&ours, row.address, index);
+            if let Some(value) = value.filter(|&v| Some(v) != (row.read)(&theirs, row.address, index)) {
                 let _ = settings.push((row.address.wrapping_add(index as u8), value));
             }
         }
@@ -599,6 +680,42 @@ mod tests {
         }
         assert_eq!(lookup("bowden", 3), None);
         assert_eq!(lookup("bowden_mm.x", 3), None);
+    }
+
+    #[test]
+    fn every_plain_setting_reads_and_writes_the_config_field_of_its_name() {
+        let mut plain = 0;
+        for address in 0..=u8::MAX {
+            let Some(field) = setting_field_name(address) else {
+                continue;
+            };
+            plain += 1;
+            let row = describe(address, 3).map(|r| r.row);
+            assert_eq!(row.map(|r| r.name.as_str()), Some(field), "{address:#x}");
+            assert!(row.is_some_and(|r| r.access() == Access::ReadWrite));
+        }
+        // Every other writable register is state or has its own read and write.
+        let own = [FSENSOR, REPORTED_REVISION, THRESHOLD_ON, THRESHOLD_OFF];
+        let writable = REGISTERS
+            .iter()
+            .filter(|row| row.access() == Access::ReadWrite && !own.contains(&row.address))
+            .count();
+        assert_eq!(writable, plain);
+        // Through the registers, each changes its field and no other.
+        let mut config = Config::default();
+        let mut fsensor = 0;
+        let mut target = Target {
+            config: &mut config,
+            fsensor: &mut fsensor,
+        };
+        assert!(write(&mut target, 3, 0x4c, 1234));
+        assert!(write(&mut target, 3, 0x0d, 77));
+        let expected = Config {
+            tension_neutral: 1234,
+            unload_speed: 77,
+            ..Config::default()
+        };
+        assert!(config == expected);
     }
 
     #[test]

@@ -94,12 +94,13 @@ impl Runner {
     /// Start the command `request` asks for on `unit`: its plan, or the error it fails with
     /// before anything moves.
     pub fn start<const N: usize>(request: (RequestCode, u8), unit: &Unit<N>, config: &Config) -> Self {
+        let mut plan = Plan::new();
         let planned = match Command::of(request.0) {
-            Some(command) => command.plan(request.1, unit, config),
+            Some(command) => command.plan(request.1, unit, config, &mut plan),
             None => Err(ErrorCode::INTERNAL),
         };
         match planned {
-            Ok(plan) => Self::new(request, &plan),
+            Ok(()) => Self::new(request, &plan),
             Err(error) => Self::failed(request, error),
         }
     }
@@ -280,22 +281,24 @@ impl Runner {
             return;
         }
         self.then_plan = false;
+        self.plan.clear();
         let planned = match self.command {
-            Some(command) => command.plan(self.request.1, unit, config),
+            Some(command) => command.plan(self.request.1, unit, config, &mut self.plan),
             None => Err(ErrorCode::INTERNAL),
         };
-        self.plan.clear();
         self.index = 0;
         self.run = None;
         self.resume_goal_from = None;
         self.status = match planned {
-            Ok(plan) => {
-                extend(&mut self.plan, &plan);
-                self.plan
-                    .first()
-                    .map_or(Status::Finished, |phase| Status::Running(phase.progress()))
+            Ok(()) => self
+                .plan
+                .first()
+                .map_or(Status::Finished, |phase| Status::Running(phase.progress())),
+            Err(error) => {
+                // Nothing of a refused plan runs.
+                self.plan.clear();
+                Status::Failed(error)
             }
-            Err(error) => Status::Failed(error),
         };
     }
 

@@ -23,6 +23,8 @@ impl Instant {
     }
 
     /// Milliseconds from `earlier` to `self`, 0 if `earlier` is later.
+    // Out of line: about twenty callers, a 64-bit saturating subtraction each (0.19 KiB).
+    #[inline(never)]
     pub const fn millis_since(self, earlier: Instant) -> u64 {
         self.0.saturating_sub(earlier.0)
     }

@@ -159,6 +159,8 @@ pub struct Unit<const N: usize> {
 }
 
 impl<const N: usize> Default for Unit<N> {
+    // Out of line: built once, at boot (inlined into the App's construction it took more).
+    #[inline(never)]
     fn default() -> Self {
         Unit {
             feeders: [Feeder::default(); N],

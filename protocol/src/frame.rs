@@ -34,6 +34,8 @@ impl Frame {
         core::str::from_utf8(text).unwrap_or("")
     }
 
+    // Out of line: every byte of every encoder, one copy.
+    #[inline(never)]
     pub(crate) fn push(&mut self, byte: u8) {
         // Every frame the encoders build fits; a longer one would be a bug, so it is cut, not a panic.
         if let Some(slot) = self.bytes.get_mut(self.len) {

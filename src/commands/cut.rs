@@ -10,12 +10,16 @@ use super::{Plan, Recovery, clear_hub, extend, hub_search, preload, retry};
 use crate::config::Config;
 use crate::unit::Unit;
 
-/// The plan for `K<slot>`.
-pub fn plan<const N: usize>(slot: usize, unit: &Unit<N>, config: &Config) -> Result<Plan, ErrorCode> {
-    let mut plan = Plan::new();
-    clear_hub(&mut plan, unit)?;
-    extend(&mut plan, &preload::phases(slot, hub_search(slot, unit, config)));
-    Ok(plan)
+/// The plan for `K<slot>`, appended to `plan`.
+pub fn plan<const N: usize>(
+    slot: usize,
+    unit: &Unit<N>,
+    config: &Config,
+    plan: &mut Plan,
+) -> Result<(), ErrorCode> {
+    clear_hub(plan, unit)?;
+    extend(plan, &preload::phases(slot, hub_search(slot, unit, config)));
+    Ok(())
 }
 
 /// After the errors raised before anything moved (the motions' are the preload's and unload's).

@@ -10,14 +10,15 @@ use super::{Action, Plan, Recovery, extend, retry, unload_from_nozzle};
 use crate::phases::Phase;
 use crate::unit::Unit;
 
-/// The plan for `E<slot>`.
-pub fn plan<const N: usize>(slot: usize, unit: &Unit<N>) -> Plan {
-    let mut plan = Plan::new();
+/// The plan for `E<slot>`, appended to `plan`.
+pub fn plan<const N: usize>(slot: usize, unit: &Unit<N>, plan: &mut Plan) {
     if unit.active() == Some(slot) {
-        extend(&mut plan, &unload_from_nozzle::phases(slot));
+        extend(plan, &unload_from_nozzle::phases(slot));
     }
-    extend(&mut plan, &[Phase::EjectFromSlot { slot }, Phase::AwaitContinue]);
-    plan
+    extend(
+        plan,
+        &[Phase::EjectFromSlot { slot: slot as u8 }, Phase::AwaitContinue],
+    );
 }
 
 /// What each error of the eject means and what the buttons do.

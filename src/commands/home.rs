@@ -5,9 +5,9 @@
 
 use super::{Plan, Recovery, start_up};
 
-/// The plan for `H0`.
-pub fn plan() -> Plan {
-    start_up::plan()
+/// The plan for `H0`, appended to `plan`.
+pub fn plan(plan: &mut Plan) {
+    start_up::plan(plan)
 }
 
 /// The start-up check's.

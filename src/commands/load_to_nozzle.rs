@@ -12,15 +12,17 @@ use crate::config::Config;
 use crate::phases::Phase;
 
 /// Feed `slot`'s filament from before the hub (at most `hub_search_mm` away) into the extruder.
+// Out of line: smaller in flash (measured with scripts/firmware-size.sh).
+#[inline(never)]
 pub const fn phases(slot: usize, hub_search_mm: u16) -> [Phase; 4] {
     [
         Phase::FeedToHub {
-            slot,
+            slot: slot as u8,
             max_mm: hub_search_mm,
         },
-        Phase::FeedThroughBowden { slot },
-        Phase::FeedToFsensor { slot },
-        Phase::FeedToNozzle { slot },
+        Phase::FeedThroughBowden { slot: slot as u8 },
+        Phase::FeedToFsensor { slot: slot as u8 },
+        Phase::FeedToNozzle { slot: slot as u8 },
     ]
 }
 
@@ -38,7 +40,10 @@ fn from_fsensor(slot: usize) -> Plan {
     let mut plan = Plan::new();
     extend(
         &mut plan,
-        &[Phase::FeedToFsensor { slot }, Phase::FeedToNozzle { slot }],
+        &[
+            Phase::FeedToFsensor { slot: slot as u8 },
+            Phase::FeedToNozzle { slot: slot as u8 },
+        ],
     );
     plan
 }
@@ -71,7 +76,10 @@ fn after_no_trigger(retry: &Retry, config: &Config) -> Option<Replanned> {
     } else if retry.hub {
         extend(
             &mut plan,
-            &[Phase::SearchFsensor { slot }, Phase::FeedToNozzle { slot }],
+            &[
+                Phase::SearchFsensor { slot: slot as u8 },
+                Phase::FeedToNozzle { slot: slot as u8 },
+            ],
         );
     } else {
         plan = reload_from_park(slot, config);

@@ -102,6 +102,8 @@ pub struct Replanned {
 
 impl Replanned {
     /// Just a plan.
+    // Out of line: smaller in flash (measured with scripts/firmware-size.sh).
+    #[inline(never)]
     pub fn plan(plan: Plan) -> Self {
         Replanned {
             plan,
@@ -142,6 +144,8 @@ const MOTION: &[Recovery] = &[
 
 impl Command {
     /// The command a request starts, if it is one.
+    // Out of line: smaller in flash (measured with scripts/firmware-size.sh).
+    #[inline(never)]
     pub const fn of(code: RequestCode) -> Option<Command> {
         Some(match code {
             RequestCode::Tool => Command::ToolChange,
@@ -155,9 +159,16 @@ impl Command {
         })
     }
 
-    /// The plan for this command with argument `value` (a slot for `T L E K`), or the error it
+    /// The plan for this command with argument `value` (a slot for `T L E K`), appended to `plan`
+    /// (built in place: a plan returned by value was copied at every level), or the error it
     /// fails with before anything moves. An empty plan finishes at once.
-    pub fn plan<const N: usize>(self, value: u8, unit: &Unit<N>, config: &Config) -> Result<Plan, ErrorCode> {
+    pub fn plan<const N: usize>(
+        self,
+        value: u8,
+        unit: &Unit<N>,
+        config: &Config,
+        plan: &mut Plan,
+    ) -> Result<(), ErrorCode> {
         let slot = usize::from(value);
         let needs_slot = matches!(
             self,
@@ -167,13 +178,22 @@ impl Command {
             return Err(ErrorCode::INVALID_TOOL);
         }
         match self {
-            Command::StartUp => Ok(start_up::plan()),
-            Command::ToolChange => tool_change::plan(slot, unit, config),
-            Command::Preload => preload::plan(slot, unit, config),
-            Command::UnloadFromNozzle => unload_from_nozzle::plan(unit),
-            Command::Eject => Ok(eject::plan(slot, unit)),
-            Command::Cut => cut::plan(slot, unit, config),
-            Command::Home => Ok(home::plan()),
+            Command::StartUp => {
+                start_up::plan(plan);
+                Ok(())
+            }
+            Command::ToolChange => tool_change::plan(slot, unit, config, plan),
+            Command::Preload => preload::plan(slot, unit, config, plan),
+            Command::UnloadFromNozzle => unload_from_nozzle::plan(unit, plan),
+            Command::Eject => {
+                eject::plan(slot, unit, plan);
+                Ok(())
+            }
+            Command::Cut => cut::plan(slot, unit, config, plan),
+            Command::Home => {
+                home::plan(plan);
+                Ok(())
+            }
         }
     }
 
@@ -202,11 +222,15 @@ impl Command {
 
     /// What `button` does after this command failed with `error`.
     pub fn on_button(self, error: ErrorCode, button: ButtonCode) -> Option<Action> {
-        self.recovery()
-            .iter()
-            .flat_map(|table| table.iter())
-            .find(|row| row.error == error && row.button == button)
-            .map(|row| row.action)
+        // Plain loops: the iterator chain (`flat_map`, `find`) took more flash.
+        for table in self.recovery() {
+            for row in *table {
+                if row.error == error && row.button == button {
+                    return Some(row.action);
+                }
+            }
+        }
+        None
     }
 }
 
@@ -233,8 +257,8 @@ pub(crate) fn clear_hub<const N: usize>(plan: &mut Plan, unit: &Unit<N>) -> Resu
             extend(
                 plan,
                 &[
-                    Phase::ProveOwner { slot: active },
-                    Phase::RetractToPark { slot: active },
+                    Phase::ProveOwner { slot: active as u8 },
+                    Phase::RetractToPark { slot: active as u8 },
                 ],
             );
             Ok(())

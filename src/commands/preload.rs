@@ -11,20 +11,30 @@ use crate::config::Config;
 use crate::phases::Phase;
 use crate::unit::Unit;
 
-/// The plan for `L<slot>`.
-pub fn plan<const N: usize>(slot: usize, unit: &Unit<N>, config: &Config) -> Result<Plan, ErrorCode> {
+/// The plan for `L<slot>`, appended to `plan`.
+pub fn plan<const N: usize>(
+    slot: usize,
+    unit: &Unit<N>,
+    config: &Config,
+    plan: &mut Plan,
+) -> Result<(), ErrorCode> {
     if unit.active().is_some() {
         return Err(ErrorCode::FILAMENT_ALREADY_LOADED);
     }
-    let mut plan = Plan::new();
-    clear_hub(&mut plan, unit)?;
-    extend(&mut plan, &phases(slot, config.preload_max_mm));
-    Ok(plan)
+    clear_hub(plan, unit)?;
+    extend(plan, &phases(slot, config.preload_max_mm));
+    Ok(())
 }
 
 /// Feed `slot` until the hub sensor sees its tip (at most `max_mm`), then park it.
 pub const fn phases(slot: usize, max_mm: u16) -> [Phase; 2] {
-    [Phase::FeedToHub { slot, max_mm }, Phase::RetractToPark { slot }]
+    [
+        Phase::FeedToHub {
+            slot: slot as u8,
+            max_mm,
+        },
+        Phase::RetractToPark { slot: slot as u8 },
+    ]
 }
 
 /// What each error of the preload means and what Retry does.

@@ -11,11 +11,9 @@ use mmu_protocol::ErrorCode;
 use super::{Plan, Recovery, extend, retry};
 use crate::phases::Phase;
 
-/// The plan of the check.
-pub fn plan() -> Plan {
-    let mut plan = Plan::new();
-    extend(&mut plan, &[Phase::CheckSensors]);
-    plan
+/// The plan of the check, appended to `plan`.
+pub fn plan(plan: &mut Plan) {
+    extend(plan, &[Phase::CheckSensors]);
 }
 
 /// Retry checks again, trusting what the sensors say now over the stored lanes.

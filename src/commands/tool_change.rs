@@ -12,20 +12,24 @@ use super::{Plan, Recovery, clear_hub, extend, hub_search, load_to_nozzle, retry
 use crate::config::Config;
 use crate::unit::{Lane, Unit};
 
-/// The plan for `T<slot>`.
-pub fn plan<const N: usize>(slot: usize, unit: &Unit<N>, config: &Config) -> Result<Plan, ErrorCode> {
-    let mut plan = Plan::new();
+/// The plan for `T<slot>`, appended to `plan`.
+pub fn plan<const N: usize>(
+    slot: usize,
+    unit: &Unit<N>,
+    config: &Config,
+    plan: &mut Plan,
+) -> Result<(), ErrorCode> {
     // Already loaded, and known to be (a stored lane alone could report the wrong filament as
     // loaded: then it is unloaded, proving or refusing the belief, and loaded again).
     if unit.lane(slot) == Lane::Loaded && unit.owner_proven(slot) {
-        return Ok(plan);
+        return Ok(());
     }
-    clear_hub(&mut plan, unit)?;
+    clear_hub(plan, unit)?;
     extend(
-        &mut plan,
+        plan,
         &load_to_nozzle::phases(slot, hub_search(slot, unit, config)),
     );
-    Ok(plan)
+    Ok(())
 }
 
 /// After the errors raised before anything moved.

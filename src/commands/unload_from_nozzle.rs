@@ -12,14 +12,15 @@ use crate::unit::Unit;
 
 /// Pull `slot`'s filament out of the printer and the hub, and park it.
 pub const fn phases(slot: usize) -> [Phase; 2] {
-    [Phase::UnloadToHub { slot }, Phase::RetractToPark { slot }]
+    [
+        Phase::UnloadToHub { slot: slot as u8 },
+        Phase::RetractToPark { slot: slot as u8 },
+    ]
 }
 
-/// The plan for `U0`.
-pub fn plan<const N: usize>(unit: &Unit<N>) -> Result<Plan, ErrorCode> {
-    let mut plan = Plan::new();
-    clear_hub(&mut plan, unit)?;
-    Ok(plan)
+/// The plan for `U0`, appended to `plan`.
+pub fn plan<const N: usize>(unit: &Unit<N>, plan: &mut Plan) -> Result<(), ErrorCode> {
+    clear_hub(plan, unit)
 }
 
 /// What each error of the unload means and what Retry does.
