@@ -528,18 +528,10 @@ pub fn write(target: &mut Target, slots: usize, address: u8, value: u16) -> bool
     (min..=max).contains(&value) && write(target, row.address, index, value)
 }
 
-/// Every setting register of a unit with `slots` slots (writable, held in [`Config`]; not the
-/// printer's sensor state) whose value in `config` differs from `defaults`, in table order, as
-/// many as fit `settings`. Settings read only the configuration: `hub` only completes the views
-/// (the unit's own, so that no default hub is built: the snapshot is taken within a control step).
-pub fn changed_settings<const CAP: usize>(
-    config: &Config,
-    defaults: &Config,
-    hub: &Hub,
-    slots: usize,
-    settings: &mut heapless::Vec<(u8, u16), CAP>,
-) {
-    let view = |config| View {
+/// What a register read sees of a configuration alone: setting registers read only the
+/// configuration (`hub` only completes the view: the unit's own, so that no default hub is built).
+pub fn settings_view<'a>(config: &'a Config, hub: &'a Hub) -> View<'a> {
+    View {
         config,
         hub,
         feeders: &[],
@@ -555,22 +547,57 @@ pub fn changed_settings<const CAP: usize>(
         dropped_responses: 0,
         bowden_learned_mm: 0,
         now: Instant::ZERO,
-    };
-    let (ours, theirs) = (view(config), view(defaults));
-    for row in REGISTERS
+    }
+}
+
+/// One address of a setting register.
+#[derive(Clone, Copy)]
+pub struct Setting {
+    row: &'static Row,
+    index: usize,
+}
+
+impl Setting {
+    /// Its address.
+    pub fn address(&self) -> u8 {
+        self.row.address.wrapping_add(self.index as u8)
+    }
+
+    /// Its value as `view` reads it.
+    pub fn read(&self, view: &View) -> Option<u16> {
+        (self.row.read)(view, self.row.address, self.index)
+    }
+}
+
+/// Every setting register of a unit with `slots` slots (writable, held in [`Config`]; not the
+/// printer's sensor state), in table order: what the persistence keeps.
+pub fn settings(slots: usize) -> impl Iterator<Item = Setting> {
+    REGISTERS
         .iter()
         .filter(|row| row.write.is_some() && row.address != FSENSOR)
-    {
-        let count = match row.span {
-            Span::One => 1,
-            Span::Sensors => 3 + 2 * slots,
-            Span::Slots => slots,
-        };
-        for index in 0..count {
-            let value = (row.read)(&ours, row.address, index);
-            if let Some(value) = value.filter(|&v| Some(v) != (row.read)(&theirs, row.address, index)) {
-                let _ = settings.push((row.address.wrapping_add(index as u8), value));
-            }
+        .flat_map(move |row| {
+            let count = match row.span {
+                Span::One => 1,
+                Span::Sensors => 3 + 2 * slots,
+                Span::Slots => slots,
+            };
+            (0..count).map(move |index| Setting { row, index })
+        })
+}
+
+/// Every setting register ([`settings`]) whose value in `config` differs from `defaults`, in
+/// table order, as many as fit `settings`.
+pub fn changed_settings<const CAP: usize>(
+    config: &Config,
+    defaults: &Config,
+    hub: &Hub,
+    slots: usize,
+    changed: &mut heapless::Vec<(u8, u16), CAP>,
+) {
+    let (ours, theirs) = (settings_view(config, hub), settings_view(defaults, hub));
+    for setting in settings(slots) {
+        if let Some(value) = setting.read(&ours).filter(|&v| Some(v) != setting.read(&theirs)) {
+            let _ = changed.push((setting.address(), value));
         }
     }
 }

@@ -1,18 +1,15 @@
 //! The settings part of a snapshot, gathered a register per call. [`App::snapshot`] reads every
 //! setting register of the unit and of a default configuration at once (5,946
 //! instructions on the M0+ measured by `scripts/step-cost.sh`, more than a control step leaves); the keeper instead compares the
-//! registers one per call against defaults read once at boot, and gets the same list. Which
-//! registers are settings follows `registers::changed_settings` (writable, not the printer's
-//! sensor state); a test holds the two lists equal.
+//! registers one per call against defaults read once at boot, and gets the same list. Both take
+//! the settings from `registers::settings`; a test holds the two lists equal.
 
 use heapless::Vec;
 
 use super::{MAX_SETTINGS, Settings};
 use crate::app::App;
 use crate::config::Config;
-use crate::registers::{self, Access, REGISTERS, Span, View};
-use crate::runner::Status;
-use crate::time::Instant;
+use crate::registers;
 
 /// Setting registers compared per call: one [`App::read_register`] costs up to about 1,000
 /// instructions on the M0+ (the register table is searched by address).
@@ -29,39 +26,12 @@ impl Defaults {
     /// configuration.
     pub(super) fn new<const N: usize>(app: &App<N>) -> Self {
         let config = Config::default();
-        let view = View {
-            config: &config,
-            hub: &app.unit().hub,
-            feeders: &app.unit().feeders,
-            lanes: &[],
-            fsensor: 0,
-            path_slot: None,
-            driving_slot: None,
-            status: Status::Finished,
-            drive_errors: 0,
-            tool_changes: &[],
-            failures: &[],
-            fed_mm: &[],
-            dropped_responses: 0,
-            bowden_learned_mm: 0,
-            now: Instant::ZERO,
-        };
+        let view = registers::settings_view(&config, &app.unit().hub);
         let mut defaults = Vec::new();
-        let settings = REGISTERS
-            .iter()
-            .filter(|row| row.access() == Access::ReadWrite && row.address != registers::FSENSOR);
-        for row in settings {
-            let count = match row.span {
-                Span::One => 1,
-                Span::Sensors => 3 + 2 * N,
-                Span::Slots => N,
-            };
-            for index in 0..count {
-                let address = row.address.wrapping_add(index as u8);
-                if let Some(value) = registers::read(&view, address) {
-                    // MAX_SETTINGS holds every setting of a 5-slot unit.
-                    let _ = defaults.push((address, value));
-                }
+        for setting in registers::settings(N) {
+            if let Some(value) = setting.read(&view) {
+                // MAX_SETTINGS holds every setting of a 5-slot unit.
+                let _ = defaults.push((setting.address(), value));
             }
         }
         Defaults(defaults)
@@ -101,6 +71,7 @@ mod tests {
     extern crate std;
 
     use super::*;
+    use crate::registers::Access;
 
     /// The whole scan, a call at a time.
     fn scanned<const N: usize>(app: &App<N>, defaults: &Defaults) -> Settings {
