@@ -333,7 +333,6 @@ pub async fn reset(board: &mut impl ResetBoard, action: BoardAction) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use mmu_hal_port::{HubSamples, SlotSamples};
     use mmu_protocol::{Request, RequestCode, RequestDecoder};
 
     extern crate std;
@@ -341,17 +340,7 @@ mod tests {
     use std::vec::Vec as StdVec;
 
     /// Mid-scale readings: every sensor healthy, no filament anywhere.
-    const SAMPLES: Samples<3> = Samples {
-        slots: [SlotSamples {
-            motor_hall: 2048,
-            filament: 2048,
-        }; 3],
-        hub: HubSamples {
-            filament: 2048,
-            tension: 2048,
-            cutter: 2048,
-        },
-    };
+    const SAMPLES: Samples<3> = Samples::uniform(2048);
 
     /// A unit past its start-up check, at `ms`.
     fn listening() -> (ControlLoop<3>, u64) {

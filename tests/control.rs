@@ -37,17 +37,7 @@ fn only_a_step_on_time_with_fresh_samples_feeds_the_watchdog() {
 }
 
 /// Mid-scale readings: every sensor healthy, no filament anywhere.
-const SAMPLES: Samples<3> = Samples {
-    slots: [mmu_firmware::SlotSamples {
-        motor_hall: 2048,
-        filament: 2048,
-    }; 3],
-    hub: mmu_firmware::HubSamples {
-        filament: 2048,
-        tension: 2048,
-        cutter: 2048,
-    },
-};
+const SAMPLES: Samples<3> = Samples::uniform(2048);
 
 fn tick(now: u64, lateness_us: u64, rx: &[u8]) -> Tick<'_, 3> {
     Tick {

@@ -224,18 +224,8 @@ fn first_answer_after_power_up_with_a_start_up_error_is_the_error() {
 /// frames after a quiet line, at every moment of the check.
 #[test]
 fn requests_during_the_start_up_check_get_no_answer_and_no_action() {
-    use mmu_firmware::{App, Config, HubSamples, Instant, Samples, SlotSamples};
-    let samples = Samples::<3> {
-        slots: [SlotSamples {
-            motor_hall: 2048,
-            filament: 2048,
-        }; 3],
-        hub: HubSamples {
-            filament: 2048,
-            tension: 2048,
-            cutter: 2048,
-        },
-    };
+    use mmu_firmware::{App, Config, Instant, Samples};
+    let samples = Samples::<3>::uniform(2048);
     let mut bytes = Vec::new();
     for request in [
         Request::new(RequestCode::Version, 0),

@@ -176,6 +176,23 @@ pub struct Samples<const N: usize> {
     pub hub: HubSamples,
 }
 
+impl<const N: usize> Samples<N> {
+    /// Every sensor reading `value` (mid-scale: every sensor healthy, no filament anywhere).
+    pub const fn uniform(value: u16) -> Self {
+        Samples {
+            slots: [SlotSamples {
+                motor_hall: value,
+                filament: value,
+            }; N],
+            hub: HubSamples {
+                filament: value,
+                tension: value,
+                cutter: value,
+            },
+        }
+    }
+}
+
 impl<const N: usize> Default for Samples<N> {
     fn default() -> Self {
         Samples {
