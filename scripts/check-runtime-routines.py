@@ -18,14 +18,15 @@ Run by scripts/firmware-size.sh on every build. Needs python3 with `unicorn` (Py
 """
 
 import random
-import struct
 import sys
+from pathlib import Path
 
 import unicorn
 from unicorn import arm_const as arm
 
-FLASH = (0x0800_0000, 128 * 1024)
-RAM = (0x2000_0000, 36 * 1024)
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "bench-mcu"))
+from run import FLASH, RAM, elf_symbols_and_segments  # noqa: E402 (bench-mcu/run.py)
+
 RETURN = 0x2000_8000  # a `b .` the routines return to (LR); the emulation stops there
 STACK_TOP = 0x2000_7000
 DST = 0x2000_1000
@@ -41,32 +42,10 @@ CALLEE_SAVED = [arm.UC_ARM_REG_R4, arm.UC_ARM_REG_R5, arm.UC_ARM_REG_R6, arm.UC_
 
 
 def load(path):
-    """PT_LOAD segments (address, bytes) and symbol addresses of a 32-bit little-endian ELF."""
-    data = open(path, "rb").read()
-    if data[:4] != b"\x7fELF" or data[4] != 1 or data[5] != 1:
-        sys.exit(f"{path}: not a 32-bit little-endian ELF")
-    (e_phoff, e_shoff) = struct.unpack_from("<II", data, 28)
-    (e_phentsize, e_phnum, e_shentsize, e_shnum) = struct.unpack_from("<HHHH", data, 42)
-    segments = []
-    for i in range(e_phnum):
-        p_type, p_offset, p_vaddr, _, p_filesz, _, _, _ = struct.unpack_from(
-            "<IIIIIIII", data, e_phoff + i * e_phentsize)
-        if p_type == 1 and p_filesz and FLASH[0] <= p_vaddr < FLASH[0] + FLASH[1]:
-            segments.append((p_vaddr, data[p_offset:p_offset + p_filesz]))
-    sections = [struct.unpack_from("<IIIIIIIIII", data, e_shoff + i * e_shentsize)
-                for i in range(e_shnum)]
-    symbols = {}
-    for sh in sections:
-        if sh[1] != 2:  # SHT_SYMTAB
-            continue
-        strtab = sections[sh[6]]
-        strings = data[strtab[4]:strtab[4] + strtab[5]]
-        for off in range(sh[4], sh[4] + sh[5], 16):
-            st_name, st_value = struct.unpack_from("<II", data, off)
-            name = strings[st_name:strings.index(b"\0", st_name)].decode()
-            if name:
-                symbols[name] = st_value
-    return segments, symbols
+    """The ELF's flash segments (address, bytes) and its symbol addresses, read by the step-cost
+    benchmark's ELF reader."""
+    segments, symbols = elf_symbols_and_segments(path)
+    return [(a, b) for a, b in segments if FLASH[0] <= a < FLASH[0] + FLASH[1]], symbols
 
 
 def truncating(n, d):
