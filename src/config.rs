@@ -5,7 +5,7 @@
 //! ([`crate::registers`]); the defaults are for the reference unit (a 360 mm Bowden tube).
 
 use crate::MAX_SLOTS;
-use crate::sensor::{FilterConfig, Thresholds};
+use crate::sensor::Thresholds;
 
 /// The version reported through `S0`..`S3`. The printer checks major, minor and revision for
 /// exact equality: 3.0.3 for Prusa-Firmware-Buddy 6.x (MK4, MK3.5, Core One), 3.0.2 for MK3S
@@ -98,10 +98,6 @@ pub struct Config {
     pub tension_gain: u16,
     /// The most duty the tension follower applies, per mille.
     pub tension_max_duty: u16,
-    /// Filters of the filament presence and tension sensors.
-    pub presence_filter: FilterConfig,
-    /// Filter of the motor Hall sensors.
-    pub motor_filter: FilterConfig,
     /// Presence thresholds of the hub filament sensor.
     pub hub_thresholds: Thresholds,
     /// Presence thresholds of each slot's filament sensor.
@@ -147,16 +143,6 @@ impl Default for Config {
             tension_deadband: 60,
             tension_gain: 2,
             tension_max_duty: 600,
-            presence_filter: FilterConfig {
-                median: 5,
-                average: 4,
-                smoothing_permille: 500,
-            },
-            motor_filter: FilterConfig {
-                median: 3,
-                average: 1,
-                smoothing_permille: 1000,
-            },
             hub_thresholds: Thresholds { on: 2600, off: 2400 },
             slot_thresholds: [Thresholds { on: 2600, off: 2400 }; MAX_SLOTS],
             motor_thresholds: [Thresholds { on: 2300, off: 1800 }; MAX_SLOTS],

@@ -343,20 +343,43 @@ impl Decay {
     }
 }
 
-/// The presence sensors' default filter (`Config::default`).
-const PRESENCE_DEFAULT: FilterConfig = FilterConfig {
+/// The filter of the filament presence, tension and cutter sensors.
+const PRESENCE_FILTER: FilterConfig = FilterConfig {
     median: 5,
     average: 4,
     smoothing_permille: 500,
 };
-const PRESENCE_DECAY: Decay = Decay::new(PRESENCE_DEFAULT.smoothing_permille);
-/// The motor Hall sensors' default filter (`Config::default`).
-const MOTOR_DEFAULT: FilterConfig = FilterConfig {
+const PRESENCE_DECAY: Decay = Decay::new(PRESENCE_FILTER.smoothing_permille);
+/// The filter of the motor Hall sensors: a revolution's edges need little delay.
+const MOTOR_FILTER: FilterConfig = FilterConfig {
     median: 3,
     average: 1,
     smoothing_permille: 1000,
 };
-const MOTOR_DECAY: Decay = Decay::new(MOTOR_DEFAULT.smoothing_permille);
+const MOTOR_DECAY: Decay = Decay::new(MOTOR_FILTER.smoothing_permille);
+
+/// Which of the unit's two filters a sensor takes. Their settings are fixed at build time (no
+/// register changes them), so the compiler folds them into the pipeline: its clamps, window
+/// dispatch and smoothing preparation, a fifth of a sample's instructions, and no general copy
+/// of the pipeline for other settings.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FilterKind {
+    /// Filament presence, tension and cutter sensors ([`FilterKind::config`]: median of 5,
+    /// average of 4, smoothing 500 ‰).
+    Presence,
+    /// Motor Hall sensors (median of 3, no average, no smoothing).
+    Motor,
+}
+
+impl FilterKind {
+    /// The settings of this filter.
+    pub const fn config(self) -> FilterConfig {
+        match self {
+            FilterKind::Presence => PRESENCE_FILTER,
+            FilterKind::Motor => MOTOR_FILTER,
+        }
+    }
+}
 
 /// Sliding median, then moving average, then exponential smoothing.
 #[derive(Debug, Clone, Copy)]
@@ -388,22 +411,31 @@ impl Filter {
         }
     }
 
-    /// Feed one raw sample; returns the filtered value.
+    /// Feed one raw sample through the filter `kind`; returns the filtered value.
     #[inline(always)]
-    pub fn push(&mut self, raw: u16, config: &FilterConfig) -> u16 {
-        // The default filters' settings (`Config::default`) as constants: the compiler folds
-        // their clamps, window dispatch and smoothing preparation away, a fifth of a sample's
-        // instructions. Any other setting takes the same steps with its values.
-        match *config {
-            PRESENCE_DEFAULT => self.push_with(raw, 5, 4, 500, PRESENCE_DECAY),
-            MOTOR_DEFAULT => self.push_with(raw, 3, 1, 1000, MOTOR_DECAY),
-            _ => self.push_any(raw, config),
+    pub fn push(&mut self, raw: u16, kind: FilterKind) -> u16 {
+        match kind {
+            FilterKind::Presence => self.push_with(
+                raw,
+                PRESENCE_FILTER.median as usize,
+                PRESENCE_FILTER.average as usize,
+                PRESENCE_FILTER.smoothing_permille,
+                PRESENCE_DECAY,
+            ),
+            FilterKind::Motor => self.push_with(
+                raw,
+                MOTOR_FILTER.median as usize,
+                MOTOR_FILTER.average as usize,
+                MOTOR_FILTER.smoothing_permille,
+                MOTOR_DECAY,
+            ),
         }
     }
 
-    /// [`Self::push`] with any settings, out of line (one copy of the pipeline for them).
-    #[inline(never)]
-    fn push_any(&mut self, raw: u16, config: &FilterConfig) -> u16 {
+    /// [`Self::push`] with any settings: the same pipeline, for the tests to reach every window
+    /// length and weight.
+    #[cfg(test)]
+    fn push_config(&mut self, raw: u16, config: &FilterConfig) -> u16 {
         let decay = Decay::new(config.smoothing_permille);
         self.push_with(
             raw,
@@ -489,7 +521,7 @@ const WARM_UP_SAMPLES: u16 = MAX_WINDOW as u16 * 2;
 
 impl AnalogSensor {
     /// Take a new raw sample at `now`.
-    pub fn update(&mut self, raw: u16, now: Instant, filter: &FilterConfig, rails: &RailLimits) {
+    pub fn update(&mut self, raw: u16, now: Instant, filter: FilterKind, rails: &RailLimits) {
         self.raw = raw;
         let rail = if raw <= rails.low {
             Some(Rail::Low)
@@ -566,7 +598,7 @@ impl PresenceSensor {
         &mut self,
         raw: u16,
         now: Instant,
-        filter: &FilterConfig,
+        filter: FilterKind,
         rails: &RailLimits,
         thresholds: Thresholds,
     ) {
@@ -601,7 +633,7 @@ impl RevolutionCounter {
         &mut self,
         raw: u16,
         now: Instant,
-        filter: &FilterConfig,
+        filter: FilterKind,
         rails: &RailLimits,
         edges: Thresholds,
     ) -> bool {
@@ -650,11 +682,6 @@ impl RevolutionCounter {
 mod tests {
     use super::*;
 
-    const PRESENCE: FilterConfig = FilterConfig {
-        median: 5,
-        average: 4,
-        smoothing_permille: 500,
-    };
     const RAILS: RailLimits = RailLimits {
         low: 40,
         high: 4055,
@@ -671,10 +698,10 @@ mod tests {
             smoothing_permille: 1000,
         };
         for _ in 0..5 {
-            filter.push(2000, &config);
+            filter.push_config(2000, &config);
         }
-        assert_eq!(filter.push(4000, &config), 2000);
-        assert_eq!(filter.push(2000, &config), 2000);
+        assert_eq!(filter.push_config(4000, &config), 2000);
+        assert_eq!(filter.push_config(2000, &config), 2000);
     }
 
     #[test]
@@ -685,10 +712,10 @@ mod tests {
             average: 1,
             smoothing_permille: 500,
         };
-        filter.push(1000, &config);
-        assert_eq!(filter.push(3000, &config), 2000);
+        filter.push_config(1000, &config);
+        assert_eq!(filter.push_config(3000, &config), 2000);
         for _ in 0..20 {
-            filter.push(3000, &config);
+            filter.push_config(3000, &config);
         }
         assert_eq!(filter.value(), 3000);
     }
@@ -771,9 +798,19 @@ mod tests {
         /// Push `raw` (sample `i`) through both; they must agree.
         fn push(&mut self, raw: u16, config: &FilterConfig, i: u32) {
             assert_eq!(
-                self.filter.push(raw, config),
+                self.filter.push_config(raw, config),
                 self.reference.push(raw, config),
                 "{config:?} at {i}"
+            );
+        }
+
+        /// Push `raw` (sample `i`) through the filter `kind`, as the sensors do, and through the
+        /// reference with that filter's settings; they must agree.
+        fn push_kind(&mut self, raw: u16, kind: FilterKind, i: u32) {
+            assert_eq!(
+                self.filter.push(raw, kind),
+                self.reference.push(raw, &kind.config()),
+                "{kind:?} at {i}"
             );
         }
 
@@ -876,24 +913,36 @@ mod tests {
     }
 
     #[test]
-    fn switching_between_the_default_filters_and_others_filters_as_the_divisions_did() {
-        // The defaults take a path of their own (constants folded): switching to and from them
+    fn the_sensors_filters_filter_as_the_divisions_did() {
+        // The sensors' two filters take their settings folded in (`Filter::push`): each gives
+        // what the divisions gave with its settings, over noisy levels switching off and on.
+        for kind in [FilterKind::Presence, FilterKind::Motor] {
+            let mut twins = Twins::new();
+            let mut seed: u32 = 3;
+            for i in 0..4000u32 {
+                seed = next_random(seed);
+                let noise = (seed >> 20) as u16 % 400;
+                let raw = if i % 500 < 250 { 1800 + noise } else { 3600 + noise };
+                twins.push_kind(raw, kind, i);
+            }
+        }
+    }
+
+    #[test]
+    fn switching_between_the_sensors_filters_and_others_filters_as_the_divisions_did() {
+        // The folded filters and the general pipeline share one state: switching between them
         // mid-stream, with partly and fully filled windows, gives what the divisions gave.
-        let configs = [
-            PRESENCE_DEFAULT,
-            MOTOR_DEFAULT,
+        let others = [
             FilterConfig {
                 median: 5,
                 average: 4,
                 smoothing_permille: 400,
             },
-            PRESENCE_DEFAULT,
             FilterConfig {
                 median: 9,
                 average: 2,
                 smoothing_permille: 500,
             },
-            MOTOR_DEFAULT,
             FilterConfig {
                 median: 3,
                 average: 1,
@@ -905,16 +954,12 @@ mod tests {
         for i in 0..5000u32 {
             seed = next_random(seed);
             let raw = (seed >> 20) as u16;
-            let config = configs[(i / 29) as usize % configs.len()];
-            twins.push(raw, &config, i);
+            match (i / 29) as usize % 6 {
+                0 | 3 => twins.push_kind(raw, FilterKind::Presence, i),
+                1 | 5 => twins.push_kind(raw, FilterKind::Motor, i),
+                k => twins.push(raw, &others[k % others.len()], i),
+            }
         }
-    }
-
-    #[test]
-    fn the_default_filters_take_the_folded_path() {
-        let config = crate::Config::default();
-        assert_eq!(config.presence_filter, PRESENCE_DEFAULT);
-        assert_eq!(config.motor_filter, MOTOR_DEFAULT);
     }
 
     #[test]
@@ -930,13 +975,13 @@ mod tests {
         let mut sensor = PresenceSensor::default();
         let mut now = Instant::ZERO;
         for _ in 0..30 {
-            sensor.update(2048, now, &PRESENCE, &RAILS, THRESHOLDS);
+            sensor.update(2048, now, FilterKind::Presence, &RAILS, THRESHOLDS);
             now = now + 1;
         }
         assert_eq!(sensor.present(), Some(false));
         // 50 ms at the rail: suspicious, held, not yet called faulty.
         for _ in 0..50 {
-            sensor.update(4095, now, &PRESENCE, &RAILS, THRESHOLDS);
+            sensor.update(4095, now, FilterKind::Presence, &RAILS, THRESHOLDS);
             now = now + 1;
             assert_eq!(
                 sensor.present(),
@@ -944,30 +989,31 @@ mod tests {
                 "the rail value is never taken as presence"
             );
         }
-        sensor.update(4095, now, &PRESENCE, &RAILS, THRESHOLDS);
+        sensor.update(4095, now, FilterKind::Presence, &RAILS, THRESHOLDS);
         assert_eq!(sensor.analog.fault(), Some(Rail::High));
         assert_eq!(sensor.present(), None);
     }
 
     #[test]
     fn revolutions_count_full_periods_only() {
-        let config = FilterConfig {
-            median: 1,
-            average: 1,
-            smoothing_permille: 1000,
-        };
         let edges = Thresholds { on: 2300, off: 1800 };
         let mut counter = RevolutionCounter::default();
         let mut now = Instant::ZERO;
         // Warm up at rest, then wobble between the thresholds: no revolution.
         for i in 0..100u32 {
-            counter.update(if i % 2 == 0 { 2100 } else { 2250 }, now, &config, &RAILS, edges);
+            counter.update(
+                if i % 2 == 0 { 2100 } else { 2250 },
+                now,
+                FilterKind::Motor,
+                &RAILS,
+                edges,
+            );
             now = now + 1;
         }
         assert_eq!(counter.revolutions(), 0);
         for _ in 0..3 {
             for value in [2400, 2500, 2000, 1700, 1600, 2000] {
-                counter.update(value, now, &config, &RAILS, edges);
+                counter.update(value, now, FilterKind::Motor, &RAILS, edges);
                 now = now + 1;
             }
         }

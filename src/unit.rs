@@ -6,7 +6,7 @@ use mmu_hal_port::Samples;
 use crate::config::Config;
 use crate::drive::SlotDrive;
 use crate::feeder::Feeder;
-use crate::sensor::{AnalogSensor, PresenceSensor, RailLimits};
+use crate::sensor::{AnalogSensor, FilterKind, PresenceSensor, RailLimits};
 use crate::time::Instant;
 
 /// Where one slot's filament is, as far as the unit knows.
@@ -210,16 +210,16 @@ impl<const N: usize> Unit<N> {
         self.hub.filament.update(
             hub.filament,
             now,
-            &config.presence_filter,
+            FilterKind::Presence,
             &rails,
             config.hub_thresholds,
         );
         self.hub
             .tension
-            .update(hub.tension, now, &config.presence_filter, &rails);
+            .update(hub.tension, now, FilterKind::Presence, &rails);
         self.hub
             .cutter
-            .update(hub.cutter, now, &config.presence_filter, &rails);
+            .update(hub.cutter, now, FilterKind::Presence, &rails);
     }
 
     /// Filament in the hub, `None` while the hub sensor is faulty or warming up.
