@@ -423,7 +423,7 @@ impl<const N: usize> App<N> {
     fn settings(&self) -> Vec<(u8, u16), MAX_SETTINGS> {
         let mut settings = Vec::new();
         // MAX_SETTINGS holds every setting of a 5-slot unit.
-        registers::changed_settings(&self.config, &Config::default(), &self.unit.hub, N, &mut settings);
+        registers::changed_settings(&self.config, &Config::DEFAULT, &self.unit.hub, N, &mut settings);
         settings
     }
 

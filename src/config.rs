@@ -112,43 +112,49 @@ pub struct Config {
     pub rail_timeout_ms: u16,
 }
 
+impl Config {
+    /// The reference unit's settings. A constant, so that building them copies them from flash
+    /// (code storing each field took twice the room).
+    pub const DEFAULT: Config = Config {
+        version: Version {
+            major: 3,
+            minor: 0,
+            revision: 3,
+            build: 1,
+        },
+        extra_load_mm: 30,
+        unload_check_mm: 40,
+        unload_speed: 95,
+        load_speed: 95,
+        slow_speed: 20,
+        bowden_mm: 360,
+        park_mm: 15,
+        bowden_slowdown_mm: 30,
+        fsensor_search_mm: 90,
+        preload_max_mm: 150,
+        hub_search_mm: 45,
+        eject_max_mm: 150,
+        mm_per_rev_centi: 200,
+        full_duty_speed: 150,
+        max_duty: 1000,
+        stall_min_duty: 250,
+        stall_timeout_ms: 400,
+        phase_slack_ms: 1000,
+        tension_neutral: 2048,
+        tension_deadband: 60,
+        tension_gain: 2,
+        tension_max_duty: 600,
+        hub_thresholds: Thresholds { on: 2600, off: 2400 },
+        slot_thresholds: [Thresholds { on: 2600, off: 2400 }; MAX_SLOTS],
+        motor_thresholds: [Thresholds { on: 2300, off: 1800 }; MAX_SLOTS],
+        rail_low: 40,
+        rail_high: 4055,
+        rail_timeout_ms: 50,
+    };
+}
+
 impl Default for Config {
     fn default() -> Self {
-        Config {
-            version: Version {
-                major: 3,
-                minor: 0,
-                revision: 3,
-                build: 1,
-            },
-            extra_load_mm: 30,
-            unload_check_mm: 40,
-            unload_speed: 95,
-            load_speed: 95,
-            slow_speed: 20,
-            bowden_mm: 360,
-            park_mm: 15,
-            bowden_slowdown_mm: 30,
-            fsensor_search_mm: 90,
-            preload_max_mm: 150,
-            hub_search_mm: 45,
-            eject_max_mm: 150,
-            mm_per_rev_centi: 200,
-            full_duty_speed: 150,
-            max_duty: 1000,
-            stall_min_duty: 250,
-            stall_timeout_ms: 400,
-            phase_slack_ms: 1000,
-            tension_neutral: 2048,
-            tension_deadband: 60,
-            tension_gain: 2,
-            tension_max_duty: 600,
-            hub_thresholds: Thresholds { on: 2600, off: 2400 },
-            slot_thresholds: [Thresholds { on: 2600, off: 2400 }; MAX_SLOTS],
-            motor_thresholds: [Thresholds { on: 2300, off: 1800 }; MAX_SLOTS],
-            rail_low: 40,
-            rail_high: 4055,
-            rail_timeout_ms: 50,
-        }
+        Self::DEFAULT
     }
 }
