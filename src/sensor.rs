@@ -113,7 +113,7 @@ impl Window {
 
 /// A [`Window`] for the sliding median. The lengths the default filters use, 3 and 5, take their
 /// median from the ring directly with a few comparisons ([`median_of_3`], [`median_of_5`]); any
-/// other length (a window filling up, other settings) sorts a copy of the window.
+/// other length (a window filling up, other settings) counts ([`MedianWindow::counted_median`]).
 #[derive(Debug, Clone, Copy)]
 struct MedianWindow {
     ring: Window,
@@ -134,27 +134,27 @@ impl MedianWindow {
             1 => value,
             3 => median_of_3(a, b, c),
             5 => median_of_5(a, b, c, d, e),
-            _ => self.sorted_median(),
+            _ => self.counted_median(),
         }
     }
 
-    /// The median of a sorted copy of the window (sorted by insertion: no sort routine in the
-    /// image).
+    /// The median of the window by counting, for each sample, the samples below it and those
+    /// not above it: no sorted copy, no sort routine in the image, nothing indexed (a window of
+    /// at most [`MAX_WINDOW`] samples takes at most 162 comparisons, and only while a window
+    /// fills or for settings other than the sensors' own).
     #[inline(never)]
-    fn sorted_median(&self) -> u16 {
-        let mut sorted = [0u16; MAX_WINDOW];
+    fn counted_median(&self) -> u16 {
         let filled = self.ring.filled();
-        for (end, &sample) in filled.iter().enumerate() {
-            let mut at = end;
-            while at > 0 && sorted[at - 1] > sample {
-                sorted[at] = sorted[at - 1];
-                at -= 1;
-            }
-            if let Some(slot) = sorted.get_mut(at) {
-                *slot = sample;
-            }
-        }
-        sorted.get(filled.len() / 2).copied().unwrap_or(0)
+        let middle = filled.len() / 2;
+        filled
+            .iter()
+            .copied()
+            .find(|&x| {
+                let below = filled.iter().filter(|&&v| v < x).count();
+                let not_above = filled.iter().filter(|&&v| v <= x).count();
+                below <= middle && middle < not_above
+            })
+            .unwrap_or(0)
     }
 }
 
