@@ -253,7 +253,10 @@ impl Runner {
         for slot in (0..8).rev().filter(|slot| suspects & (1 << slot) != 0) {
             if self.plan.push(Phase::ClearMerge { slot }).is_ok() {
                 for at in (self.index + 1..self.plan.len()).rev() {
-                    self.plan.swap(at - 1, at);
+                    // The pair taken as one slice: no bounds-check panic (`swap` had two).
+                    if let Some([before, after]) = self.plan.get_mut(at - 1..=at) {
+                        core::mem::swap(before, after);
+                    }
                 }
             }
         }
@@ -356,5 +359,37 @@ impl Runner {
                 }
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn merge_clearances_run_in_slot_order_before_the_blocked_phase() {
+        let plan = [
+            Phase::CheckSensors,
+            Phase::FeedToHub { slot: 1, max_mm: 100 },
+            Phase::FeedThroughBowden { slot: 1 },
+            Phase::FeedToFsensor { slot: 1 },
+        ];
+        let mut runner = Runner::new((RequestCode::Load, 1), &plan);
+        runner.advance();
+        runner.clear_merge_first(0b101);
+        let expected = [
+            Phase::CheckSensors,
+            Phase::ClearMerge { slot: 0 },
+            Phase::ClearMerge { slot: 2 },
+            Phase::FeedToHub { slot: 1, max_mm: 100 },
+            Phase::FeedThroughBowden { slot: 1 },
+            Phase::FeedToFsensor { slot: 1 },
+        ];
+        assert_eq!(runner.plan.as_slice(), &expected);
+        assert_eq!(runner.phase(), Some(Phase::ClearMerge { slot: 0 }));
+        assert_eq!(
+            runner.status(),
+            Status::Running(ProgressCode::RETRACTING_FROM_FINDA)
+        );
     }
 }
