@@ -198,6 +198,15 @@ impl AverageWindow {
     /// Adds a sample to a window of `capacity`; returns the new mean, rounded down.
     #[inline(always)]
     fn push(&mut self, value: u16, capacity: usize) -> u16 {
+        if capacity <= 1 {
+            // A window of one sample (the motor sensors'): the state the ring's bookkeeping
+            // would reach, set directly.
+            self.ring.values[0] = value;
+            self.ring.len = 1;
+            self.ring.next = 1;
+            self.sum = value.into();
+            return value;
+        }
         let len_before = self.ring.len;
         let replaced = self.ring.push(value, capacity);
         let len = self.ring.len;
