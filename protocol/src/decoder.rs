@@ -161,9 +161,11 @@ enum Step {
     Rejected(Rejection),
 }
 
+/// The state machine of one direction: `RESPONSE` false decodes requests, true responses. A
+/// constant, not a field: the firmware's request decoder then has no code for a response's
+/// parameter.
 #[derive(Debug, Clone)]
-struct FrameDecoder {
-    direction: Direction,
+struct FrameDecoder<const RESPONSE: bool> {
     state: State,
     fields: Fields,
 }
@@ -172,8 +174,14 @@ const fn is_newline(byte: u8) -> bool {
     byte == b'\n' || byte == b'\r'
 }
 
-impl FrameDecoder {
-    const fn new(direction: Direction, state: State) -> Self {
+impl<const RESPONSE: bool> FrameDecoder<RESPONSE> {
+    const DIRECTION: Direction = if RESPONSE {
+        Direction::Response
+    } else {
+        Direction::Request
+    };
+
+    const fn new(state: State) -> Self {
         let fields = Fields {
             code: 0,
             value: 0,
@@ -182,11 +190,7 @@ impl FrameDecoder {
             param_value: None,
             crc: 0,
         };
-        FrameDecoder {
-            direction,
-            state,
-            fields,
-        }
+        FrameDecoder { state, fields }
     }
 
     fn feed(&mut self, byte: u8) -> Step {
@@ -219,7 +223,7 @@ impl FrameDecoder {
                 self.fields.value2 = (self.fields.value2 << 4) | u16::from(d);
                 Step::Pending
             }
-            (State::ParamValue, Some(d)) => {
+            (State::ParamValue, Some(d)) if RESPONSE => {
                 let previous = self.fields.param_value.unwrap_or(0);
                 self.fields.param_value = Some((previous << 4) | u16::from(d));
                 Step::Pending
@@ -239,13 +243,13 @@ impl FrameDecoder {
                 Step::Pending
             }
             (State::Value, None) if byte == b' ' && self.space_allowed() => {
-                self.state = match self.direction {
+                self.state = match Self::DIRECTION {
                     Direction::Request => State::WriteValue,
                     Direction::Response => State::Param,
                 };
                 Step::Pending
             }
-            (State::Param, _) if ParamCode::from_byte(byte).is_some() => {
+            (State::Param, _) if RESPONSE && ParamCode::from_byte(byte).is_some() => {
                 self.fields.param = byte;
                 self.state = State::ParamValue;
                 Step::Pending
@@ -290,7 +294,7 @@ impl FrameDecoder {
 
     /// `*` may follow a request's value (a write's second value) or a response's parameter.
     fn star_allowed(&self) -> bool {
-        match (self.direction, self.state) {
+        match (Self::DIRECTION, self.state) {
             (Direction::Request, State::Value) => self.fields.code != RequestCode::Write.as_byte(),
             (Direction::Request, State::WriteValue) => true,
             (Direction::Response, State::ParamValue) => true,
@@ -300,7 +304,7 @@ impl FrameDecoder {
 
     /// A space follows the value in every response, and in a request only for `W`.
     fn space_allowed(&self) -> bool {
-        match self.direction {
+        match Self::DIRECTION {
             Direction::Request => self.fields.code == RequestCode::Write.as_byte(),
             Direction::Response => true,
         }
@@ -331,7 +335,7 @@ fn map_step<F>(
 
 /// The unit's decoder of the printer's requests.
 #[derive(Debug, Clone)]
-pub struct RequestDecoder(FrameDecoder);
+pub struct RequestDecoder(FrameDecoder<false>);
 
 impl Default for RequestDecoder {
     fn default() -> Self {
@@ -342,17 +346,14 @@ impl Default for RequestDecoder {
 impl RequestDecoder {
     /// A decoder at a line boundary, waiting for the first frame.
     pub const fn new() -> Self {
-        RequestDecoder(FrameDecoder::new(Direction::Request, State::Idle))
+        RequestDecoder(FrameDecoder::new(State::Idle))
     }
 
     /// A decoder joining a line that may be in the middle of a frame (the unit just booted while
     /// the printer may be sending): it accepts nothing until the line falls silent, so the tail
     /// of a frame is never taken for a frame.
     pub const fn new_mid_line() -> Self {
-        RequestDecoder(FrameDecoder::new(
-            Direction::Request,
-            State::AwaitSilence { dropped: false },
-        ))
+        RequestDecoder(FrameDecoder::new(State::AwaitSilence { dropped: false }))
     }
 
     /// Feed one byte. Returns a request when a frame completes, an error when a frame is rejected,
@@ -388,7 +389,7 @@ impl RequestDecoder {
 
 /// The printer's decoder of the unit's responses.
 #[derive(Debug, Clone)]
-pub struct ResponseDecoder(FrameDecoder);
+pub struct ResponseDecoder(FrameDecoder<true>);
 
 impl Default for ResponseDecoder {
     fn default() -> Self {
@@ -399,16 +400,13 @@ impl Default for ResponseDecoder {
 impl ResponseDecoder {
     /// A decoder at a line boundary, waiting for the first frame.
     pub const fn new() -> Self {
-        ResponseDecoder(FrameDecoder::new(Direction::Response, State::Idle))
+        ResponseDecoder(FrameDecoder::new(State::Idle))
     }
 
     /// A decoder joining a line that may be in the middle of a frame (see
     /// [`RequestDecoder::new_mid_line`]).
     pub const fn new_mid_line() -> Self {
-        ResponseDecoder(FrameDecoder::new(
-            Direction::Response,
-            State::AwaitSilence { dropped: false },
-        ))
+        ResponseDecoder(FrameDecoder::new(State::AwaitSilence { dropped: false }))
     }
 
     /// Feed one byte. Returns a response when a frame completes, an error when a frame is
