@@ -104,12 +104,6 @@ pub struct Config {
     pub slot_thresholds: [Thresholds; MAX_SLOTS],
     /// Edge thresholds of each slot's motor Hall sine.
     pub motor_thresholds: [Thresholds; MAX_SLOTS],
-    /// A raw reading at or below this is a sensor stuck at the low rail.
-    pub rail_low: u16,
-    /// A raw reading at or above this is a sensor stuck at the high rail.
-    pub rail_high: u16,
-    /// How long a reading must stay at a rail before the sensor is reported faulty, ms.
-    pub rail_timeout_ms: u16,
 }
 
 impl Config {
@@ -147,9 +141,6 @@ impl Config {
         hub_thresholds: Thresholds { on: 2600, off: 2400 },
         slot_thresholds: [Thresholds { on: 2600, off: 2400 }; MAX_SLOTS],
         motor_thresholds: [Thresholds { on: 2300, off: 1800 }; MAX_SLOTS],
-        rail_low: 40,
-        rail_high: 4055,
-        rail_timeout_ms: 50,
     };
 }
 

@@ -5,7 +5,7 @@
 use mmu_hal_port::{Direction, SlotSamples};
 
 use crate::config::Config;
-use crate::sensor::{FilterKind, PresenceSensor, RailLimits, RevolutionCounter, Thresholds};
+use crate::sensor::{FilterKind, PresenceSensor, RevolutionCounter, Thresholds};
 use crate::time::Instant;
 
 /// Thresholds no reading reaches, for a slot beyond the configured ones.
@@ -34,15 +34,12 @@ impl Feeder {
         counting: Direction,
         now: Instant,
         config: &Config,
-        rails: &RailLimits,
     ) {
         let presence = config.slot_thresholds.get(slot).copied().unwrap_or(DISABLED);
         let edges = config.motor_thresholds.get(slot).copied().unwrap_or(DISABLED);
         self.filament
-            .update(sample.filament, now, FilterKind::Presence, rails, presence);
-        let revolution = self
-            .hall
-            .update(sample.motor_hall, now, FilterKind::Motor, rails, edges);
+            .update(sample.filament, now, FilterKind::Presence, presence);
+        let revolution = self.hall.update(sample.motor_hall, now, FilterKind::Motor, edges);
         if revolution {
             let step = i32::from(config.mm_per_rev_centi);
             self.odometry_centi = match counting {

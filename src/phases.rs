@@ -757,7 +757,7 @@ fn push_into_gears(
 #[inline(never)]
 fn taut_for(run: &mut PhaseRun, tension: u16, now: Instant, config: &Config) -> u64 {
     let taut = u32::from(tension) > u32::from(config.tension_neutral) + u32::from(config.tension_deadband)
-        && tension < config.rail_high;
+        && tension < crate::sensor::RAIL_HIGH;
     run.taut_since = if taut { run.taut_since.or(Some(now)) } else { None };
     run.taut_since.map_or(0, |since| now.millis_since(since))
 }

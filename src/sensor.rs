@@ -503,16 +503,13 @@ pub enum Rail {
     High,
 }
 
-/// Rail limits shared by every sensor.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct RailLimits {
-    /// At or below: low rail.
-    pub low: u16,
-    /// At or above: high rail.
-    pub high: u16,
-    /// How long before the sensor is called faulty, ms.
-    pub timeout_ms: u16,
-}
+/// A raw reading at or below this is a sensor stuck at the low rail. The rail limits are the
+/// same for every sensor and fixed at build time (no register changes them).
+pub const RAIL_LOW: u16 = 40;
+/// A raw reading at or above this is a sensor stuck at the high rail.
+pub const RAIL_HIGH: u16 = 4055;
+/// How long a reading must stay at a rail before the sensor is reported faulty, ms.
+pub const RAIL_TIMEOUT_MS: u64 = 50;
 
 /// One analog sensor: its latest raw sample, its filtered value and its health.
 #[derive(Debug, Clone, Copy, Default)]
@@ -530,18 +527,18 @@ const WARM_UP_SAMPLES: u16 = MAX_WINDOW as u16 * 2;
 
 impl AnalogSensor {
     /// Take a new raw sample at `now`.
-    pub fn update(&mut self, raw: u16, now: Instant, filter: FilterKind, rails: &RailLimits) {
+    pub fn update(&mut self, raw: u16, now: Instant, filter: FilterKind) {
         self.raw = raw;
-        let rail = if raw <= rails.low {
+        let rail = if raw <= RAIL_LOW {
             Some(Rail::Low)
-        } else if raw >= rails.high {
+        } else if raw >= RAIL_HIGH {
             Some(Rail::High)
         } else {
             None
         };
         match (rail, self.at_rail_since) {
             (Some(rail), Some((seen, since))) if rail == seen => {
-                if now.millis_since(since) >= u64::from(rails.timeout_ms) {
+                if now.millis_since(since) >= RAIL_TIMEOUT_MS {
                     self.fault = Some(rail);
                 }
             }
@@ -603,15 +600,8 @@ pub struct PresenceSensor {
 
 impl PresenceSensor {
     /// Take a new raw sample at `now` and decide presence.
-    pub fn update(
-        &mut self,
-        raw: u16,
-        now: Instant,
-        filter: FilterKind,
-        rails: &RailLimits,
-        thresholds: Thresholds,
-    ) {
-        self.analog.update(raw, now, filter, rails);
+    pub fn update(&mut self, raw: u16, now: Instant, filter: FilterKind, thresholds: Thresholds) {
+        self.analog.update(raw, now, filter);
         if let Some(value) = self.analog.fresh_reading() {
             self.present = thresholds.decide(self.present, value);
         }
@@ -638,15 +628,8 @@ pub struct RevolutionCounter {
 
 impl RevolutionCounter {
     /// Take a new raw sample at `now`; returns true when it completed a revolution.
-    pub fn update(
-        &mut self,
-        raw: u16,
-        now: Instant,
-        filter: FilterKind,
-        rails: &RailLimits,
-        edges: Thresholds,
-    ) -> bool {
-        self.analog.update(raw, now, filter, rails);
+    pub fn update(&mut self, raw: u16, now: Instant, filter: FilterKind, edges: Thresholds) -> bool {
+        self.analog.update(raw, now, filter);
         let Some(value) = self.analog.fresh_reading() else {
             return false;
         };
@@ -691,11 +674,6 @@ impl RevolutionCounter {
 mod tests {
     use super::*;
 
-    const RAILS: RailLimits = RailLimits {
-        low: 40,
-        high: 4055,
-        timeout_ms: 50,
-    };
     const THRESHOLDS: Thresholds = Thresholds { on: 2600, off: 2400 };
 
     #[test]
@@ -984,13 +962,13 @@ mod tests {
         let mut sensor = PresenceSensor::default();
         let mut now = Instant::ZERO;
         for _ in 0..30 {
-            sensor.update(2048, now, FilterKind::Presence, &RAILS, THRESHOLDS);
+            sensor.update(2048, now, FilterKind::Presence, THRESHOLDS);
             now = now + 1;
         }
         assert_eq!(sensor.present(), Some(false));
         // 50 ms at the rail: suspicious, held, not yet called faulty.
         for _ in 0..50 {
-            sensor.update(4095, now, FilterKind::Presence, &RAILS, THRESHOLDS);
+            sensor.update(4095, now, FilterKind::Presence, THRESHOLDS);
             now = now + 1;
             assert_eq!(
                 sensor.present(),
@@ -998,7 +976,7 @@ mod tests {
                 "the rail value is never taken as presence"
             );
         }
-        sensor.update(4095, now, FilterKind::Presence, &RAILS, THRESHOLDS);
+        sensor.update(4095, now, FilterKind::Presence, THRESHOLDS);
         assert_eq!(sensor.analog.fault(), Some(Rail::High));
         assert_eq!(sensor.present(), None);
     }
@@ -1014,7 +992,6 @@ mod tests {
                 if i % 2 == 0 { 2100 } else { 2250 },
                 now,
                 FilterKind::Motor,
-                &RAILS,
                 edges,
             );
             now = now + 1;
@@ -1022,7 +999,7 @@ mod tests {
         assert_eq!(counter.revolutions(), 0);
         for _ in 0..3 {
             for value in [2400, 2500, 2000, 1700, 1600, 2000] {
-                counter.update(value, now, FilterKind::Motor, &RAILS, edges);
+                counter.update(value, now, FilterKind::Motor, edges);
                 now = now + 1;
             }
         }

@@ -6,7 +6,7 @@ use mmu_hal_port::Samples;
 use crate::config::Config;
 use crate::drive::SlotDrive;
 use crate::feeder::Feeder;
-use crate::sensor::{AnalogSensor, FilterKind, PresenceSensor, RailLimits};
+use crate::sensor::{AnalogSensor, FilterKind, PresenceSensor};
 use crate::time::Instant;
 
 /// Where one slot's filament is, as far as the unit knows.
@@ -180,11 +180,6 @@ impl<const N: usize> Default for Unit<N> {
 impl<const N: usize> Unit<N> {
     /// Take a round of raw samples at `now`.
     pub fn sense(&mut self, samples: &Samples<N>, now: Instant, config: &Config) {
-        let rails = RailLimits {
-            low: config.rail_low,
-            high: config.rail_high,
-            timeout_ms: config.rail_timeout_ms,
-        };
         for (slot, ((feeder, sample), drive)) in self
             .feeders
             .iter_mut()
@@ -193,7 +188,7 @@ impl<const N: usize> Unit<N> {
             .enumerate()
         {
             let before = feeder.odometry_centi();
-            feeder.sense(slot, *sample, drive.counting(), now, config, &rails);
+            feeder.sense(slot, *sample, drive.counting(), now, config);
             if feeder.odometry_centi() != before
                 && drive.is_coasting()
                 && let (Some(moved), Some(last)) = (
@@ -207,19 +202,11 @@ impl<const N: usize> Unit<N> {
             }
         }
         let hub = &samples.hub;
-        self.hub.filament.update(
-            hub.filament,
-            now,
-            FilterKind::Presence,
-            &rails,
-            config.hub_thresholds,
-        );
         self.hub
-            .tension
-            .update(hub.tension, now, FilterKind::Presence, &rails);
-        self.hub
-            .cutter
-            .update(hub.cutter, now, FilterKind::Presence, &rails);
+            .filament
+            .update(hub.filament, now, FilterKind::Presence, config.hub_thresholds);
+        self.hub.tension.update(hub.tension, now, FilterKind::Presence);
+        self.hub.cutter.update(hub.cutter, now, FilterKind::Presence);
     }
 
     /// Filament in the hub, `None` while the hub sensor is faulty or warming up.
