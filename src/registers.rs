@@ -108,7 +108,7 @@ pub enum Subject {
 }
 
 /// One row of the register table: plain data (10 B in the firmware image); the code that reads
-/// and writes its register is an arm of `read_row` and `write_row` ([`registers!`]).
+/// and writes its register is an arm of `read_row` and `write_row` (made by `registers!`).
 pub struct Row {
     /// The (first) address.
     pub address: u8,

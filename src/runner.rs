@@ -175,7 +175,7 @@ impl Runner {
                         hub: unit.hub_present() == Some(true),
                         fed_mm: self.failed_fed_centi.map(|centi| centi / 100),
                     };
-                    let Some(replanned) = replan(&retry, config) else {
+                    let Some(replanned) = replan.plan(&retry, config) else {
                         self.inherited = inherited;
                         return None;
                     };

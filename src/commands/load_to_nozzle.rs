@@ -7,7 +7,7 @@
 
 use mmu_protocol::{ButtonCode, ErrorCode};
 
-use super::{Action, Plan, Recovery, Replanned, Retry, extend, unload_from_nozzle};
+use super::{Action, Plan, Recovery, Replan, Replanned, Retry, extend, unload_from_nozzle};
 use crate::config::Config;
 use crate::phases::Phase;
 
@@ -52,7 +52,7 @@ fn from_fsensor(slot: usize) -> Plan {
 /// user pushed the tip): the tip may be far past it, so the load starts over from the park
 /// position. It still sees nothing: the feed to the hub runs again from where the tip is, as far
 /// as from an unknown position.
-fn after_missed_hub(retry: &Retry, config: &Config) -> Option<Replanned> {
+pub(crate) fn after_missed_hub(retry: &Retry, config: &Config) -> Option<Replanned> {
     if retry.hub {
         return Some(Replanned::plan(reload_from_park(retry.slot, config)));
     }
@@ -68,7 +68,7 @@ fn after_missed_hub(retry: &Retry, config: &Config) -> Option<Replanned> {
 /// search distance, not only what the first attempt left (the user may have pulled it back to
 /// look, a slipping drive fed less than it counted). The hub sensor sees nothing (the filament
 /// was taken out): the load starts over from the park position.
-fn after_no_trigger(retry: &Retry, config: &Config) -> Option<Replanned> {
+pub(crate) fn after_no_trigger(retry: &Retry, config: &Config) -> Option<Replanned> {
     let slot = retry.slot;
     let mut plan = Plan::new();
     if retry.fsensor {
@@ -96,7 +96,7 @@ fn after_no_trigger(retry: &Retry, config: &Config) -> Option<Replanned> {
 /// teaches nothing: nothing moves and `8009` stays (an unload would only end in `8004` FSENSOR
 /// FIL. STUCK, hiding the first cause). With the sensor clear, the load starts over from the park
 /// position.
-fn after_too_early(retry: &Retry, config: &Config) -> Option<Replanned> {
+pub(crate) fn after_too_early(retry: &Retry, config: &Config) -> Option<Replanned> {
     if !retry.fsensor {
         return Some(Replanned::plan(reload_from_park(retry.slot, config)));
     }
@@ -130,7 +130,7 @@ pub const RECOVERY: &[Recovery] = &[
     Recovery {
         error: ErrorCode::FINDA_DIDNT_SWITCH_ON,
         button: ButtonCode::MIDDLE,
-        action: Action::Replan(after_missed_hub),
+        action: Action::Replan(Replan::AfterMissedHub),
     },
     // `8003`: the printer's sensor did not trigger within the search distance, or the filament
     // stopped on its way there (a Bowden jam, the printer's idle extruder), or the printer's push
@@ -138,13 +138,13 @@ pub const RECOVERY: &[Recovery] = &[
     Recovery {
         error: ErrorCode::FSENSOR_DIDNT_SWITCH_ON,
         button: ButtonCode::MIDDLE,
-        action: Action::Replan(after_no_trigger),
+        action: Action::Replan(Replan::AfterNoTrigger),
     },
     // `8009`: the printer's sensor triggered during the fast feed: the Bowden tube is shorter
     // than configured, holds a leftover, or the sensor is stuck on.
     Recovery {
         error: ErrorCode::FSENSOR_TOO_EARLY,
         button: ButtonCode::MIDDLE,
-        action: Action::Replan(after_too_early),
+        action: Action::Replan(Replan::AfterTooEarly),
     },
 ];
