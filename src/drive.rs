@@ -74,7 +74,7 @@ struct Lease {
 }
 
 /// One slot's motor.
-#[derive(Debug, Clone, Copy, Default)]
+#[derive(Debug, Clone, Copy)]
 pub struct SlotDrive {
     command: MotorCommand,
     schedule: Option<Schedule>,
@@ -87,7 +87,23 @@ pub struct SlotDrive {
     braked_at: Instant,
 }
 
+impl Default for SlotDrive {
+    fn default() -> Self {
+        Self::NEW
+    }
+}
+
 impl SlotDrive {
+    /// A motor that coasts, with no motion in progress.
+    pub const NEW: SlotDrive = SlotDrive {
+        command: MotorCommand::Coast,
+        schedule: None,
+        lease: None,
+        hard_drive_since: None,
+        counting: None,
+        braked_at: Instant::ZERO,
+    };
+
     /// Start a supervised motion under `budget`: distance and time count from here.
     pub fn begin(&mut self, budget: Budget, feeder: &Feeder, now: Instant) {
         self.lease = Some(Lease {

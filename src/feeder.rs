@@ -15,7 +15,7 @@ const DISABLED: Thresholds = Thresholds {
 };
 
 /// One slot's sensors: motor Hall sensor and slot filament sensor.
-#[derive(Debug, Clone, Copy, Default)]
+#[derive(Debug, Clone, Copy)]
 pub struct Feeder {
     /// The motor Hall sensor and its revolution count.
     pub hall: RevolutionCounter,
@@ -25,7 +25,20 @@ pub struct Feeder {
     odometry_centi: i32,
 }
 
+impl Default for Feeder {
+    fn default() -> Self {
+        Self::NEW
+    }
+}
+
 impl Feeder {
+    /// A slot that has seen no sample.
+    pub const NEW: Feeder = Feeder {
+        hall: RevolutionCounter::NEW,
+        filament: PresenceSensor::NEW,
+        odometry_centi: 0,
+    };
+
     /// Take the slot's raw samples at `now`; a revolution moves the filament in `counting`.
     pub fn sense(
         &mut self,

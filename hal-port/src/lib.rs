@@ -14,14 +14,16 @@ pub mod tb6612;
 /// Largest raw analog sample: every board scales its ADC readings to 12 bits.
 pub const ADC_MAX: u16 = 4095;
 
-/// Which way a slot motor turns the filament.
+/// Which way a slot motor turns the filament. Counted from 1, so that [`MotorCommand::Coast`]
+/// and `Option::<Direction>::None` are zero bytes: state that starts coasting is built by
+/// clearing memory.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Direction {
     /// Towards the hub and the printer.
-    Forward,
+    Forward = 1,
     /// Back towards the spool.
-    Reverse,
+    Reverse = 2,
 }
 
 /// A PWM duty cycle in per mille (0 = off, 1000 = always on).
