@@ -17,28 +17,26 @@
 use core::convert::Infallible;
 use core::ops::Range;
 use core::sync::atomic::{AtomicBool, Ordering};
-use core::task::Poll;
 
 use embassy_stm32::adc::{self, Adc, AdcChannel as _, AdcConfig, AnyAdcChannel, Averaging, SampleTime};
 use embassy_stm32::crc;
 use embassy_stm32::flash::{self, Blocking, Flash};
-use embassy_stm32::gpio::{AnyPin, Input, Level, Output, OutputType, Pin, Pull, Speed};
+use embassy_stm32::gpio::{AfType, AnyPin, Flex, Input, Level, Output, OutputType, Pin, Pull, Speed};
+use embassy_stm32::interrupt::{self, InterruptExt as _};
 use embassy_stm32::pac;
 use embassy_stm32::peripherals::{self, ADC1, TIM3};
-use embassy_stm32::rcc::{self, Pll, PllMul, PllPreDiv, PllRDiv, PllSource, Sysclk};
+use embassy_stm32::rcc::{Pll, PllMul, PllPreDiv, PllRDiv, PllSource, Sysclk};
 use embassy_stm32::time::khz;
 use embassy_stm32::timer::low_level::CountingMode;
 use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm, SimplePwmChannel};
-use embassy_stm32::usart::{self, BufferedUart, BufferedUartRx, BufferedUartTx};
-use embassy_stm32::{Peri, bind_interrupts, dma};
-use embassy_time::{Duration, with_timeout};
-use embedded_io::Read as _;
-use embedded_io_async::{ReadReady as _, Write as _};
+use embassy_stm32::usart::{RxPin, TxPin};
+use embassy_stm32::{Peri, bind_interrupts, dma, rcc};
+use embassy_time::{Duration, Instant};
 use embedded_storage::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
 use mmu_firmware::persist::EntryCrc;
+use mmu_firmware::uart::{Port, Uart, UsartRegisters};
 use mmu_hal_port::tb6612::{Channel, Tb6612};
 use mmu_hal_port::{Button as _, HubSamples, MotorCommand, Samples, SlotSamples, StatusLed as _};
-use static_cell::ConstStaticCell;
 
 /// Filament slots on this board.
 pub const SLOTS: usize = 3;
@@ -56,9 +54,11 @@ const SAMPLE_TIME: SampleTime = SampleTime::CYCLES79_5;
 /// responses (`mmu_firmware::TX_CAPACITY` = 48).
 const RX_RING: usize = mmu_firmware::control::RX_RING;
 const TX_RING: usize = 256;
+/// The printer line's rate, 8N1.
+const BAUD: u32 = 115_200;
 
 bind_interrupts!(struct Irqs {
-    USART3_4_LPUART1 => usart::BufferedInterruptHandler<peripherals::USART3>;
+    USART3_4_LPUART1 => PrinterUartInterrupt;
     DMA1_CHANNEL1 => dma::InterruptHandler<peripherals::DMA1_CH1>;
 });
 
@@ -571,8 +571,9 @@ pub struct Control {
     chip2: Chip2,
     /// Whether each chip is in standby (STBY low): while none of its motors is driven or braked.
     chip_standby: [bool; 2],
-    rx: BufferedUartRx<'static>,
-    tx: BufferedUartTx<'static>,
+    uart: Port<'static, PrinterUsart, RX_RING, TX_RING>,
+    /// PC11 (RX) and PC10 (TX) in their USART3 function, for as long as the board runs.
+    _uart_pins: [Flex<'static>; 2],
     led: Output<'static>,
     button: Input<'static>,
 }
@@ -608,25 +609,27 @@ impl Control {
     /// how many. The USART interrupt fills a 256-byte ring in the background.
     pub fn receive(&mut self, buf: &mut [u8]) -> usize {
         let limit = buf.len().min(mmu_firmware::control::MAX_RX_PER_STEP);
-        let Some(buf) = buf.get_mut(..limit) else {
-            return 0;
-        };
-        // Ready: the read returns at once (embedded-io `ReadReady`), without a future.
-        if !matches!(self.rx.read_ready(), Ok(true)) {
-            return 0;
+        match buf.get_mut(..limit) {
+            Some(buf) => self.uart.receive(buf),
+            None => 0,
         }
-        self.rx.read(buf).unwrap_or(0)
     }
 
     /// Queues `bytes` for the printer without waiting. Returns false (nothing queued) when the
     /// transmit ring has no room for all of them, so a response is never sent in part.
     pub fn send(&mut self, bytes: &[u8]) -> bool {
-        matches!(embassy_futures::poll_once(self.tx.write(bytes)), Poll::Ready(Ok(n)) if n == bytes.len())
+        self.uart.send(bytes)
     }
 
     /// Waits until every queued byte has left the UART, at most `timeout`.
-    pub async fn flush(&mut self, timeout: Duration) {
-        let _ = with_timeout(timeout, self.tx.flush()).await;
+    pub fn flush(&mut self, timeout: Duration) {
+        let deadline = Instant::now() + timeout;
+        while !self.uart.sent() && Instant::now() < deadline {}
+    }
+
+    /// What went wrong on the printer's receive line since start-up.
+    pub fn line_errors(&self) -> mmu_firmware::uart::LineErrors {
+        PRINTER_UART.errors()
     }
 
     /// Lights or clears LD4.
@@ -709,26 +712,7 @@ pub fn init() -> (Control, Sampler, StoreFlash) {
         low(parts.stby2),
     ));
 
-    // Printer UART: 115200 8N1, interrupt-driven rings. No pull on RX: the line is driven by
-    // the printer, possibly at 5 V.
-    static RX_BUF: ConstStaticCell<[u8; RX_RING]> = ConstStaticCell::new([0; RX_RING]);
-    static TX_BUF: ConstStaticCell<[u8; TX_RING]> = ConstStaticCell::new([0; TX_RING]);
-    let mut uart_config = usart::Config::default();
-    uart_config.baudrate = 115_200;
-    uart_config.data_bits = usart::DataBits::DataBits8;
-    uart_config.parity = usart::Parity::ParityNone;
-    uart_config.stop_bits = usart::StopBits::STOP1;
-    uart_config.rx_pull = Pull::None;
-    let uart = defmt::unwrap!(BufferedUart::new(
-        parts.printer_uart,
-        parts.printer_rx,
-        parts.printer_tx,
-        defmt::unwrap!(TX_BUF.try_take()),
-        defmt::unwrap!(RX_BUF.try_take()),
-        Irqs,
-        uart_config,
-    ));
-    let (tx, rx) = uart.split();
+    let (uart, _uart_pins) = start_printer_uart(parts.printer_uart, parts.printer_rx, parts.printer_tx);
 
     // ADC: 64 MHz system clock / 2 = 32 MHz (the G0 allows 35), 8x hardware oversampling.
     let adc_config = AdcConfig {
@@ -762,8 +746,8 @@ pub fn init() -> (Control, Sampler, StoreFlash) {
         chip1,
         chip2,
         chip_standby: [true; 2],
-        rx,
-        tx,
+        uart,
+        _uart_pins,
         led: Output::new(parts.status_led, Level::Low, Speed::Low),
         button: Input::new(parts.button, Pull::Up),
     };
@@ -778,4 +762,95 @@ pub fn init() -> (Control, Sampler, StoreFlash) {
         crc: HardwareCrc::new(parts.crc),
     };
     (control, sampler, store)
+}
+
+/// The printer UART's rings, shared by its interrupt and [`Control`] (see `mmu_firmware::uart`,
+/// which holds the driver's decisions and their tests).
+///
+/// Not embassy-stm32's `BufferedUart`: its async machinery (wakers, futures, the configuration
+/// code for every USART mode) took 1.8 KB more of the 32 KiB flash, for a line this firmware only
+/// polls once a step.
+static PRINTER_UART: Uart<RX_RING, TX_RING> = Uart::new();
+
+/// USART3's registers (RM0444, USART chapter), one volatile access each.
+struct PrinterUsart;
+
+impl UsartRegisters for PrinterUsart {
+    fn isr(&self) -> u32 {
+        pac::USART3.isr().read().0
+    }
+
+    fn clear(&self, flags: u32) {
+        pac::USART3.icr().write_value(pac::usart::regs::Icr(flags));
+    }
+
+    fn read_rdr(&self) -> u8 {
+        pac::USART3.rdr().read().0 as u8
+    }
+
+    fn write_tdr(&self, byte: u8) {
+        pac::USART3
+            .tdr()
+            .write_value(pac::usart::regs::Dr(u32::from(byte)));
+    }
+
+    fn cr1(&self) -> u32 {
+        pac::USART3.cr1().read().0
+    }
+
+    fn set_cr1(&self, cr1: u32) {
+        pac::USART3.cr1().write_value(pac::usart::regs::Cr1(cr1));
+    }
+
+    fn pend_interrupt(&self) {
+        interrupt::USART3_4_LPUART1.pend();
+    }
+}
+
+/// Runs [`Uart::on_interrupt`] for USART3.
+struct PrinterUartInterrupt;
+
+impl interrupt::typelevel::Handler<interrupt::typelevel::USART3_4_LPUART1> for PrinterUartInterrupt {
+    unsafe fn on_interrupt() {
+        // SAFETY: this handler is the interrupt's only context.
+        unsafe { PRINTER_UART.on_interrupt(&PrinterUsart) }
+    }
+}
+
+/// USART3 at [`BAUD`] 8N1 with its FIFOs, the receive interrupt on: the register settings
+/// embassy-stm32 0.6.0's `BufferedUart::new` makes for this configuration (clock on and reset,
+/// USART_BRR = kernel clock / baud with oversampling by 16, USART_CR1 = UE | RE | TE | FIFOEN |
+/// RXFNEIE, the other registers at their reset values), and the pins in their USART function
+/// (TX push-pull; no pull on RX: the printer drives it, possibly at 5 V).
+fn start_printer_uart(
+    _usart: Peri<'static, peripherals::USART3>,
+    rx: Peri<'static, peripherals::PC11>,
+    tx: Peri<'static, peripherals::PC10>,
+) -> (Port<'static, PrinterUsart, RX_RING, TX_RING>, [Flex<'static>; 2]) {
+    // The AF numbers from the HAL's pin tables, which also check that these are USART3's pins.
+    let (rx_af, tx_af) = (
+        RxPin::<peripherals::USART3>::af_num(&*rx),
+        TxPin::<peripherals::USART3>::af_num(&*tx),
+    );
+    let mut rx = Flex::new(rx);
+    rx.set_as_af_unchecked(rx_af, AfType::input(Pull::None));
+    let mut tx = Flex::new(tx);
+    tx.set_as_af_unchecked(tx_af, AfType::output(OutputType::PushPull, Speed::Medium));
+    rcc::enable_and_reset::<peripherals::USART3>();
+    let kernel_hz = rcc::frequency::<peripherals::USART3>().0;
+    let regs = pac::USART3;
+    regs.brr()
+        .write_value(pac::usart::regs::Brr((kernel_hz + BAUD / 2) / BAUD));
+    regs.cr1().write(|w| {
+        w.set_ue(true);
+        w.set_re(true);
+        w.set_te(true);
+        w.set_fifoen(true);
+        w.set_rxneie(true);
+    });
+    interrupt::USART3_4_LPUART1.unpend();
+    // SAFETY: the handler only touches PRINTER_UART's interrupt side.
+    unsafe { interrupt::USART3_4_LPUART1.enable() };
+    // SAFETY: the one Port.
+    (unsafe { PRINTER_UART.port(PrinterUsart) }, [rx, tx])
 }

@@ -74,9 +74,10 @@ pub const RX_RING: usize = 256;
 const _: () = assert!(RX_RING >= rx_ring_needed(RX_GAP_MS));
 
 /// The bytes received from the printer that wait for the control loop, oldest first, with the
-/// loop's rule: each step takes at most [`MAX_RX_PER_STEP`] of them. The board's UART ring
-/// (`src/board.rs`) does the same with Embassy's buffer; this one serves the host, the tests and
-/// the step-cost benchmark (`bench-mcu`), which must hand the App exactly what the board would.
+/// loop's rule: each step takes at most [`MAX_RX_PER_STEP`] of them. The board's UART driver
+/// ([`crate::uart`]) does the same, and its tests check that it hands out what this does; this
+/// one serves the host, the tests and the step-cost benchmark (`bench-mcu`), which must hand the
+/// App exactly what the board would.
 #[derive(Debug, Clone, Default)]
 pub struct RxQueue<const CAPACITY: usize> {
     bytes: Deque<u8, CAPACITY>,

@@ -34,6 +34,7 @@ use embassy_executor::Executor;
 use embassy_time::{Duration, Instant as Clock, Ticker};
 use mmu_firmware::control::{self, ControlLoop, ResetBoard, Tick};
 use mmu_firmware::persist::{Boot, Keeper, Store};
+use mmu_firmware::uart::LineErrors;
 use mmu_firmware::{App, BoardAction, Config, Instant, drive};
 use static_cell::StaticCell;
 
@@ -89,6 +90,7 @@ async fn control_task(
     let mut ticker = Ticker::every(CONTROL_PERIOD);
     let mut deadline = Clock::now() + CONTROL_PERIOD;
     let mut rx = [0u8; RX_CHUNK];
+    let mut line_errors = LineErrors::default();
     loop {
         ticker.next().await;
         let lateness = Clock::now().saturating_duration_since(deadline);
@@ -131,7 +133,9 @@ async fn control_task(
             board.feed_watchdog();
         }
         if let Some(stats) = step.report {
-            log_stats(&stats);
+            let now_errors = board.line_errors();
+            log_stats(&stats, &now_errors.since(&line_errors));
+            line_errors = now_errors;
         }
 
         // Last, just after the feed: a write stalls the CPU (see `board::WatchedFlash`; a page
@@ -170,7 +174,7 @@ impl ResetBoard for Resetting<'_> {
     }
 
     async fn flush(&mut self) {
-        self.board.flush(FLUSH_BEFORE_RESET).await;
+        self.board.flush(FLUSH_BEFORE_RESET);
     }
 
     async fn persist(&mut self, action: BoardAction) {
@@ -182,17 +186,21 @@ impl ResetBoard for Resetting<'_> {
     }
 }
 
-fn log_stats(stats: &control::Stats) {
-    if stats.troubled() {
+/// The period's statistics, with what went wrong on the printer's receive line meanwhile.
+fn log_stats(stats: &control::Stats, line: &LineErrors) {
+    if stats.troubled() || line.total() > 0 {
         warn!(
-            "control: {} steps, {} late (max {} us), {} with stale samples, {} watchdog feeds skipped, {} responses dropped, {} flash writes",
+            "control: {} steps, {} late (max {} us), {} with stale samples, {} watchdog feeds skipped, {} responses dropped, {} flash writes; received: {} overruns, {} garbled, {} dropped",
             stats.steps,
             stats.late,
             stats.max_lateness_us,
             stats.stale,
             stats.unfed,
             stats.tx_dropped,
-            stats.saves
+            stats.saves,
+            line.overruns,
+            line.garbled,
+            line.dropped
         );
     } else {
         info!(
