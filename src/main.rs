@@ -1,16 +1,21 @@
 //! MCU entry point of the reference board (NUCLEO-G071RB): the unit logic ([`mmu_firmware::App`])
 //! stepped every millisecond, with the same code the host tests and the simulator step.
 //!
-//! One task, `control_task`, on a thread-mode Embassy executor: at boot it restores what the unit
-//! kept in flash ([`Persisted`]); then every millisecond (Ticker) it scans all nine Hall sensors
-//! (DMA, about 210 µs with the CPU free), drains the bytes the printer sent, debounces the button,
-//! steps the App, applies the motor commands, queues the response bytes, drives the status LED,
-//! carries out resets, feeds the watchdog when it stepped on time, and writes what changed to
-//! flash. (A separate sampler task publishing its scans cost 380 B of flash and 190 B of RAM
-//! more; a scan that never completes now stalls the loop, so the watchdog resets the MCU.)
+//! One loop, [`run`]: at boot it restores what the unit kept in flash ([`Persisted`]); then every
+//! millisecond of the board's uptime clock it scans all nine Hall sensors (DMA, about 210 µs),
+//! drains the bytes the printer sent, debounces the button, steps the App, applies the motor
+//! commands, queues the response bytes, drives the status LED, carries out resets, feeds the
+//! watchdog when it stepped on time, and writes what changed to flash. A scan that never
+//! completes stalls the loop, so the watchdog resets the MCU.
+//!
+//! No async executor: the firmware has one loop, and an Embassy executor with embassy-time (the
+//! `Ticker`, the time driver on TIM15, its timer queue and wakers) took 1.9 KB more of the 32 KiB
+//! flash than this loop paced by a hardware counter ([`board::wait_until`]), measured. What it
+//! still awaits (the ADC scan, a reset's steps) runs to completion under `block_on`, which polls
+//! while the DMA works.
 //!
 //! The printer UART's receive path needs no task of its own: the USART interrupt moves every byte
-//! into a 256-byte ring as it arrives, whatever the tasks are doing (a byte could only be lost if
+//! into a 256-byte ring as it arrives, whatever the loop is doing (a byte could only be lost if
 //! interrupts stayed masked for a whole character time, 87 µs), and each step takes at most
 //! `control::MAX_RX_PER_STEP` bytes from it, more than arrive in a millisecond (the ring holds
 //! 20 ms of continuous traffic beyond that).
@@ -30,9 +35,8 @@ use core::sync::atomic::{AtomicBool, Ordering};
 use cortex_m_rt::{ExceptionFrame, entry, exception};
 use defmt::{error, info, unwrap, warn};
 use defmt_rtt as _;
-use embassy_executor::Executor;
-use embassy_time::{Duration, Instant as Clock, Ticker};
-use mmu_firmware::control::{self, ControlLoop, ResetBoard, Tick};
+use embassy_futures::block_on;
+use mmu_firmware::control::{self, ControlLoop, ResetBoard, Schedule, Tick};
 use mmu_firmware::persist::{Boot, Keeper, Store};
 use mmu_firmware::uart::LineErrors;
 use mmu_firmware::{App, BoardAction, Config, Instant, drive};
@@ -40,12 +44,12 @@ use static_cell::StaticCell;
 
 use board::SLOTS;
 
-/// Period of the control step.
-const CONTROL_PERIOD: Duration = Duration::from_millis(1);
+/// Period of the control step, µs.
+const CONTROL_PERIOD_US: u64 = 1_000;
 /// Most bytes handed to one step (`board::Control::receive` takes no more).
 const RX_CHUNK: usize = control::MAX_RX_PER_STEP;
-/// The longest a reset waits for the last response to leave the UART.
-const FLUSH_BEFORE_RESET: Duration = Duration::from_millis(20);
+/// The longest a reset waits for the last response to leave the UART, µs.
+const FLUSH_BEFORE_RESET_US: u64 = 20_000;
 
 #[entry]
 fn main() -> ! {
@@ -57,55 +61,52 @@ fn main() -> ! {
         board::reset_cause()
     );
 
-    static EXECUTOR: StaticCell<Executor> = StaticCell::new();
-    // `try_init` and defmt's `unwrap!` rather than `init`: its panic message would stay in flash.
-    unwrap!(EXECUTOR.try_init(Executor::new())).run(|spawner| {
-        let (control, sampler, flash) = board::init();
-        let logic = new_logic();
-        spawner.spawn(unwrap!(control_task(control, sampler, flash, logic)));
-    })
+    let (control, sampler, flash) = board::init();
+    let logic = new_logic();
+    run(control, sampler, flash, logic)
 }
 
-/// The unit logic, in a static rather than in the control task's future. Built out of line:
-/// `App::new` builds it on the stack first (about 2.5 KiB), and this frame is gone before the
-/// tasks run, whereas a temporary in the task's `poll` or in `Executor::run` would stay under
-/// every later step (the worst-case stack, `scripts/firmware-size.sh`).
+/// The unit logic, in a static rather than in the loop's frame. Built out of line: `App::new`
+/// builds it on the stack first (about 2.5 KiB), and this frame is gone before the loop runs,
+/// whereas a temporary in [`run`] or `main` would stay under every later step (the worst-case
+/// stack, `scripts/firmware-size.sh`).
 #[inline(never)]
 fn new_logic() -> &'static mut ControlLoop<SLOTS> {
     static LOGIC: StaticCell<ControlLoop<SLOTS>> = StaticCell::new();
+    // `try_init` and defmt's `unwrap!` rather than `init`: its panic message would stay in flash.
     unwrap!(LOGIC.try_init(ControlLoop::new(
         App::new(Config::default()),
-        millis(Clock::now()),
+        millis(board::uptime_us()),
     )))
 }
 
-#[embassy_executor::task]
-async fn control_task(
+/// The control loop: a step every [`CONTROL_PERIOD_US`] of the uptime clock ([`Schedule`]). A
+/// step that starts late (the previous one overran) runs at once and reports its lateness, which
+/// decides the watchdog feed ([`control::feeds_watchdog`]); the ticks a flash write stalled are
+/// dropped rather than caught up in a burst of late, unfed steps.
+fn run(
     mut board: board::Control,
     mut sampler: board::Sampler,
     flash: board::StoreFlash,
     control: &'static mut ControlLoop<SLOTS>,
-) {
+) -> ! {
     let mut persisted = Persisted::boot(control.app_mut(), flash);
-    let mut ticker = Ticker::every(CONTROL_PERIOD);
-    let mut deadline = Clock::now() + CONTROL_PERIOD;
+    let mut schedule = Schedule::new(board::uptime_us(), CONTROL_PERIOD_US);
     let mut rx = [0u8; RX_CHUNK];
     let mut line_errors = LineErrors::default();
     loop {
-        ticker.next().await;
-        let lateness = Clock::now().saturating_duration_since(deadline);
-        deadline += CONTROL_PERIOD;
+        let lateness_us = schedule.start(board::wait_until(schedule.deadline_us()));
 
         // This tick's scan, then the step: the App steps on readings taken just before it.
-        let samples = sampler.sample().await;
-        let now = Clock::now();
+        let samples = block_on(sampler.sample());
+        let now = board::uptime_us();
         let received = board.receive(&mut rx);
         let button_down = board.button_down();
         let step = control_step(
             control,
             &Tick {
                 now: millis(now),
-                lateness_us: lateness.as_micros(),
+                lateness_us,
                 sample_age_us: 0,
                 samples: &samples,
                 rx: &rx[..received],
@@ -127,7 +128,7 @@ async fn control_task(
                 persisted: &mut persisted,
                 app: control.app(),
             };
-            control::reset(&mut resetting, action).await;
+            block_on(control::reset(&mut resetting, action));
         }
         if step.feed_watchdog {
             board.feed_watchdog();
@@ -144,18 +145,17 @@ async fn control_task(
         let busy = received > 0 || !step.out.tx.is_empty();
         if persisted.update(control.app(), now, busy) {
             control.saved();
-            ticker.reset();
-            deadline = Clock::now() + CONTROL_PERIOD;
+            schedule.restart(board::uptime_us());
         }
     }
 }
 
-fn millis(at: Clock) -> Instant {
-    Instant::from_millis(at.as_millis())
+fn millis(at_us: u64) -> Instant {
+    Instant::from_millis(at_us / 1000)
 }
 
 /// One step of the unit logic and its loop policy. Kept out of line so that its size shows as
-/// `mmu_firmware::control_step` in `scripts/firmware-size.sh` rather than inside the task's future.
+/// `mmu_firmware::control_step` in `scripts/firmware-size.sh` rather than inside [`run`].
 #[inline(never)]
 fn control_step(control: &mut ControlLoop<SLOTS>, tick: &Tick<SLOTS>) -> control::Step<SLOTS> {
     control.step(tick)
@@ -174,7 +174,7 @@ impl ResetBoard for Resetting<'_> {
     }
 
     async fn flush(&mut self) {
-        self.board.flush(FLUSH_BEFORE_RESET);
+        self.board.flush(FLUSH_BEFORE_RESET_US);
     }
 
     async fn persist(&mut self, action: BoardAction) {
@@ -258,10 +258,8 @@ impl Persisted {
     /// wrote, i.e. stalled the CPU. A failed write leaves the previous record in flash; the
     /// keeper tries again after a pause, and its health is logged once per change.
     #[inline(never)]
-    fn update(&mut self, app: &App<SLOTS>, now: Clock, busy: bool) -> bool {
-        let wrote = self
-            .0
-            .update_after(app, Instant::from_millis(now.as_millis()), busy);
+    fn update(&mut self, app: &App<SLOTS>, now_us: u64, busy: bool) -> bool {
+        let wrote = self.0.update_after(app, millis(now_us), busy);
         if let Some(health) = self.0.take_news() {
             warn!("store: {}", health);
         }
