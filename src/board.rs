@@ -15,10 +15,11 @@
 //! - [`uptime_us`] and [`wait_until`]: the clock that paces the control loop (TIM2);
 //! - [`reset_cause`], [`reset`].
 //!
-//! Two parts are plain register code rather than Embassy's, for the 32 KiB flash target (each
+//! Three parts are plain register code rather than Embassy's, for the 32 KiB flash target (each
 //! measured on the linked image): the printer UART (the ring logic in `mmu_firmware::uart`, with
-//! host tests; embassy-stm32's `BufferedUart` took 1.8 KB more) and the clock (one free-running
-//! 32-bit counter instead of embassy-time's driver, queue and the executor, 1.9 KB more).
+//! host tests; embassy-stm32's `BufferedUart` took 1.8 KB more), the clock (one free-running
+//! 32-bit counter instead of embassy-time's driver, queue and the executor, 1.9 KB more) and the
+//! ADC scan (Embassy still sets the ADC up; its DMA `read` took 1.3 KB more).
 
 use core::convert::Infallible;
 use core::ops::Range;
@@ -38,7 +39,7 @@ use embassy_stm32::time::khz;
 use embassy_stm32::timer::low_level::CountingMode;
 use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm, SimplePwmChannel};
 use embassy_stm32::usart::{RxPin, TxPin};
-use embassy_stm32::{Peri, bind_interrupts, dma, rcc};
+use embassy_stm32::{Peri, bind_interrupts, rcc};
 use embedded_storage::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
 use mmu_firmware::persist::EntryCrc;
 use mmu_firmware::uart::{Port, Uart, UsartRegisters};
@@ -66,7 +67,6 @@ const BAUD: u32 = 115_200;
 
 bind_interrupts!(struct Irqs {
     USART3_4_LPUART1 => PrinterUartInterrupt;
-    DMA1_CHANNEL1 => dma::InterruptHandler<peripherals::DMA1_CH1>;
 });
 
 /// Declares the board's pin map once and derives from it: the [`Parts`] struct that takes every
@@ -120,8 +120,7 @@ pin_map! {
     peripherals {
         pwm_timer: TIM3, "Motor PWM, 20 kHz, channels 1-3";
         clock_timer: TIM2, "The uptime clock, 1 MHz, 32 bits (uptime_us)";
-        adc: ADC1, "All nine Hall sensors, one DMA scan per millisecond";
-        adc_dma: DMA1_CH1, "ADC scan results";
+        adc: ADC1, "All nine Hall sensors, one scan per millisecond";
         printer_uart: USART3, "Printer MMU port, 115200 8N1 (USART2 stays on the ST-LINK VCP)";
         watchdog: IWDG, "Independent watchdog, fed by the control loop";
         flash: FLASH, "Internal flash: the persisted state in its last 16 pages (STORE_RANGE)";
@@ -362,7 +361,7 @@ impl EntryCrc for HardwareCrc {
 /// or a double word programmed (85 µs typical), every fetch from flash stalls, so the CPU stops
 /// altogether: no task, no interrupt (the vectors are in flash too). The motors keep the last
 /// command applied; UART bytes that arrive meanwhile, past the receiver's own buffer, are lost
-/// (overrun; the printer's protocol retries); the timers and the ADC's DMA carry on. One control
+/// (overrun; the printer's protocol retries); the timers and the ADC carry on. One control
 /// step of a save programs at most 8 double words or erases one page (a save erases at most two,
 /// see `mmu_firmware::persist`); a save before a reset runs whole, and erasing the whole store
 /// erases all its pages in a row. Each erase is shorter
@@ -494,12 +493,17 @@ const ANALOG_INPUTS: usize = 2 * SLOTS + 3;
 /// The first hub input.
 const HUB_INPUTS: usize = 2 * SLOTS;
 
-/// The ADC half of the board: one DMA scan of all nine Hall sensors per call.
+/// The ADC half of the board: one scan of all nine Hall sensors per call.
+///
+/// Embassy's driver sets the ADC up (regulator, calibration, clock, oversampling); the scan is
+/// register code: the channels are selected once ([`start_scan`]), and each call starts the
+/// sequence and reads each result as it completes. Embassy's `read` reprograms the channels and a
+/// DMA transfer at every call (1.3 KB more flash, measured), and does not wait for CCRDY after
+/// writing ADC_CHSELR, which RM0444 requires before a conversion starts.
 pub struct Sampler {
-    adc: Adc<'static, ADC1>,
-    dma: Peri<'static, peripherals::DMA1_CH1>,
-    /// The channels, in the order of [`ANALOG_INPUTS`].
-    inputs: [AnyAdcChannel<'static, ADC1>; ANALOG_INPUTS],
+    _adc: Adc<'static, ADC1>,
+    /// The channels' pins, in analog mode for as long as the board runs.
+    _inputs: [AnyAdcChannel<'static, ADC1>; ANALOG_INPUTS],
     /// Where each input's conversion lands in a scan's results. The G0 ADC converts the selected
     /// channels (CHSELR) in ascending channel number whatever order they are listed in (RM0444,
     /// ADC: CHSELRMOD = 0, SCANDIR = 0), so it is the number of inputs on a lower channel.
@@ -508,17 +512,17 @@ pub struct Sampler {
 
 impl Sampler {
     /// One scan of every sensor, about 210 µs (9 channels x 8 oversampled conversions of
-    /// 2.9 µs), the CPU free meanwhile.
-    pub async fn sample(&mut self) -> Samples<SLOTS> {
+    /// 2.9 µs): ADSTART, then each conversion's result from ADC_DR once EOC is set (reading DR
+    /// clears EOC; RM0444, ADC_ISR and ADC_DR). A scan that never completes stalls the control
+    /// loop, and the watchdog resets the MCU.
+    pub fn sample(&mut self) -> Samples<SLOTS> {
+        let adc = pac::ADC1;
         let mut raw = [0u16; ANALOG_INPUTS];
-        self.adc
-            .read(
-                self.dma.reborrow(),
-                Irqs,
-                self.inputs.iter_mut().map(|channel| (channel, SAMPLE_TIME)),
-                &mut raw,
-            )
-            .await;
+        adc.cr().modify(|w| w.set_adstart(true));
+        for value in &mut raw {
+            while !adc.isr().read().eoc() {}
+            *value = adc.dr().read().data();
+        }
         let positions = &self.scan_positions;
         let input = |index: usize| {
             let position = positions.get(index).map_or(usize::MAX, |&at| usize::from(at));
@@ -760,10 +764,10 @@ pub fn init() -> (Control, Sampler, StoreFlash) {
         led: Output::new(parts.status_led, Level::Low, Speed::Low),
         button: Input::new(parts.button, Pull::Up),
     };
+    start_scan(&inputs);
     let sampler = Sampler {
-        adc,
-        dma: parts.adc_dma,
-        inputs,
+        _adc: adc,
+        _inputs: inputs,
         scan_positions,
     };
     let store = StoreFlash {
@@ -903,3 +907,23 @@ fn start_clock(_timer: Peri<'static, peripherals::TIM2>) {
 }
 
 defmt::timestamp!("{=u64:us}", uptime_us());
+
+/// Prepares the scan [`Sampler::sample`] starts: the ADC enabled (ADEN, then ADRDY), every input
+/// selected in ADC_CHSELR with the sample time SMP1 ([`SAMPLE_TIME`]; SMPSEL = 0 for all), single
+/// conversion mode, no DMA (ADC_CFGR1 as reset), then CCRDY awaited: RM0444 (ADC_ISR, CCRDY)
+/// ignores a start issued before the channel configuration is applied.
+fn start_scan(inputs: &[AnyAdcChannel<'static, ADC1>; ANALOG_INPUTS]) {
+    let adc = pac::ADC1;
+    if !adc.cr().read().aden() {
+        adc.isr().write(|w| w.set_adrdy(true));
+        adc.cr().modify(|w| w.set_aden(true));
+        while !adc.isr().read().adrdy() {}
+    }
+    adc.smpr().write(|w| w.set_sample_time(0, SAMPLE_TIME));
+    adc.chselr().write(|w| {
+        for input in inputs {
+            w.set_chsel(usize::from(input.get_hw_channel()), true);
+        }
+    });
+    while !adc.isr().read().ccrdy() {}
+}

@@ -2,7 +2,7 @@
 //! stepped every millisecond, with the same code the host tests and the simulator step.
 //!
 //! One loop, [`run`]: at boot it restores what the unit kept in flash ([`Persisted`]); then every
-//! millisecond of the board's uptime clock it scans all nine Hall sensors (DMA, about 210 µs),
+//! millisecond of the board's uptime clock it scans all nine Hall sensors (about 210 µs),
 //! drains the bytes the printer sent, debounces the button, steps the App, applies the motor
 //! commands, queues the response bytes, drives the status LED, carries out resets, feeds the
 //! watchdog when it stepped on time, and writes what changed to flash. A scan that never
@@ -10,9 +10,9 @@
 //!
 //! No async executor: the firmware has one loop, and an Embassy executor with embassy-time (the
 //! `Ticker`, the time driver on TIM15, its timer queue and wakers) took 1.9 KB more of the 32 KiB
-//! flash than this loop paced by a hardware counter ([`board::wait_until`]), measured. What it
-//! still awaits (the ADC scan, a reset's steps) runs to completion under `block_on`, which polls
-//! while the DMA works.
+//! flash than this loop paced by a hardware counter ([`board::wait_until`]), measured. The one
+//! thing still `async`, a reset's steps ([`control::reset`], shared with the simulator), runs to
+//! completion under `block_on`.
 //!
 //! The printer UART's receive path needs no task of its own: the USART interrupt moves every byte
 //! into a 256-byte ring as it arrives, whatever the loop is doing (a byte could only be lost if
@@ -98,7 +98,7 @@ fn run(
         let lateness_us = schedule.start(board::wait_until(schedule.deadline_us()));
 
         // This tick's scan, then the step: the App steps on readings taken just before it.
-        let samples = block_on(sampler.sample());
+        let samples = sampler.sample();
         let now = board::uptime_us();
         let received = board.receive(&mut rx);
         let button_down = board.button_down();
