@@ -56,7 +56,7 @@ fn main() -> ! {
     // Before anything else: every bridge off, whatever state a reset left the pins in.
     board::emergency_stop();
     info!(
-        "mmu-firmware {} starting, reset cause: {}",
+        "mmu-firmware {=str} starting, reset cause: {}",
         env!("CARGO_PKG_VERSION"),
         board::reset_cause()
     );
@@ -190,7 +190,7 @@ impl ResetBoard for Resetting<'_> {
 fn log_stats(stats: &control::Stats, line: &LineErrors) {
     if stats.troubled() || line.total() > 0 {
         warn!(
-            "control: {} steps, {} late (max {} us), {} with stale samples, {} watchdog feeds skipped, {} responses dropped, {} flash writes; received: {} overruns, {} garbled, {} dropped",
+            "control: {=u32} steps, {=u32} late (max {=u64} us), {=u32} with stale samples, {=u32} watchdog feeds skipped, {=u32} responses dropped, {=u32} flash writes; received: {=u32} overruns, {=u32} garbled, {=u32} dropped",
             stats.steps,
             stats.late,
             stats.max_lateness_us,
@@ -204,7 +204,7 @@ fn log_stats(stats: &control::Stats, line: &LineErrors) {
         );
     } else {
         info!(
-            "control: {} steps on time, max lateness {} us, {} flash writes",
+            "control: {=u32} steps on time, max lateness {=u64} us, {=u32} flash writes",
             stats.steps, stats.max_lateness_us, stats.saves
         );
     }
@@ -237,17 +237,17 @@ impl Persisted {
                 let snapshot = app.snapshot();
                 let c = &snapshot.counters;
                 info!(
-                    "restored: lanes {}, {} settings, errors {}, tool changes {}, failures {}, fed {} mm",
-                    snapshot.lanes,
+                    "restored: lanes {=[?]}, {=usize} settings, errors {=u16}, tool changes {=[?]}, failures {=[?]}, fed {=[?]} mm",
+                    &snapshot.lanes[..],
                     snapshot.settings.len(),
                     c.drive_errors,
-                    c.tool_changes,
-                    c.failures,
-                    c.fed_mm
+                    &c.tool_changes[..],
+                    &c.failures[..],
+                    &c.fed_mm[..]
                 );
             }
             Boot::Damaged(damage) => warn!(
-                "store: {} unreadable double words, {} torn entries (a power cut): the newest complete records are restored",
+                "store: {=u16} unreadable double words, {=u16} torn entries (a power cut): the newest complete records are restored",
                 damage.unreadable, damage.torn
             ),
         }
