@@ -122,7 +122,7 @@ fn run(
             control.tx_dropped();
         }
         if let Some(action) = step.out.action {
-            info!("board action: {}", action);
+            // Logged by `Persisted::before`, which every reset runs ("store: Reset done").
             let mut resetting = Resetting {
                 board: &mut board,
                 persisted: &mut persisted,
