@@ -1,7 +1,7 @@
 //! MCU entry point of the reference board (NUCLEO-G071RB): the unit logic ([`mmu_firmware::App`])
 //! stepped every millisecond, with the same code the host tests and the simulator step.
 //!
-//! One loop, [`run`]: at boot it restores what the unit kept in flash ([`Persisted`]); then every
+//! One loop, [`run`]: once `main` has restored what the unit kept in flash ([`Persisted`]), every
 //! millisecond of the board's uptime clock it scans all nine Hall sensors (about 210 µs),
 //! drains the bytes the printer sent, debounces the button, steps the App, applies the motor
 //! commands, queues the response bytes, drives the status LED, carries out resets, feeds the
@@ -63,7 +63,8 @@ fn main() -> ! {
 
     let (control, sampler, flash) = board::init();
     let logic = new_logic();
-    run(control, sampler, flash, logic)
+    let persisted = Persisted::boot(logic.app_mut(), flash);
+    run(control, sampler, persisted, logic)
 }
 
 /// The unit logic, in a static rather than in the loop's frame. Built out of line: `App::new`
@@ -87,10 +88,9 @@ fn new_logic() -> &'static mut ControlLoop<SLOTS> {
 fn run(
     mut board: board::Control,
     mut sampler: board::Sampler,
-    flash: board::StoreFlash,
+    mut persisted: Persisted,
     control: &'static mut ControlLoop<SLOTS>,
 ) -> ! {
-    let mut persisted = Persisted::boot(control.app_mut(), flash);
     let mut schedule = Schedule::new(board::uptime_us(), CONTROL_PERIOD_US);
     let mut rx = [0u8; RX_CHUNK];
     let mut line_errors = LineErrors::default();
