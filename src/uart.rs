@@ -9,14 +9,16 @@
 //! rule); the control loop takes at most the buffer it passes ([`control::MAX_RX_PER_STEP`]);
 //! [`Port::send`] queues a whole response or nothing.
 //!
-//! The register bits are those of RM0444 (STM32G0x1 reference manual), USART chapter, registers
-//! with FIFO mode enabled: USART_CR1 (RXFNEIE bit 5, TXFNFIE bit 7), USART_ISR (PE 0, FE 1, NE 2,
-//! ORE 3, RXFNE 5, TC 6, TXFNF 7) and USART_ICR (PECF 0, FECF 1, NECF 2, ORECF 3: writing 1 clears
-//! the ISR flag at the same position). The manual says: ORE is set when a byte completes in the
-//! shift register while the receive FIFO is full (that byte is lost) and raises the interrupt with
-//! RXFNEIE, so it must be cleared or the interrupt never ends; FE and NE come with the byte they
-//! concern (it is still received) and raise no interrupt of their own; TC is set when the last
-//! frame has left with the transmit FIFO empty and is cleared by a write to USART_TDR.
+//! The register bits are those of RM0444 (STM32G0x1 reference manual), §33.8, USART registers
+//! with FIFO mode enabled (the mode the board sets, as BufferedUart did): USART_CR1 (§33.8.1:
+//! RXFNEIE bit 5, TXFNFIE bit 7), USART_ISR (§33.8.9: PE 0, FE 1, NE 2, ORE 3, RXFNE 5, TC 6,
+//! TXFNF 7) and USART_ICR (§33.8.11: PECF 0, FECF 1, NECF 2, ORECF 3; writing 1 clears the ISR
+//! flag at the same position). The descriptions (read as ST's SVD carries them, e.g. the
+//! `stm32g0` crate's `usart1::isr_fifo_enabled`) say: ORE is set when a frame completes in the
+//! shift register while the receive FIFO is full (that frame is lost) and raises the interrupt
+//! with RXFNEIE, so it must be cleared or the interrupt never ends; FE and NE come with the byte
+//! they concern (it is still received) and raise no interrupt of their own; TC is set when the
+//! last frame has left with the transmit FIFO empty, and is cleared by a write to USART_TDR.
 //!
 //! [`control::RxQueue`]: crate::control::RxQueue
 //! [`control::MAX_RX_PER_STEP`]: crate::control::MAX_RX_PER_STEP
