@@ -99,13 +99,13 @@ fn run(
 
         // This tick's scan, then the step: the App steps on readings taken just before it.
         let samples = sampler.sample();
-        let now = board::uptime_us();
+        let now = millis(board::uptime_us());
         let received = board.receive(&mut rx);
         let button_down = board.button_down();
         let step = control_step(
             control,
             &Tick {
-                now: millis(now),
+                now,
                 lateness_us,
                 sample_age_us: 0,
                 samples: &samples,
@@ -258,8 +258,8 @@ impl Persisted {
     /// wrote, i.e. stalled the CPU. A failed write leaves the previous record in flash; the
     /// keeper tries again after a pause, and its health is logged once per change.
     #[inline(never)]
-    fn update(&mut self, app: &App<SLOTS>, now_us: u64, busy: bool) -> bool {
-        let wrote = self.0.update_after(app, millis(now_us), busy);
+    fn update(&mut self, app: &App<SLOTS>, now: Instant, busy: bool) -> bool {
+        let wrote = self.0.update_after(app, now, busy);
         if let Some(health) = self.0.take_news() {
             warn!("store: {}", health);
         }
