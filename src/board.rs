@@ -1,7 +1,7 @@
 //! The reference board: a NUCLEO-G071RB (STM32G071RB, Cortex-M0+, 64 MHz, 3.3 V) driving two
 //! TB6612FNG dual H-bridges and nine analog Hall sensors, wired to a Prusa printer's MMU port.
 //!
-//! This is the only module that touches Embassy HAL types. The `pin_map!` table below is the
+//! This is the only module (with its submodules) that touches Embassy HAL types. The `pin_map!` table below is the
 //! single source of truth for pins, timers, ADC channels and the UART: the README wiring table
 //! mirrors it (`scripts/check-pinmap.sh` compares the two), the emergency stop derives its pins
 //! from it, and the sensor scan order is computed from the channels it names.
@@ -15,36 +15,42 @@
 //! - [`uptime_us`] and [`wait_until`]: the clock that paces the control loop (TIM2);
 //! - [`reset_cause`], [`reset`].
 //!
-//! Three parts are plain register code rather than Embassy's, for the 32 KiB flash target (each
-//! measured on the linked image): the printer UART (the ring logic in `mmu_firmware::uart`, with
-//! host tests; embassy-stm32's `BufferedUart` took 1.8 KB more), the clock (one free-running
-//! 32-bit counter instead of embassy-time's driver, queue and the executor, 1.9 KB more) and the
-//! ADC scan (Embassy still sets the ADC up; its DMA `read` took 1.3 KB more).
+//! Three parts are plain register code rather than Embassy's, each in a module of its own, for
+//! the 32 KiB flash target (each measured on the linked image): the printer UART
+//! (`printer_uart`; the ring logic is `mmu_firmware::uart`, with host tests; embassy-stm32's
+//! `BufferedUart` took 1.8 KB more), the clock (`clock`: one free-running 32-bit counter instead
+//! of embassy-time's driver, queue and the executor, 1.9 KB more) and the ADC scan (`sampler`:
+//! Embassy still sets the ADC up; its DMA `read` took 1.3 KB more).
+
+mod clock;
+mod printer_uart;
+mod sampler;
 
 use core::convert::Infallible;
 use core::ops::Range;
 use core::sync::atomic::{AtomicBool, Ordering};
 
-use core::cell::Cell;
-use cortex_m::interrupt::Mutex;
-use embassy_stm32::adc::{self, Adc, AdcChannel as _, AdcConfig, AnyAdcChannel, Averaging, SampleTime};
+use embassy_stm32::adc::AdcChannel as _;
 use embassy_stm32::crc;
 use embassy_stm32::flash::{self, Blocking, Flash};
-use embassy_stm32::gpio::{AfType, AnyPin, Flex, Input, Level, Output, OutputType, Pin, Pull, Speed};
-use embassy_stm32::interrupt::{self, InterruptExt as _};
+use embassy_stm32::gpio::{AnyPin, Flex, Input, Level, Output, OutputType, Pin, Pull, Speed};
 use embassy_stm32::pac;
-use embassy_stm32::peripherals::{self, ADC1, TIM3};
-use embassy_stm32::rcc::{Pll, PllMul, PllPreDiv, PllRDiv, PllSource, Sysclk};
+use embassy_stm32::peripherals::{self, TIM3};
+use embassy_stm32::rcc::{self, Pll, PllMul, PllPreDiv, PllRDiv, PllSource, Sysclk};
 use embassy_stm32::time::khz;
 use embassy_stm32::timer::low_level::CountingMode;
 use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm, SimplePwmChannel};
-use embassy_stm32::usart::{RxPin, TxPin};
-use embassy_stm32::{Peri, bind_interrupts, rcc};
+use embassy_stm32::{Peri, bind_interrupts};
 use embedded_storage::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
 use mmu_firmware::persist::EntryCrc;
-use mmu_firmware::uart::{Port, Uart, UsartRegisters};
+use mmu_firmware::uart::Port;
 use mmu_hal_port::tb6612::{Channel, Tb6612};
-use mmu_hal_port::{Button as _, HubSamples, MotorCommand, Samples, SlotSamples, StatusLed as _};
+use mmu_hal_port::{Button as _, MotorCommand, StatusLed as _};
+
+use clock::start_clock;
+pub use clock::{uptime_us, wait_until};
+use printer_uart::{PRINTER_UART, PrinterUartInterrupt, PrinterUsart, RX_RING, TX_RING, start_printer_uart};
+pub use sampler::Sampler;
 
 /// Filament slots on this board.
 pub const SLOTS: usize = 3;
@@ -54,16 +60,6 @@ const PWM_KHZ: u32 = 20;
 /// Independent watchdog timeout. The control loop feeds it every on-time step (1 ms); ~100 steps
 /// missed in a row and the MCU resets, which leaves every bridge off (see [`emergency_stop`]).
 pub const WATCHDOG_TIMEOUT_US: u32 = 100_000;
-/// ADC sample time per conversion (ADC clock 32 MHz): 2.5 µs, plenty for a Hall sensor output.
-const SAMPLE_TIME: SampleTime = SampleTime::CYCLES79_5;
-/// Printer UART ring buffers. RX holds what arrives while the control loop does not step for
-/// `control::RX_GAP_MS` with the printer sending without pause, plus what a step leaves waiting
-/// (a step takes at most `control::MAX_RX_PER_STEP` bytes); TX more than five steps' worth of
-/// responses (`mmu_firmware::TX_CAPACITY` = 48).
-const RX_RING: usize = mmu_firmware::control::RX_RING;
-const TX_RING: usize = 256;
-/// The printer line's rate, 8N1.
-const BAUD: u32 = 115_200;
 
 bind_interrupts!(struct Irqs {
     USART3_4_LPUART1 => PrinterUartInterrupt;
@@ -486,62 +482,6 @@ pub fn reset() -> ! {
     cortex_m::peripheral::SCB::sys_reset()
 }
 
-/// Analog inputs: two per slot and three on the hub, in this order: slot `s`'s motor Hall sensor
-/// at `2 s`, its filament sensor at `2 s + 1`, then the hub's filament, tension and cutter
-/// sensors from [`HUB_INPUTS`].
-const ANALOG_INPUTS: usize = 2 * SLOTS + 3;
-/// The first hub input.
-const HUB_INPUTS: usize = 2 * SLOTS;
-
-/// The ADC half of the board: one scan of all nine Hall sensors per call.
-///
-/// Embassy's driver sets the ADC up (regulator, calibration, clock, oversampling); the scan is
-/// register code: the channels are selected once ([`start_scan`]), and each call starts the
-/// sequence and reads each result as it completes. Embassy's `read` reprograms the channels and a
-/// DMA transfer at every call (1.3 KB more flash, measured), and does not wait for CCRDY after
-/// writing ADC_CHSELR, which RM0444 requires before a conversion starts.
-pub struct Sampler {
-    _adc: Adc<'static, ADC1>,
-    /// The channels' pins, in analog mode for as long as the board runs.
-    _inputs: [AnyAdcChannel<'static, ADC1>; ANALOG_INPUTS],
-    /// Where each input's conversion lands in a scan's results. The G0 ADC converts the selected
-    /// channels (CHSELR) in ascending channel number whatever order they are listed in (RM0444,
-    /// ADC: CHSELRMOD = 0, SCANDIR = 0), so it is the number of inputs on a lower channel.
-    scan_positions: [u8; ANALOG_INPUTS],
-}
-
-impl Sampler {
-    /// One scan of every sensor, about 210 µs (9 channels x 8 oversampled conversions of
-    /// 2.9 µs): ADSTART, then each conversion's result from ADC_DR once EOC is set (reading DR
-    /// clears EOC; RM0444, ADC_ISR and ADC_DR). A scan that never completes stalls the control
-    /// loop, and the watchdog resets the MCU.
-    pub fn sample(&mut self) -> Samples<SLOTS> {
-        let adc = pac::ADC1;
-        let mut raw = [0u16; ANALOG_INPUTS];
-        adc.cr().modify(|w| w.set_adstart(true));
-        for value in &mut raw {
-            while !adc.isr().read().eoc() {}
-            *value = adc.dr().read().data();
-        }
-        let positions = &self.scan_positions;
-        let input = |index: usize| {
-            let position = positions.get(index).map_or(usize::MAX, |&at| usize::from(at));
-            raw.get(position).copied().unwrap_or_default()
-        };
-        Samples {
-            slots: core::array::from_fn(|slot| SlotSamples {
-                motor_hall: input(2 * slot),
-                filament: input(2 * slot + 1),
-            }),
-            hub: HubSamples {
-                filament: input(HUB_INPUTS),
-                tension: input(HUB_INPUTS + 1),
-                cutter: input(HUB_INPUTS + 2),
-            },
-        }
-    }
-}
-
 /// The PWM input of one bridge.
 type Pwm = SimplePwmChannel<'static, TIM3>;
 /// TB6612 #1: slot 0 on bridge A, slot 1 on bridge B.
@@ -727,34 +667,6 @@ pub fn init() -> (Control, Sampler, StoreFlash) {
 
     let (uart, _uart_pins) = start_printer_uart(parts.printer_uart, parts.printer_rx, parts.printer_tx);
 
-    // ADC: 64 MHz system clock / 2 = 32 MHz (the G0 allows 35), 8x hardware oversampling.
-    let adc_config = AdcConfig {
-        clock: Some(adc::Clock::Async {
-            div: adc::Presc::DIV2,
-        }),
-        averaging: Some(Averaging::Samples8),
-        ..AdcConfig::default()
-    };
-    let adc = Adc::new_with_config(parts.adc, adc_config);
-    // In the order of ANALOG_INPUTS.
-    let inputs = [
-        parts.slot0_hall.degrade_adc(),
-        parts.slot0_filament.degrade_adc(),
-        parts.slot1_hall.degrade_adc(),
-        parts.slot1_filament.degrade_adc(),
-        parts.slot2_hall.degrade_adc(),
-        parts.slot2_filament.degrade_adc(),
-        parts.hub_filament.degrade_adc(),
-        parts.hub_tension.degrade_adc(),
-        parts.hub_cutter.degrade_adc(),
-    ];
-    let mut scan_positions = [0u8; ANALOG_INPUTS];
-    for (position, own) in scan_positions.iter_mut().zip(&inputs) {
-        for other in &inputs {
-            *position += u8::from(other.get_hw_channel() < own.get_hw_channel());
-        }
-    }
-
     let control = Control {
         chip1,
         chip2,
@@ -764,166 +676,24 @@ pub fn init() -> (Control, Sampler, StoreFlash) {
         led: Output::new(parts.status_led, Level::Low, Speed::Low),
         button: Input::new(parts.button, Pull::Up),
     };
-    start_scan(&inputs);
-    let sampler = Sampler {
-        _adc: adc,
-        _inputs: inputs,
-        scan_positions,
-    };
+    // In the order of `sampler::ANALOG_INPUTS`.
+    let sampler = Sampler::start(
+        parts.adc,
+        [
+            parts.slot0_hall.degrade_adc(),
+            parts.slot0_filament.degrade_adc(),
+            parts.slot1_hall.degrade_adc(),
+            parts.slot1_filament.degrade_adc(),
+            parts.slot2_hall.degrade_adc(),
+            parts.slot2_filament.degrade_adc(),
+            parts.hub_filament.degrade_adc(),
+            parts.hub_tension.degrade_adc(),
+            parts.hub_cutter.degrade_adc(),
+        ],
+    );
     let store = StoreFlash {
         flash: WatchedFlash(Flash::new_blocking(parts.flash)),
         crc: HardwareCrc::new(parts.crc),
     };
     (control, sampler, store)
-}
-
-/// The printer UART's rings, shared by its interrupt and [`Control`] (see `mmu_firmware::uart`,
-/// which holds the driver's decisions and their tests).
-///
-/// Not embassy-stm32's `BufferedUart`: its async machinery (wakers, futures, the configuration
-/// code for every USART mode) took 1.8 KB more of the 32 KiB flash, for a line this firmware only
-/// polls once a step.
-static PRINTER_UART: Uart<RX_RING, TX_RING> = Uart::new();
-
-/// USART3's registers (RM0444, USART chapter), one volatile access each.
-struct PrinterUsart;
-
-impl UsartRegisters for PrinterUsart {
-    fn isr(&self) -> u32 {
-        pac::USART3.isr().read().0
-    }
-
-    fn clear(&self, flags: u32) {
-        pac::USART3.icr().write_value(pac::usart::regs::Icr(flags));
-    }
-
-    fn read_rdr(&self) -> u8 {
-        pac::USART3.rdr().read().0 as u8
-    }
-
-    fn write_tdr(&self, byte: u8) {
-        pac::USART3
-            .tdr()
-            .write_value(pac::usart::regs::Dr(u32::from(byte)));
-    }
-
-    fn cr1(&self) -> u32 {
-        pac::USART3.cr1().read().0
-    }
-
-    fn set_cr1(&self, cr1: u32) {
-        pac::USART3.cr1().write_value(pac::usart::regs::Cr1(cr1));
-    }
-
-    fn pend_interrupt(&self) {
-        interrupt::USART3_4_LPUART1.pend();
-    }
-}
-
-/// Runs [`Uart::on_interrupt`] for USART3.
-struct PrinterUartInterrupt;
-
-impl interrupt::typelevel::Handler<interrupt::typelevel::USART3_4_LPUART1> for PrinterUartInterrupt {
-    unsafe fn on_interrupt() {
-        // SAFETY: this handler is the interrupt's only context.
-        unsafe { PRINTER_UART.on_interrupt(&PrinterUsart) }
-    }
-}
-
-/// USART3 at [`BAUD`] 8N1 with its FIFOs, the receive interrupt on: the register settings
-/// embassy-stm32 0.6.0's `BufferedUart::new` makes for this configuration (clock on and reset,
-/// USART_BRR = kernel clock / baud with oversampling by 16, USART_CR1 = UE | RE | TE | FIFOEN |
-/// RXFNEIE, the other registers at their reset values), and the pins in their USART function
-/// (TX push-pull; no pull on RX: the printer drives it, possibly at 5 V).
-fn start_printer_uart(
-    _usart: Peri<'static, peripherals::USART3>,
-    rx: Peri<'static, peripherals::PC11>,
-    tx: Peri<'static, peripherals::PC10>,
-) -> (Port<'static, PrinterUsart, RX_RING, TX_RING>, [Flex<'static>; 2]) {
-    // The AF numbers from the HAL's pin tables, which also check that these are USART3's pins.
-    let (rx_af, tx_af) = (
-        RxPin::<peripherals::USART3>::af_num(&*rx),
-        TxPin::<peripherals::USART3>::af_num(&*tx),
-    );
-    let mut rx = Flex::new(rx);
-    rx.set_as_af_unchecked(rx_af, AfType::input(Pull::None));
-    let mut tx = Flex::new(tx);
-    tx.set_as_af_unchecked(tx_af, AfType::output(OutputType::PushPull, Speed::Medium));
-    rcc::enable_and_reset::<peripherals::USART3>();
-    let kernel_hz = rcc::frequency::<peripherals::USART3>().0;
-    let regs = pac::USART3;
-    regs.brr()
-        .write_value(pac::usart::regs::Brr((kernel_hz + BAUD / 2) / BAUD));
-    regs.cr1().write(|w| {
-        w.set_ue(true);
-        w.set_re(true);
-        w.set_te(true);
-        w.set_fifoen(true);
-        w.set_rxneie(true);
-    });
-    interrupt::USART3_4_LPUART1.unpend();
-    // SAFETY: the handler only touches PRINTER_UART's interrupt side.
-    unsafe { interrupt::USART3_4_LPUART1.enable() };
-    // SAFETY: the one Port.
-    (unsafe { PRINTER_UART.port(PrinterUsart) }, [rx, tx])
-}
-
-/// The uptime, µs: TIM2's 32-bit count extended to 64 bits at each reading (it wraps every 71
-/// minutes; the control loop reads it every millisecond).
-static UPTIME_US: Mutex<Cell<u64>> = Mutex::new(Cell::new(0));
-
-/// Microseconds since [`init`] started the clock.
-pub fn uptime_us() -> u64 {
-    cortex_m::interrupt::free(|cs| {
-        let uptime = UPTIME_US.borrow(cs);
-        let last = uptime.get();
-        let count = pac::TIM2.cnt().read();
-        let now = last + u64::from(count.wrapping_sub(last as u32));
-        uptime.set(now);
-        now
-    })
-}
-
-/// Waits until the uptime reaches `deadline_us`; returns the uptime then.
-pub fn wait_until(deadline_us: u64) -> u64 {
-    loop {
-        let now = uptime_us();
-        if now >= deadline_us {
-            return now;
-        }
-    }
-}
-
-/// Starts TIM2 counting microseconds: prescaler = timer clock / 1 MHz, the 32-bit auto-reload
-/// at its reset value 0xFFFF_FFFF (RM0444, TIM2/TIM3 registers), an update event to load the
-/// prescaler, then the counter on.
-fn start_clock(_timer: Peri<'static, peripherals::TIM2>) {
-    rcc::enable_and_reset::<peripherals::TIM2>();
-    let per_us = rcc::frequency::<peripherals::TIM2>().0 / 1_000_000;
-    let timer = pac::TIM2;
-    timer.psc().write_value(per_us.saturating_sub(1) as u16);
-    timer.egr().write(|w| w.set_ug(true));
-    timer.cr1().write(|w| w.set_cen(true));
-}
-
-defmt::timestamp!("{=u64:us}", uptime_us());
-
-/// Prepares the scan [`Sampler::sample`] starts: the ADC enabled (ADEN, then ADRDY), every input
-/// selected in ADC_CHSELR with the sample time SMP1 ([`SAMPLE_TIME`]; SMPSEL = 0 for all), single
-/// conversion mode, no DMA (ADC_CFGR1 as reset), then CCRDY awaited: RM0444 (ADC_ISR, CCRDY)
-/// ignores a start issued before the channel configuration is applied.
-fn start_scan(inputs: &[AnyAdcChannel<'static, ADC1>; ANALOG_INPUTS]) {
-    let adc = pac::ADC1;
-    if !adc.cr().read().aden() {
-        adc.isr().write(|w| w.set_adrdy(true));
-        adc.cr().modify(|w| w.set_aden(true));
-        while !adc.isr().read().adrdy() {}
-    }
-    adc.smpr().write(|w| w.set_sample_time(0, SAMPLE_TIME));
-    adc.chselr().write(|w| {
-        for input in inputs {
-            w.set_chsel(usize::from(input.get_hw_channel()), true);
-        }
-    });
-    while !adc.isr().read().ccrdy() {}
 }
