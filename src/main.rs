@@ -214,7 +214,7 @@ fn log_stats(stats: &control::Stats, line: &LineErrors) {
 ///
 /// The store is synchronous: every flash operation of [`board::WatchedFlash`] blocks (the CPU
 /// stalls anyway while the G0's flash programs or erases). Its calls are plain out-of-line
-/// functions, whose frames stay out of the control task's future.
+/// functions, whose frames stay off the loop's.
 struct Persisted(Keeper<board::WatchedFlash, SLOTS, board::HardwareCrc>);
 
 impl Persisted {
