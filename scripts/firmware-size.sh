@@ -89,8 +89,7 @@ if [ "$hex_awk_ok" != 16 ]; then
     }
 fi
 # The worst-case stack, a static estimate from the disassembly (scripts/stack-estimate.py): the
-# deepest call chain from reset, through the Embassy executor's task polls (it calls them through
-# a pointer), plus the deepest interrupt and the NMI/HardFault on top. It must fit the RAM that
+# deepest call chain from reset, plus the deepest interrupt and the NMI/HardFault on top. It must fit the RAM that
 # static RAM leaves.
 echo
 # It disassembles with llvm-objdump: from PATH, else from rustup's llvm-tools component.
@@ -99,7 +98,7 @@ if [ -z "${LLVM_OBJDUMP:-}" ] && ! command -v llvm-objdump >/dev/null 2>&1; then
     LLVM_OBJDUMP="$(find "$(rustc --print sysroot)/lib/rustlib" -name llvm-objdump -type f | sed -n 1p)"
     export LLVM_OBJDUMP
 fi
-stack_report="$(python3 scripts/stack-estimate.py "$elf" --indirect 'Executor::run=TaskStorage$LT$F$GT$::poll')"
+stack_report="$(python3 scripts/stack-estimate.py "$elf")"
 echo "$stack_report"
 stack="$(awk '/^worst-case stack:/ { print $3 }' <<<"$stack_report")"
 

@@ -10,7 +10,7 @@ Each function's frame is what its code takes from the stack: the registers it pu
 plus every `sub sp, #n` and `ldr rX, =-n; add sp, rX`. The call graph is every `bl` and every
 branch into another function (tail calls counted as calls: an over-estimate). Paths through a
 recursion are cut at the repeated function (and reported). Calls through a register (`blx`: task
-polls, wakers, trait objects) have no target in the code: `--indirect` names them (the Embassy
+polls, wakers, trait objects) have no target in the code: `--indirect` names them (an async
 executor polls its tasks through a function pointer), the others are listed as unresolved.
 
 The worst case is the deepest path from the reset handler, plus the deepest interrupt handler

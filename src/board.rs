@@ -1,7 +1,7 @@
 //! The reference board: a NUCLEO-G071RB (STM32G071RB, Cortex-M0+, 64 MHz, 3.3 V) driving two
 //! TB6612FNG dual H-bridges and nine analog Hall sensors, wired to a Prusa printer's MMU port.
 //!
-//! This is the only module that touches Embassy HAL types. The `pin_map!` table below is the
+//! This is the only module (with its submodules) that touches Embassy HAL types. The `pin_map!` table below is the
 //! single source of truth for pins, timers, ADC channels and the UART: the README wiring table
 //! mirrors it (`scripts/check-pinmap.sh` compares the two), the emergency stop derives its pins
 //! from it, and the sensor scan order is computed from the channels it names.
@@ -12,33 +12,45 @@
 //! - [`init`]: clocks and peripherals, returning the [`Control`] half (motors, printer UART, LED,
 //!   button, watchdog), the [`Sampler`] half (ADC) and the [`StoreFlash`] (the persisted state's
 //!   region of the internal flash, [`STORE_RANGE`]);
+//! - [`uptime_us`] and [`wait_until`]: the clock that paces the control loop (TIM2);
 //! - [`reset_cause`], [`reset`].
+//!
+//! Three parts are plain register code rather than Embassy's, each in a module of its own, for
+//! the 32 KiB flash target (each measured on the linked image): the printer UART
+//! (`printer_uart`; the ring logic is `mmu_firmware::uart`, with host tests; embassy-stm32's
+//! `BufferedUart` took 1.8 KB more), the clock (`clock`: one free-running 32-bit counter instead
+//! of embassy-time's driver, queue and the executor, 1.9 KB more) and the ADC scan (`sampler`:
+//! Embassy still sets the ADC up; its DMA `read` took 1.3 KB more).
+
+mod clock;
+mod printer_uart;
+mod sampler;
 
 use core::convert::Infallible;
 use core::ops::Range;
 use core::sync::atomic::{AtomicBool, Ordering};
-use core::task::Poll;
 
-use embassy_stm32::adc::{self, Adc, AdcChannel as _, AdcConfig, AnyAdcChannel, Averaging, SampleTime};
+use embassy_stm32::adc::AdcChannel as _;
 use embassy_stm32::crc;
 use embassy_stm32::flash::{self, Blocking, Flash};
-use embassy_stm32::gpio::{AnyPin, Input, Level, Output, OutputType, Pin, Pull, Speed};
+use embassy_stm32::gpio::{AnyPin, Flex, Input, Level, Output, OutputType, Pin, Pull, Speed};
 use embassy_stm32::pac;
-use embassy_stm32::peripherals::{self, ADC1, TIM3};
+use embassy_stm32::peripherals::{self, TIM3};
 use embassy_stm32::rcc::{self, Pll, PllMul, PllPreDiv, PllRDiv, PllSource, Sysclk};
 use embassy_stm32::time::khz;
 use embassy_stm32::timer::low_level::CountingMode;
 use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm, SimplePwmChannel};
-use embassy_stm32::usart::{self, BufferedUart, BufferedUartRx, BufferedUartTx};
-use embassy_stm32::{Peri, bind_interrupts, dma};
-use embassy_time::{Duration, with_timeout};
-use embedded_io::Read as _;
-use embedded_io_async::{ReadReady as _, Write as _};
+use embassy_stm32::{Peri, bind_interrupts};
 use embedded_storage::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
 use mmu_firmware::persist::EntryCrc;
+use mmu_firmware::uart::Port;
 use mmu_hal_port::tb6612::{Channel, Tb6612};
-use mmu_hal_port::{Button as _, HubSamples, MotorCommand, Samples, SlotSamples, StatusLed as _};
-use static_cell::ConstStaticCell;
+use mmu_hal_port::{Button as _, MotorCommand, StatusLed as _};
+
+use clock::start_clock;
+pub use clock::{uptime_us, wait_until};
+use printer_uart::{PRINTER_UART, PrinterUartInterrupt, PrinterUsart, RX_RING, TX_RING, start_printer_uart};
+pub use sampler::Sampler;
 
 /// Filament slots on this board.
 pub const SLOTS: usize = 3;
@@ -48,18 +60,9 @@ const PWM_KHZ: u32 = 20;
 /// Independent watchdog timeout. The control loop feeds it every on-time step (1 ms); ~100 steps
 /// missed in a row and the MCU resets, which leaves every bridge off (see [`emergency_stop`]).
 pub const WATCHDOG_TIMEOUT_US: u32 = 100_000;
-/// ADC sample time per conversion (ADC clock 32 MHz): 2.5 µs, plenty for a Hall sensor output.
-const SAMPLE_TIME: SampleTime = SampleTime::CYCLES79_5;
-/// Printer UART ring buffers. RX holds what arrives while the control loop does not step for
-/// `control::RX_GAP_MS` with the printer sending without pause, plus what a step leaves waiting
-/// (a step takes at most `control::MAX_RX_PER_STEP` bytes); TX more than five steps' worth of
-/// responses (`mmu_firmware::TX_CAPACITY` = 48).
-const RX_RING: usize = mmu_firmware::control::RX_RING;
-const TX_RING: usize = 256;
 
 bind_interrupts!(struct Irqs {
-    USART3_4_LPUART1 => usart::BufferedInterruptHandler<peripherals::USART3>;
-    DMA1_CHANNEL1 => dma::InterruptHandler<peripherals::DMA1_CH1>;
+    USART3_4_LPUART1 => PrinterUartInterrupt;
 });
 
 /// Declares the board's pin map once and derives from it: the [`Parts`] struct that takes every
@@ -111,9 +114,9 @@ macro_rules! pin_map {
 // are NOT 5 V tolerant (analog pins of the G0 are 3.6 V tolerant): power the Hall sensors from 3.3 V.
 pin_map! {
     peripherals {
-        pwm_timer: TIM3, "Motor PWM, 20 kHz, channels 1-3 (TIM15 is the Embassy time driver)";
-        adc: ADC1, "All nine Hall sensors, one DMA scan per millisecond";
-        adc_dma: DMA1_CH1, "ADC scan results";
+        pwm_timer: TIM3, "Motor PWM, 20 kHz, channels 1-3";
+        clock_timer: TIM2, "The uptime clock, 1 MHz, 32 bits (uptime_us)";
+        adc: ADC1, "All nine Hall sensors, one scan per millisecond";
         printer_uart: USART3, "Printer MMU port, 115200 8N1 (USART2 stays on the ST-LINK VCP)";
         watchdog: IWDG, "Independent watchdog, fed by the control loop";
         flash: FLASH, "Internal flash: the persisted state in its last 16 pages (STORE_RANGE)";
@@ -354,7 +357,7 @@ impl EntryCrc for HardwareCrc {
 /// or a double word programmed (85 µs typical), every fetch from flash stalls, so the CPU stops
 /// altogether: no task, no interrupt (the vectors are in flash too). The motors keep the last
 /// command applied; UART bytes that arrive meanwhile, past the receiver's own buffer, are lost
-/// (overrun; the printer's protocol retries); the timers and the ADC's DMA carry on. One control
+/// (overrun; the printer's protocol retries); the timers and the ADC carry on. One control
 /// step of a save programs at most 8 double words or erases one page (a save erases at most two,
 /// see `mmu_firmware::persist`); a save before a reset runs whole, and erasing the whole store
 /// erases all its pages in a row. Each erase is shorter
@@ -479,57 +482,6 @@ pub fn reset() -> ! {
     cortex_m::peripheral::SCB::sys_reset()
 }
 
-/// Analog inputs: two per slot and three on the hub, in this order: slot `s`'s motor Hall sensor
-/// at `2 s`, its filament sensor at `2 s + 1`, then the hub's filament, tension and cutter
-/// sensors from [`HUB_INPUTS`].
-const ANALOG_INPUTS: usize = 2 * SLOTS + 3;
-/// The first hub input.
-const HUB_INPUTS: usize = 2 * SLOTS;
-
-/// The ADC half of the board: one DMA scan of all nine Hall sensors per call.
-pub struct Sampler {
-    adc: Adc<'static, ADC1>,
-    dma: Peri<'static, peripherals::DMA1_CH1>,
-    /// The channels, in the order of [`ANALOG_INPUTS`].
-    inputs: [AnyAdcChannel<'static, ADC1>; ANALOG_INPUTS],
-    /// Where each input's conversion lands in a scan's results. The G0 ADC converts the selected
-    /// channels (CHSELR) in ascending channel number whatever order they are listed in (RM0444,
-    /// ADC: CHSELRMOD = 0, SCANDIR = 0), so it is the number of inputs on a lower channel.
-    scan_positions: [u8; ANALOG_INPUTS],
-}
-
-impl Sampler {
-    /// One scan of every sensor, about 210 µs (9 channels x 8 oversampled conversions of
-    /// 2.9 µs), the CPU free meanwhile.
-    pub async fn sample(&mut self) -> Samples<SLOTS> {
-        let mut raw = [0u16; ANALOG_INPUTS];
-        self.adc
-            .read(
-                self.dma.reborrow(),
-                Irqs,
-                self.inputs.iter_mut().map(|channel| (channel, SAMPLE_TIME)),
-                &mut raw,
-            )
-            .await;
-        let positions = &self.scan_positions;
-        let input = |index: usize| {
-            let position = positions.get(index).map_or(usize::MAX, |&at| usize::from(at));
-            raw.get(position).copied().unwrap_or_default()
-        };
-        Samples {
-            slots: core::array::from_fn(|slot| SlotSamples {
-                motor_hall: input(2 * slot),
-                filament: input(2 * slot + 1),
-            }),
-            hub: HubSamples {
-                filament: input(HUB_INPUTS),
-                tension: input(HUB_INPUTS + 1),
-                cutter: input(HUB_INPUTS + 2),
-            },
-        }
-    }
-}
-
 /// The PWM input of one bridge.
 type Pwm = SimplePwmChannel<'static, TIM3>;
 /// TB6612 #1: slot 0 on bridge A, slot 1 on bridge B.
@@ -571,8 +523,9 @@ pub struct Control {
     chip2: Chip2,
     /// Whether each chip is in standby (STBY low): while none of its motors is driven or braked.
     chip_standby: [bool; 2],
-    rx: BufferedUartRx<'static>,
-    tx: BufferedUartTx<'static>,
+    uart: Port<'static, PrinterUsart, RX_RING, TX_RING>,
+    /// PC11 (RX) and PC10 (TX) in their USART3 function, for as long as the board runs.
+    _uart_pins: [Flex<'static>; 2],
     led: Output<'static>,
     button: Input<'static>,
 }
@@ -608,25 +561,27 @@ impl Control {
     /// how many. The USART interrupt fills a 256-byte ring in the background.
     pub fn receive(&mut self, buf: &mut [u8]) -> usize {
         let limit = buf.len().min(mmu_firmware::control::MAX_RX_PER_STEP);
-        let Some(buf) = buf.get_mut(..limit) else {
-            return 0;
-        };
-        // Ready: the read returns at once (embedded-io `ReadReady`), without a future.
-        if !matches!(self.rx.read_ready(), Ok(true)) {
-            return 0;
+        match buf.get_mut(..limit) {
+            Some(buf) => self.uart.receive(buf),
+            None => 0,
         }
-        self.rx.read(buf).unwrap_or(0)
     }
 
     /// Queues `bytes` for the printer without waiting. Returns false (nothing queued) when the
     /// transmit ring has no room for all of them, so a response is never sent in part.
     pub fn send(&mut self, bytes: &[u8]) -> bool {
-        matches!(embassy_futures::poll_once(self.tx.write(bytes)), Poll::Ready(Ok(n)) if n == bytes.len())
+        self.uart.send(bytes)
     }
 
-    /// Waits until every queued byte has left the UART, at most `timeout`.
-    pub async fn flush(&mut self, timeout: Duration) {
-        let _ = with_timeout(timeout, self.tx.flush()).await;
+    /// Waits until every queued byte has left the UART, at most `timeout_us`.
+    pub fn flush(&mut self, timeout_us: u64) {
+        let deadline = uptime_us() + timeout_us;
+        while !self.uart.sent() && uptime_us() < deadline {}
+    }
+
+    /// What went wrong on the printer's receive line since start-up.
+    pub fn line_errors(&self) -> mmu_firmware::uart::LineErrors {
+        PRINTER_UART.errors()
     }
 
     /// Lights or clears LD4.
@@ -674,6 +629,7 @@ pub fn init() -> (Control, Sampler, StoreFlash) {
 
     // The watchdog first: from here on a stalled init resets the MCU too.
     start_watchdog(parts.watchdog);
+    start_clock(parts.clock_timer);
 
     // Motors: duty 0 on every channel before the pins switch to the timer, STBY and IN low.
     let pwm = SimplePwm::new(
@@ -709,70 +665,32 @@ pub fn init() -> (Control, Sampler, StoreFlash) {
         low(parts.stby2),
     ));
 
-    // Printer UART: 115200 8N1, interrupt-driven rings. No pull on RX: the line is driven by
-    // the printer, possibly at 5 V.
-    static RX_BUF: ConstStaticCell<[u8; RX_RING]> = ConstStaticCell::new([0; RX_RING]);
-    static TX_BUF: ConstStaticCell<[u8; TX_RING]> = ConstStaticCell::new([0; TX_RING]);
-    let mut uart_config = usart::Config::default();
-    uart_config.baudrate = 115_200;
-    uart_config.data_bits = usart::DataBits::DataBits8;
-    uart_config.parity = usart::Parity::ParityNone;
-    uart_config.stop_bits = usart::StopBits::STOP1;
-    uart_config.rx_pull = Pull::None;
-    let uart = defmt::unwrap!(BufferedUart::new(
-        parts.printer_uart,
-        parts.printer_rx,
-        parts.printer_tx,
-        defmt::unwrap!(TX_BUF.try_take()),
-        defmt::unwrap!(RX_BUF.try_take()),
-        Irqs,
-        uart_config,
-    ));
-    let (tx, rx) = uart.split();
-
-    // ADC: 64 MHz system clock / 2 = 32 MHz (the G0 allows 35), 8x hardware oversampling.
-    let adc_config = AdcConfig {
-        clock: Some(adc::Clock::Async {
-            div: adc::Presc::DIV2,
-        }),
-        averaging: Some(Averaging::Samples8),
-        ..AdcConfig::default()
-    };
-    let adc = Adc::new_with_config(parts.adc, adc_config);
-    // In the order of ANALOG_INPUTS.
-    let inputs = [
-        parts.slot0_hall.degrade_adc(),
-        parts.slot0_filament.degrade_adc(),
-        parts.slot1_hall.degrade_adc(),
-        parts.slot1_filament.degrade_adc(),
-        parts.slot2_hall.degrade_adc(),
-        parts.slot2_filament.degrade_adc(),
-        parts.hub_filament.degrade_adc(),
-        parts.hub_tension.degrade_adc(),
-        parts.hub_cutter.degrade_adc(),
-    ];
-    let mut scan_positions = [0u8; ANALOG_INPUTS];
-    for (position, own) in scan_positions.iter_mut().zip(&inputs) {
-        for other in &inputs {
-            *position += u8::from(other.get_hw_channel() < own.get_hw_channel());
-        }
-    }
+    let (uart, _uart_pins) = start_printer_uart(parts.printer_uart, parts.printer_rx, parts.printer_tx);
 
     let control = Control {
         chip1,
         chip2,
         chip_standby: [true; 2],
-        rx,
-        tx,
+        uart,
+        _uart_pins,
         led: Output::new(parts.status_led, Level::Low, Speed::Low),
         button: Input::new(parts.button, Pull::Up),
     };
-    let sampler = Sampler {
-        adc,
-        dma: parts.adc_dma,
-        inputs,
-        scan_positions,
-    };
+    // In the order of `sampler::ANALOG_INPUTS`.
+    let sampler = Sampler::start(
+        parts.adc,
+        [
+            parts.slot0_hall.degrade_adc(),
+            parts.slot0_filament.degrade_adc(),
+            parts.slot1_hall.degrade_adc(),
+            parts.slot1_filament.degrade_adc(),
+            parts.slot2_hall.degrade_adc(),
+            parts.slot2_filament.degrade_adc(),
+            parts.hub_filament.degrade_adc(),
+            parts.hub_tension.degrade_adc(),
+            parts.hub_cutter.degrade_adc(),
+        ],
+    );
     let store = StoreFlash {
         flash: WatchedFlash(Flash::new_blocking(parts.flash)),
         crc: HardwareCrc::new(parts.crc),

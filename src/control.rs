@@ -74,9 +74,10 @@ pub const RX_RING: usize = 256;
 const _: () = assert!(RX_RING >= rx_ring_needed(RX_GAP_MS));
 
 /// The bytes received from the printer that wait for the control loop, oldest first, with the
-/// loop's rule: each step takes at most [`MAX_RX_PER_STEP`] of them. The board's UART ring
-/// (`src/board.rs`) does the same with Embassy's buffer; this one serves the host, the tests and
-/// the step-cost benchmark (`bench-mcu`), which must hand the App exactly what the board would.
+/// loop's rule: each step takes at most [`MAX_RX_PER_STEP`] of them. The board's UART driver
+/// ([`crate::uart`]) does the same, and its tests check that it hands out what this does; this
+/// one serves the host, the tests and the step-cost benchmark (`bench-mcu`), which must hand the
+/// App exactly what the board would.
 #[derive(Debug, Clone, Default)]
 pub struct RxQueue<const CAPACITY: usize> {
     bytes: Deque<u8, CAPACITY>,
@@ -130,6 +131,44 @@ impl<const CAPACITY: usize> RxQueue<CAPACITY> {
     /// Bytes lost to a full queue since it was made.
     pub fn lost(&self) -> u32 {
         self.lost
+    }
+}
+
+/// When the control loop steps: every period on a fixed grid, the way Embassy's `Ticker` paced it
+/// (a step that starts late is followed by the ones it delayed, at once), except after a flash
+/// write, whose missed ticks are dropped ([`Schedule::restart`]).
+#[derive(Debug, Clone, Copy)]
+pub struct Schedule {
+    next_us: u64,
+    period_us: u64,
+}
+
+impl Schedule {
+    /// The first step a period after `now_us`.
+    pub const fn new(now_us: u64, period_us: u64) -> Self {
+        Schedule {
+            next_us: now_us + period_us,
+            period_us,
+        }
+    }
+
+    /// When the next step is due, µs.
+    pub const fn deadline_us(&self) -> u64 {
+        self.next_us
+    }
+
+    /// The due step starts at `now_us`: returns how late, µs, and schedules the next one a period
+    /// after this one's deadline.
+    pub fn start(&mut self, now_us: u64) -> u64 {
+        let lateness = now_us.saturating_sub(self.next_us);
+        self.next_us += self.period_us;
+        lateness
+    }
+
+    /// The loop stalled until `now_us` (a flash write): the next step a period from now, the
+    /// ticks missed meanwhile dropped.
+    pub fn restart(&mut self, now_us: u64) {
+        self.next_us = now_us + self.period_us;
     }
 }
 
@@ -494,6 +533,23 @@ mod tests {
             }
         }
         assert!(decodes(b"Tab*\n"));
+    }
+
+    #[test]
+    fn the_schedule_reports_lateness_keeps_its_grid_and_drops_what_a_flash_write_stalled() {
+        let mut schedule = Schedule::new(500, 1_000);
+        assert_eq!(schedule.deadline_us(), 1_500);
+        assert_eq!(schedule.start(1_500), 0);
+        assert_eq!(schedule.start(2_530), 30, "a step 30 us late");
+        assert_eq!(schedule.deadline_us(), 3_500, "the grid is kept");
+        // A step overran to 6 200: the steps it delayed follow at once, each knowing how late.
+        let late: StdVec<u64> = (0..3).map(|_| schedule.start(6_200)).collect();
+        assert_eq!(late, [2_700, 1_700, 700]);
+        assert_eq!(schedule.deadline_us(), 6_500);
+        // A flash write stalled the CPU until 50 000: no burst of late steps after it.
+        schedule.restart(50_000);
+        assert_eq!(schedule.deadline_us(), 51_000);
+        assert_eq!(schedule.start(51_000), 0);
     }
 
     #[test]

@@ -27,6 +27,7 @@ pub mod registers;
 pub mod runner;
 pub mod sensor;
 pub mod time;
+pub mod uart;
 pub mod unit;
 
 pub use app::{App, BoardAction, Outputs, TX_CAPACITY};

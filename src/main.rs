@@ -1,16 +1,21 @@
 //! MCU entry point of the reference board (NUCLEO-G071RB): the unit logic ([`mmu_firmware::App`])
 //! stepped every millisecond, with the same code the host tests and the simulator step.
 //!
-//! One task, `control_task`, on a thread-mode Embassy executor: at boot it restores what the unit
-//! kept in flash ([`Persisted`]); then every millisecond (Ticker) it scans all nine Hall sensors
-//! (DMA, about 210 µs with the CPU free), drains the bytes the printer sent, debounces the button,
-//! steps the App, applies the motor commands, queues the response bytes, drives the status LED,
-//! carries out resets, feeds the watchdog when it stepped on time, and writes what changed to
-//! flash. (A separate sampler task publishing its scans cost 380 B of flash and 190 B of RAM
-//! more; a scan that never completes now stalls the loop, so the watchdog resets the MCU.)
+//! One loop, [`run`]: once `main` has restored what the unit kept in flash ([`Persisted`]), every
+//! millisecond of the board's uptime clock it scans all nine Hall sensors (about 210 µs),
+//! drains the bytes the printer sent, debounces the button, steps the App, applies the motor
+//! commands, queues the response bytes, drives the status LED, carries out resets, feeds the
+//! watchdog when it stepped on time, and writes what changed to flash. A scan that never
+//! completes stalls the loop, so the watchdog resets the MCU.
+//!
+//! No async executor: the firmware has one loop, and an Embassy executor with embassy-time (the
+//! `Ticker`, the time driver on TIM15, its timer queue and wakers) took 1.9 KB more of the 32 KiB
+//! flash than this loop paced by a hardware counter ([`board::wait_until`]), measured. The one
+//! thing still `async`, a reset's steps ([`control::reset`], shared with the simulator), runs to
+//! completion under `block_on`.
 //!
 //! The printer UART's receive path needs no task of its own: the USART interrupt moves every byte
-//! into a 256-byte ring as it arrives, whatever the tasks are doing (a byte could only be lost if
+//! into a 256-byte ring as it arrives, whatever the loop is doing (a byte could only be lost if
 //! interrupts stayed masked for a whole character time, 87 µs), and each step takes at most
 //! `control::MAX_RX_PER_STEP` bytes from it, more than arrive in a millisecond (the ring holds
 //! 20 ms of continuous traffic beyond that).
@@ -30,80 +35,78 @@ use core::sync::atomic::{AtomicBool, Ordering};
 use cortex_m_rt::{ExceptionFrame, entry, exception};
 use defmt::{error, info, unwrap, warn};
 use defmt_rtt as _;
-use embassy_executor::Executor;
-use embassy_time::{Duration, Instant as Clock, Ticker};
-use mmu_firmware::control::{self, ControlLoop, ResetBoard, Tick};
+use embassy_futures::block_on;
+use mmu_firmware::control::{self, ControlLoop, ResetBoard, Schedule, Tick};
 use mmu_firmware::persist::{Boot, Keeper, Store};
+use mmu_firmware::uart::LineErrors;
 use mmu_firmware::{App, BoardAction, Config, Instant, drive};
 use static_cell::StaticCell;
 
 use board::SLOTS;
 
-/// Period of the control step.
-const CONTROL_PERIOD: Duration = Duration::from_millis(1);
+/// Period of the control step, µs.
+const CONTROL_PERIOD_US: u64 = 1_000;
 /// Most bytes handed to one step (`board::Control::receive` takes no more).
 const RX_CHUNK: usize = control::MAX_RX_PER_STEP;
-/// The longest a reset waits for the last response to leave the UART.
-const FLUSH_BEFORE_RESET: Duration = Duration::from_millis(20);
+/// The longest a reset waits for the last response to leave the UART, µs.
+const FLUSH_BEFORE_RESET_US: u64 = 20_000;
 
 #[entry]
 fn main() -> ! {
     // Before anything else: every bridge off, whatever state a reset left the pins in.
     board::emergency_stop();
     info!(
-        "mmu-firmware {} starting, reset cause: {}",
+        "mmu-firmware {=str} starting, reset cause: {}",
         env!("CARGO_PKG_VERSION"),
         board::reset_cause()
     );
 
-    static EXECUTOR: StaticCell<Executor> = StaticCell::new();
-    // `try_init` and defmt's `unwrap!` rather than `init`: its panic message would stay in flash.
-    unwrap!(EXECUTOR.try_init(Executor::new())).run(|spawner| {
-        let (control, sampler, flash) = board::init();
-        let logic = new_logic();
-        spawner.spawn(unwrap!(control_task(control, sampler, flash, logic)));
-    })
+    let (control, sampler, flash) = board::init();
+    let logic = new_logic();
+    let persisted = Persisted::boot(logic.app_mut(), flash);
+    run(control, sampler, persisted, logic)
 }
 
-/// The unit logic, in a static rather than in the control task's future. Built out of line:
-/// `App::new` builds it on the stack first (about 2.5 KiB), and this frame is gone before the
-/// tasks run, whereas a temporary in the task's `poll` or in `Executor::run` would stay under
-/// every later step (the worst-case stack, `scripts/firmware-size.sh`).
+/// The unit logic, in a static rather than in the loop's frame. Built out of line: `App::new`
+/// builds it on the stack first (about 2.5 KiB), and this frame is gone before the loop runs,
+/// whereas a temporary in [`run`] or `main` would stay under every later step (the worst-case
+/// stack, `scripts/firmware-size.sh`).
 #[inline(never)]
 fn new_logic() -> &'static mut ControlLoop<SLOTS> {
     static LOGIC: StaticCell<ControlLoop<SLOTS>> = StaticCell::new();
+    // `try_init` and defmt's `unwrap!` rather than `init`: its panic message would stay in flash.
     unwrap!(LOGIC.try_init(ControlLoop::new(
         App::new(Config::default()),
-        millis(Clock::now()),
+        millis(board::uptime_us()),
     )))
 }
 
-#[embassy_executor::task]
-async fn control_task(
+/// The control loop: a step every [`CONTROL_PERIOD_US`] of the uptime clock ([`Schedule`]). A
+/// step that starts late (the previous one overran) runs at once and reports its lateness, which
+/// decides the watchdog feed ([`control::feeds_watchdog`]); the ticks a flash write stalled are
+/// dropped rather than caught up in a burst of late, unfed steps.
+fn run(
     mut board: board::Control,
     mut sampler: board::Sampler,
-    flash: board::StoreFlash,
+    mut persisted: Persisted,
     control: &'static mut ControlLoop<SLOTS>,
-) {
-    let mut persisted = Persisted::boot(control.app_mut(), flash);
-    let mut ticker = Ticker::every(CONTROL_PERIOD);
-    let mut deadline = Clock::now() + CONTROL_PERIOD;
+) -> ! {
+    let mut schedule = Schedule::new(board::uptime_us(), CONTROL_PERIOD_US);
     let mut rx = [0u8; RX_CHUNK];
+    let mut line_errors = LineErrors::default();
     loop {
-        ticker.next().await;
-        let lateness = Clock::now().saturating_duration_since(deadline);
-        deadline += CONTROL_PERIOD;
+        let lateness_us = schedule.start(board::wait_until(schedule.deadline_us()));
 
         // This tick's scan, then the step: the App steps on readings taken just before it.
-        let samples = sampler.sample().await;
-        let now = Clock::now();
+        let samples = sampler.sample();
+        let now = millis(board::uptime_us());
         let received = board.receive(&mut rx);
         let button_down = board.button_down();
         let step = control_step(
             control,
             &Tick {
-                now: millis(now),
-                lateness_us: lateness.as_micros(),
+                now,
+                lateness_us,
                 sample_age_us: 0,
                 samples: &samples,
                 rx: &rx[..received],
@@ -119,19 +122,21 @@ async fn control_task(
             control.tx_dropped();
         }
         if let Some(action) = step.out.action {
-            info!("board action: {}", action);
+            // Logged by `Persisted::before`, which every reset runs ("store: Reset done").
             let mut resetting = Resetting {
                 board: &mut board,
                 persisted: &mut persisted,
                 app: control.app(),
             };
-            control::reset(&mut resetting, action).await;
+            block_on(control::reset(&mut resetting, action));
         }
         if step.feed_watchdog {
             board.feed_watchdog();
         }
         if let Some(stats) = step.report {
-            log_stats(&stats);
+            let now_errors = board.line_errors();
+            log_stats(&stats, &now_errors.since(&line_errors));
+            line_errors = now_errors;
         }
 
         // Last, just after the feed: a write stalls the CPU (see `board::WatchedFlash`; a page
@@ -140,18 +145,17 @@ async fn control_task(
         let busy = received > 0 || !step.out.tx.is_empty();
         if persisted.update(control.app(), now, busy) {
             control.saved();
-            ticker.reset();
-            deadline = Clock::now() + CONTROL_PERIOD;
+            schedule.restart(board::uptime_us());
         }
     }
 }
 
-fn millis(at: Clock) -> Instant {
-    Instant::from_millis(at.as_millis())
+fn millis(at_us: u64) -> Instant {
+    Instant::from_millis(at_us / 1000)
 }
 
 /// One step of the unit logic and its loop policy. Kept out of line so that its size shows as
-/// `mmu_firmware::control_step` in `scripts/firmware-size.sh` rather than inside the task's future.
+/// `mmu_firmware::control_step` in `scripts/firmware-size.sh` rather than inside [`run`].
 #[inline(never)]
 fn control_step(control: &mut ControlLoop<SLOTS>, tick: &Tick<SLOTS>) -> control::Step<SLOTS> {
     control.step(tick)
@@ -170,7 +174,7 @@ impl ResetBoard for Resetting<'_> {
     }
 
     async fn flush(&mut self) {
-        self.board.flush(FLUSH_BEFORE_RESET).await;
+        self.board.flush(FLUSH_BEFORE_RESET_US);
     }
 
     async fn persist(&mut self, action: BoardAction) {
@@ -182,21 +186,25 @@ impl ResetBoard for Resetting<'_> {
     }
 }
 
-fn log_stats(stats: &control::Stats) {
-    if stats.troubled() {
+/// The period's statistics, with what went wrong on the printer's receive line meanwhile.
+fn log_stats(stats: &control::Stats, line: &LineErrors) {
+    if stats.troubled() || line.total() > 0 {
         warn!(
-            "control: {} steps, {} late (max {} us), {} with stale samples, {} watchdog feeds skipped, {} responses dropped, {} flash writes",
+            "control: {=u32} steps, {=u32} late (max {=u64} us), {=u32} with stale samples, {=u32} watchdog feeds skipped, {=u32} responses dropped, {=u32} flash writes; received: {=u32} overruns, {=u32} garbled, {=u32} dropped",
             stats.steps,
             stats.late,
             stats.max_lateness_us,
             stats.stale,
             stats.unfed,
             stats.tx_dropped,
-            stats.saves
+            stats.saves,
+            line.overruns,
+            line.garbled,
+            line.dropped
         );
     } else {
         info!(
-            "control: {} steps on time, max lateness {} us, {} flash writes",
+            "control: {=u32} steps on time, max lateness {=u64} us, {=u32} flash writes",
             stats.steps, stats.max_lateness_us, stats.saves
         );
     }
@@ -206,7 +214,7 @@ fn log_stats(stats: &control::Stats) {
 ///
 /// The store is synchronous: every flash operation of [`board::WatchedFlash`] blocks (the CPU
 /// stalls anyway while the G0's flash programs or erases). Its calls are plain out-of-line
-/// functions, whose frames stay out of the control task's future.
+/// functions, whose frames stay off the loop's.
 struct Persisted(Keeper<board::WatchedFlash, SLOTS, board::HardwareCrc>);
 
 impl Persisted {
@@ -229,17 +237,17 @@ impl Persisted {
                 let snapshot = app.snapshot();
                 let c = &snapshot.counters;
                 info!(
-                    "restored: lanes {}, {} settings, errors {}, tool changes {}, failures {}, fed {} mm",
-                    snapshot.lanes,
+                    "restored: lanes {=[?]}, {=usize} settings, errors {=u16}, tool changes {=[?]}, failures {=[?]}, fed {=[?]} mm",
+                    &snapshot.lanes[..],
                     snapshot.settings.len(),
                     c.drive_errors,
-                    c.tool_changes,
-                    c.failures,
-                    c.fed_mm
+                    &c.tool_changes[..],
+                    &c.failures[..],
+                    &c.fed_mm[..]
                 );
             }
             Boot::Damaged(damage) => warn!(
-                "store: {} unreadable double words, {} torn entries (a power cut): the newest complete records are restored",
+                "store: {=u16} unreadable double words, {=u16} torn entries (a power cut): the newest complete records are restored",
                 damage.unreadable, damage.torn
             ),
         }
@@ -250,10 +258,8 @@ impl Persisted {
     /// wrote, i.e. stalled the CPU. A failed write leaves the previous record in flash; the
     /// keeper tries again after a pause, and its health is logged once per change.
     #[inline(never)]
-    fn update(&mut self, app: &App<SLOTS>, now: Clock, busy: bool) -> bool {
-        let wrote = self
-            .0
-            .update_after(app, Instant::from_millis(now.as_millis()), busy);
+    fn update(&mut self, app: &App<SLOTS>, now: Instant, busy: bool) -> bool {
+        let wrote = self.0.update_after(app, now, busy);
         if let Some(health) = self.0.take_news() {
             warn!("store: {}", health);
         }
