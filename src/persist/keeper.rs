@@ -469,4 +469,53 @@ mod tests {
         }
         assert_eq!(unit.steps_until_stored(false, |s| s.lanes == lanes), 2);
     }
+
+    /// The newest copy of a record torn (a cut before its trailer was programmed): a restart
+    /// restores the copy before it and reports the torn entry, once; the next save leaves it
+    /// behind.
+    #[test]
+    fn a_torn_newest_entry_restores_the_copy_before_it() {
+        let (first, second) = (
+            [Lane::Parked, Lane::Loaded, Lane::Empty],
+            [Lane::InHub, Lane::Parked, Lane::Empty],
+        );
+        let mut unit = Unit::boot();
+        for lanes in [first, second] {
+            unit.change_lanes(lanes);
+            unit.steps_until_stored(false, |s| s.lanes == lanes);
+        }
+        let mut flash = unit.keeper.store().flash().clone();
+        let trailer = flash.0.iter().rposition(|&b| b != 0xff).unwrap() / 8 * 8;
+        flash.0[trailer..trailer + 8].fill(0xff);
+        let mut store = Store::<_, 3>::new(flash, 0..3 * PAGE as u32).unwrap();
+        assert_eq!(store.load().lanes, first);
+        assert_eq!(
+            store.damage(),
+            Damage {
+                unreadable: 0,
+                torn: 1
+            }
+        );
+
+        let mut app = App::new(Config::default());
+        let (keeper, boot) = Keeper::boot(store, &mut app);
+        assert_eq!(
+            boot,
+            Boot::Damaged(Damage {
+                unreadable: 0,
+                torn: 1
+            })
+        );
+        assert_eq!(app.lanes(), first);
+        let mut unit = Unit {
+            app,
+            keeper,
+            now: Instant::ZERO,
+        };
+        unit.change_lanes(second);
+        unit.steps_until_stored(false, |s| s.lanes == second);
+        let mut store = Store::<_, 3>::new(unit.keeper.store().flash().clone(), 0..3 * PAGE as u32).unwrap();
+        assert_eq!(store.load().lanes, second);
+        assert!(store.damage().is_none(), "{:?}", store.damage());
+    }
 }

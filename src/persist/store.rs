@@ -55,6 +55,12 @@ pub struct Damage {
 }
 
 impl Damage {
+    /// One more entry whose checks failed.
+    #[inline(never)]
+    fn note_torn(&mut self) {
+        self.torn = self.torn.saturating_add(1);
+    }
+
     /// Whether nothing was found.
     pub fn is_none(&self) -> bool {
         *self == Damage::default()
@@ -244,114 +250,77 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
         self.flash.read(address, bytes).is_ok() && is_complete(bytes, &mut self.crc)
     }
 
-    /// Walk one page's entries. In a committed page, note each record's newest complete copy and
-    /// the damage found.
-    ///
-    /// Only headers are read on the way; the entries that would be some record's newest are then
-    /// checked whole, and only when one of them is torn is the page walked again for the
-    /// record's newest complete copy.
+    /// Walk one page's entries, each checked whole. In a committed page, note each record's
+    /// newest complete copy, and as damage a record whose newest entry there is torn (as the
+    /// damage the walk met); damage in a page that does not count (a torn erase's leftovers) is
+    /// not reported.
     fn scan_page(&mut self, page: u32) -> PageScan {
-        let mut candidates: [Option<(Newest, usize)>; 4] = [None; 4];
-        let mut commit = None;
-        let mut newest_header = None;
-        // Damage in a page that does not count (a torn erase's leftovers) is not reported.
-        let damage_before = self.damage;
-        let tail = self.walk(page, |key, len, place| {
-            newest_header = newest_header.max(Some(place.sequence));
-            if key == COMMIT {
-                commit = Some((place, len));
-            } else if let Some(record) = Record::from_key(key) {
-                let slot = &mut candidates[record.index()];
-                if slot.is_none_or(|(c, _)| place.sequence > c.sequence) {
-                    *slot = Some((place, len));
-                }
-            }
-        });
-        let committed = match commit {
-            Some((place, len)) => self.entry_complete(self.page_address(page) + place.offset, len),
-            None => false,
+        // Per record: the newest sequence number of its headers, and its newest complete copy.
+        let mut newest_headers: [Option<u32>; 4] = [None; 4];
+        let mut complete: [Option<Newest>; 4] = [None; 4];
+        let mut scan = PageScan {
+            newest_header: None,
+            committed: false,
+            tail: None,
         };
-        if !committed {
-            self.damage = damage_before;
-        } else {
-            for record in Record::ALL {
-                let Some((candidate, len)) = candidates[record.index()] else {
-                    continue;
-                };
-                let known = self.newest[record.index()];
-                if known.is_some_and(|known| known.sequence >= candidate.sequence) {
-                    continue;
-                }
-                if self.entry_complete(self.page_address(page) + candidate.offset, len) {
-                    self.newest[record.index()] = Some(candidate);
-                } else {
-                    self.damage.torn = self.damage.torn.saturating_add(1);
-                    self.newest_complete_in(page, record);
-                }
-            }
-        }
-        PageScan {
-            newest_header,
-            committed,
-            tail,
-        }
-    }
-
-    /// Walk `page`'s entry headers, calling `visit` with each (key, payload length, place).
-    /// Returns where an entry may be appended (`None`: full, or the walk ended on damage).
-    fn walk(&mut self, page: u32, mut visit: impl FnMut(u8, usize, Newest)) -> Option<u32> {
+        let damage_before = self.damage;
         let (start, size) = (self.page_address(page), page_size::<F>());
         let mut offset = 0;
         while offset + DOUBLE_WORD as u32 <= size {
             let (key, len, sequence) = match self.header(start + offset) {
                 Ok(Some(header)) => header,
-                Ok(None) => return Some(offset),
+                Ok(None) => {
+                    scan.tail = Some(offset);
+                    break;
+                }
                 Err(()) => {
                     self.note_unreadable_or_torn(start + offset);
-                    return None;
+                    break;
                 }
             };
             let entry = entry_size(len) as u32;
             if offset + entry > size {
-                self.damage.torn = self.damage.torn.saturating_add(1);
-                return None;
+                self.damage.note_torn();
+                break;
             }
-            visit(
-                key,
-                len,
-                Newest {
-                    sequence,
-                    page,
-                    offset,
-                },
-            );
+            scan.newest_header = scan.newest_header.max(Some(sequence));
+            let is_complete = self.entry_complete(start + offset, len);
+            if key == COMMIT {
+                // The last commit entry of the page decides.
+                scan.committed = is_complete;
+            } else if let Some(record) = Record::from_key(key) {
+                let index = record.index();
+                newest_headers[index] = newest_headers[index].max(Some(sequence));
+                if is_complete && complete[index].is_none_or(|c| sequence > c.sequence) {
+                    complete[index] = Some(Newest {
+                        sequence,
+                        page,
+                        offset,
+                    });
+                }
+            }
             offset += entry;
         }
-        None
-    }
-
-    /// After `record`'s newest entry in `page` turned out torn: its newest complete one there, if
-    /// newer than any known (entries follow each other in sequence order within a page).
-    fn newest_complete_in(&mut self, page: u32, record: Record) {
-        let (start, size) = (self.page_address(page), page_size::<F>());
-        let mut offset = 0;
-        while offset + DOUBLE_WORD as u32 <= size {
-            let Ok(Some((key, len, sequence))) = self.header(start + offset) else {
-                return;
-            };
-            let known = self.newest[record.index()];
-            if key == record as u8
-                && known.is_none_or(|known| sequence > known.sequence)
-                && self.entry_complete(start + offset, len)
-            {
-                self.newest[record.index()] = Some(Newest {
-                    sequence,
-                    page,
-                    offset,
-                });
-            }
-            offset += entry_size(len) as u32;
+        if !scan.committed {
+            self.damage = damage_before;
+            return scan;
         }
+        for index in 0..self.newest.len() {
+            let known = self.newest[index].map(|known| known.sequence);
+            if newest_headers[index] <= known {
+                continue;
+            }
+            let complete = complete[index];
+            if complete.map(|c| c.sequence) != newest_headers[index] {
+                self.damage.note_torn();
+            }
+            if let Some(complete) = complete
+                && Some(complete.sequence) > known
+            {
+                self.newest[index] = Some(complete);
+            }
+        }
+        scan
     }
 
     fn note_unreadable_or_torn(&mut self, address: u32) {
@@ -359,7 +328,7 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
         if self.flash.read(address, &mut word).is_err() {
             self.damage.unreadable = self.damage.unreadable.saturating_add(1);
         } else {
-            self.damage.torn = self.damage.torn.saturating_add(1);
+            self.damage.note_torn();
         }
     }
 
