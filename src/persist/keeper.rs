@@ -16,7 +16,7 @@ use embedded_storage::nor_flash::NorFlash;
 
 use super::crc::{EntryCrc, SoftwareCrc};
 use super::settings::{Defaults, Scan};
-use super::{Damage, Snapshot, Store, StoreError};
+use super::{Damage, Store, StoreError};
 use crate::app::{App, BoardAction};
 use crate::time::Instant;
 use crate::unit::Lane;
@@ -191,22 +191,18 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Keeper<F, N, C> {
         let Some(scan) = self.scan.as_mut() else {
             return false;
         };
-        let Some(settings) = scan.step(app, &self.defaults) else {
+        if !scan.compare_next(app, &self.defaults) {
             return false;
-        };
+        }
         if self.settings_seen != Some(app.settings_revision()) {
             self.settings_seen = Some(app.settings_revision());
             self.scan = Some(Scan::default());
             return false;
         }
-        self.scan = None;
-        let snapshot = Snapshot {
-            lanes: self.lanes,
-            counters: app.counters,
-            settings,
-        };
         self.store.set_erase_allowance(self.erase_credit);
-        self.store.begin_save(&snapshot, Some(now));
+        self.store
+            .begin_save_of(&self.lanes, &app.counters, scan.settings(), Some(now));
+        self.scan = None;
         false
     }
 
@@ -327,6 +323,7 @@ mod tests {
 
     use embedded_storage::nor_flash::{ErrorType, NorFlashErrorKind, ReadNorFlash};
 
+    use super::super::Snapshot;
     use super::*;
 
     const PAGE: usize = 2048;

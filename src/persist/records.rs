@@ -234,14 +234,14 @@ impl<const N: usize> Records<N> {
         }
     }
 
-    /// Become `snapshot`, its settings split into the identity and the rest (in place: no
-    /// copy of the records on the stack).
-    pub(super) fn set_from_snapshot(&mut self, snapshot: &Snapshot<N>) {
-        self.lanes = snapshot.lanes;
-        self.counters = snapshot.counters;
+    /// Become the snapshot of `lanes`, `counters` and `settings`, its settings split into the
+    /// identity and the rest (in place: no copy of the records on the stack).
+    pub(super) fn set(&mut self, lanes: &[Lane; N], counters: &Counters<N>, settings: &[(u8, u16)]) {
+        self.lanes = *lanes;
+        self.counters = *counters;
         self.settings.clear();
         self.identity.clear();
-        for &(address, value) in &snapshot.settings {
+        for &(address, value) in settings {
             // Each holds what a snapshot can hold (a register appears once).
             let _ = if is_identity(address) {
                 self.identity.push((address, value))

@@ -73,7 +73,19 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
     /// Returns how many records it will write (0: nothing to save, no save started). A save in
     /// progress is abandoned (what it completed stays saved).
     pub fn begin_save(&mut self, snapshot: &Snapshot<N>, now: Option<Instant>) -> u8 {
-        self.target.set_from_snapshot(snapshot);
+        self.begin_save_of(&snapshot.lanes, &snapshot.counters, &snapshot.settings, now)
+    }
+
+    /// [`Store::begin_save`] of the snapshot of `lanes`, `counters` and `settings` (no snapshot
+    /// built on the way).
+    pub(in crate::persist) fn begin_save_of(
+        &mut self,
+        lanes: &[Lane; N],
+        counters: &Counters<N>,
+        settings: &[(u8, u16)],
+        now: Option<Instant>,
+    ) -> u8 {
+        self.target.set(lanes, counters, settings);
         let changed = self.changed(&self.target, now);
         if changed & bit(Record::Counters) == 0 {
             // Not due (or unchanged): the target stays the stored records but for the changes.
