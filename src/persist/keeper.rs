@@ -515,4 +515,46 @@ mod tests {
         assert_eq!(store.load().lanes, second);
         assert!(store.damage().is_none(), "{:?}", store.damage());
     }
+
+    /// A flash that erases 128 KiB at once (as some NOR flashes do): a store keeps where its
+    /// entries lie in 16 bits, so it refuses such pages rather than mislay entries.
+    struct LargePages;
+
+    impl ErrorType for LargePages {
+        type Error = NorFlashErrorKind;
+    }
+
+    impl ReadNorFlash for LargePages {
+        const READ_SIZE: usize = 1;
+
+        fn read(&mut self, _: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
+            bytes.fill(0xff);
+            Ok(())
+        }
+
+        fn capacity(&self) -> usize {
+            3 << 17
+        }
+    }
+
+    impl NorFlash for LargePages {
+        const WRITE_SIZE: usize = 8;
+        const ERASE_SIZE: usize = 1 << 17;
+
+        fn erase(&mut self, _: u32, _: u32) -> Result<(), Self::Error> {
+            Ok(())
+        }
+
+        fn write(&mut self, _: u32, _: &[u8]) -> Result<(), Self::Error> {
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn a_flash_of_pages_over_64_kib_is_refused() {
+        let store = Store::<_, 3>::new(LargePages, 0..3 << 17);
+        assert!(matches!(store, Err(StoreError::Layout)));
+        let store = Store::<_, 3>::new(RamFlash(Vec::new()), 0..3 * PAGE as u32);
+        assert!(store.is_ok(), "pages of 2 KiB");
+    }
 }

@@ -35,13 +35,14 @@ pub use save::Progress;
 /// Counters are written at most this often, ms (they change while the unit works).
 pub const SLOW_RECORD_PERIOD_MS: u64 = 10_000;
 
-/// Where a record's newest complete copy lies.
+/// Where a record's newest complete copy lies (in 16 bits: [`Store::with_crc`] takes no more
+/// pages, nor larger ones).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 struct Newest {
     sequence: u32,
-    page: u32,
+    page: u16,
     /// Its offset in the page.
-    offset: u32,
+    offset: u16,
 }
 
 /// What a load found that a healthy store does not hold.
@@ -128,8 +129,9 @@ impl<F: NorFlash, const N: usize> Store<F, N> {
 }
 
 impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
-    /// A store over `range` of `flash`: page aligned, at least three pages, on a flash that
-    /// programs whole double words (or less) and reads bytes; `crc` computes its entries' CRC.
+    /// A store over `range` of `flash`: page aligned, at least three pages and at most 65,536 of
+    /// at most 64 KiB, on a flash that programs whole double words (or less) and reads bytes;
+    /// `crc` computes its entries' CRC.
     pub fn with_crc(flash: F, crc: C, range: core::ops::Range<u32>) -> Result<Self, StoreError> {
         let page = page_size::<F>();
         let fits = page > 0
@@ -139,7 +141,10 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
             && DOUBLE_WORD.is_multiple_of(F::WRITE_SIZE)
             && DOUBLE_WORD.is_multiple_of(F::READ_SIZE)
             && F::ERASE_SIZE.is_multiple_of(DOUBLE_WORD)
-            && F::ERASE_SIZE >= 4 * MAX_ENTRY;
+            && F::ERASE_SIZE >= 4 * MAX_ENTRY
+            // Where an entry lies is kept in 16 bits (`Newest`).
+            && F::ERASE_SIZE <= 1 << 16
+            && (range.end - range.start) / page <= 1 << 16;
         if !fits {
             return Err(StoreError::Layout);
         }
@@ -294,8 +299,8 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
                 if is_complete && complete[index].is_none_or(|c| sequence > c.sequence) {
                     complete[index] = Some(Newest {
                         sequence,
-                        page,
-                        offset,
+                        page: page as u16,
+                        offset: offset as u16,
                     });
                 }
             }
@@ -334,7 +339,7 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
 
     /// Read `record`'s newest entry into the buffer: its payload's length.
     fn find(&mut self, newest: Newest, record: Record) -> Option<usize> {
-        let address = self.page_address(newest.page) + newest.offset;
+        let address = self.page_address(newest.page.into()) + u32::from(newest.offset);
         let (key, len, sequence) = self.header(address).ok()??;
         if key != record as u8 || sequence != newest.sequence || !self.entry_complete(address, len) {
             return None;

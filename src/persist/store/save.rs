@@ -284,7 +284,12 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
                 let after = self.head.map_or(self.pages - 1, |(page, _)| page);
                 let page = (1..self.pages)
                     .map(|step| (after + step) % self.pages)
-                    .find(|&page| self.newest.iter().flatten().all(|newest| newest.page != page))
+                    .find(|&page| {
+                        self.newest
+                            .iter()
+                            .flatten()
+                            .all(|newest| u32::from(newest.page) != page)
+                    })
                     .ok_or(StoreError::Flash)?;
                 // Whatever happens next, the page after this one is tried next.
                 self.head = Some((page, None));
@@ -384,8 +389,8 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
             key,
             place: Newest {
                 sequence,
-                page,
-                offset,
+                page: page as u16,
+                offset: offset as u16,
             },
         });
         Ok(())
@@ -405,7 +410,8 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
             return Err(StoreError::Flash);
         };
         let done = offset + bytes.len() == writing.entry.size();
-        let address = self.base + place.page * page_size::<F>() + place.offset + offset as u32;
+        let address =
+            self.base + u32::from(place.page) * page_size::<F>() + u32::from(place.offset) + offset as u32;
         let mut target = [0u8; PROGRAM_CHUNK];
         let target = &mut target[..bytes.len()];
         if self.flash.read(address, target).is_err() || target.iter().any(|&b| b != 0xff) {
@@ -419,7 +425,7 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
         let size = writing.entry.size() as u32;
         let key = writing.key;
         self.writing = None;
-        self.head = Some((place.page, Some(place.offset + size)));
+        self.head = Some((place.page.into(), Some(u32::from(place.offset) + size)));
         Ok(self.entry_written(job, key, place))
     }
 
