@@ -236,20 +236,15 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
 
     /// The records of `next` that differ from the stored ones and are due, as bits.
     fn changed(&self, next: &Records<N>, now: Option<Instant>) -> u8 {
-        let slow_allowed = self.slow_allowed(now);
         let saved = &self.saved;
-        let mut changed = 0;
-        for (record, differs) in [
-            (Record::Lanes, next.lanes != saved.lanes),
-            (Record::Settings, next.settings != saved.settings),
-            (Record::Identity, next.identity != saved.identity),
-            (Record::Counters, next.counters != saved.counters && slow_allowed),
-        ] {
-            if differs {
-                changed |= bit(record);
-            }
-        }
-        changed
+        let bit_if = |differs: bool, record| if differs { bit(record) } else { 0 };
+        bit_if(next.lanes != saved.lanes, Record::Lanes)
+            | bit_if(next.settings != saved.settings, Record::Settings)
+            | bit_if(next.identity != saved.identity, Record::Identity)
+            | bit_if(
+                next.counters != saved.counters && self.slow_allowed(now),
+                Record::Counters,
+            )
     }
 
     /// Whether counters may be written at `now` (`None`: whenever).
