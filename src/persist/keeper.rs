@@ -16,7 +16,7 @@ use embedded_storage::nor_flash::NorFlash;
 
 use super::crc::{EntryCrc, SoftwareCrc};
 use super::settings::{Defaults, Scan};
-use super::{Damage, Store, StoreError};
+use super::{Damage, Snapshot, Store, StoreError};
 use crate::app::{App, BoardAction};
 use crate::time::Instant;
 use crate::unit::Lane;
@@ -232,10 +232,20 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Keeper<F, N, C> {
         self.store
             .set_erase_allowance(self.erase_credit.max(ERASES_BEFORE_RESET));
         let result = match action {
-            BoardAction::Reset => self.store.save(&app.snapshot(), None).map(drop),
+            BoardAction::Reset => self.store.save(&self.snapshot(app), None).map(drop),
             BoardAction::EraseAndReset => self.store.forget(),
         };
         self.settle(result, now)
+    }
+
+    /// What `app` keeps across a restart, as [`App::snapshot`] gives it, its settings compared
+    /// with the defaults read at boot (no default configuration built).
+    pub fn snapshot(&self, app: &App<N>) -> Snapshot<N> {
+        Snapshot {
+            lanes: app.lanes(),
+            counters: app.counters,
+            settings: Scan::all(app, &self.defaults),
+        }
     }
 
     /// Whether a save is in progress (or the settings it saves are being compared): the next
@@ -323,7 +333,6 @@ mod tests {
 
     use embedded_storage::nor_flash::{ErrorType, NorFlashErrorKind, ReadNorFlash};
 
-    use super::super::Snapshot;
     use super::*;
 
     const PAGE: usize = 2048;
@@ -556,5 +565,23 @@ mod tests {
         assert!(matches!(store, Err(StoreError::Layout)));
         let store = Store::<_, 3>::new(RamFlash(Vec::new()), 0..3 * PAGE as u32);
         assert!(store.is_ok(), "pages of 2 KiB");
+    }
+
+    /// The keeper's snapshot (the one a reset saves, and the boot logs) is the App's, its
+    /// settings found against the defaults read at boot.
+    #[test]
+    fn the_keepers_snapshot_is_the_apps() {
+        let mut unit = Unit::boot();
+        assert_eq!(unit.keeper.snapshot(&unit.app), unit.app.snapshot());
+        unit.change_lanes([Lane::Parked, Lane::Loaded, Lane::Empty]);
+        unit.app.counters.tool_changes[1] = 7;
+        for (address, value) in [(0x22, 777), (0x52, 2)] {
+            assert!(unit.app.write_register(address, value), "{address:#04x}");
+        }
+        let snapshot = unit.keeper.snapshot(&unit.app);
+        assert_eq!(snapshot.settings.len(), 2);
+        assert_eq!(snapshot, unit.app.snapshot());
+        unit.keeper.before(BoardAction::Reset, &unit.app).unwrap();
+        assert_eq!(unit.stored(), snapshot, "saved before the reset");
     }
 }

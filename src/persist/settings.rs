@@ -65,6 +65,13 @@ impl Scan {
         false
     }
 
+    /// The settings of `app` that differ from their defaults: every register compared at once.
+    pub(super) fn all<const N: usize>(app: &App<N>, defaults: &Defaults) -> Settings {
+        let mut scan = Scan::default();
+        while !scan.compare_next(app, defaults) {}
+        scan.settings
+    }
+
     /// The settings that differ from their defaults, of the registers compared so far.
     pub(super) fn settings(&self) -> &Settings {
         &self.settings
