@@ -275,6 +275,23 @@ impl<const N: usize> Records<N> {
         writer.len()
     }
 
+    /// Become blank records (lanes unknown, counters zero, no settings) but for `from`'s
+    /// identity, in place.
+    pub(super) fn blank_but_identity(&mut self, from: &Records<N>) {
+        self.lanes = [Lane::Unknown; N];
+        self.counters = Counters::default();
+        self.settings.clear();
+        self.identity.clone_from(&from.identity);
+    }
+
+    /// Become `from`, in place.
+    pub(super) fn copy_from(&mut self, from: &Records<N>) {
+        self.lanes = from.lanes;
+        self.counters = from.counters;
+        self.settings.clone_from(&from.settings);
+        self.identity.clone_from(&from.identity);
+    }
+
     /// Take `record` from `from`.
     pub(super) fn copy_record(&mut self, record: Record, from: &Records<N>) {
         match record {

@@ -231,7 +231,7 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
                 self.saved.decode(record, payload);
             }
         }
-        self.target = self.saved.clone();
+        self.target.copy_from(&self.saved);
         self.saved.snapshot()
     }
 

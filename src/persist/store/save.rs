@@ -129,10 +129,7 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
     /// either as it was or blank. (Erasing pages instead could bring old records back: a cut
     /// erase leaves old entries behind.)
     pub fn begin_forget(&mut self) {
-        self.target = Records {
-            identity: self.saved.identity.clone(),
-            ..Records::blank()
-        };
+        self.target.blank_but_identity(&self.saved);
         self.slow_due = None;
         self.begin(bit(Record::Settings) | bit(Record::Counters) | bit(Record::Lanes));
     }
@@ -177,7 +174,7 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
                 self.writing = None;
                 self.slow_due = None;
                 // What the flash holds: the records the failed save did not complete.
-                self.target = self.saved.clone();
+                self.target.copy_from(&self.saved);
                 Err(error)
             }
         }
@@ -225,10 +222,7 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
         }
         self.newest = [None; 4];
         self.head = None;
-        self.target = Records {
-            identity: self.saved.identity.clone(),
-            ..Records::blank()
-        };
+        self.target.blank_but_identity(&self.saved);
         self.slow_due = None;
         self.begin(0);
         self.finish()
@@ -443,7 +437,7 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
                 // The commit: the fresh page holds every record's newest copy.
                 None => {
                     self.newest = self.placed;
-                    self.saved = self.target.clone();
+                    self.saved.copy_from(&self.target);
                     None
                 }
             },
