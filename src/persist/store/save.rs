@@ -58,6 +58,16 @@ pub struct Progress {
     pub wrote: bool,
 }
 
+/// Whether the `len` bytes (at most [`CHECK_CHUNK`]) at `address` of `flash` read erased.
+fn reads_erased<F: NorFlash>(flash: &mut F, address: u32, len: usize) -> bool {
+    let mut bytes = [0u8; CHECK_CHUNK];
+    let Some(bytes) = bytes.get_mut(..len) else {
+        return false;
+    };
+    // A fold, not `any`: no branch per byte (a third of the instructions on the M0+).
+    flash.read(address, bytes).is_ok() && bytes.iter().fold(0xff, |all, &b| all & b) == 0xff
+}
+
 fn bit(record: Record) -> u8 {
     1 << record.index()
 }
@@ -325,12 +335,9 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
     /// Check the next slice of `page` from `offset`: the stage that follows.
     fn check_erased(&mut self, page: u32, offset: u32) -> Stage {
         let size = page_size::<F>();
-        let mut slice = [0u8; CHECK_CHUNK];
         let len = CHECK_CHUNK.min((size - offset) as usize);
-        let slice = &mut slice[..len];
         let start = self.page_address(page) + offset;
-        // A fold, not `any`: no branch per byte (a third of the instructions on the M0+).
-        if self.flash.read(start, slice).is_err() || slice.iter().fold(0xff, |all, &b| all & b) != 0xff {
+        if !reads_erased(&mut self.flash, start, len) {
             return Stage::Erase;
         }
         if offset + len as u32 >= size {
@@ -401,9 +408,7 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
         let done = offset + bytes.len() == writing.entry.size();
         let address =
             self.base + u32::from(place.page) * page_size::<F>() + u32::from(place.offset) + offset as u32;
-        let mut target = [0u8; PROGRAM_CHUNK];
-        let target = &mut target[..bytes.len()];
-        if self.flash.read(address, target).is_err() || target.iter().any(|&b| b != 0xff) {
+        if !reads_erased(&mut self.flash, address, bytes.len()) {
             return Err(StoreError::Flash);
         }
         self.flash_work = true;
