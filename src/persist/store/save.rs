@@ -280,16 +280,23 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
                 }))
             }
             Job::Move { tries } => {
+                // The page after the head that holds no record's newest copy.
                 let after = self.head.map_or(self.pages - 1, |(page, _)| page);
-                let page = (1..self.pages)
-                    .map(|step| (after + step) % self.pages)
-                    .find(|&page| {
-                        self.newest
-                            .iter()
-                            .flatten()
-                            .all(|newest| u32::from(newest.page) != page)
-                    })
-                    .ok_or(StoreError::Flash)?;
+                let mut page = after;
+                let page = loop {
+                    page = if page + 1 < self.pages { page + 1 } else { 0 };
+                    if page == after {
+                        return Err(StoreError::Flash);
+                    }
+                    if self
+                        .newest
+                        .iter()
+                        .flatten()
+                        .all(|newest| u32::from(newest.page) != page)
+                    {
+                        break page;
+                    }
+                };
                 // Whatever happens next, the page after this one is tried next.
                 self.head = Some((page, None));
                 self.placed = [None; 4];
