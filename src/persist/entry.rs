@@ -109,12 +109,12 @@ impl EntryWriter {
         if start == 0 {
             crc.start();
         }
-        crc.add(&buffer[start..end.min(body)]);
+        crc.add(buffer.get(start..end.min(body))?);
         if end == self.size {
-            buffer[body..end].copy_from_slice(&trailer(crc.value()));
+            *buffer.get_mut(body..)?.first_chunk_mut()? = trailer(crc.value());
         }
         self.written = end;
-        Some((start, &buffer[start..end]))
+        Some((start, buffer.get(start..end)?))
     }
 }
 
