@@ -78,7 +78,10 @@ impl EntryWriter {
     pub(super) fn new(buffer: &mut [u8; MAX_ENTRY], key: u8, sequence: u32, len: usize) -> Self {
         let len = len.min(MAX_RECORD);
         let size = entry_size(len);
-        buffer[DOUBLE_WORD + len..size - DOUBLE_WORD].fill(0);
+        // `len` is at most MAX_RECORD: the padding is in the buffer.
+        if let Some(padding) = buffer.get_mut(DOUBLE_WORD + len..size - DOUBLE_WORD) {
+            padding.fill(0);
+        }
         buffer[0] = key;
         buffer[1] = len as u8;
         buffer[2..6].copy_from_slice(&sequence.to_le_bytes());
