@@ -23,9 +23,11 @@ const HEADER_CRC: Crc<u16, NoTable> = Crc::<u16, NoTable>::new(&CRC_16_IBM_3740)
 /// record's or [`COMMIT`].
 pub(super) fn parse_header(word: &[u8; DOUBLE_WORD]) -> Option<(u8, usize, u32)> {
     let [key, len, s0, s1, s2, s3, c0, c1] = *word;
+    if HEADER_CRC.checksum(&word[..6]) != u16::from_le_bytes([c0, c1]) {
+        return None;
+    }
     let known = Record::from_key(key).is_some() || key == COMMIT;
-    let checks = HEADER_CRC.checksum(&word[..6]) == u16::from_le_bytes([c0, c1]);
-    (known && checks && usize::from(len) <= MAX_RECORD).then_some((
+    (known && usize::from(len) <= MAX_RECORD).then_some((
         key,
         usize::from(len),
         u32::from_le_bytes([s0, s1, s2, s3]),
