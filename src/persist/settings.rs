@@ -52,11 +52,13 @@ impl Scan {
     /// (in a call that compares none: starting a save with them costs a call of its own), the
     /// settings that differ then in [`Scan::settings`].
     pub(super) fn compare_next<const N: usize>(&mut self, app: &App<N>, defaults: &Defaults) -> bool {
-        let next = defaults.0.get(self.next..).unwrap_or_default();
-        if next.is_empty() {
+        if self.next >= defaults.0.len() {
             return true;
         }
-        for &(address, default) in next.iter().take(REGISTERS_PER_CALL) {
+        for _ in 0..REGISTERS_PER_CALL {
+            let Some(&(address, default)) = defaults.0.get(self.next) else {
+                break;
+            };
             if let Some(value) = app.read_register(address).filter(|&value| value != default) {
                 let _ = self.settings.push((address, value));
             }
