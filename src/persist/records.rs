@@ -194,12 +194,13 @@ fn decode_pairs(bytes: &[u8], pairs: &mut VecView<(u8, u16)>, identity: bool) {
     if entries > MAX_SETTINGS {
         return;
     }
-    for pair in 0..entries {
-        let at = 3 * pair;
-        let address = field(fields, at, 1) as u8;
+    for pair in fields.chunks_exact(3) {
+        let &[address, low, high] = pair else {
+            continue;
+        };
         if !identity || is_identity(address) {
             // Room for every pair of a record that decodes (at most one per identity register).
-            let _ = pairs.push((address, field(fields, at + 1, 2) as u16));
+            let _ = pairs.push((address, u16::from_le_bytes([low, high])));
         }
     }
 }
