@@ -237,13 +237,15 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
 
     /// Read the header double word at `address`: `Ok(None)` when erased, `Err` when it does not
     /// read or is not a header; the key is a record's or [`COMMIT`].
-    fn header(&mut self, address: u32) -> Result<Option<(u8, usize, u32)>, ()> {
+    fn header(&mut self, address: u32) -> Result<Option<(u8, usize, u32)>, NotHeader> {
         let mut word = [0u8; DOUBLE_WORD];
-        self.flash.read(address, &mut word).map_err(drop)?;
+        self.flash
+            .read(address, &mut word)
+            .map_err(|_| NotHeader::Unreadable)?;
         if word == [0xff; DOUBLE_WORD] {
             return Ok(None);
         }
-        parse_header(&word).map(Some).ok_or(())
+        parse_header(&word).map(Some).ok_or(NotHeader::Torn)
     }
 
     /// Read the whole entry at `address` whose payload is `len` bytes into the buffer: whether it
@@ -278,8 +280,12 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
                     scan.tail = Some(offset);
                     break;
                 }
-                Err(()) => {
-                    self.note_unreadable_or_torn(start + offset);
+                Err(NotHeader::Unreadable) => {
+                    self.damage.unreadable = self.damage.unreadable.saturating_add(1);
+                    break;
+                }
+                Err(NotHeader::Torn) => {
+                    self.damage.note_torn();
                     break;
                 }
             };
@@ -328,15 +334,6 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
         scan
     }
 
-    fn note_unreadable_or_torn(&mut self, address: u32) {
-        let mut word = [0u8; DOUBLE_WORD];
-        if self.flash.read(address, &mut word).is_err() {
-            self.damage.unreadable = self.damage.unreadable.saturating_add(1);
-        } else {
-            self.damage.note_torn();
-        }
-    }
-
     /// Read `record`'s newest entry into the buffer: its payload's length.
     fn find(&mut self, newest: Newest, record: Record) -> Option<usize> {
         let address = self.page_address(newest.page.into()) + u32::from(newest.offset);
@@ -346,6 +343,14 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
         }
         Some(len)
     }
+}
+
+/// Why a double word where an entry was expected is not its header.
+enum NotHeader {
+    /// It does not read (ECC error).
+    Unreadable,
+    /// It reads, but not as a header (a program or an erase cut short).
+    Torn,
 }
 
 /// What one page's walk found.
