@@ -28,7 +28,7 @@ pub const ERASES_PER_HOUR: u32 = 60;
 /// Page erases a unit may do at once (its budget when it starts, and the most it saves up).
 pub const ERASE_BURST: u32 = 24;
 /// The first pause after a failed save, ms; it doubles up to [`RETRY_MAX_MS`].
-const RETRY_MIN_MS: u64 = 1000;
+const RETRY_MIN_MS: u32 = 1000;
 /// The longest pause between two tries of a failing store, ms.
 pub const RETRY_MAX_MS: u64 = 600_000;
 /// A reset (`X0`, `X42`) may always erase this many pages (one save's page moves).
@@ -83,7 +83,7 @@ pub struct Keeper<F: NorFlash, const N: usize, C: EntryCrc = SoftwareCrc> {
     refilled_at: Option<Instant>,
     /// After a failed save: no new try before this, and the pause after the next failure.
     retry_at: Option<Instant>,
-    retry_pause_ms: u64,
+    retry_pause_ms: u32,
     health: Health,
     /// Something [`Keeper::take_news`] has not reported yet.
     news: bool,
@@ -278,8 +278,11 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Keeper<F, N, C> {
                     self.health.failing = true;
                     self.news = true;
                 }
-                self.retry_at = Some(Instant::from_millis(now.as_millis() + self.retry_pause_ms));
-                self.retry_pause_ms = (self.retry_pause_ms * 2).min(RETRY_MAX_MS);
+                self.retry_at = Some(Instant::from_millis(
+                    now.as_millis() + u64::from(self.retry_pause_ms),
+                ));
+                // 32 bits: RETRY_MAX_MS is 10 minutes.
+                self.retry_pause_ms = (self.retry_pause_ms * 2).min(RETRY_MAX_MS as u32);
             }
         }
         result
