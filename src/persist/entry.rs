@@ -114,7 +114,9 @@ impl EntryWriter {
         if start == 0 {
             crc.start();
         }
-        crc.add(buffer.get(start..end.min(body))?);
+        // Always in the buffer (the entry is at most MAX_ENTRY); were it not, the trailer would
+        // not match and the entry would not count.
+        crc.add(buffer.get(start..end.min(body)).unwrap_or_default());
         if end == self.size {
             *buffer.get_mut(body..)?.first_chunk_mut()? = trailer(crc.value());
         }
