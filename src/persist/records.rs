@@ -127,9 +127,9 @@ impl<'a> Writer<'a> {
         }
     }
 
+    /// The format byte, then the entry count's (low) byte.
     fn header(&mut self, entries: usize) {
-        self.field(u32::from(FORMAT), 1);
-        self.field(entries as u32, 1);
+        self.field(u32::from(FORMAT) | (entries as u32) << 8, 2);
     }
 }
 
