@@ -118,12 +118,13 @@ impl<'a> Writer<'a> {
     }
 
     /// Append the `width` low bytes of `value`, little endian.
-    fn field(&mut self, value: u32, width: usize) {
-        for byte in value.to_le_bytes().into_iter().take(width) {
+    fn field(&mut self, mut value: u32, width: usize) {
+        for _ in 0..width {
             if let Some(to) = self.out.get_mut(self.len) {
-                *to = byte;
+                *to = value as u8;
                 self.len += 1;
             }
+            value >>= 8;
         }
     }
 
