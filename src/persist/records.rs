@@ -1,6 +1,6 @@
 //! The records and their bytes: a format byte, an entry count, then the fields in little endian.
-//! A record that does not decode (another format, another slot count, cut short) gives `None`,
-//! and the unit starts that record from its defaults. [`Records`] is the store's view of all four,
+//! A record that does not decode (another format, another slot count, a length other than its
+//! entries take) gives `None`, and the unit starts that record from its defaults. [`Records`] is the store's view of all four,
 //! with the identity registers split from the other settings.
 
 use heapless::vec::VecView;
