@@ -96,7 +96,13 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
         now: Option<Instant>,
     ) -> u8 {
         self.target.set(lanes, counters, settings);
-        let changed = self.changed(&self.target, now);
+        self.begin_changed(now, true).count_ones() as u8
+    }
+
+    /// Start saving the target's records that differ from the stored ones (settings and
+    /// identity only when `settings`), counters only when due: their bits.
+    fn begin_changed(&mut self, now: Option<Instant>, settings: bool) -> u8 {
+        let changed = self.changed(&self.target, now, settings);
         if changed & bit(Record::Counters) == 0 {
             // Not due (or unchanged): the target stays the stored records but for the changes.
             self.target.counters = self.saved.counters;
@@ -107,31 +113,19 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
         if changed != 0 {
             self.begin(changed);
         }
-        changed.count_ones() as u8
+        changed
     }
 
     /// Start saving `lanes`, and `counters` when given and due (as in [`Store::begin_save`]),
     /// the settings as stored: whether any differ from the stored ones (`false`: nothing to
     /// save, no save started). Cheaper than a snapshot when the settings are known unchanged.
     pub fn begin_changes(&mut self, lanes: [Lane; N], counters: Option<&Counters<N>>, now: Instant) -> bool {
-        let mut changed = 0;
-        if lanes != self.saved.lanes {
-            self.target.lanes = lanes;
-            changed |= bit(Record::Lanes);
-        }
-        self.slow_due = None;
-        if let Some(counters) = counters
-            && *counters != self.saved.counters
-            && self.slow_allowed(Some(now))
-        {
+        // Between saves the target is the stored records: only these two can differ.
+        self.target.lanes = lanes;
+        if let Some(counters) = counters {
             self.target.counters = *counters;
-            self.slow_due = Some(Some(now));
-            changed |= bit(Record::Counters);
         }
-        if changed != 0 {
-            self.begin(changed);
-        }
-        changed != 0
+        self.begin_changed(Some(now), false) != 0
     }
 
     /// Start forgetting everything but the identity (`X42`): blank records (lanes unknown,
@@ -238,13 +232,14 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
         self.finish()
     }
 
-    /// The records of `next` that differ from the stored ones and are due, as bits.
-    fn changed(&self, next: &Records<N>, now: Option<Instant>) -> u8 {
+    /// The records of `next` that differ from the stored ones and are due, as bits; its
+    /// settings and identity only when `settings` (they are compared a register at a time).
+    fn changed(&self, next: &Records<N>, now: Option<Instant>, settings: bool) -> u8 {
         let saved = &self.saved;
         let bit_if = |differs: bool, record| if differs { bit(record) } else { 0 };
         bit_if(next.lanes != saved.lanes, Record::Lanes)
-            | bit_if(next.settings != saved.settings, Record::Settings)
-            | bit_if(next.identity != saved.identity, Record::Identity)
+            | bit_if(settings && next.settings != saved.settings, Record::Settings)
+            | bit_if(settings && next.identity != saved.identity, Record::Identity)
             | bit_if(
                 next.counters != saved.counters && self.slow_allowed(now),
                 Record::Counters,
