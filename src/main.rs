@@ -224,17 +224,18 @@ impl Persisted {
     fn boot(app: &mut App<SLOTS>, flash: board::StoreFlash) -> Self {
         let store = unwrap!(Store::with_crc(flash.flash, flash.crc, board::STORE_RANGE));
         let (keeper, boot) = Keeper::boot(store, app);
-        Self::log_boot(app, boot);
-        Persisted(keeper)
+        let persisted = Persisted(keeper);
+        persisted.log_boot(app, boot);
+        persisted
     }
 
     /// What the boot found. Out of line: the snapshot it logs from is then not on the stack
     /// together with the store's boot future.
     #[inline(never)]
-    fn log_boot(app: &App<SLOTS>, boot: Boot) {
+    fn log_boot(&self, app: &App<SLOTS>, boot: Boot) {
         match boot {
             Boot::Restored => {
-                let snapshot = app.snapshot();
+                let snapshot = self.0.snapshot(app);
                 let c = &snapshot.counters;
                 info!(
                     "restored: lanes {=[?]}, {=usize} settings, errors {=u16}, tool changes {=[?]}, failures {=[?]}, fed {=[?]} mm",

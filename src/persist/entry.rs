@@ -23,9 +23,11 @@ const HEADER_CRC: Crc<u16, NoTable> = Crc::<u16, NoTable>::new(&CRC_16_IBM_3740)
 /// record's or [`COMMIT`].
 pub(super) fn parse_header(word: &[u8; DOUBLE_WORD]) -> Option<(u8, usize, u32)> {
     let [key, len, s0, s1, s2, s3, c0, c1] = *word;
+    if HEADER_CRC.checksum(&word[..6]) != u16::from_le_bytes([c0, c1]) {
+        return None;
+    }
     let known = Record::from_key(key).is_some() || key == COMMIT;
-    let checks = HEADER_CRC.checksum(&word[..6]) == u16::from_le_bytes([c0, c1]);
-    (known && checks && usize::from(len) <= MAX_RECORD).then_some((
+    (known && usize::from(len) <= MAX_RECORD).then_some((
         key,
         usize::from(len),
         u32::from_le_bytes([s0, s1, s2, s3]),
@@ -78,7 +80,10 @@ impl EntryWriter {
     pub(super) fn new(buffer: &mut [u8; MAX_ENTRY], key: u8, sequence: u32, len: usize) -> Self {
         let len = len.min(MAX_RECORD);
         let size = entry_size(len);
-        buffer[DOUBLE_WORD + len..size - DOUBLE_WORD].fill(0);
+        // `len` is at most MAX_RECORD: the padding is in the buffer.
+        if let Some(padding) = buffer.get_mut(DOUBLE_WORD + len..size - DOUBLE_WORD) {
+            padding.fill(0);
+        }
         buffer[0] = key;
         buffer[1] = len as u8;
         buffer[2..6].copy_from_slice(&sequence.to_le_bytes());
@@ -109,12 +114,14 @@ impl EntryWriter {
         if start == 0 {
             crc.start();
         }
-        crc.add(&buffer[start..end.min(body)]);
+        // Always in the buffer (the entry is at most MAX_ENTRY); were it not, the trailer would
+        // not match and the entry would not count.
+        crc.add(buffer.get(start..end.min(body)).unwrap_or_default());
         if end == self.size {
-            buffer[body..end].copy_from_slice(&trailer(crc.value()));
+            *buffer.get_mut(body..)?.first_chunk_mut()? = trailer(crc.value());
         }
         self.written = end;
-        Some((start, &buffer[start..end]))
+        Some((start, buffer.get(start..end)?))
     }
 }
 

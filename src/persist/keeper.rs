@@ -28,7 +28,7 @@ pub const ERASES_PER_HOUR: u32 = 60;
 /// Page erases a unit may do at once (its budget when it starts, and the most it saves up).
 pub const ERASE_BURST: u32 = 24;
 /// The first pause after a failed save, ms; it doubles up to [`RETRY_MAX_MS`].
-const RETRY_MIN_MS: u64 = 1000;
+const RETRY_MIN_MS: u32 = 1000;
 /// The longest pause between two tries of a failing store, ms.
 pub const RETRY_MAX_MS: u64 = 600_000;
 /// A reset (`X0`, `X42`) may always erase this many pages (one save's page moves).
@@ -83,7 +83,7 @@ pub struct Keeper<F: NorFlash, const N: usize, C: EntryCrc = SoftwareCrc> {
     refilled_at: Option<Instant>,
     /// After a failed save: no new try before this, and the pause after the next failure.
     retry_at: Option<Instant>,
-    retry_pause_ms: u64,
+    retry_pause_ms: u32,
     health: Health,
     /// Something [`Keeper::take_news`] has not reported yet.
     news: bool,
@@ -191,22 +191,18 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Keeper<F, N, C> {
         let Some(scan) = self.scan.as_mut() else {
             return false;
         };
-        let Some(settings) = scan.step(app, &self.defaults) else {
+        if !scan.compare_next(app, &self.defaults) {
             return false;
-        };
+        }
         if self.settings_seen != Some(app.settings_revision()) {
             self.settings_seen = Some(app.settings_revision());
             self.scan = Some(Scan::default());
             return false;
         }
-        self.scan = None;
-        let snapshot = Snapshot {
-            lanes: self.lanes,
-            counters: app.counters,
-            settings,
-        };
         self.store.set_erase_allowance(self.erase_credit);
-        self.store.begin_save(&snapshot, Some(now));
+        self.store
+            .begin_save_of(&self.lanes, &app.counters, scan.settings(), Some(now));
+        self.scan = None;
         false
     }
 
@@ -236,10 +232,20 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Keeper<F, N, C> {
         self.store
             .set_erase_allowance(self.erase_credit.max(ERASES_BEFORE_RESET));
         let result = match action {
-            BoardAction::Reset => self.store.save(&app.snapshot(), None).map(drop),
+            BoardAction::Reset => self.store.save(&self.snapshot(app), None).map(drop),
             BoardAction::EraseAndReset => self.store.forget(),
         };
         self.settle(result, now)
+    }
+
+    /// What `app` keeps across a restart, as [`App::snapshot`] gives it, its settings compared
+    /// with the defaults read at boot (no default configuration built).
+    pub fn snapshot(&self, app: &App<N>) -> Snapshot<N> {
+        Snapshot {
+            lanes: app.lanes(),
+            counters: app.counters,
+            settings: Scan::all(app, &self.defaults),
+        }
     }
 
     /// Whether a save is in progress (or the settings it saves are being compared): the next
@@ -272,8 +278,11 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Keeper<F, N, C> {
                     self.health.failing = true;
                     self.news = true;
                 }
-                self.retry_at = Some(Instant::from_millis(now.as_millis() + self.retry_pause_ms));
-                self.retry_pause_ms = (self.retry_pause_ms * 2).min(RETRY_MAX_MS);
+                self.retry_at = Some(Instant::from_millis(
+                    now.as_millis() + u64::from(self.retry_pause_ms),
+                ));
+                // 32 bits: RETRY_MAX_MS is 10 minutes.
+                self.retry_pause_ms = (self.retry_pause_ms * 2).min(RETRY_MAX_MS as u32);
             }
         }
         result
@@ -468,5 +477,114 @@ mod tests {
             assert_ne!(unit.stored().lanes, lanes, "deferred after a busy step");
         }
         assert_eq!(unit.steps_until_stored(false, |s| s.lanes == lanes), 2);
+    }
+
+    /// The newest copy of a record torn (a cut before its trailer was programmed): a restart
+    /// restores the copy before it and reports the torn entry, once; the next save leaves it
+    /// behind.
+    #[test]
+    fn a_torn_newest_entry_restores_the_copy_before_it() {
+        let (first, second) = (
+            [Lane::Parked, Lane::Loaded, Lane::Empty],
+            [Lane::InHub, Lane::Parked, Lane::Empty],
+        );
+        let mut unit = Unit::boot();
+        for lanes in [first, second] {
+            unit.change_lanes(lanes);
+            unit.steps_until_stored(false, |s| s.lanes == lanes);
+        }
+        let mut flash = unit.keeper.store().flash().clone();
+        let trailer = flash.0.iter().rposition(|&b| b != 0xff).unwrap() / 8 * 8;
+        flash.0[trailer..trailer + 8].fill(0xff);
+        let mut store = Store::<_, 3>::new(flash, 0..3 * PAGE as u32).unwrap();
+        assert_eq!(store.load().lanes, first);
+        assert_eq!(
+            store.damage(),
+            Damage {
+                unreadable: 0,
+                torn: 1
+            }
+        );
+
+        let mut app = App::new(Config::default());
+        let (keeper, boot) = Keeper::boot(store, &mut app);
+        assert_eq!(
+            boot,
+            Boot::Damaged(Damage {
+                unreadable: 0,
+                torn: 1
+            })
+        );
+        assert_eq!(app.lanes(), first);
+        let mut unit = Unit {
+            app,
+            keeper,
+            now: Instant::ZERO,
+        };
+        unit.change_lanes(second);
+        unit.steps_until_stored(false, |s| s.lanes == second);
+        let mut store = Store::<_, 3>::new(unit.keeper.store().flash().clone(), 0..3 * PAGE as u32).unwrap();
+        assert_eq!(store.load().lanes, second);
+        assert!(store.damage().is_none(), "{:?}", store.damage());
+    }
+
+    /// A flash that erases 128 KiB at once (as some NOR flashes do): a store keeps where its
+    /// entries lie in 16 bits, so it refuses such pages rather than mislay entries.
+    struct LargePages;
+
+    impl ErrorType for LargePages {
+        type Error = NorFlashErrorKind;
+    }
+
+    impl ReadNorFlash for LargePages {
+        const READ_SIZE: usize = 1;
+
+        fn read(&mut self, _: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
+            bytes.fill(0xff);
+            Ok(())
+        }
+
+        fn capacity(&self) -> usize {
+            3 << 17
+        }
+    }
+
+    impl NorFlash for LargePages {
+        const WRITE_SIZE: usize = 8;
+        const ERASE_SIZE: usize = 1 << 17;
+
+        fn erase(&mut self, _: u32, _: u32) -> Result<(), Self::Error> {
+            Ok(())
+        }
+
+        fn write(&mut self, _: u32, _: &[u8]) -> Result<(), Self::Error> {
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn a_flash_of_pages_over_64_kib_is_refused() {
+        let store = Store::<_, 3>::new(LargePages, 0..3 << 17);
+        assert!(matches!(store, Err(StoreError::Layout)));
+        let store = Store::<_, 3>::new(RamFlash(Vec::new()), 0..3 * PAGE as u32);
+        assert!(store.is_ok(), "pages of 2 KiB");
+    }
+
+    /// The keeper's snapshot (the one a reset saves, and the boot logs) is the App's, its
+    /// settings found against the defaults read at boot.
+    #[test]
+    fn the_keepers_snapshot_is_the_apps() {
+        let mut unit = Unit::boot();
+        assert_eq!(unit.keeper.snapshot(&unit.app), unit.app.snapshot());
+        unit.change_lanes([Lane::Parked, Lane::Loaded, Lane::Empty]);
+        unit.app.counters.tool_changes[1] = 7;
+        for (address, value) in [(0x22, 777), (0x52, 2)] {
+            assert!(unit.app.write_register(address, value), "{address:#04x}");
+        }
+        let snapshot = unit.keeper.snapshot(&unit.app);
+        assert_eq!(snapshot.settings.len(), 2);
+        assert_eq!(snapshot, unit.app.snapshot());
+        unit.keeper.before(BoardAction::Reset, &unit.app).unwrap();
+        assert_eq!(unit.stored(), snapshot, "saved before the reset");
     }
 }

@@ -1,7 +1,9 @@
 //! The records and their bytes: a format byte, an entry count, then the fields in little endian.
-//! A record that does not decode (another format, another slot count, cut short) gives `None`,
-//! and the unit starts that record from its defaults. [`Records`] is the store's view of all four,
+//! A record that does not decode (another format, another slot count, a length other than its
+//! entries take) gives `None`, and the unit starts that record from its defaults. [`Records`] is the store's view of all four,
 //! with the identity registers split from the other settings.
+
+use heapless::vec::VecView;
 
 use super::{Counters, IDENTITY_REGISTERS, MAX_SETTINGS, Settings, Snapshot, is_identity};
 use crate::unit::Lane;
@@ -50,6 +52,7 @@ impl Record {
 #[cfg(test)]
 pub(super) type Bytes = heapless::Vec<u8, MAX_RECORD>;
 
+/// A lane's code in the lanes record.
 fn lane_code(lane: Lane) -> u8 {
     match lane {
         Lane::Unknown => 0,
@@ -61,6 +64,7 @@ fn lane_code(lane: Lane) -> u8 {
     }
 }
 
+/// The lane of a code in the lanes record.
 fn lane_from(code: u8) -> Option<Lane> {
     Some(match code {
         0 => Lane::Unknown,
@@ -73,23 +77,26 @@ fn lane_from(code: u8) -> Option<Lane> {
     })
 }
 
-/// Reads a record's fields in order; every read past the end gives `None`.
-struct Reader<'a>(&'a [u8]);
-
-impl Reader<'_> {
-    fn u8(&mut self) -> Option<u8> {
-        let (&first, rest) = self.0.split_first()?;
-        self.0 = rest;
-        Some(first)
+/// The little-endian field of `width` bytes at `at` in `bytes` (bytes past the end read 0).
+fn field(bytes: &[u8], at: usize, width: usize) -> u32 {
+    let mut value = 0;
+    for at in (at..at + width).rev() {
+        value = value << 8 | u32::from(bytes.get(at).copied().unwrap_or(0));
     }
+    value
+}
 
-    fn u16(&mut self) -> Option<u16> {
-        Some(u16::from_le_bytes([self.u8()?, self.u8()?]))
-    }
-
-    fn u32(&mut self) -> Option<u32> {
-        Some(u32::from(self.u16()?) | (u32::from(self.u16()?) << 16))
-    }
+/// The fields of a record of this format after its header, when they are exactly `entries`
+/// entries of `entry` bytes after `head` bytes, and `count` entries when given.
+fn body(bytes: &[u8], count: Option<usize>, head: usize, entry: usize) -> Option<(&[u8], usize)> {
+    let [format, entries, ref fields @ ..] = *bytes else {
+        return None;
+    };
+    let entries = usize::from(entries);
+    let fits = format == FORMAT
+        && count.is_none_or(|count| count == entries)
+        && fields.len() == head + entries * entry;
+    fits.then_some((fields, entries))
 }
 
 /// Writes a record's fields in order into an entry's payload, in place; bytes past the end are
@@ -110,33 +117,37 @@ impl<'a> Writer<'a> {
         self.len
     }
 
-    fn put(&mut self, bytes: &[u8]) {
-        let end = self.len + bytes.len();
-        if let Some(to) = self.out.get_mut(self.len..end) {
-            to.copy_from_slice(bytes);
-            self.len = end;
+    /// Append the `width` low bytes of `value`, little endian.
+    fn field(&mut self, mut value: u32, width: usize) {
+        for _ in 0..width {
+            if let Some(to) = self.out.get_mut(self.len) {
+                *to = value as u8;
+                self.len += 1;
+            }
+            value >>= 8;
         }
     }
 
+    /// The format byte, then the entry count's (low) byte.
     fn header(&mut self, entries: usize) {
-        self.put(&[FORMAT, entries as u8]);
+        self.field(u32::from(FORMAT) | (entries as u32) << 8, 2);
     }
 }
 
 pub(super) fn encode_lanes<const N: usize>(lanes: &[Lane; N], out: &mut Writer) {
     out.header(N);
     for &lane in lanes {
-        out.put(&[lane_code(lane)]);
+        out.field(u32::from(lane_code(lane)), 1);
     }
 }
 
 pub(super) fn encode_counters<const N: usize>(counters: &Counters<N>, out: &mut Writer) {
     out.header(N);
-    out.put(&counters.drive_errors.to_le_bytes());
+    out.field(u32::from(counters.drive_errors), 2);
     for slot in 0..N {
-        out.put(&counters.tool_changes[slot].to_le_bytes());
-        out.put(&counters.failures[slot].to_le_bytes());
-        out.put(&counters.fed_mm[slot].to_le_bytes());
+        out.field(u32::from(counters.tool_changes[slot]), 2);
+        out.field(u32::from(counters.failures[slot]), 2);
+        out.field(counters.fed_mm[slot], 4);
     }
 }
 
@@ -144,57 +155,62 @@ pub(super) fn encode_counters<const N: usize>(counters: &Counters<N>, out: &mut 
 pub(super) fn encode_settings(settings: &[(u8, u16)], out: &mut Writer) {
     out.header(settings.len());
     for &(address, value) in settings {
-        let [low, high] = value.to_le_bytes();
-        out.put(&[address, low, high]);
+        out.field(u32::from(address), 1);
+        out.field(u32::from(value), 2);
     }
-}
-
-/// A reader past the header, when the record is of this format and for `count` entries.
-fn body(bytes: &[u8], count: Option<usize>) -> Option<(Reader<'_>, usize)> {
-    let mut reader = Reader(bytes);
-    let (format, entries) = (reader.u8()?, usize::from(reader.u8()?));
-    (format == FORMAT && count.is_none_or(|n| n == entries)).then_some((reader, entries))
 }
 
 pub(super) fn decode_lanes<const N: usize>(bytes: &[u8]) -> Option<[Lane; N]> {
-    let (mut reader, _) = body(bytes, Some(N))?;
+    let (codes, _) = body(bytes, Some(N), 0, 1)?;
     let mut lanes = [Lane::Unknown; N];
-    for lane in &mut lanes {
-        *lane = lane_from(reader.u8()?)?;
+    for (lane, &code) in lanes.iter_mut().zip(codes) {
+        *lane = lane_from(code)?;
     }
-    reader.0.is_empty().then_some(lanes)
+    Some(lanes)
 }
 
 pub(super) fn decode_counters<const N: usize>(bytes: &[u8]) -> Option<Counters<N>> {
-    let (mut reader, _) = body(bytes, Some(N))?;
+    let (fields, _) = body(bytes, Some(N), 2, 8)?;
     let mut counters = Counters::<N> {
-        drive_errors: reader.u16()?,
+        drive_errors: field(fields, 0, 2) as u16,
         ..Counters::default()
     };
     for slot in 0..N {
-        counters.tool_changes[slot] = reader.u16()?;
-        counters.failures[slot] = reader.u16()?;
-        counters.fed_mm[slot] = reader.u32()?;
+        let at = 2 + 8 * slot;
+        counters.tool_changes[slot] = field(fields, at, 2) as u16;
+        counters.failures[slot] = field(fields, at + 2, 2) as u16;
+        counters.fed_mm[slot] = field(fields, at + 4, 4);
     }
-    reader.0.is_empty().then_some(counters)
+    Some(counters)
 }
 
-/// Hand each (register, value) pair of a settings or identity record to `take` (`false`: the
-/// record does not decode); `None` when it does not decode.
-fn decode_pairs(bytes: &[u8], mut take: impl FnMut((u8, u16)) -> bool) -> Option<()> {
-    let (mut reader, entries) = body(bytes, None)?;
-    for _ in 0..entries {
-        if !take((reader.u8()?, reader.u16()?)) {
-            return None;
+/// Decode a settings or identity record into `pairs` (only the identity's registers when
+/// `identity`); `pairs` is left empty when it does not decode (more pairs than a unit has
+/// settings, among others).
+fn decode_pairs(bytes: &[u8], pairs: &mut VecView<(u8, u16)>, identity: bool) {
+    pairs.clear();
+    let Some((fields, entries)) = body(bytes, None, 0, 3) else {
+        return;
+    };
+    if entries > MAX_SETTINGS {
+        return;
+    }
+    for pair in fields.chunks_exact(3) {
+        let &[address, low, high] = pair else {
+            continue;
+        };
+        if !identity || is_identity(address) {
+            // Room for every pair of a record that decodes (at most one per identity register).
+            let _ = pairs.push((address, u16::from_le_bytes([low, high])));
         }
     }
-    reader.0.is_empty().then_some(())
 }
 
 #[cfg(test)]
 pub(super) fn decode_settings(bytes: &[u8]) -> Option<Settings> {
     let mut settings = Settings::new();
-    decode_pairs(bytes, |pair| settings.push(pair).is_ok())?;
+    body(bytes, None, 0, 3)?;
+    decode_pairs(bytes, &mut settings, false);
     Some(settings)
 }
 
@@ -220,14 +236,14 @@ impl<const N: usize> Records<N> {
         }
     }
 
-    /// Become `snapshot`, its settings split into the identity and the rest (in place: no
-    /// copy of the records on the stack).
-    pub(super) fn set_from_snapshot(&mut self, snapshot: &Snapshot<N>) {
-        self.lanes = snapshot.lanes;
-        self.counters = snapshot.counters;
+    /// Become the snapshot of `lanes`, `counters` and `settings`, its settings split into the
+    /// identity and the rest (in place: no copy of the records on the stack).
+    pub(super) fn set(&mut self, lanes: &[Lane; N], counters: &Counters<N>, settings: &[(u8, u16)]) {
+        self.lanes = *lanes;
+        self.counters = *counters;
         self.settings.clear();
         self.identity.clear();
-        for &(address, value) in &snapshot.settings {
+        for &(address, value) in settings {
             // Each holds what a snapshot can hold (a register appears once).
             let _ = if is_identity(address) {
                 self.identity.push((address, value))
@@ -261,6 +277,23 @@ impl<const N: usize> Records<N> {
         writer.len()
     }
 
+    /// Become blank records (lanes unknown, counters zero, no settings) but for `from`'s
+    /// identity, in place.
+    pub(super) fn blank_but_identity(&mut self, from: &Records<N>) {
+        self.lanes = [Lane::Unknown; N];
+        self.counters = Counters::default();
+        self.settings.clear();
+        self.identity.clone_from(&from.identity);
+    }
+
+    /// Become `from`, in place.
+    pub(super) fn copy_from(&mut self, from: &Records<N>) {
+        self.lanes = from.lanes;
+        self.counters = from.counters;
+        self.settings.clone_from(&from.settings);
+        self.identity.clone_from(&from.identity);
+    }
+
     /// Take `record` from `from`.
     pub(super) fn copy_record(&mut self, record: Record, from: &Records<N>) {
         match record {
@@ -277,28 +310,8 @@ impl<const N: usize> Records<N> {
             Record::Lanes => self.lanes = decode_lanes(bytes).unwrap_or([Lane::Unknown; N]),
             Record::Counters => self.counters = decode_counters(bytes).unwrap_or_default(),
             // In place: no copy of a settings list on the stack.
-            Record::Settings => {
-                let settings = &mut self.settings;
-                settings.clear();
-                if decode_pairs(bytes, |pair| settings.push(pair).is_ok()).is_none() {
-                    settings.clear();
-                }
-            }
-            // What a settings record holds (at most MAX_SETTINGS pairs), but the identity's.
-            Record::Identity => {
-                let (identity, mut pairs) = (&mut self.identity, 0);
-                identity.clear();
-                let decoded = decode_pairs(bytes, |pair| {
-                    pairs += 1;
-                    if is_identity(pair.0) {
-                        let _ = identity.push(pair);
-                    }
-                    pairs <= MAX_SETTINGS
-                });
-                if decoded.is_none() {
-                    identity.clear();
-                }
-            }
+            Record::Settings => decode_pairs(bytes, &mut self.settings, false),
+            Record::Identity => decode_pairs(bytes, &mut self.identity, true),
         }
     }
 }
@@ -379,5 +392,39 @@ mod tests {
         assert_eq!(decode_lanes::<3>(&lanes[..4]), None, "cut short");
         assert_eq!(decode_counters::<3>(&[FORMAT, 3, 1]), None);
         assert_eq!(decode_settings(&[FORMAT, 2, 0x0b, 30, 0]), None);
+    }
+
+    /// Every record decodes only at its exact length: a byte too few or too many, and the unit
+    /// starts that record from its defaults (the identity too).
+    #[test]
+    fn records_of_another_length_are_refused() {
+        let counters = Counters::<3> {
+            drive_errors: 1,
+            tool_changes: [2, 3, 4],
+            failures: [5, 6, 7],
+            fed_mm: [8, 9, 70_000],
+        };
+        let settings = [(0x0b, 30), (0x52, 2)];
+        let mut records = Records::<3>::blank();
+        for record in Record::ALL {
+            let bytes = encoded(|w| match record {
+                Record::Lanes => encode_lanes(&[Lane::Loaded; 3], w),
+                Record::Counters => encode_counters(&counters, w),
+                Record::Settings | Record::Identity => encode_settings(&settings, w),
+            });
+            records.decode(record, &bytes);
+            assert_ne!(records, Records::blank(), "{record:?} decodes");
+            let mut longer = bytes.clone();
+            longer.push(0).unwrap();
+            for other in [&bytes[..bytes.len() - 1], &longer[..]] {
+                records.decode(record, &bytes);
+                records.decode(record, other);
+                assert_eq!(records, Records::blank(), "{record:?} of {} bytes", other.len());
+            }
+        }
+        assert_eq!(
+            decode_counters::<3>(&encoded(|w| encode_counters(&counters, w))),
+            Some(counters)
+        );
     }
 }

@@ -48,21 +48,42 @@ pub(super) struct Scan {
 }
 
 impl Scan {
-    /// Compare the next [`REGISTERS_PER_CALL`] registers; once every one is compared, the
-    /// settings that differ (in a call that compares none: handing them over costs a save's
-    /// start).
-    pub(super) fn step<const N: usize>(&mut self, app: &App<N>, defaults: &Defaults) -> Option<Settings> {
-        let next = defaults.0.get(self.next..).unwrap_or_default();
-        if next.is_empty() {
-            return Some(core::mem::take(&mut self.settings));
+    /// Compare the next [`REGISTERS_PER_CALL`] registers: `true` once every one is compared
+    /// (in a call that compares none: starting a save with them costs a call of its own), the
+    /// settings that differ then in [`Scan::settings`].
+    pub(super) fn compare_next<const N: usize>(&mut self, app: &App<N>, defaults: &Defaults) -> bool {
+        if self.next >= defaults.0.len() {
+            return true;
         }
-        for &(address, default) in next.iter().take(REGISTERS_PER_CALL) {
+        for _ in 0..REGISTERS_PER_CALL {
+            let Some(&(address, default)) = defaults.0.get(self.next) else {
+                break;
+            };
             if let Some(value) = app.read_register(address).filter(|&value| value != default) {
                 let _ = self.settings.push((address, value));
             }
             self.next += 1;
         }
-        None
+        false
+    }
+
+    /// The settings of `app` that differ from their defaults: every register compared at once.
+    pub(super) fn all<const N: usize>(app: &App<N>, defaults: &Defaults) -> Settings {
+        let mut scan = Scan::default();
+        while !scan.compare_next(app, defaults) {}
+        scan.settings
+    }
+
+    /// The settings that differ from their defaults, of the registers compared so far.
+    pub(super) fn settings(&self) -> &Settings {
+        &self.settings
+    }
+
+    /// [`Scan::compare_next`], handing the settings over once every register is compared.
+    #[cfg(test)]
+    fn step<const N: usize>(&mut self, app: &App<N>, defaults: &Defaults) -> Option<Settings> {
+        self.compare_next(app, defaults)
+            .then(|| core::mem::take(&mut self.settings))
     }
 }
 

@@ -35,13 +35,14 @@ pub use save::Progress;
 /// Counters are written at most this often, ms (they change while the unit works).
 pub const SLOW_RECORD_PERIOD_MS: u64 = 10_000;
 
-/// Where a record's newest complete copy lies.
+/// Where a record's newest complete copy lies (in 16 bits: [`Store::with_crc`] takes no more
+/// pages, nor larger ones).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 struct Newest {
     sequence: u32,
-    page: u32,
+    page: u16,
     /// Its offset in the page.
-    offset: u32,
+    offset: u16,
 }
 
 /// What a load found that a healthy store does not hold.
@@ -55,6 +56,12 @@ pub struct Damage {
 }
 
 impl Damage {
+    /// One more entry whose checks failed.
+    #[inline(never)]
+    fn note_torn(&mut self) {
+        self.torn = self.torn.saturating_add(1);
+    }
+
     /// Whether nothing was found.
     pub fn is_none(&self) -> bool {
         *self == Damage::default()
@@ -122,8 +129,9 @@ impl<F: NorFlash, const N: usize> Store<F, N> {
 }
 
 impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
-    /// A store over `range` of `flash`: page aligned, at least three pages, on a flash that
-    /// programs whole double words (or less) and reads bytes; `crc` computes its entries' CRC.
+    /// A store over `range` of `flash`: page aligned, at least three pages and at most 65,536 of
+    /// at most 64 KiB, on a flash that programs whole double words (or less) and reads bytes;
+    /// `crc` computes its entries' CRC.
     pub fn with_crc(flash: F, crc: C, range: core::ops::Range<u32>) -> Result<Self, StoreError> {
         let page = page_size::<F>();
         let fits = page > 0
@@ -133,7 +141,10 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
             && DOUBLE_WORD.is_multiple_of(F::WRITE_SIZE)
             && DOUBLE_WORD.is_multiple_of(F::READ_SIZE)
             && F::ERASE_SIZE.is_multiple_of(DOUBLE_WORD)
-            && F::ERASE_SIZE >= 4 * MAX_ENTRY;
+            && F::ERASE_SIZE >= 4 * MAX_ENTRY
+            // Where an entry lies is kept in 16 bits (`Newest`).
+            && F::ERASE_SIZE <= 1 << 16
+            && (range.end - range.start) / page <= 1 << 16;
         if !fits {
             return Err(StoreError::Layout);
         }
@@ -220,19 +231,21 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
                 self.saved.decode(record, payload);
             }
         }
-        self.target = self.saved.clone();
+        self.target.copy_from(&self.saved);
         self.saved.snapshot()
     }
 
     /// Read the header double word at `address`: `Ok(None)` when erased, `Err` when it does not
     /// read or is not a header; the key is a record's or [`COMMIT`].
-    fn header(&mut self, address: u32) -> Result<Option<(u8, usize, u32)>, ()> {
+    fn header(&mut self, address: u32) -> Result<Option<(u8, usize, u32)>, NotHeader> {
         let mut word = [0u8; DOUBLE_WORD];
-        self.flash.read(address, &mut word).map_err(drop)?;
+        self.flash
+            .read(address, &mut word)
+            .map_err(|_| NotHeader::Unreadable)?;
         if word == [0xff; DOUBLE_WORD] {
             return Ok(None);
         }
-        parse_header(&word).map(Some).ok_or(())
+        parse_header(&word).map(Some).ok_or(NotHeader::Torn)
     }
 
     /// Read the whole entry at `address` whose payload is `len` bytes into the buffer: whether it
@@ -244,134 +257,100 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
         self.flash.read(address, bytes).is_ok() && is_complete(bytes, &mut self.crc)
     }
 
-    /// Walk one page's entries. In a committed page, note each record's newest complete copy and
-    /// the damage found.
-    ///
-    /// Only headers are read on the way; the entries that would be some record's newest are then
-    /// checked whole, and only when one of them is torn is the page walked again for the
-    /// record's newest complete copy.
+    /// Walk one page's entries, each checked whole. In a committed page, note each record's
+    /// newest complete copy, and as damage a record whose newest entry there is torn (as the
+    /// damage the walk met); damage in a page that does not count (a torn erase's leftovers) is
+    /// not reported.
     fn scan_page(&mut self, page: u32) -> PageScan {
-        let mut candidates: [Option<(Newest, usize)>; 4] = [None; 4];
-        let mut commit = None;
-        let mut newest_header = None;
-        // Damage in a page that does not count (a torn erase's leftovers) is not reported.
-        let damage_before = self.damage;
-        let tail = self.walk(page, |key, len, place| {
-            newest_header = newest_header.max(Some(place.sequence));
-            if key == COMMIT {
-                commit = Some((place, len));
-            } else if let Some(record) = Record::from_key(key) {
-                let slot = &mut candidates[record.index()];
-                if slot.is_none_or(|(c, _)| place.sequence > c.sequence) {
-                    *slot = Some((place, len));
-                }
-            }
-        });
-        let committed = match commit {
-            Some((place, len)) => self.entry_complete(self.page_address(page) + place.offset, len),
-            None => false,
+        // Per record: the newest sequence number of its headers, and its newest complete copy.
+        let mut newest_headers: [Option<u32>; 4] = [None; 4];
+        let mut complete: [Option<Newest>; 4] = [None; 4];
+        let mut scan = PageScan {
+            newest_header: None,
+            committed: false,
+            tail: None,
         };
-        if !committed {
-            self.damage = damage_before;
-        } else {
-            for record in Record::ALL {
-                let Some((candidate, len)) = candidates[record.index()] else {
-                    continue;
-                };
-                let known = self.newest[record.index()];
-                if known.is_some_and(|known| known.sequence >= candidate.sequence) {
-                    continue;
-                }
-                if self.entry_complete(self.page_address(page) + candidate.offset, len) {
-                    self.newest[record.index()] = Some(candidate);
-                } else {
-                    self.damage.torn = self.damage.torn.saturating_add(1);
-                    self.newest_complete_in(page, record);
-                }
-            }
-        }
-        PageScan {
-            newest_header,
-            committed,
-            tail,
-        }
-    }
-
-    /// Walk `page`'s entry headers, calling `visit` with each (key, payload length, place).
-    /// Returns where an entry may be appended (`None`: full, or the walk ended on damage).
-    fn walk(&mut self, page: u32, mut visit: impl FnMut(u8, usize, Newest)) -> Option<u32> {
+        let damage_before = self.damage;
         let (start, size) = (self.page_address(page), page_size::<F>());
         let mut offset = 0;
         while offset + DOUBLE_WORD as u32 <= size {
             let (key, len, sequence) = match self.header(start + offset) {
                 Ok(Some(header)) => header,
-                Ok(None) => return Some(offset),
-                Err(()) => {
-                    self.note_unreadable_or_torn(start + offset);
-                    return None;
+                Ok(None) => {
+                    scan.tail = Some(offset);
+                    break;
+                }
+                Err(NotHeader::Unreadable) => {
+                    self.damage.unreadable = self.damage.unreadable.saturating_add(1);
+                    break;
+                }
+                Err(NotHeader::Torn) => {
+                    self.damage.note_torn();
+                    break;
                 }
             };
             let entry = entry_size(len) as u32;
             if offset + entry > size {
-                self.damage.torn = self.damage.torn.saturating_add(1);
-                return None;
+                self.damage.note_torn();
+                break;
             }
-            visit(
-                key,
-                len,
-                Newest {
-                    sequence,
-                    page,
-                    offset,
-                },
-            );
+            scan.newest_header = scan.newest_header.max(Some(sequence));
+            let is_complete = self.entry_complete(start + offset, len);
+            if key == COMMIT {
+                // The last commit entry of the page decides.
+                scan.committed = is_complete;
+            } else if let Some(record) = Record::from_key(key) {
+                let index = record.index();
+                newest_headers[index] = newest_headers[index].max(Some(sequence));
+                if is_complete && complete[index].is_none_or(|c| sequence > c.sequence) {
+                    complete[index] = Some(Newest {
+                        sequence,
+                        page: page as u16,
+                        offset: offset as u16,
+                    });
+                }
+            }
             offset += entry;
         }
-        None
-    }
-
-    /// After `record`'s newest entry in `page` turned out torn: its newest complete one there, if
-    /// newer than any known (entries follow each other in sequence order within a page).
-    fn newest_complete_in(&mut self, page: u32, record: Record) {
-        let (start, size) = (self.page_address(page), page_size::<F>());
-        let mut offset = 0;
-        while offset + DOUBLE_WORD as u32 <= size {
-            let Ok(Some((key, len, sequence))) = self.header(start + offset) else {
-                return;
-            };
-            let known = self.newest[record.index()];
-            if key == record as u8
-                && known.is_none_or(|known| sequence > known.sequence)
-                && self.entry_complete(start + offset, len)
-            {
-                self.newest[record.index()] = Some(Newest {
-                    sequence,
-                    page,
-                    offset,
-                });
+        if !scan.committed {
+            self.damage = damage_before;
+            return scan;
+        }
+        for index in 0..self.newest.len() {
+            let known = self.newest[index].map(|known| known.sequence);
+            if newest_headers[index] <= known {
+                continue;
             }
-            offset += entry_size(len) as u32;
+            let complete = complete[index];
+            if complete.map(|c| c.sequence) != newest_headers[index] {
+                self.damage.note_torn();
+            }
+            if let Some(complete) = complete
+                && Some(complete.sequence) > known
+            {
+                self.newest[index] = Some(complete);
+            }
         }
-    }
-
-    fn note_unreadable_or_torn(&mut self, address: u32) {
-        let mut word = [0u8; DOUBLE_WORD];
-        if self.flash.read(address, &mut word).is_err() {
-            self.damage.unreadable = self.damage.unreadable.saturating_add(1);
-        } else {
-            self.damage.torn = self.damage.torn.saturating_add(1);
-        }
+        scan
     }
 
     /// Read `record`'s newest entry into the buffer: its payload's length.
     fn find(&mut self, newest: Newest, record: Record) -> Option<usize> {
-        let address = self.page_address(newest.page) + newest.offset;
+        let address = self.page_address(newest.page.into()) + u32::from(newest.offset);
         let (key, len, sequence) = self.header(address).ok()??;
         if key != record as u8 || sequence != newest.sequence || !self.entry_complete(address, len) {
             return None;
         }
         Some(len)
     }
+}
+
+/// Why a double word where an entry was expected is not its header.
+enum NotHeader {
+    /// It does not read (ECC error).
+    Unreadable,
+    /// It reads, but not as a header (a program or an erase cut short).
+    Torn,
 }
 
 /// What one page's walk found.

@@ -58,6 +58,16 @@ pub struct Progress {
     pub wrote: bool,
 }
 
+/// Whether the `len` bytes (at most [`CHECK_CHUNK`]) at `address` of `flash` read erased.
+fn reads_erased<F: NorFlash>(flash: &mut F, address: u32, len: usize) -> bool {
+    let mut bytes = [0u8; CHECK_CHUNK];
+    let Some(bytes) = bytes.get_mut(..len) else {
+        return false;
+    };
+    // A fold, not `any`: no branch per byte (a third of the instructions on the M0+).
+    flash.read(address, bytes).is_ok() && bytes.iter().fold(0xff, |all, &b| all & b) == 0xff
+}
+
 fn bit(record: Record) -> u8 {
     1 << record.index()
 }
@@ -73,8 +83,26 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
     /// Returns how many records it will write (0: nothing to save, no save started). A save in
     /// progress is abandoned (what it completed stays saved).
     pub fn begin_save(&mut self, snapshot: &Snapshot<N>, now: Option<Instant>) -> u8 {
-        self.target.set_from_snapshot(snapshot);
-        let changed = self.changed(&self.target, now);
+        self.begin_save_of(&snapshot.lanes, &snapshot.counters, &snapshot.settings, now)
+    }
+
+    /// [`Store::begin_save`] of the snapshot of `lanes`, `counters` and `settings` (no snapshot
+    /// built on the way).
+    pub(in crate::persist) fn begin_save_of(
+        &mut self,
+        lanes: &[Lane; N],
+        counters: &Counters<N>,
+        settings: &[(u8, u16)],
+        now: Option<Instant>,
+    ) -> u8 {
+        self.target.set(lanes, counters, settings);
+        self.begin_changed(now, true).count_ones() as u8
+    }
+
+    /// Start saving the target's records that differ from the stored ones (settings and
+    /// identity only when `settings`), counters only when due: their bits.
+    fn begin_changed(&mut self, now: Option<Instant>, settings: bool) -> u8 {
+        let changed = self.changed(&self.target, now, settings);
         if changed & bit(Record::Counters) == 0 {
             // Not due (or unchanged): the target stays the stored records but for the changes.
             self.target.counters = self.saved.counters;
@@ -85,31 +113,19 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
         if changed != 0 {
             self.begin(changed);
         }
-        changed.count_ones() as u8
+        changed
     }
 
     /// Start saving `lanes`, and `counters` when given and due (as in [`Store::begin_save`]),
     /// the settings as stored: whether any differ from the stored ones (`false`: nothing to
     /// save, no save started). Cheaper than a snapshot when the settings are known unchanged.
     pub fn begin_changes(&mut self, lanes: [Lane; N], counters: Option<&Counters<N>>, now: Instant) -> bool {
-        let mut changed = 0;
-        if lanes != self.saved.lanes {
-            self.target.lanes = lanes;
-            changed |= bit(Record::Lanes);
-        }
-        self.slow_due = None;
-        if let Some(counters) = counters
-            && *counters != self.saved.counters
-            && self.slow_allowed(Some(now))
-        {
+        // Between saves the target is the stored records: only these two can differ.
+        self.target.lanes = lanes;
+        if let Some(counters) = counters {
             self.target.counters = *counters;
-            self.slow_due = Some(Some(now));
-            changed |= bit(Record::Counters);
         }
-        if changed != 0 {
-            self.begin(changed);
-        }
-        changed != 0
+        self.begin_changed(Some(now), false) != 0
     }
 
     /// Start forgetting everything but the identity (`X42`): blank records (lanes unknown,
@@ -117,10 +133,7 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
     /// either as it was or blank. (Erasing pages instead could bring old records back: a cut
     /// erase leaves old entries behind.)
     pub fn begin_forget(&mut self) {
-        self.target = Records {
-            identity: self.saved.identity.clone(),
-            ..Records::blank()
-        };
+        self.target.blank_but_identity(&self.saved);
         self.slow_due = None;
         self.begin(bit(Record::Settings) | bit(Record::Counters) | bit(Record::Lanes));
     }
@@ -165,7 +178,7 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
                 self.writing = None;
                 self.slow_due = None;
                 // What the flash holds: the records the failed save did not complete.
-                self.target = self.saved.clone();
+                self.target.copy_from(&self.saved);
                 Err(error)
             }
         }
@@ -213,31 +226,24 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
         }
         self.newest = [None; 4];
         self.head = None;
-        self.target = Records {
-            identity: self.saved.identity.clone(),
-            ..Records::blank()
-        };
+        self.target.blank_but_identity(&self.saved);
         self.slow_due = None;
         self.begin(0);
         self.finish()
     }
 
-    /// The records of `next` that differ from the stored ones and are due, as bits.
-    fn changed(&self, next: &Records<N>, now: Option<Instant>) -> u8 {
-        let slow_allowed = self.slow_allowed(now);
+    /// The records of `next` that differ from the stored ones and are due, as bits; its
+    /// settings and identity only when `settings` (they are compared a register at a time).
+    fn changed(&self, next: &Records<N>, now: Option<Instant>, settings: bool) -> u8 {
         let saved = &self.saved;
-        let mut changed = 0;
-        for (record, differs) in [
-            (Record::Lanes, next.lanes != saved.lanes),
-            (Record::Settings, next.settings != saved.settings),
-            (Record::Identity, next.identity != saved.identity),
-            (Record::Counters, next.counters != saved.counters && slow_allowed),
-        ] {
-            if differs {
-                changed |= bit(record);
-            }
-        }
-        changed
+        let bit_if = |differs: bool, record| if differs { bit(record) } else { 0 };
+        bit_if(next.lanes != saved.lanes, Record::Lanes)
+            | bit_if(settings && next.settings != saved.settings, Record::Settings)
+            | bit_if(settings && next.identity != saved.identity, Record::Identity)
+            | bit_if(
+                next.counters != saved.counters && self.slow_allowed(now),
+                Record::Counters,
+            )
     }
 
     /// Whether counters may be written at `now` (`None`: whenever).
@@ -269,11 +275,23 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
                 }))
             }
             Job::Move { tries } => {
+                // The page after the head that holds no record's newest copy.
                 let after = self.head.map_or(self.pages - 1, |(page, _)| page);
-                let page = (1..self.pages)
-                    .map(|step| (after + step) % self.pages)
-                    .find(|&page| self.newest.iter().flatten().all(|newest| newest.page != page))
-                    .ok_or(StoreError::Flash)?;
+                let mut page = after;
+                let page = loop {
+                    page = if page + 1 < self.pages { page + 1 } else { 0 };
+                    if page == after {
+                        return Err(StoreError::Flash);
+                    }
+                    if self
+                        .newest
+                        .iter()
+                        .flatten()
+                        .all(|newest| u32::from(newest.page) != page)
+                    {
+                        break page;
+                    }
+                };
                 // Whatever happens next, the page after this one is tried next.
                 self.head = Some((page, None));
                 self.placed = [None; 4];
@@ -319,12 +337,9 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
     /// Check the next slice of `page` from `offset`: the stage that follows.
     fn check_erased(&mut self, page: u32, offset: u32) -> Stage {
         let size = page_size::<F>();
-        let mut slice = [0u8; CHECK_CHUNK];
         let len = CHECK_CHUNK.min((size - offset) as usize);
-        let slice = &mut slice[..len];
         let start = self.page_address(page) + offset;
-        // A fold, not `any`: no branch per byte (a third of the instructions on the M0+).
-        if self.flash.read(start, slice).is_err() || slice.iter().fold(0xff, |all, &b| all & b) != 0xff {
+        if !reads_erased(&mut self.flash, start, len) {
             return Stage::Erase;
         }
         if offset + len as u32 >= size {
@@ -372,8 +387,8 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
             key,
             place: Newest {
                 sequence,
-                page,
-                offset,
+                page: page as u16,
+                offset: offset as u16,
             },
         });
         Ok(())
@@ -393,10 +408,9 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
             return Err(StoreError::Flash);
         };
         let done = offset + bytes.len() == writing.entry.size();
-        let address = self.base + place.page * page_size::<F>() + place.offset + offset as u32;
-        let mut target = [0u8; PROGRAM_CHUNK];
-        let target = &mut target[..bytes.len()];
-        if self.flash.read(address, target).is_err() || target.iter().any(|&b| b != 0xff) {
+        let address =
+            self.base + u32::from(place.page) * page_size::<F>() + u32::from(place.offset) + offset as u32;
+        if !reads_erased(&mut self.flash, address, bytes.len()) {
             return Err(StoreError::Flash);
         }
         self.flash_work = true;
@@ -407,7 +421,7 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
         let size = writing.entry.size() as u32;
         let key = writing.key;
         self.writing = None;
-        self.head = Some((place.page, Some(place.offset + size)));
+        self.head = Some((place.page.into(), Some(u32::from(place.offset) + size)));
         Ok(self.entry_written(job, key, place))
     }
 
@@ -430,7 +444,7 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
                 // The commit: the fresh page holds every record's newest copy.
                 None => {
                     self.newest = self.placed;
-                    self.saved = self.target.clone();
+                    self.saved.copy_from(&self.target);
                     None
                 }
             },
