@@ -72,6 +72,14 @@ impl Sampler {
     pub fn sample(&mut self) -> Samples<SLOTS> {
         let adc = pac::ADC1;
         let mut raw = [0u16; ANALOG_INPUTS];
+        // A result left unread by a scan that was held up (an overrun: a probe halted the core)
+        // would otherwise count as this scan's first, and every later scan would read each
+        // sensor from its neighbour's channel.
+        adc.isr().write(|w| {
+            w.set_eoc(true);
+            w.set_eos(true);
+            w.set_ovr(true);
+        });
         adc.cr().modify(|w| w.set_adstart(true));
         for value in &mut raw {
             while !adc.isr().read().eoc() {}
