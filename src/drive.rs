@@ -233,8 +233,8 @@ impl SlotDrive {
         }
         self.schedule = Some(schedule);
         let moved_centi = match direction {
-            Direction::Forward => i64::from(odometry) - i64::from(schedule.from_centi),
-            Direction::Reverse => i64::from(schedule.from_centi) - i64::from(odometry),
+            Direction::Forward => odometry.saturating_sub(schedule.from_centi),
+            Direction::Reverse => schedule.from_centi.saturating_sub(odometry),
         };
         let lag_mm = schedule_lag_mm(speed, now.millis_since(schedule.since), moved_centi);
         let duty =
@@ -279,19 +279,22 @@ pub const fn stopped<const N: usize>() -> [MotorCommand; N] {
 }
 
 /// How far the filament is behind its schedule after `elapsed_ms` at `speed` mm/s, in whole mm
-/// (truncated), within ±1000: `(speed × elapsed / 10 − moved_centi) / 100`. Without a library
-/// division while `speed × elapsed` fits 32 bits (the first minute at full speed): a 64-bit
-/// division costs a few hundred instructions on the Cortex-M0+, every step of a move.
-fn schedule_lag_mm(speed: u16, elapsed_ms: u64, moved_centi: i64) -> i32 {
-    let elapsed_ms = i64::try_from(elapsed_ms).unwrap_or(i64::MAX / 1000);
-    let scheduled = i64::from(speed).saturating_mul(elapsed_ms);
-    let scheduled_centi = match u32::try_from(scheduled) {
-        // ⌈2³⁵ / 10⌉: exact for every u32.
-        Ok(scheduled) => i64::from(crate::sensor::mul_high(scheduled, 0xcccc_cccd) >> 3),
-        Err(_) => scheduled / 10,
+/// (truncated), within ±1000: `(speed × elapsed / 10 − moved_centi) / 100`, in 32 bits and
+/// without a library division (a 64-bit division costs a few hundred instructions on the
+/// Cortex-M0+, every step of a move). A schedule past `u32::MAX` (`speed × elapsed`, 4.29 km in
+/// tenths of a hundredth) is 1000 mm behind: exact while the filament moved at most 4.29 km along
+/// it, and a schedule lasts a few phases, each braked by its budget after at most `u16::MAX` mm.
+fn schedule_lag_mm(speed: u16, elapsed_ms: u64, moved_centi: i32) -> i32 {
+    let elapsed_ms = u32::try_from(elapsed_ms).unwrap_or(u32::MAX);
+    let Some(scheduled) = elapsed_ms.checked_mul(u32::from(speed)) else {
+        return 1000;
     };
+    // ⌈2³⁵ / 10⌉: exact for every u32; the quotient is below 2²⁹.
+    let scheduled_centi = (crate::sensor::mul_high(scheduled, 0xcccc_cccd) >> 3) as i32;
     // Beyond ±100 000 centi the truncated quotient is beyond ±1000 and clamped anyway.
-    let lag_centi = (scheduled_centi - moved_centi).clamp(-100_000, 100_000) as i32;
+    let lag_centi = scheduled_centi
+        .saturating_sub(moved_centi)
+        .clamp(-100_000, 100_000);
     // ⌈2³² / 100⌉: exact up to 100 000.
     let lag_mm = crate::sensor::mul_high(lag_centi.unsigned_abs(), 42_949_673) as i32;
     (if lag_centi < 0 { -lag_mm } else { lag_mm }).clamp(-1000, 1000)
@@ -341,9 +344,14 @@ mod tests {
         ((scheduled_centi - moved_centi) / 100).clamp(-1000, 1000) as i32
     }
 
+    /// The farthest the filament may have moved along a schedule for its lag to stay exact past
+    /// 32 bits, centi (4.29 km): far beyond any schedule, which lasts a few phases, each braked by
+    /// its budget after at most `u16::MAX` mm.
+    const FARTHEST_MOVED_CENTI: i32 = 429_396_729;
+
     #[test]
     fn the_schedule_lag_is_what_the_divisions_gave() {
-        let speeds = [0, 1, 7, 20, 60, 100, 333, 1000, 65_535];
+        let speeds = [0, 1, 7, 20, 60, 100, 333, 1000, 2000, 65_535];
         let elapsed = [
             0,
             1,
@@ -355,6 +363,7 @@ mod tests {
             65_537,
             4_294_967,
             65_540_001,
+            131_071_000,
             1 << 40,
             u64::MAX,
         ];
@@ -371,11 +380,19 @@ mod tests {
                     for moved_centi in [
                         scheduled.saturating_sub(offset),
                         -offset,
-                        i64::MIN / 4,
-                        i64::MAX / 4,
+                        i64::from(i32::MIN),
+                        i64::from(-FARTHEST_MOVED_CENTI),
+                        i64::from(FARTHEST_MOVED_CENTI),
                     ] {
+                        // A move the drive sees: it moved at most its budget either way.
+                        let Ok(moved) = i32::try_from(moved_centi) else {
+                            continue;
+                        };
+                        if moved > FARTHEST_MOVED_CENTI {
+                            continue;
+                        }
                         assert_eq!(
-                            schedule_lag_mm(speed, elapsed_ms, moved_centi),
+                            schedule_lag_mm(speed, elapsed_ms, moved),
                             dividing_lag_mm(speed, elapsed_ms, moved_centi),
                             "speed {speed}, elapsed {elapsed_ms}, moved {moved_centi}"
                         );
@@ -389,10 +406,34 @@ mod tests {
             for k in [-101, -100, -99, -1, 0, 1, 99, 100, 101] {
                 let moved_centi = i64::from(scheduled / 10) - k;
                 assert_eq!(
-                    schedule_lag_mm(1, elapsed_ms, moved_centi),
+                    schedule_lag_mm(1, elapsed_ms, moved_centi as i32),
                     dividing_lag_mm(1, elapsed_ms, moved_centi),
                     "elapsed {elapsed_ms}, moved {moved_centi}"
                 );
+            }
+        }
+    }
+
+    /// A schedule past 32 bits (hours into a move) is a full 1000 mm behind for any distance a
+    /// move can have covered, as the divisions had it: the drive then pushes at its full
+    /// catch-up duty.
+    #[test]
+    fn a_schedule_past_32_bits_is_a_full_metre_behind() {
+        for (speed, elapsed_ms) in [
+            (1, u64::from(u32::MAX) + 1),
+            (2, 1 << 31),
+            (1000, 4_294_968),
+            (2000, 2_147_484),
+            (65_535, 65_538),
+            (1, u64::MAX),
+        ] {
+            assert!(u64::from(speed) * elapsed_ms.min(1 << 40) > u64::from(u32::MAX));
+            for moved in (i32::MIN..=FARTHEST_MOVED_CENTI)
+                .step_by(65_521)
+                .chain([FARTHEST_MOVED_CENTI])
+            {
+                assert_eq!(schedule_lag_mm(speed, elapsed_ms, moved), 1000);
+                assert_eq!(dividing_lag_mm(speed, elapsed_ms, i64::from(moved)), 1000);
             }
         }
     }
