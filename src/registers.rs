@@ -107,7 +107,7 @@ pub enum Subject {
     Slot(usize),
 }
 
-/// One row of the register table: plain data (10 B in the firmware image); the code that reads
+/// One row of the register table: plain data (8 B in the firmware image); the code that reads
 /// and writes its register is an arm of `read_row` and `write_row` (made by `registers!`).
 pub struct Row {
     /// The (first) address.
@@ -117,18 +117,28 @@ pub struct Row {
     /// The name tools show, e.g. `bowden_mm`; block registers add their subject (`raw.hub.filament`).
     /// Empty in the firmware image, which never shows it.
     pub name: Name,
-    /// The values a write accepts (`None`: read only).
-    pub range: Option<(u16, u16)>,
+    /// The lowest and highest value a write accepts; a read-only row's accepts none (lowest
+    /// above highest: 2 B a row less than an `Option`).
+    accepts: (u16, u16),
     handler: Handler,
 }
+
+/// What a read-only row accepts: nothing.
+const READ_ONLY: (u16, u16) = (1, 0);
 
 impl Row {
     /// Whether the printer may write it: a register with a range of values to accept.
     pub const fn access(&self) -> Access {
-        match self.range {
+        match self.range() {
             Some(_) => Access::ReadWrite,
             None => Access::Read,
         }
+    }
+
+    /// The values a write accepts, lowest and highest (`None`: read only).
+    pub const fn range(&self) -> Option<(u16, u16)> {
+        let (min, max) = self.accepts;
+        if min <= max { Some(self.accepts) } else { None }
     }
 
     /// Its value at `index` of the block, as `view` reads it.
@@ -258,7 +268,7 @@ fn write_setting(t: &mut Target, address: u8, _: usize, value: u16) -> bool {
 ///
 /// `read` is a closure of the view, the row's (first) address and the index in the block;
 /// `write` of the target, the address, the index and the value, false when it refuses the
-/// value. The macro makes [`REGISTERS`], the rows as plain data (10 B each in the firmware
+/// value. The macro makes [`REGISTERS`], the rows as plain data (8 B each in the firmware
 /// image), a `Handler` variant for each row with code of its own, and `read_row` and
 /// `write_row`, whose match arms run the rows' closures: where every row held pointers to a
 /// function of its own (16 B a row), the image is 0.4 KiB smaller.
@@ -331,7 +341,7 @@ macro_rules! registers {
             address: $address,
             span: Span::$span,
             name: name!($name),
-            range: None,
+            accepts: READ_ONLY,
             handler: Handler::$handler,
         }
     };
@@ -342,7 +352,7 @@ macro_rules! registers {
             address: $address,
             span: Span::$span,
             name: name!($name),
-            range: Some(($min, $max)),
+            accepts: ($min, $max),
             handler: Handler::$handler,
         }
     };
@@ -607,9 +617,8 @@ pub fn write(target: &mut Target, slots: usize, address: u8, value: u16) -> bool
     let Some((row, index)) = find(address, slots) else {
         return false;
     };
-    let Some((min, max)) = row.range else {
-        return false;
-    };
+    // A read-only row accepts no value.
+    let (min, max) = row.accepts;
     (min..=max).contains(&value) && write_row(row.handler, target, row.address, index, value)
 }
 
@@ -828,6 +837,30 @@ mod tests {
             ..Config::default()
         };
         assert!(config == expected);
+    }
+
+    #[test]
+    fn a_read_only_register_takes_no_value() {
+        let mut config = Config::default();
+        let mut fsensor = 0;
+        let mut target = Target {
+            config: &mut config,
+            fsensor: &mut fsensor,
+        };
+        let mut read_only = 0;
+        for register in all(3).filter(|r| r.row.access() == Access::Read) {
+            read_only += 1;
+            assert_eq!(register.row.range(), None, "{register}");
+            for value in [0, 1, 2, 255, 4095, u16::MAX] {
+                assert!(
+                    !write(&mut target, 3, register.address, value),
+                    "{register} = {value}"
+                );
+            }
+        }
+        assert!(read_only > 20, "{read_only} read-only registers");
+        assert!(config == Config::default());
+        assert_eq!(fsensor, 0);
     }
 
     #[test]
