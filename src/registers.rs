@@ -688,9 +688,13 @@ pub fn changed_settings<const CAP: usize>(
     slots: usize,
     changed: &mut heapless::Vec<(u8, u16), CAP>,
 ) {
-    let (ours, theirs) = (settings_view(config, hub), settings_view(defaults, hub));
+    // One view, its settings switched: setting registers read nothing else.
+    let mut view = settings_view(defaults, hub);
     for setting in settings(slots) {
-        if let Some(value) = setting.read(&ours).filter(|&v| Some(v) != setting.read(&theirs)) {
+        view.config = defaults;
+        let default = setting.read(&view);
+        view.config = config;
+        if let Some(value) = setting.read(&view).filter(|&v| Some(v) != default) {
             let _ = changed.push((setting.address(), value));
         }
     }
