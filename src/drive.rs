@@ -26,11 +26,11 @@ const CATCH_UP_GAIN: i32 = 25;
 pub struct Budget {
     /// Filament the motor may move, mm (either direction).
     pub max_mm: u16,
-    /// Time the motor may be driven, ms.
-    pub max_ms: u64,
+    /// Time the motor may be driven, ms (`u32::MAX`: no limit).
+    pub max_ms: u32,
     /// The longest the motor may be driven, at any duty, without a revolution, ms: a motor too
     /// weakly driven to count as stalled still has to move the filament.
-    pub max_still_ms: u64,
+    pub max_still_ms: u32,
     /// The error reported past any bound.
     pub error: ErrorCode,
 }
@@ -140,12 +140,12 @@ impl SlotDrive {
             }
         }
         let still_since = lease.started.max(feeder.hall.last_revolution());
-        let still_too_long =
-            self.command.is_driving() && now.millis_since(still_since) > lease.budget.max_still_ms;
+        let still_too_long = self.command.is_driving()
+            && millis_u32(now.millis_since(still_since)) > lease.budget.max_still_ms;
         // More than `max_mm` whole millimetres, without a division (`centi / 100 > max_mm`).
         let too_far =
             feeder.odometry_centi().abs_diff(lease.from_centi) > u32::from(lease.budget.max_mm) * 100 + 99;
-        let too_long = now.millis_since(lease.started) > lease.budget.max_ms;
+        let too_long = millis_u32(now.millis_since(lease.started)) > lease.budget.max_ms;
         let verdict = if self.stalled(feeder, now, config) {
             Err(ErrorCode::STALLED_PULLEY)
         } else if still_too_long || too_far || too_long {
@@ -272,6 +272,12 @@ impl SlotDrive {
     }
 }
 
+/// A duration in 32 bits, saturated (49 days): past a budget's every bound but `u32::MAX`, which
+/// is none.
+pub(crate) fn millis_u32(ms: u64) -> u32 {
+    u32::try_from(ms).unwrap_or(u32::MAX)
+}
+
 /// Every motor of a unit stopped (coasting): what the board applies before the logic's first
 /// step and before a reset.
 pub const fn stopped<const N: usize>() -> [MotorCommand; N] {
@@ -336,6 +342,43 @@ pub fn follow_duty(speed: u16, tension: Option<u16>, config: &Config) -> Duty {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A motion under `max_ms`, `now_ms` after it began, motor stopped (no stall, no distance).
+    fn timed_run(max_ms: u32, now_ms: u64) -> Result<(), ErrorCode> {
+        let (config, feeder, mut drive) = (Config::default(), Feeder::default(), SlotDrive::NEW);
+        let budget = Budget {
+            max_mm: u16::MAX,
+            max_ms,
+            max_still_ms: max_ms,
+            error: ErrorCode::MOVE_PULLEY_FAILED,
+        };
+        drive.begin(budget, &feeder, Instant::ZERO);
+        drive.run(
+            Motion::Follow { speed: 0 },
+            &feeder,
+            None,
+            Instant::from_millis(now_ms),
+            &config,
+        )
+    }
+
+    #[test]
+    fn a_budget_runs_out_after_its_time_and_u32_max_is_none() {
+        for max_ms in [0, 1, 3000, 131_135_535, u32::MAX - 1] {
+            assert_eq!(timed_run(max_ms, u64::from(max_ms)), Ok(()), "{max_ms}");
+            for late in [u64::from(max_ms) + 1, u64::from(u32::MAX) + 1, 1 << 40, u64::MAX] {
+                assert_eq!(
+                    timed_run(max_ms, late),
+                    Err(ErrorCode::MOVE_PULLEY_FAILED),
+                    "{max_ms}"
+                );
+            }
+        }
+        // The follower's budget: a print of any length.
+        for now_ms in [0, u64::from(u32::MAX), u64::from(u32::MAX) + 1, 1 << 40, u64::MAX] {
+            assert_eq!(timed_run(u32::MAX, now_ms), Ok(()), "{now_ms}");
+        }
+    }
 
     /// The lag as it was computed, with 64-bit divisions.
     fn dividing_lag_mm(speed: u16, elapsed_ms: u64, moved_centi: i64) -> i32 {

@@ -186,8 +186,9 @@ struct Bounds {
 impl Bounds {
     /// The drive's budget: the distance, and twice the nominal duration plus slack.
     fn budget(&self, config: &Config) -> Budget {
+        // At most 65 535 × 2000 + 65 535.
         let max_ms =
-            u64::from(self.max_mm) * 2000 / u64::from(self.speed.max(1)) + u64::from(config.phase_slack_ms);
+            u32::from(self.max_mm) * 2000 / u32::from(self.speed.max(1)) + u32::from(config.phase_slack_ms);
         Budget {
             max_mm: self.max_mm,
             max_ms,
@@ -311,7 +312,7 @@ struct Lease {
     started: Instant,
     from_centi: i32,
     used_mm: u16,
-    used_ms: u64,
+    used_ms: u32,
 }
 
 impl Lease {
@@ -328,7 +329,9 @@ impl Lease {
     fn end(&mut self, now: Instant, odometry_centi: i32) {
         let mm = odometry_centi.abs_diff(self.from_centi) / 100;
         self.used_mm = self.used_mm.saturating_add(u16::try_from(mm).unwrap_or(u16::MAX));
-        self.used_ms = self.used_ms.saturating_add(now.millis_since(self.started));
+        self.used_ms = self
+            .used_ms
+            .saturating_add(crate::drive::millis_u32(now.millis_since(self.started)));
     }
 
     /// Begin a new lease at `now`: what is left of `full`.
