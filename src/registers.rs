@@ -107,13 +107,11 @@ pub enum Subject {
     Slot(usize),
 }
 
-/// One row of the register table: plain data (8 B in the firmware image); the code that reads
+/// One row of the register table: plain data (6 B in the firmware image); the code that reads
 /// and writes its register is an arm of `read_row` and `write_row` (made by `registers!`).
 pub struct Row {
     /// The (first) address.
     pub address: u8,
-    /// How many addresses the row covers.
-    pub span: Span,
     /// The name tools show, e.g. `bowden_mm`; block registers add their subject (`raw.hub.filament`).
     /// Empty in the firmware image, which never shows it.
     pub name: Name,
@@ -141,6 +139,11 @@ impl Row {
         if min <= max { Some(self.accepts) } else { None }
     }
 
+    /// How many addresses the row covers.
+    pub const fn span(&self) -> Span {
+        self.handler.span()
+    }
+
     /// Its value at `index` of the block, as `view` reads it.
     fn read(&self, view: &View, index: usize) -> Option<u16> {
         read_row(self.handler, view, self.address, index)
@@ -149,7 +152,7 @@ impl Row {
     /// The index inside the block that `address` names, if it is one of this row's addresses.
     fn index_of(&self, address: u8) -> Option<usize> {
         let offset = address.checked_sub(self.address)?;
-        let size = match self.span {
+        let size = match self.span() {
             Span::One => 1,
             Span::Sensors => SENSOR_BLOCK,
             Span::Slots => SLOT_BLOCK,
@@ -268,7 +271,7 @@ fn write_setting(t: &mut Target, address: u8, _: usize, value: u16) -> bool {
 ///
 /// `read` is a closure of the view, the row's (first) address and the index in the block;
 /// `write` of the target, the address, the index and the value, false when it refuses the
-/// value. The macro makes [`REGISTERS`], the rows as plain data (8 B each in the firmware
+/// value. The macro makes [`REGISTERS`], the rows as plain data (6 B each in the firmware
 /// image), a `Handler` variant for each row with code of its own, and `read_row` and
 /// `write_row`, whose match arms run the rows' closures: where every row held pointers to a
 /// function of its own (16 B a row), the image is 0.4 KiB smaller.
@@ -301,6 +304,16 @@ macro_rules! registers {
         enum Handler {
             $($own,)*
             Setting,
+        }
+
+        impl Handler {
+            /// How many addresses its row covers (a row of its own says; a setting has one).
+            const fn span(self) -> Span {
+                match self {
+                    $(Handler::$own => registers!(@span $kind($($read)*)),)*
+                    Handler::Setting => Span::One,
+                }
+            }
         }
 
         /// The register map, MMU3 registers first. A `static`, not a `const`: each use of a
@@ -339,7 +352,6 @@ macro_rules! registers {
     (@row $handler:ident block($address:expr, $span:ident, $name:literal, $read:expr)) => {
         Row {
             address: $address,
-            span: Span::$span,
             name: name!($name),
             accepts: READ_ONLY,
             handler: Handler::$handler,
@@ -350,11 +362,19 @@ macro_rules! registers {
     )) => {
         Row {
             address: $address,
-            span: Span::$span,
             name: name!($name),
             accepts: ($min, $max),
             handler: Handler::$handler,
         }
+    };
+    (@span read_only($($row:tt)*)) => {
+        Span::One
+    };
+    (@span block($address:expr, $span:ident, $($row:tt)*)) => {
+        Span::$span
+    };
+    (@span writable($address:expr, $span:ident, $($row:tt)*)) => {
+        Span::$span
     };
     (@read read_only($address:expr, $name:literal, $read:expr)) => {
         reading($read)
@@ -597,7 +617,7 @@ fn find(address: u8, slots: usize) -> Option<(&'static Row, usize)> {
     let (row, index) = REGISTERS
         .iter()
         .find_map(|row| row.index_of(address).map(|index| (row, index)))?;
-    let exists = match row.span {
+    let exists = match row.span() {
         Span::One => true,
         Span::Sensors => index < 3 + 2 * slots,
         Span::Slots => index < slots,
@@ -670,7 +690,7 @@ pub fn settings(slots: usize) -> impl Iterator<Item = Setting> {
         .iter()
         .filter(|row| row.access() == Access::ReadWrite && row.address != FSENSOR)
         .flat_map(move |row| {
-            let count = match row.span {
+            let count = match row.span() {
                 Span::One => 1,
                 Span::Sensors => 3 + 2 * slots,
                 Span::Slots => slots,
@@ -726,7 +746,7 @@ impl fmt::Display for Register {
 /// The register at `address` on a unit with `slots` slots.
 pub fn describe(address: u8, slots: usize) -> Option<Register> {
     let (row, index) = find(address, slots)?;
-    let subject = match row.span {
+    let subject = match row.span() {
         Span::One => None,
         Span::Sensors => Some(Subject::Sensor(SensorId::from_index(index))),
         Span::Slots => Some(Subject::Slot(index)),
