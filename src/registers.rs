@@ -162,7 +162,7 @@ impl Row {
 }
 
 /// A register's name. Only tools show names: in the firmware image (feature `mcu`) it is empty
-/// and takes no space in the table (8 B a row).
+/// and takes no space in the table (6 B a row).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Name(#[cfg(not(feature = "mcu"))] &'static str);
 
