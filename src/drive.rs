@@ -26,11 +26,11 @@ const CATCH_UP_GAIN: i32 = 25;
 pub struct Budget {
     /// Filament the motor may move, mm (either direction).
     pub max_mm: u16,
-    /// Time the motor may be driven, ms.
-    pub max_ms: u64,
+    /// Time the motor may be driven, ms (`u32::MAX`: no limit).
+    pub max_ms: u32,
     /// The longest the motor may be driven, at any duty, without a revolution, ms: a motor too
     /// weakly driven to count as stalled still has to move the filament.
-    pub max_still_ms: u64,
+    pub max_still_ms: u32,
     /// The error reported past any bound.
     pub error: ErrorCode,
 }
@@ -140,12 +140,12 @@ impl SlotDrive {
             }
         }
         let still_since = lease.started.max(feeder.hall.last_revolution());
-        let still_too_long =
-            self.command.is_driving() && now.millis_since(still_since) > lease.budget.max_still_ms;
+        let still_too_long = self.command.is_driving()
+            && millis_u32(now.millis_since(still_since)) > lease.budget.max_still_ms;
         // More than `max_mm` whole millimetres, without a division (`centi / 100 > max_mm`).
         let too_far =
             feeder.odometry_centi().abs_diff(lease.from_centi) > u32::from(lease.budget.max_mm) * 100 + 99;
-        let too_long = now.millis_since(lease.started) > lease.budget.max_ms;
+        let too_long = millis_u32(now.millis_since(lease.started)) > lease.budget.max_ms;
         let verdict = if self.stalled(feeder, now, config) {
             Err(ErrorCode::STALLED_PULLEY)
         } else if still_too_long || too_far || too_long {
@@ -233,8 +233,8 @@ impl SlotDrive {
         }
         self.schedule = Some(schedule);
         let moved_centi = match direction {
-            Direction::Forward => i64::from(odometry) - i64::from(schedule.from_centi),
-            Direction::Reverse => i64::from(schedule.from_centi) - i64::from(odometry),
+            Direction::Forward => odometry.saturating_sub(schedule.from_centi),
+            Direction::Reverse => schedule.from_centi.saturating_sub(odometry),
         };
         let lag_mm = schedule_lag_mm(speed, now.millis_since(schedule.since), moved_centi);
         let duty =
@@ -272,6 +272,12 @@ impl SlotDrive {
     }
 }
 
+/// A duration in 32 bits, saturated (49 days): past a budget's every bound but `u32::MAX`, which
+/// is none.
+pub(crate) fn millis_u32(ms: u64) -> u32 {
+    u32::try_from(ms).unwrap_or(u32::MAX)
+}
+
 /// Every motor of a unit stopped (coasting): what the board applies before the logic's first
 /// step and before a reset.
 pub const fn stopped<const N: usize>() -> [MotorCommand; N] {
@@ -279,19 +285,22 @@ pub const fn stopped<const N: usize>() -> [MotorCommand; N] {
 }
 
 /// How far the filament is behind its schedule after `elapsed_ms` at `speed` mm/s, in whole mm
-/// (truncated), within ±1000: `(speed × elapsed / 10 − moved_centi) / 100`. Without a library
-/// division while `speed × elapsed` fits 32 bits (the first minute at full speed): a 64-bit
-/// division costs a few hundred instructions on the Cortex-M0+, every step of a move.
-fn schedule_lag_mm(speed: u16, elapsed_ms: u64, moved_centi: i64) -> i32 {
-    let elapsed_ms = i64::try_from(elapsed_ms).unwrap_or(i64::MAX / 1000);
-    let scheduled = i64::from(speed).saturating_mul(elapsed_ms);
-    let scheduled_centi = match u32::try_from(scheduled) {
-        // ⌈2³⁵ / 10⌉: exact for every u32.
-        Ok(scheduled) => i64::from(crate::sensor::mul_high(scheduled, 0xcccc_cccd) >> 3),
-        Err(_) => scheduled / 10,
+/// (truncated), within ±1000: `(speed × elapsed / 10 − moved_centi) / 100`, in 32 bits and
+/// without a library division (a 64-bit division costs a few hundred instructions on the
+/// Cortex-M0+, every step of a move). A schedule past `u32::MAX` (`speed × elapsed`, 4.29 km in
+/// tenths of a hundredth) is 1000 mm behind: exact while the filament moved at most 4.29 km along
+/// it, and a schedule lasts a few phases, each braked by its budget after at most `u16::MAX` mm.
+fn schedule_lag_mm(speed: u16, elapsed_ms: u64, moved_centi: i32) -> i32 {
+    let elapsed_ms = u32::try_from(elapsed_ms).unwrap_or(u32::MAX);
+    let Some(scheduled) = elapsed_ms.checked_mul(u32::from(speed)) else {
+        return 1000;
     };
+    // ⌈2³⁵ / 10⌉: exact for every u32; the quotient is below 2²⁹.
+    let scheduled_centi = (crate::sensor::mul_high(scheduled, 0xcccc_cccd) >> 3) as i32;
     // Beyond ±100 000 centi the truncated quotient is beyond ±1000 and clamped anyway.
-    let lag_centi = (scheduled_centi - moved_centi).clamp(-100_000, 100_000) as i32;
+    let lag_centi = scheduled_centi
+        .saturating_sub(moved_centi)
+        .clamp(-100_000, 100_000);
     // ⌈2³² / 100⌉: exact up to 100 000.
     let lag_mm = crate::sensor::mul_high(lag_centi.unsigned_abs(), 42_949_673) as i32;
     (if lag_centi < 0 { -lag_mm } else { lag_mm }).clamp(-1000, 1000)
@@ -334,6 +343,43 @@ pub fn follow_duty(speed: u16, tension: Option<u16>, config: &Config) -> Duty {
 mod tests {
     use super::*;
 
+    /// A motion under `max_ms`, `now_ms` after it began, motor stopped (no stall, no distance).
+    fn timed_run(max_ms: u32, now_ms: u64) -> Result<(), ErrorCode> {
+        let (config, feeder, mut drive) = (Config::default(), Feeder::default(), SlotDrive::NEW);
+        let budget = Budget {
+            max_mm: u16::MAX,
+            max_ms,
+            max_still_ms: max_ms,
+            error: ErrorCode::MOVE_PULLEY_FAILED,
+        };
+        drive.begin(budget, &feeder, Instant::ZERO);
+        drive.run(
+            Motion::Follow { speed: 0 },
+            &feeder,
+            None,
+            Instant::from_millis(now_ms),
+            &config,
+        )
+    }
+
+    #[test]
+    fn a_budget_runs_out_after_its_time_and_u32_max_is_none() {
+        for max_ms in [0, 1, 3000, 131_135_535, u32::MAX - 1] {
+            assert_eq!(timed_run(max_ms, u64::from(max_ms)), Ok(()), "{max_ms}");
+            for late in [u64::from(max_ms) + 1, u64::from(u32::MAX) + 1, 1 << 40, u64::MAX] {
+                assert_eq!(
+                    timed_run(max_ms, late),
+                    Err(ErrorCode::MOVE_PULLEY_FAILED),
+                    "{max_ms}"
+                );
+            }
+        }
+        // The follower's budget: a print of any length.
+        for now_ms in [0, u64::from(u32::MAX), u64::from(u32::MAX) + 1, 1 << 40, u64::MAX] {
+            assert_eq!(timed_run(u32::MAX, now_ms), Ok(()), "{now_ms}");
+        }
+    }
+
     /// The lag as it was computed, with 64-bit divisions.
     fn dividing_lag_mm(speed: u16, elapsed_ms: u64, moved_centi: i64) -> i32 {
         let elapsed_ms = i64::try_from(elapsed_ms).unwrap_or(i64::MAX / 1000);
@@ -341,9 +387,14 @@ mod tests {
         ((scheduled_centi - moved_centi) / 100).clamp(-1000, 1000) as i32
     }
 
+    /// The farthest the filament may have moved along a schedule for its lag to stay exact past
+    /// 32 bits, centi (4.29 km): far beyond any schedule, which lasts a few phases, each braked by
+    /// its budget after at most `u16::MAX` mm.
+    const FARTHEST_MOVED_CENTI: i32 = 429_396_729;
+
     #[test]
     fn the_schedule_lag_is_what_the_divisions_gave() {
-        let speeds = [0, 1, 7, 20, 60, 100, 333, 1000, 65_535];
+        let speeds = [0, 1, 7, 20, 60, 100, 333, 1000, 2000, 65_535];
         let elapsed = [
             0,
             1,
@@ -355,6 +406,7 @@ mod tests {
             65_537,
             4_294_967,
             65_540_001,
+            131_071_000,
             1 << 40,
             u64::MAX,
         ];
@@ -371,11 +423,19 @@ mod tests {
                     for moved_centi in [
                         scheduled.saturating_sub(offset),
                         -offset,
-                        i64::MIN / 4,
-                        i64::MAX / 4,
+                        i64::from(i32::MIN),
+                        i64::from(-FARTHEST_MOVED_CENTI),
+                        i64::from(FARTHEST_MOVED_CENTI),
                     ] {
+                        // A move the drive sees: it moved at most its budget either way.
+                        let Ok(moved) = i32::try_from(moved_centi) else {
+                            continue;
+                        };
+                        if moved > FARTHEST_MOVED_CENTI {
+                            continue;
+                        }
                         assert_eq!(
-                            schedule_lag_mm(speed, elapsed_ms, moved_centi),
+                            schedule_lag_mm(speed, elapsed_ms, moved),
                             dividing_lag_mm(speed, elapsed_ms, moved_centi),
                             "speed {speed}, elapsed {elapsed_ms}, moved {moved_centi}"
                         );
@@ -389,10 +449,34 @@ mod tests {
             for k in [-101, -100, -99, -1, 0, 1, 99, 100, 101] {
                 let moved_centi = i64::from(scheduled / 10) - k;
                 assert_eq!(
-                    schedule_lag_mm(1, elapsed_ms, moved_centi),
+                    schedule_lag_mm(1, elapsed_ms, moved_centi as i32),
                     dividing_lag_mm(1, elapsed_ms, moved_centi),
                     "elapsed {elapsed_ms}, moved {moved_centi}"
                 );
+            }
+        }
+    }
+
+    /// A schedule past 32 bits (hours into a move) is a full 1000 mm behind for any distance a
+    /// move can have covered, as the divisions had it: the drive then pushes at its full
+    /// catch-up duty.
+    #[test]
+    fn a_schedule_past_32_bits_is_a_full_metre_behind() {
+        for (speed, elapsed_ms) in [
+            (1, u64::from(u32::MAX) + 1),
+            (2, 1 << 31),
+            (1000, 4_294_968),
+            (2000, 2_147_484),
+            (65_535, 65_538),
+            (1, u64::MAX),
+        ] {
+            assert!(u64::from(speed) * elapsed_ms.min(1 << 40) > u64::from(u32::MAX));
+            for moved in (i32::MIN..=FARTHEST_MOVED_CENTI)
+                .step_by(65_521)
+                .chain([FARTHEST_MOVED_CENTI])
+            {
+                assert_eq!(schedule_lag_mm(speed, elapsed_ms, moved), 1000);
+                assert_eq!(dividing_lag_mm(speed, elapsed_ms, i64::from(moved)), 1000);
             }
         }
     }

@@ -27,8 +27,8 @@ pub const JAM_ERROR: ErrorCode = ErrorCode::MOVE_PULLEY_FAILED;
 /// but the motor must keep turning.
 const BUDGET: Budget = Budget {
     max_mm: u16::MAX,
-    max_ms: u64::MAX,
-    max_still_ms: STILL_MS,
+    max_ms: u32::MAX,
+    max_still_ms: STILL_MS as u32,
     error: JAM_ERROR,
 };
 

@@ -186,8 +186,9 @@ struct Bounds {
 impl Bounds {
     /// The drive's budget: the distance, and twice the nominal duration plus slack.
     fn budget(&self, config: &Config) -> Budget {
+        // At most 65 535 × 2000 + 65 535.
         let max_ms =
-            u64::from(self.max_mm) * 2000 / u64::from(self.speed.max(1)) + u64::from(config.phase_slack_ms);
+            u32::from(self.max_mm) * 2000 / u32::from(self.speed.max(1)) + u32::from(config.phase_slack_ms);
         Budget {
             max_mm: self.max_mm,
             max_ms,
@@ -311,7 +312,7 @@ struct Lease {
     started: Instant,
     from_centi: i32,
     used_mm: u16,
-    used_ms: u64,
+    used_ms: u32,
 }
 
 impl Lease {
@@ -328,7 +329,9 @@ impl Lease {
     fn end(&mut self, now: Instant, odometry_centi: i32) {
         let mm = odometry_centi.abs_diff(self.from_centi) / 100;
         self.used_mm = self.used_mm.saturating_add(u16::try_from(mm).unwrap_or(u16::MAX));
-        self.used_ms = self.used_ms.saturating_add(now.millis_since(self.started));
+        self.used_ms = self
+            .used_ms
+            .saturating_add(crate::drive::millis_u32(now.millis_since(self.started)));
     }
 
     /// Begin a new lease at `now`: what is left of `full`.
@@ -346,6 +349,23 @@ impl Lease {
 }
 
 impl PhaseRun {
+    /// A phase attempt starting at `now`, its distance goal counting from `goal_from_centi`, with
+    /// the filament at `odometry_centi`.
+    // Out of line: two callers in the step (measured smaller).
+    #[inline(never)]
+    fn new(now: Instant, goal_from_centi: i32, odometry_centi: i32) -> Self {
+        PhaseRun {
+            started: now,
+            goal_from_centi,
+            mark_centi: None,
+            compressed_since: None,
+            taut_since: None,
+            pushed: false,
+            lease: Lease::new(now, odometry_centi),
+            held: false,
+        }
+    }
+
     /// Where the distance goal of this phase counts from (kept for the attempt after Retry).
     pub fn goal_from_centi(&self) -> i32 {
         self.goal_from_centi
@@ -458,16 +478,7 @@ fn step_motion<const N: usize>(
         Some(run) => run,
         None => {
             drive.begin(bounds.budget(config), feeder, now);
-            run.insert(PhaseRun {
-                started: now,
-                goal_from_centi: resume_goal_from.unwrap_or(odometry),
-                mark_centi: None,
-                compressed_since: None,
-                taut_since: None,
-                pushed: false,
-                lease: Lease::new(now, odometry),
-                held: false,
-            })
+            run.insert(PhaseRun::new(now, resume_goal_from.unwrap_or(odometry), odometry))
         }
     };
     let toward_goal_mm = match bounds.direction {
@@ -801,18 +812,7 @@ fn check_sensors<const N: usize>(
         .find(|&id| unit.sensor(id).is_some_and(|s| s.reading().is_none()));
     let hub = unit.hub_present();
     if let (Some(_), _) | (None, None) = (unsettled, hub) {
-        let started = run
-            .get_or_insert(PhaseRun {
-                started: now,
-                goal_from_centi: 0,
-                mark_centi: None,
-                compressed_since: None,
-                taut_since: None,
-                pushed: false,
-                lease: Lease::new(now, 0),
-                held: false,
-            })
-            .started;
+        let started = run.get_or_insert(PhaseRun::new(now, 0, 0)).started;
         if now.millis_since(started) > SENSOR_SETTLE_MS {
             return Outcome::Fail(unsettled.map_or(ErrorCode::FINDA_FLICKERS, sensor_fault_error));
         }

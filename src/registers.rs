@@ -107,28 +107,41 @@ pub enum Subject {
     Slot(usize),
 }
 
-/// One row of the register table: plain data (10 B in the firmware image); the code that reads
+/// One row of the register table: plain data (6 B in the firmware image); the code that reads
 /// and writes its register is an arm of `read_row` and `write_row` (made by `registers!`).
 pub struct Row {
     /// The (first) address.
     pub address: u8,
-    /// How many addresses the row covers.
-    pub span: Span,
     /// The name tools show, e.g. `bowden_mm`; block registers add their subject (`raw.hub.filament`).
     /// Empty in the firmware image, which never shows it.
     pub name: Name,
-    /// The values a write accepts (`None`: read only).
-    pub range: Option<(u16, u16)>,
+    /// The lowest and highest value a write accepts; a read-only row's accepts none (lowest
+    /// above highest: 2 B a row less than an `Option`).
+    accepts: (u16, u16),
     handler: Handler,
 }
+
+/// What a read-only row accepts: nothing.
+const READ_ONLY: (u16, u16) = (1, 0);
 
 impl Row {
     /// Whether the printer may write it: a register with a range of values to accept.
     pub const fn access(&self) -> Access {
-        match self.range {
+        match self.range() {
             Some(_) => Access::ReadWrite,
             None => Access::Read,
         }
+    }
+
+    /// The values a write accepts, lowest and highest (`None`: read only).
+    pub const fn range(&self) -> Option<(u16, u16)> {
+        let (min, max) = self.accepts;
+        if min <= max { Some(self.accepts) } else { None }
+    }
+
+    /// How many addresses the row covers.
+    pub const fn span(&self) -> Span {
+        self.handler.span()
     }
 
     /// Its value at `index` of the block, as `view` reads it.
@@ -139,7 +152,7 @@ impl Row {
     /// The index inside the block that `address` names, if it is one of this row's addresses.
     fn index_of(&self, address: u8) -> Option<usize> {
         let offset = address.checked_sub(self.address)?;
-        let size = match self.span {
+        let size = match self.span() {
             Span::One => 1,
             Span::Sensors => SENSOR_BLOCK,
             Span::Slots => SLOT_BLOCK,
@@ -149,7 +162,7 @@ impl Row {
 }
 
 /// A register's name. Only tools show names: in the firmware image (feature `mcu`) it is empty
-/// and takes no space in the table (8 B a row).
+/// and takes no space in the table (6 B a row).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Name(#[cfg(not(feature = "mcu"))] &'static str);
 
@@ -258,7 +271,7 @@ fn write_setting(t: &mut Target, address: u8, _: usize, value: u16) -> bool {
 ///
 /// `read` is a closure of the view, the row's (first) address and the index in the block;
 /// `write` of the target, the address, the index and the value, false when it refuses the
-/// value. The macro makes [`REGISTERS`], the rows as plain data (10 B each in the firmware
+/// value. The macro makes [`REGISTERS`], the rows as plain data (6 B each in the firmware
 /// image), a `Handler` variant for each row with code of its own, and `read_row` and
 /// `write_row`, whose match arms run the rows' closures: where every row held pointers to a
 /// function of its own (16 B a row), the image is 0.4 KiB smaller.
@@ -291,6 +304,16 @@ macro_rules! registers {
         enum Handler {
             $($own,)*
             Setting,
+        }
+
+        impl Handler {
+            /// How many addresses its row covers (a row of its own says; a setting has one).
+            const fn span(self) -> Span {
+                match self {
+                    $(Handler::$own => registers!(@span $kind($($read)*)),)*
+                    Handler::Setting => Span::One,
+                }
+            }
         }
 
         /// The register map, MMU3 registers first. A `static`, not a `const`: each use of a
@@ -329,9 +352,8 @@ macro_rules! registers {
     (@row $handler:ident block($address:expr, $span:ident, $name:literal, $read:expr)) => {
         Row {
             address: $address,
-            span: Span::$span,
             name: name!($name),
-            range: None,
+            accepts: READ_ONLY,
             handler: Handler::$handler,
         }
     };
@@ -340,11 +362,19 @@ macro_rules! registers {
     )) => {
         Row {
             address: $address,
-            span: Span::$span,
             name: name!($name),
-            range: Some(($min, $max)),
+            accepts: ($min, $max),
             handler: Handler::$handler,
         }
+    };
+    (@span read_only($($row:tt)*)) => {
+        Span::One
+    };
+    (@span block($address:expr, $span:ident, $($row:tt)*)) => {
+        Span::$span
+    };
+    (@span writable($address:expr, $span:ident, $($row:tt)*)) => {
+        Span::$span
     };
     (@read read_only($address:expr, $name:literal, $read:expr)) => {
         reading($read)
@@ -587,7 +617,7 @@ fn find(address: u8, slots: usize) -> Option<(&'static Row, usize)> {
     let (row, index) = REGISTERS
         .iter()
         .find_map(|row| row.index_of(address).map(|index| (row, index)))?;
-    let exists = match row.span {
+    let exists = match row.span() {
         Span::One => true,
         Span::Sensors => index < 3 + 2 * slots,
         Span::Slots => index < slots,
@@ -607,9 +637,8 @@ pub fn write(target: &mut Target, slots: usize, address: u8, value: u16) -> bool
     let Some((row, index)) = find(address, slots) else {
         return false;
     };
-    let Some((min, max)) = row.range else {
-        return false;
-    };
+    // A read-only row accepts no value.
+    let (min, max) = row.accepts;
     (min..=max).contains(&value) && write_row(row.handler, target, row.address, index, value)
 }
 
@@ -661,7 +690,7 @@ pub fn settings(slots: usize) -> impl Iterator<Item = Setting> {
         .iter()
         .filter(|row| row.access() == Access::ReadWrite && row.address != FSENSOR)
         .flat_map(move |row| {
-            let count = match row.span {
+            let count = match row.span() {
                 Span::One => 1,
                 Span::Sensors => 3 + 2 * slots,
                 Span::Slots => slots,
@@ -679,9 +708,13 @@ pub fn changed_settings<const CAP: usize>(
     slots: usize,
     changed: &mut heapless::Vec<(u8, u16), CAP>,
 ) {
-    let (ours, theirs) = (settings_view(config, hub), settings_view(defaults, hub));
+    // One view, its settings switched: setting registers read nothing else.
+    let mut view = settings_view(defaults, hub);
     for setting in settings(slots) {
-        if let Some(value) = setting.read(&ours).filter(|&v| Some(v) != setting.read(&theirs)) {
+        view.config = defaults;
+        let default = setting.read(&view);
+        view.config = config;
+        if let Some(value) = setting.read(&view).filter(|&v| Some(v) != default) {
             let _ = changed.push((setting.address(), value));
         }
     }
@@ -713,7 +746,7 @@ impl fmt::Display for Register {
 /// The register at `address` on a unit with `slots` slots.
 pub fn describe(address: u8, slots: usize) -> Option<Register> {
     let (row, index) = find(address, slots)?;
-    let subject = match row.span {
+    let subject = match row.span() {
         Span::One => None,
         Span::Sensors => Some(Subject::Sensor(SensorId::from_index(index))),
         Span::Slots => Some(Subject::Slot(index)),
@@ -828,6 +861,30 @@ mod tests {
             ..Config::default()
         };
         assert!(config == expected);
+    }
+
+    #[test]
+    fn a_read_only_register_takes_no_value() {
+        let mut config = Config::default();
+        let mut fsensor = 0;
+        let mut target = Target {
+            config: &mut config,
+            fsensor: &mut fsensor,
+        };
+        let mut read_only = 0;
+        for register in all(3).filter(|r| r.row.access() == Access::Read) {
+            read_only += 1;
+            assert_eq!(register.row.range(), None, "{register}");
+            for value in [0, 1, 2, 255, 4095, u16::MAX] {
+                assert!(
+                    !write(&mut target, 3, register.address, value),
+                    "{register} = {value}"
+                );
+            }
+        }
+        assert!(read_only > 20, "{read_only} read-only registers");
+        assert!(config == Config::default());
+        assert_eq!(fsensor, 0);
     }
 
     #[test]

@@ -175,7 +175,8 @@ impl Runner {
                         hub: unit.hub_present() == Some(true),
                         fed_mm: self.failed_fed_centi.map(|centi| centi / 100),
                     };
-                    let Some(replanned) = replan.plan(&retry, config) else {
+                    let mut plan = Plan::new();
+                    let Some(replanned) = replan.plan(&retry, config, &mut plan) else {
                         self.inherited = inherited;
                         return None;
                     };
@@ -184,7 +185,7 @@ impl Runner {
                         learned = Some(Learned::BowdenMm(bowden_mm));
                     }
                     let then_plan = self.then_plan;
-                    *self = Runner::new(self.request, &replanned.plan);
+                    *self = Runner::new(self.request, &plan);
                     self.then_plan = then_plan;
                     self.notes.trust_sensors = true;
                 }

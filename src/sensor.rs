@@ -250,7 +250,8 @@ fn divide_small(sum: u32, len: usize) -> u32 {
 /// The high 32 bits of the 64-bit product `a × b`, from 16-bit halves: four single-cycle
 /// multiplications on the Cortex-M0+ instead of the 64-bit multiplication routine
 /// (`__aeabi_lmul`), which LLVM would otherwise turn this back into (hence the `black_box`).
-#[inline(always)]
+// Out of line: five callers (132 B smaller than inlined; the idle step no costlier, measured).
+#[inline(never)]
 pub(crate) fn mul_high(a: u32, b: u32) -> u32 {
     let (a0, a1) = (a & 0xffff, a >> 16);
     let (b0, b1) = (b & 0xffff, core::hint::black_box(b >> 16));

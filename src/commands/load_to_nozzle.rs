@@ -28,37 +28,33 @@ pub const fn phases(slot: usize, hub_search_mm: u16) -> [Phase; 4] {
 
 /// Back to the park position and load again from there, every phase with its full bound (the
 /// tip's place is known again once the hub sensor clears).
-fn reload_from_park(slot: usize, config: &Config) -> Plan {
-    let mut plan = Plan::new();
-    extend(&mut plan, &unload_from_nozzle::phases(slot));
-    extend(&mut plan, &phases(slot, config.hub_search_mm));
-    plan
+fn reload_from_park(slot: usize, config: &Config, plan: &mut Plan) {
+    extend(plan, &unload_from_nozzle::phases(slot));
+    extend(plan, &phases(slot, config.hub_search_mm));
 }
 
 /// The phases of the load from the printer's sensor on.
-fn from_fsensor(slot: usize) -> Plan {
-    let mut plan = Plan::new();
+fn from_fsensor(slot: usize, plan: &mut Plan) {
     extend(
-        &mut plan,
+        plan,
         &[
             Phase::FeedToFsensor { slot: slot as u8 },
             Phase::FeedToNozzle { slot: slot as u8 },
         ],
     );
-    plan
 }
 
 /// Retry after `8001`. The hub sensor sees the filament now (its threshold was wrong, or the
 /// user pushed the tip): the tip may be far past it, so the load starts over from the park
 /// position. It still sees nothing: the feed to the hub runs again from where the tip is, as far
 /// as from an unknown position.
-pub(crate) fn after_missed_hub(retry: &Retry, config: &Config) -> Option<Replanned> {
+pub(crate) fn after_missed_hub(retry: &Retry, config: &Config, plan: &mut Plan) -> Option<Replanned> {
     if retry.hub {
-        return Some(Replanned::plan(reload_from_park(retry.slot, config)));
+        reload_from_park(retry.slot, config, plan);
+    } else {
+        extend(plan, &phases(retry.slot, config.preload_max_mm));
     }
-    let mut plan = Plan::new();
-    extend(&mut plan, &phases(retry.slot, config.preload_max_mm));
-    Some(Replanned::plan(plan))
+    Some(Replanned::default())
 }
 
 /// Retry after `8003`. The printer's sensor reads filament now (it works again, the user pushed
@@ -68,23 +64,22 @@ pub(crate) fn after_missed_hub(retry: &Retry, config: &Config) -> Option<Replann
 /// search distance, not only what the first attempt left (the user may have pulled it back to
 /// look, a slipping drive fed less than it counted). The hub sensor sees nothing (the filament
 /// was taken out): the load starts over from the park position.
-pub(crate) fn after_no_trigger(retry: &Retry, config: &Config) -> Option<Replanned> {
+pub(crate) fn after_no_trigger(retry: &Retry, config: &Config, plan: &mut Plan) -> Option<Replanned> {
     let slot = retry.slot;
-    let mut plan = Plan::new();
     if retry.fsensor {
-        plan = from_fsensor(slot);
+        from_fsensor(slot, plan);
     } else if retry.hub {
         extend(
-            &mut plan,
+            plan,
             &[
                 Phase::SearchFsensor { slot: slot as u8 },
                 Phase::FeedToNozzle { slot: slot as u8 },
             ],
         );
     } else {
-        plan = reload_from_park(slot, config);
+        reload_from_park(slot, config, plan);
     }
-    Some(Replanned::plan(plan))
+    Some(Replanned::default())
 }
 
 /// Retry after `8009`. The printer cannot write register 0x22 while `T` runs (printer-truth §9:
@@ -96,13 +91,14 @@ pub(crate) fn after_no_trigger(retry: &Retry, config: &Config) -> Option<Replann
 /// teaches nothing: nothing moves and `8009` stays (an unload would only end in `8004` FSENSOR
 /// FIL. STUCK, hiding the first cause). With the sensor clear, the load starts over from the park
 /// position.
-pub(crate) fn after_too_early(retry: &Retry, config: &Config) -> Option<Replanned> {
+pub(crate) fn after_too_early(retry: &Retry, config: &Config, plan: &mut Plan) -> Option<Replanned> {
     if !retry.fsensor {
-        return Some(Replanned::plan(reload_from_park(retry.slot, config)));
+        reload_from_park(retry.slot, config, plan);
+        return Some(Replanned::default());
     }
     let learned = learned_bowden_mm(retry.fed_mm?, config)?;
+    from_fsensor(retry.slot, plan);
     Some(Replanned {
-        plan: from_fsensor(retry.slot),
         bowden_mm: Some(learned),
     })
 }

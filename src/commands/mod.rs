@@ -90,12 +90,13 @@ pub enum Replan {
 }
 
 impl Replan {
-    /// The new plan after `retry`, or `None` when nothing is to move.
-    pub fn plan(self, retry: &Retry, config: &Config) -> Option<Replanned> {
+    /// The new plan after `retry`, appended to `plan` (built in place, as [`Command::plan`]), or
+    /// `None` when nothing is to move (`plan` is then left as it was).
+    pub fn plan(self, retry: &Retry, config: &Config, plan: &mut Plan) -> Option<Replanned> {
         match self {
-            Replan::AfterMissedHub => load_to_nozzle::after_missed_hub(retry, config),
-            Replan::AfterNoTrigger => load_to_nozzle::after_no_trigger(retry, config),
-            Replan::AfterTooEarly => load_to_nozzle::after_too_early(retry, config),
+            Replan::AfterMissedHub => load_to_nozzle::after_missed_hub(retry, config, plan),
+            Replan::AfterNoTrigger => load_to_nozzle::after_no_trigger(retry, config, plan),
+            Replan::AfterTooEarly => load_to_nozzle::after_too_early(retry, config, plan),
         }
     }
 }
@@ -114,25 +115,11 @@ pub struct Retry {
     pub fed_mm: Option<i32>,
 }
 
-/// A new plan after Retry, and a setting it learned on the way.
-#[derive(Debug, Clone)]
+/// What a [`Replan`] learned on the way to its new plan.
+#[derive(Debug, Clone, Copy, Default)]
 pub struct Replanned {
-    /// The phases to run.
-    pub plan: Plan,
     /// A Bowden length (register 0x22) measured by the failed attempt, to keep.
     pub bowden_mm: Option<u16>,
-}
-
-impl Replanned {
-    /// Just a plan.
-    // Out of line: smaller in flash (measured with scripts/firmware-size.sh).
-    #[inline(never)]
-    pub fn plan(plan: Plan) -> Self {
-        Replanned {
-            plan,
-            bowden_mm: None,
-        }
-    }
 }
 
 /// One row of a command's recovery table: after `error`, the printer's `button` does `action`.

@@ -110,7 +110,7 @@ mod tests {
         registers::all(N)
             .filter(|r| r.row.access() == Access::ReadWrite && r.address != registers::FSENSOR)
             .filter_map(|r| {
-                let (min, max) = r.row.range?;
+                let (min, max) = r.row.range()?;
                 let value = app.read_register(r.address)?;
                 Some((
                     r.address,
