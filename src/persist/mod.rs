@@ -11,6 +11,8 @@
 
 mod crc;
 mod entry;
+#[cfg(test)]
+mod format;
 mod keeper;
 mod records;
 mod settings;
