@@ -1,7 +1,7 @@
-//! The printer UART's interrupt-driven byte rings for an STM32 USART (the G0's, FIFO mode): every
-//! decision the driver makes, over a [`UsartRegisters`] access the board implements with volatile
-//! reads and writes (`src/board.rs`), so that host tests run the decisions against a model of the
-//! registers (`tests` below).
+//! The printer UART's interrupt-driven byte rings for an STM32 USART: every decision the driver
+//! makes, over a [`UsartRegisters`] access the board implements with volatile reads and writes
+//! (`src/board/printer_uart.rs`), so that host tests run the decisions against a model of the
+//! registers (`tests` below), with and without FIFOs.
 //!
 //! It replaces embassy-stm32's `BufferedUart` (1.8 KB more flash, measured) with the same line
 //! behaviour: the interrupt moves every received byte into the receive ring, and one that finds
@@ -9,16 +9,19 @@
 //! rule); the control loop takes at most the buffer it passes ([`control::MAX_RX_PER_STEP`]);
 //! [`Port::send`] queues a whole response or nothing.
 //!
-//! The register bits are those of RM0444 (STM32G0x1 reference manual), §33.8, USART registers
-//! with FIFO mode enabled (the mode the board sets, as BufferedUart did): USART_CR1 (§33.8.1:
-//! RXFNEIE bit 5, TXFNFIE bit 7), USART_ISR (§33.8.9: PE 0, FE 1, NE 2, ORE 3, RXFNE 5, TC 6,
-//! TXFNF 7) and USART_ICR (§33.8.11: PECF 0, FECF 1, NECF 2, ORECF 3; writing 1 clears the ISR
-//! flag at the same position). The descriptions (read as ST's SVD carries them, e.g. the
+//! The register bits are those of RM0444 (STM32G0x1 reference manual), §33.8, USART registers.
+//! The board's USART3 is a basic USART without FIFO mode on the G071 (RM0444, "USART
+//! implementation"); a full USART in FIFO mode has the same bits at the same positions under
+//! other names, which the constants below carry: USART_CR1 (§33.8.1: RXNEIE/RXFNEIE bit 5,
+//! TXEIE/TXFNFIE bit 7), USART_ISR (§33.8.9: PE 0, FE 1, NE 2, ORE 3, RXNE/RXFNE 5, TC 6,
+//! TXE/TXFNF 7) and USART_ICR (§33.8.11: PECF 0, FECF 1, NECF 2, ORECF 3; writing 1 clears the
+//! ISR flag at the same position). The descriptions (read as ST's SVD carries them, e.g. the
 //! `stm32g0` crate's `usart1::isr_fifo_enabled`) say: ORE is set when a frame completes in the
-//! shift register while the receive FIFO is full (that frame is lost) and raises the interrupt
-//! with RXFNEIE, so it must be cleared or the interrupt never ends; FE and NE come with the byte
-//! they concern (it is still received) and raise no interrupt of their own; TC is set when the
-//! last frame has left with the transmit FIFO empty, and is cleared by a write to USART_TDR.
+//! shift register while the receive data register (or FIFO) is full (that frame is lost) and
+//! raises the interrupt with RXNEIE, so it must be cleared or the interrupt never ends; FE and NE
+//! come with the byte they concern (it is still received) and raise no interrupt of their own; TC
+//! is set when the last frame has left with nothing left to send, and is cleared by a write to
+//! USART_TDR.
 //!
 //! [`control::RxQueue`]: crate::control::RxQueue
 //! [`control::MAX_RX_PER_STEP`]: crate::control::MAX_RX_PER_STEP
@@ -32,7 +35,7 @@ pub const ISR_PE: u32 = 1 << 0;
 pub const ISR_FE: u32 = 1 << 1;
 /// USART_ISR: noise detected on the received frame.
 pub const ISR_NE: u32 = 1 << 2;
-/// USART_ISR: overrun, a byte lost because the receive FIFO was full.
+/// USART_ISR: overrun, a frame lost because the receive data register (or FIFO) was full.
 pub const ISR_ORE: u32 = 1 << 3;
 /// USART_ISR: the receive FIFO is not empty (RXFNE; RXNE without FIFO).
 pub const ISR_RXFNE: u32 = 1 << 5;
@@ -125,8 +128,9 @@ impl<const N: usize> Ring<N> {
 /// the reader takes differences and the interrupt needs no atomic read-modify-write.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct LineErrors {
-    /// Bytes lost in the USART: its receive FIFO was full (the interrupt could not run: a flash
-    /// write stalls the CPU).
+    /// Overruns in the USART: bytes arrived while its receive register was full (the interrupt
+    /// could not run: a flash write stalls the CPU). One count per overrun, however many bytes
+    /// it lost: ORE stays set until the interrupt clears it.
     pub overruns: u32,
     /// Frames with a framing, noise or parity error (received all the same).
     pub garbled: u32,
@@ -297,7 +301,7 @@ impl<R: UsartRegisters, const RX: usize, const TX: usize> Port<'_, R, RX, TX> {
 #[cfg(test)]
 mod tests {
     //! The driver against a model of the USART's registers and the NVIC, written from RM0444's
-    //! register descriptions (FIFO mode enabled) quoted in the module header.
+    //! register descriptions quoted in the module header, with and without FIFOs.
 
     use super::*;
     use crate::control::{MAX_RX_PER_STEP, RX_RING, RxQueue};
@@ -308,12 +312,16 @@ mod tests {
     use std::collections::VecDeque;
     use std::vec::Vec;
 
-    /// Depth of the G0 USART's receive and transmit FIFOs.
-    const FIFO: usize = 8;
+    /// The receive and transmit buffer depths the driver meets: 1, the data registers of a basic
+    /// USART such as the G071's USART3 (no FIFO, RM0444 "USART implementation"), and 8, the FIFOs
+    /// of a full one (USART1, USART2).
+    const DEPTHS: [usize; 2] = [1, 8];
 
     /// The peripheral: FIFOs, the flags, CR1, and whether the NVIC has the interrupt pending.
     #[derive(Default)]
     struct Usart {
+        /// How many frames each FIFO holds (1: no FIFO, the data register).
+        depth: usize,
         rx_fifo: VecDeque<u8>,
         tx_fifo: VecDeque<u8>,
         /// PE, FE, NE, ORE and TC; RXFNE and TXFNF follow from the FIFOs.
@@ -329,9 +337,10 @@ mod tests {
     struct Model(RefCell<Usart>);
 
     impl Model {
-        fn new() -> Self {
+        fn new(depth: usize) -> Self {
             // After reset TC is set (no transmission); the board enables RXFNEIE at init.
             Model(RefCell::new(Usart {
+                depth,
                 flags: ISR_TC,
                 cr1: CR1_RXFNEIE,
                 ..Usart::default()
@@ -341,7 +350,7 @@ mod tests {
         /// A frame arrives; `flags` are the errors detected on it (FE, NE, PE).
         fn arrive(&self, byte: u8, flags: u32) {
             let mut u = self.0.borrow_mut();
-            if u.rx_fifo.len() == FIFO {
+            if u.rx_fifo.len() == u.depth {
                 u.flags |= ISR_ORE;
             } else {
                 u.rx_fifo.push_back(byte);
@@ -379,7 +388,7 @@ mod tests {
             if !self.rx_fifo.is_empty() {
                 isr |= ISR_RXFNE;
             }
-            if self.tx_fifo.len() < FIFO {
+            if self.tx_fifo.len() < self.depth {
                 isr |= ISR_TXFNF;
             }
             isr
@@ -405,7 +414,10 @@ mod tests {
 
         fn write_tdr(&self, byte: u8) {
             let mut u = self.0.borrow_mut();
-            assert!(u.tx_fifo.len() < FIFO, "TDR written with the transmit FIFO full");
+            assert!(
+                u.tx_fifo.len() < u.depth,
+                "TDR written with the transmit FIFO full"
+            );
             u.tx_fifo.push_back(byte);
             u.flags &= !ISR_TC;
         }
@@ -442,127 +454,143 @@ mod tests {
 
     #[test]
     fn received_bytes_reach_the_loop_in_order_at_most_a_buffer_a_step() {
-        let model = Model::new();
-        let uart = TestUart::new();
-        let mut port = unsafe { uart.port(&model) };
-        let sent: Vec<u8> = (0..40).collect();
-        for &byte in &sent {
-            model.arrive(byte, 0);
-            service(&uart, &model);
-        }
-        let mut got = Vec::new();
-        let mut buf = [0u8; MAX_RX_PER_STEP];
-        loop {
-            let n = port.receive(&mut buf);
-            assert!(n <= MAX_RX_PER_STEP);
-            if n == 0 {
-                break;
+        for depth in DEPTHS {
+            let model = Model::new(depth);
+            let uart = TestUart::new();
+            let mut port = unsafe { uart.port(&model) };
+            let sent: Vec<u8> = (0..40).collect();
+            for &byte in &sent {
+                model.arrive(byte, 0);
+                service(&uart, &model);
             }
-            got.extend_from_slice(&buf[..n]);
+            let mut got = Vec::new();
+            let mut buf = [0u8; MAX_RX_PER_STEP];
+            loop {
+                let n = port.receive(&mut buf);
+                assert!(n <= MAX_RX_PER_STEP);
+                if n == 0 {
+                    break;
+                }
+                got.extend_from_slice(&buf[..n]);
+            }
+            assert_eq!(got, sent);
+            assert_eq!(uart.errors(), LineErrors::default());
         }
-        assert_eq!(got, sent);
-        assert_eq!(uart.errors(), LineErrors::default());
     }
 
     #[test]
     fn a_full_ring_loses_the_newest_bytes_and_counts_them_without_an_interrupt_storm() {
-        let model = Model::new();
-        let uart = TestUart::new();
-        let mut port = unsafe { uart.port(&model) };
-        for i in 0..RX_RING + 5 {
-            model.arrive(i as u8, 0);
+        for depth in DEPTHS {
+            let model = Model::new(depth);
+            let uart = TestUart::new();
+            let mut port = unsafe { uart.port(&model) };
+            for i in 0..RX_RING + 5 {
+                model.arrive(i as u8, 0);
+                service(&uart, &model);
+            }
+            assert_eq!(uart.errors().dropped, 5);
+            let mut buf = [0u8; RX_RING];
+            assert_eq!(port.receive(&mut buf), RX_RING);
+            assert!(
+                buf.iter().enumerate().all(|(i, &b)| b == i as u8),
+                "the oldest bytes kept"
+            );
+            model.arrive(0xAB, 0);
             service(&uart, &model);
+            assert_eq!(port.receive(&mut buf[..1]), 1);
+            assert_eq!(buf[0], 0xAB, "reception goes on once the loop took bytes");
         }
-        assert_eq!(uart.errors().dropped, 5);
-        let mut buf = [0u8; RX_RING];
-        assert_eq!(port.receive(&mut buf), RX_RING);
-        assert!(
-            buf.iter().enumerate().all(|(i, &b)| b == i as u8),
-            "the oldest bytes kept"
-        );
-        model.arrive(0xAB, 0);
-        service(&uart, &model);
-        assert_eq!(port.receive(&mut buf[..1]), 1);
-        assert_eq!(buf[0], 0xAB, "reception goes on once the loop took bytes");
     }
 
     #[test]
     fn an_overrun_while_the_interrupt_cannot_run_is_cleared_counted_and_reception_goes_on() {
-        // A flash erase stalls the CPU: the FIFO fills, the next frame is lost (ORE).
-        let model = Model::new();
-        let uart = TestUart::new();
-        let mut port = unsafe { uart.port(&model) };
-        for byte in 0..FIFO as u8 + 2 {
-            model.arrive(byte, 0);
+        for depth in DEPTHS {
+            // A flash erase stalls the CPU: the FIFO fills, the next frame is lost (ORE).
+            let model = Model::new(depth);
+            let uart = TestUart::new();
+            let mut port = unsafe { uart.port(&model) };
+            for byte in 0..depth as u8 + 2 {
+                model.arrive(byte, 0);
+            }
+            service(&uart, &model);
+            assert_eq!(model.0.borrow().flags & ISR_ORE, 0, "ORE cleared");
+            assert_eq!(uart.errors().overruns, 1);
+            model.arrive(b'Q', 0);
+            service(&uart, &model);
+            let mut buf = [0u8; 16];
+            let n = port.receive(&mut buf);
+            let mut expected: Vec<u8> = (0..depth as u8).collect();
+            expected.push(b'Q');
+            assert_eq!(&buf[..n], &expected[..]);
         }
-        service(&uart, &model);
-        assert_eq!(model.0.borrow().flags & ISR_ORE, 0, "ORE cleared");
-        assert_eq!(uart.errors().overruns, 1);
-        model.arrive(b'Q', 0);
-        service(&uart, &model);
-        let mut buf = [0u8; 16];
-        let n = port.receive(&mut buf);
-        let mut expected: Vec<u8> = (0..FIFO as u8).collect();
-        expected.push(b'Q');
-        assert_eq!(&buf[..n], &expected[..]);
     }
 
     #[test]
     fn framing_and_noise_errors_keep_the_byte_and_are_cleared_and_counted() {
-        let model = Model::new();
-        let uart = TestUart::new();
-        let mut port = unsafe { uart.port(&model) };
-        model.arrive(b'a', ISR_FE);
-        service(&uart, &model);
-        model.arrive(b'b', ISR_NE);
-        service(&uart, &model);
-        assert_eq!(model.0.borrow().flags & ERRORS, 0);
-        assert_eq!(uart.errors().garbled, 2);
-        assert_eq!(uart.errors().total(), 2);
-        let mut buf = [0u8; 4];
-        assert_eq!(port.receive(&mut buf), 2);
-        assert_eq!(&buf[..2], b"ab");
+        for depth in DEPTHS {
+            let model = Model::new(depth);
+            let uart = TestUart::new();
+            let mut port = unsafe { uart.port(&model) };
+            model.arrive(b'a', ISR_FE);
+            service(&uart, &model);
+            model.arrive(b'b', ISR_NE);
+            service(&uart, &model);
+            assert_eq!(model.0.borrow().flags & ERRORS, 0);
+            assert_eq!(uart.errors().garbled, 2);
+            assert_eq!(uart.errors().total(), 2);
+            let mut buf = [0u8; 4];
+            assert_eq!(port.receive(&mut buf), 2);
+            assert_eq!(&buf[..2], b"ab");
+        }
     }
 
     #[test]
     fn a_response_goes_out_whole_in_order_and_the_transmit_interrupt_ends_with_it() {
-        let model = Model::new();
-        let uart = TestUart::new();
-        let mut port = unsafe { uart.port(&model) };
-        let response = b"Q0 A0*4f\nR8 A1*23\n";
-        assert!(port.send(response));
-        service(&uart, &model);
-        assert!(!port.sent());
-        for sent in 1..=response.len() {
-            assert!(!port.sent(), "a byte waits in the ring or the FIFO");
-            model.shift_out();
+        for depth in DEPTHS {
+            let model = Model::new(depth);
+            let uart = TestUart::new();
+            let mut port = unsafe { uart.port(&model) };
+            let response = b"Q0 A0*4f\nR8 A1*23\n";
+            assert!(port.send(response));
             service(&uart, &model);
-            assert_eq!(model.line(), response[..sent]);
+            assert!(!port.sent());
+            for sent in 1..=response.len() {
+                assert!(!port.sent(), "a byte waits in the ring or the FIFO");
+                model.shift_out();
+                service(&uart, &model);
+                assert_eq!(model.line(), response[..sent]);
+            }
+            assert_eq!(model.0.borrow().cr1 & CR1_TXFNFIE, 0, "transmit interrupt off");
+            assert!(port.sent());
         }
-        assert_eq!(model.0.borrow().cr1 & CR1_TXFNFIE, 0, "transmit interrupt off");
-        assert!(port.sent());
     }
 
     #[test]
     fn a_response_that_does_not_fit_is_refused_whole() {
-        let model = Model::new();
-        let uart = TestUart::new();
-        let mut port = unsafe { uart.port(&model) };
-        // The line does not move: the FIFO takes 8 and 52 wait in the ring of 64.
-        assert!(port.send(&[b'x'; 60]));
-        service(&uart, &model);
-        assert!(!port.send(&[b'z'; 13]), "one byte too many: refused");
-        assert!(port.send(&[b'y'; 12]));
-        service(&uart, &model);
-        assert!(!port.send(&[b'z'; 1]), "ring full: refused");
-        for _ in 0..100 {
-            model.shift_out();
+        for depth in DEPTHS {
+            let model = Model::new(depth);
+            let uart = TestUart::new();
+            let mut port = unsafe { uart.port(&model) };
+            // The line does not move: the FIFO takes `depth` and the rest wait in the ring of 64.
+            assert!(port.send(&[b'x'; 60]));
             service(&uart, &model);
+            let room = 64 - (60 - depth);
+            assert!(
+                !port.send(&std::vec![b'z'; room + 1]),
+                "one byte too many: refused"
+            );
+            assert!(port.send(&std::vec![b'y'; room]));
+            service(&uart, &model);
+            assert!(!port.send(&[b'z'; 1]), "ring full: refused");
+            for _ in 0..100 {
+                model.shift_out();
+                service(&uart, &model);
+            }
+            let mut expected = std::vec![b'x'; 60];
+            expected.extend_from_slice(&std::vec![b'y'; room]);
+            assert_eq!(model.line(), expected, "nothing of the refused response sent");
+            assert!(port.sent());
         }
-        let mut expected = std::vec![b'x'; 60];
-        expected.extend_from_slice(&[b'y'; 12]);
-        assert_eq!(model.line(), expected, "nothing of the refused response sent");
-        assert!(port.sent());
     }
 
     /// What the line does in one step of the loop.
@@ -585,9 +613,10 @@ mod tests {
                     Just(Event::Take),
                 ],
                 0..60,
-            )
+            ),
+            depth in proptest::sample::select(DEPTHS.to_vec()),
         ) {
-            let model = Model::new();
+            let model = Model::new(depth);
             let uart = TestUart::new();
             let mut port = unsafe { uart.port(&model) };
             let mut queue = RxQueue::<RX_RING>::new();

@@ -72,11 +72,17 @@ impl interrupt::typelevel::Handler<interrupt::typelevel::USART3_4_LPUART1> for P
     }
 }
 
-/// USART3 at [`BAUD`] 8N1 with its FIFOs, the receive interrupt on: the register settings
-/// embassy-stm32 0.6.0's `BufferedUart::new` makes for this configuration (clock on and reset,
-/// USART_BRR = kernel clock / baud with oversampling by 16, USART_CR1 = UE | RE | TE | FIFOEN |
-/// RXFNEIE, the other registers at their reset values), and the pins in their USART function
-/// (TX push-pull; no pull on RX: the printer drives it, possibly at 5 V).
+/// USART3 at [`BAUD`] 8N1, the receive interrupt on: the register settings embassy-stm32
+/// 0.6.0's `BufferedUart::new` makes for this configuration (clock on and reset, USART_BRR =
+/// kernel clock / baud with oversampling by 16, USART_CR1 = UE | RE | TE | RXNEIE, the other
+/// registers at their reset values), and the pins in their USART function (TX push-pull; no pull
+/// on RX: the printer drives it, possibly at 5 V).
+///
+/// Without FIFOEN, which BufferedUart sets on every `usart_v4` USART: on the STM32G071 USART3 is
+/// a basic USART without FIFO mode (RM0444, "USART implementation": FIFO only on USART1 and
+/// USART2; stm32g0xx-hal builds USART3 and USART4 of the G070/G071/G081 as basic USARTs), where
+/// CR1 bit 29 is reserved and must be kept at its reset value. The driver's flags sit at the same
+/// positions either way (RXNE and TXE for RXFNE and TXFNF; its tests run both).
 pub(super) fn start_printer_uart(
     _usart: Peri<'static, peripherals::USART3>,
     rx: Peri<'static, peripherals::PC11>,
@@ -100,7 +106,6 @@ pub(super) fn start_printer_uart(
         w.set_ue(true);
         w.set_re(true);
         w.set_te(true);
-        w.set_fifoen(true);
         w.set_rxneie(true);
     });
     interrupt::USART3_4_LPUART1.unpend();
