@@ -9,12 +9,12 @@
 //!
 //! Every sensor is filtered in every 1 ms step on a core without a divider (Cortex-M0+), where
 //! a division is a library call of about a hundred instructions, so a sample costs as little as
-//! the pipeline allows: medians of 3 and 5 by a few comparisons (longer windows stay sorted by
-//! insertion), the average from a running sum divided by a shift or a reciprocal
-//! (`divide_small`), the smoothing in whole counts and thousandths (`Decay`: shifts for the
-//! usual weights, [`div1000`] for the others), and the default settings as constants the
-//! compiler folds. The results are exactly those of the sort and divisions they replace (see the
-//! tests).
+//! the pipeline allows: medians of 3 and 5 by a few comparisons (a window still filling, or of
+//! another length, by counting), the average from a running sum divided by a shift or a
+//! reciprocal (`divide_small`), the smoothing in whole counts and thousandths (`Decay`: shifts
+//! for the usual weights, [`div1000`] for the others), and the two filters' settings
+//! ([`FilterKind`]) as constants the compiler folds. The results are exactly those of the sort
+//! and divisions they replace (see the tests).
 
 use crate::time::Instant;
 
