@@ -348,7 +348,7 @@ impl<const N: usize> ControlLoop<N> {
 }
 
 /// What a reset needs from the board.
-#[allow(async_fn_in_trait)] // implemented and awaited in one single-threaded executor
+#[allow(async_fn_in_trait)] // awaited under `block_on`, on one thread (the board, the tests)
 pub trait ResetBoard {
     /// Every motor off.
     fn stop_motors(&mut self);
