@@ -72,9 +72,10 @@ impl Sampler {
     pub fn sample(&mut self) -> Samples<SLOTS> {
         let adc = pac::ADC1;
         let mut raw = [0u16; ANALOG_INPUTS];
-        // A result left unread by a scan that was held up (an overrun: a probe halted the core)
-        // would otherwise count as this scan's first, and every later scan would read each
-        // sensor from its neighbour's channel.
+        // Flags left by an earlier scan cleared. A scan held up past a conversion (23 µs: a probe
+        // halted the core) loses the results that overran (OVRMOD = 0 keeps the unread one) and
+        // never delivers nine: the loop below waits and the watchdog resets the MCU, as the
+        // doc above says; it cannot go on with results shifted by one channel.
         adc.isr().write(|w| {
             w.set_eoc(true);
             w.set_eos(true);
