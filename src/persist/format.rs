@@ -1,9 +1,12 @@
 //! The on-flash format against a store written by an earlier firmware: a unit updated in the
 //! field must restore what the previous build kept, and keep writing the same bytes.
 //!
-//! `testdata/store-format-1.txt` was written by the firmware of commit 4579974 (before the flash
-//! cut of issue 14) running [`save_the_sequence`] with its own `Store`: the test loads it with
-//! today's `Store` and writes the same sequence again, byte for byte.
+//! The two files in `testdata/` come from the tree of commit 4579974 (before the flash cut of
+//! issue 14), its own `Store` running the same sequences as this module (a scratch copy of it
+//! there, not kept): `store-format-1.txt`, the flash after [`save_the_sequence`], which today's
+//! `Store` must load and write again byte for byte; `cuts-format-1.txt`, what that `Store`
+//! restored after a power cut at each flash operation of 40 saves, which today's must restore
+//! too. A deliberate format change replaces both tests, not their data.
 
 extern crate std;
 
