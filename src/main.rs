@@ -15,10 +15,14 @@
 //! completion under `block_on`.
 //!
 //! The printer UART's receive path needs no task of its own: the USART interrupt moves every byte
-//! into a 256-byte ring as it arrives, whatever the loop is doing (a byte could only be lost if
-//! interrupts stayed masked for a whole character time, 87 µs), and each step takes at most
+//! into a 256-byte ring as it arrives, whatever the loop is doing, and each step takes at most
 //! `control::MAX_RX_PER_STEP` bytes from it, more than arrive in a millisecond (the ring holds
-//! 20 ms of continuous traffic beyond that).
+//! 20 ms of continuous traffic beyond that). USART3 has no FIFO on this part: its receive register
+//! and shift register hold two characters (174 µs), so bytes are lost only while the interrupt
+//! cannot run that long: during a flash page erase (up to 40 ms, the CPU stalled on its flash
+//! fetch; a double word's 85 µs fits), which the store does only after a step the printer was
+//! quiet in. A request lost then goes unanswered: after 2 s the printer restarts the handshake
+//! and counts one drop-out (ten in a row would show MMU_NOT_RESPONDING).
 //!
 //! Safety: [`board::emergency_stop`] runs first thing at boot, in the panic handler and in the
 //! HardFault handler, and before every reset; the independent watchdog resets the MCU (bridges
