@@ -452,16 +452,24 @@ mod tests {
         panic!("the USART interrupt stays requested after it was handled");
     }
 
-    #[test]
-    fn received_bytes_reach_the_loop_in_order_at_most_a_buffer_a_step() {
+    /// Runs `test` at each FIFO depth ([`DEPTHS`]) on a fresh model, driver and port.
+    fn at_each_depth(test: impl Fn(usize, &Model, &TestUart, &mut Port<'_, &Model, RX_RING, 64>)) {
         for depth in DEPTHS {
             let model = Model::new(depth);
             let uart = TestUart::new();
+            // SAFETY: the one port; the interrupt side runs only through `service`.
             let mut port = unsafe { uart.port(&model) };
+            test(depth, &model, &uart, &mut port);
+        }
+    }
+
+    #[test]
+    fn received_bytes_reach_the_loop_in_order_at_most_a_buffer_a_step() {
+        at_each_depth(|_, model, uart, port| {
             let sent: Vec<u8> = (0..40).collect();
             for &byte in &sent {
                 model.arrive(byte, 0);
-                service(&uart, &model);
+                service(uart, model);
             }
             let mut got = Vec::new();
             let mut buf = [0u8; MAX_RX_PER_STEP];
@@ -475,18 +483,15 @@ mod tests {
             }
             assert_eq!(got, sent);
             assert_eq!(uart.errors(), LineErrors::default());
-        }
+        });
     }
 
     #[test]
     fn a_full_ring_loses_the_newest_bytes_and_counts_them_without_an_interrupt_storm() {
-        for depth in DEPTHS {
-            let model = Model::new(depth);
-            let uart = TestUart::new();
-            let mut port = unsafe { uart.port(&model) };
+        at_each_depth(|_, model, uart, port| {
             for i in 0..RX_RING + 5 {
                 model.arrive(i as u8, 0);
-                service(&uart, &model);
+                service(uart, model);
             }
             assert_eq!(uart.errors().dropped, 5);
             let mut buf = [0u8; RX_RING];
@@ -496,101 +501,89 @@ mod tests {
                 "the oldest bytes kept"
             );
             model.arrive(0xAB, 0);
-            service(&uart, &model);
+            service(uart, model);
             assert_eq!(port.receive(&mut buf[..1]), 1);
             assert_eq!(buf[0], 0xAB, "reception goes on once the loop took bytes");
-        }
+        });
     }
 
     #[test]
     fn an_overrun_while_the_interrupt_cannot_run_is_cleared_counted_and_reception_goes_on() {
-        for depth in DEPTHS {
+        at_each_depth(|depth, model, uart, port| {
             // A flash erase stalls the CPU: the FIFO fills, the next frame is lost (ORE).
-            let model = Model::new(depth);
-            let uart = TestUart::new();
-            let mut port = unsafe { uart.port(&model) };
             for byte in 0..depth as u8 + 2 {
                 model.arrive(byte, 0);
             }
-            service(&uart, &model);
+            service(uart, model);
             assert_eq!(model.0.borrow().flags & ISR_ORE, 0, "ORE cleared");
             assert_eq!(uart.errors().overruns, 1);
             model.arrive(b'Q', 0);
-            service(&uart, &model);
+            service(uart, model);
             let mut buf = [0u8; 16];
             let n = port.receive(&mut buf);
             let mut expected: Vec<u8> = (0..depth as u8).collect();
             expected.push(b'Q');
             assert_eq!(&buf[..n], &expected[..]);
-        }
+        });
     }
 
     #[test]
     fn framing_and_noise_errors_keep_the_byte_and_are_cleared_and_counted() {
-        for depth in DEPTHS {
-            let model = Model::new(depth);
-            let uart = TestUart::new();
-            let mut port = unsafe { uart.port(&model) };
+        at_each_depth(|_, model, uart, port| {
             model.arrive(b'a', ISR_FE);
-            service(&uart, &model);
+            service(uart, model);
             model.arrive(b'b', ISR_NE);
-            service(&uart, &model);
+            service(uart, model);
             assert_eq!(model.0.borrow().flags & ERRORS, 0);
             assert_eq!(uart.errors().garbled, 2);
             assert_eq!(uart.errors().total(), 2);
             let mut buf = [0u8; 4];
             assert_eq!(port.receive(&mut buf), 2);
             assert_eq!(&buf[..2], b"ab");
-        }
+        });
     }
 
     #[test]
     fn a_response_goes_out_whole_in_order_and_the_transmit_interrupt_ends_with_it() {
-        for depth in DEPTHS {
-            let model = Model::new(depth);
-            let uart = TestUart::new();
-            let mut port = unsafe { uart.port(&model) };
+        at_each_depth(|_, model, uart, port| {
             let response = b"Q0 A0*4f\nR8 A1*23\n";
             assert!(port.send(response));
-            service(&uart, &model);
+            service(uart, model);
             assert!(!port.sent());
             for sent in 1..=response.len() {
                 assert!(!port.sent(), "a byte waits in the ring or the FIFO");
                 model.shift_out();
-                service(&uart, &model);
+                service(uart, model);
                 assert_eq!(model.line(), response[..sent]);
             }
             assert_eq!(model.0.borrow().cr1 & CR1_TXFNFIE, 0, "transmit interrupt off");
             assert!(port.sent());
-        }
+        });
     }
 
     #[test]
     fn a_response_that_does_not_fit_is_refused_whole() {
-        for depth in DEPTHS {
-            let model = Model::new(depth);
-            let uart = TestUart::new();
-            let mut port = unsafe { uart.port(&model) };
+        at_each_depth(|depth, model, uart, port| {
             // The line does not move: the FIFO takes `depth` and the rest wait in the ring of 64.
             assert!(port.send(&[b'x'; 60]));
-            service(&uart, &model);
+            service(uart, model);
             let room = 64 - (60 - depth);
             assert!(
                 !port.send(&std::vec![b'z'; room + 1]),
                 "one byte too many: refused"
             );
             assert!(port.send(&std::vec![b'y'; room]));
-            service(&uart, &model);
+            service(uart, model);
             assert!(!port.send(&[b'z'; 1]), "ring full: refused");
             for _ in 0..100 {
                 model.shift_out();
-                service(&uart, &model);
+                service(uart, model);
             }
             let mut expected = std::vec![b'x'; 60];
             expected.extend_from_slice(&std::vec![b'y'; room]);
             assert_eq!(model.line(), expected, "nothing of the refused response sent");
             assert!(port.sent());
-        }
+        });
     }
 
     /// What the line does in one step of the loop.
