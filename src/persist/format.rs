@@ -15,53 +15,12 @@ use std::vec::Vec;
 
 use embedded_storage::nor_flash::{ErrorType, NorFlash, NorFlashErrorKind, ReadNorFlash};
 
+use super::ram_flash::{PAGE, RamFlash};
 use super::{Counters, Snapshot, Store};
 use crate::time::Instant;
 use crate::unit::Lane;
 
-const PAGE: usize = 2048;
 const PAGES: usize = 3;
-
-/// A NOR flash in RAM: erased to 0xff, programmed by double words that only clear bits.
-#[derive(Clone)]
-struct RamFlash(Vec<u8>);
-
-impl ErrorType for RamFlash {
-    type Error = NorFlashErrorKind;
-}
-
-impl ReadNorFlash for RamFlash {
-    const READ_SIZE: usize = 1;
-
-    fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
-        let from = self.0.get(offset as usize..offset as usize + bytes.len());
-        bytes.copy_from_slice(from.ok_or(NorFlashErrorKind::OutOfBounds)?);
-        Ok(())
-    }
-
-    fn capacity(&self) -> usize {
-        self.0.len()
-    }
-}
-
-impl NorFlash for RamFlash {
-    const WRITE_SIZE: usize = 8;
-    const ERASE_SIZE: usize = PAGE;
-
-    fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
-        let page = self.0.get_mut(from as usize..to as usize);
-        page.ok_or(NorFlashErrorKind::OutOfBounds)?.fill(0xff);
-        Ok(())
-    }
-
-    fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
-        let to = self.0.get_mut(offset as usize..offset as usize + bytes.len());
-        for (to, byte) in to.ok_or(NorFlashErrorKind::OutOfBounds)?.iter_mut().zip(bytes) {
-            *to &= byte;
-        }
-        Ok(())
-    }
-}
 
 fn store(flash: RamFlash) -> Store<RamFlash, 3> {
     Store::new(flash, 0..(PAGES * PAGE) as u32).unwrap()

@@ -14,6 +14,8 @@ mod entry;
 #[cfg(test)]
 mod format;
 mod keeper;
+#[cfg(test)]
+mod ram_flash;
 mod records;
 mod settings;
 mod store;
