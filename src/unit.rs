@@ -29,6 +29,16 @@ pub enum Lane {
 }
 
 impl Lane {
+    /// Every lane state, in declaration order.
+    pub const ALL: [Lane; 6] = [
+        Lane::Unknown,
+        Lane::Empty,
+        Lane::Parked,
+        Lane::InHub,
+        Lane::AtFsensor,
+        Lane::Loaded,
+    ];
+
     /// True when this slot's filament occupies the hub path (at most one slot may).
     pub const fn owns_hub(self) -> bool {
         matches!(self, Lane::InHub | Lane::AtFsensor | Lane::Loaded)

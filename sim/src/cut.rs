@@ -69,20 +69,12 @@ pub enum Action {
 /// A random life of `length` actions, with the time (ms) each happens after the previous one.
 pub fn life(seed: u64, length: usize) -> Vec<(u64, Action)> {
     let mut rng = Rng::new(seed);
-    let lanes = [
-        Lane::Unknown,
-        Lane::Empty,
-        Lane::Parked,
-        Lane::InHub,
-        Lane::AtFsensor,
-        Lane::Loaded,
-    ];
     let mut pick = |n: u64| (rng.next_u64() % n) as usize;
     (0..length)
         .map(|_| {
             let wait = [1, 40, 3_000, 12_000][pick(4)];
             let action = match pick(100) {
-                0..=44 => Action::Lanes(core::array::from_fn(|_| lanes[pick(6)])),
+                0..=44 => Action::Lanes(core::array::from_fn(|_| Lane::ALL[pick(Lane::ALL.len() as u64)])),
                 45..=64 => Action::Count(pick(SLOTS as u64), pick(5) == 0),
                 65..=91 => {
                     let (address, min, max) = SETTINGS[pick(SETTINGS.len() as u64)];

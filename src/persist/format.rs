@@ -40,23 +40,14 @@ fn written_by_format_1() -> RamFlash {
     flash
 }
 
-const LANES: [Lane; 6] = [
-    Lane::Unknown,
-    Lane::Empty,
-    Lane::Parked,
-    Lane::InHub,
-    Lane::AtFsensor,
-    Lane::Loaded,
-];
-
 /// The `i`-th snapshot of the sequence: every lane code, counters over their whole widths, a
 /// settings list that grows and shrinks (up to 18 settings), the identity register last.
 fn snapshot(i: u32) -> Snapshot<3> {
     let mut snapshot = Snapshot::<3> {
         lanes: [
-            LANES[(i % 6) as usize],
-            LANES[((i / 6) % 6) as usize],
-            LANES[((i + 3) % 6) as usize],
+            Lane::ALL[(i % 6) as usize],
+            Lane::ALL[((i / 6) % 6) as usize],
+            Lane::ALL[((i + 3) % 6) as usize],
         ],
         counters: Counters {
             drive_errors: (i * 7) as u16,
