@@ -107,6 +107,17 @@ void counter_on_block(void *uc, uint64_t address, uint32_t size, void *user) {
 """
 
 
+def cortex_m0(segments):
+    """A Cortex-M0 in Unicorn with the G071's flash and RAM mapped and the ELF's segments loaded."""
+    uc = unicorn.Uc(unicorn.UC_ARCH_ARM, unicorn.UC_MODE_THUMB | unicorn.UC_MODE_MCLASS)
+    uc.ctl_set_cpu_model(arm.UC_CPU_ARM_CORTEX_M0)
+    uc.mem_map(FLASH[0], FLASH[1])
+    uc.mem_map(RAM[0], RAM[1])
+    for address, data in segments:
+        uc.mem_write(address, data)
+    return uc
+
+
 def native_counter():
     """The compiled block counter and unicorn's C library, or None (then Python counts)."""
     try:
@@ -138,12 +149,7 @@ class Bench:
         for name in ("bench_main", "bench_mark", "_stack_start"):
             if name not in self.symbols:
                 sys.exit(f"{elf}: no symbol {name}")
-        uc = unicorn.Uc(unicorn.UC_ARCH_ARM, unicorn.UC_MODE_THUMB | unicorn.UC_MODE_MCLASS)
-        uc.ctl_set_cpu_model(arm.UC_CPU_ARM_CORTEX_M0)
-        uc.mem_map(FLASH[0], FLASH[1])
-        uc.mem_map(RAM[0], RAM[1])
-        for address, data in segments:
-            uc.mem_write(address, data)
+        uc = cortex_m0(segments)
         # The persisted state's region (0x08018000..) is erased flash.
         uc.mem_write(0x0801_8000, b"\xff" * 0x8000)
         blob = struct.pack("<I", len(session)) + session

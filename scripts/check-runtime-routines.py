@@ -25,7 +25,7 @@ import unicorn
 from unicorn import arm_const as arm
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "bench-mcu"))
-from run import FLASH, RAM, elf_symbols_and_segments  # noqa: E402 (bench-mcu/run.py)
+from run import FLASH, cortex_m0, elf_symbols_and_segments  # noqa: E402 (bench-mcu/run.py)
 
 RETURN = 0x2000_8000  # a `b .` the routines return to (LR); the emulation stops there
 STACK_TOP = 0x2000_7000
@@ -118,12 +118,7 @@ def main():
     if missing:
         sys.exit(f"check-runtime-routines: FAIL: not in the ELF: {', '.join(missing)}")
 
-    uc = unicorn.Uc(unicorn.UC_ARCH_ARM, unicorn.UC_MODE_THUMB | unicorn.UC_MODE_MCLASS)
-    uc.ctl_set_cpu_model(arm.UC_CPU_ARM_CORTEX_M0)
-    uc.mem_map(FLASH[0], FLASH[1])
-    uc.mem_map(RAM[0], RAM[1])
-    for address, blob in segments:
-        uc.mem_write(address, blob)
+    uc = cortex_m0(segments)
     uc.mem_write(RETURN, b"\xfe\xe7")  # b .
 
     rng = random.Random(14)
