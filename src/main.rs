@@ -234,7 +234,7 @@ impl Persisted {
     }
 
     /// What the boot found. Out of line: the snapshot it logs from is then not on the stack
-    /// together with the store's boot future.
+    /// together with the keeper's boot frame.
     #[inline(never)]
     fn log_boot(&self, app: &App<SLOTS>, boot: Boot) {
         match boot {
