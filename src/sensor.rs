@@ -425,20 +425,8 @@ impl Filter {
     #[inline(always)]
     pub fn push(&mut self, raw: u16, kind: FilterKind) -> u16 {
         match kind {
-            FilterKind::Presence => self.push_with(
-                raw,
-                PRESENCE_FILTER.median as usize,
-                PRESENCE_FILTER.average as usize,
-                PRESENCE_FILTER.smoothing_permille,
-                PRESENCE_DECAY,
-            ),
-            FilterKind::Motor => self.push_with(
-                raw,
-                MOTOR_FILTER.median as usize,
-                MOTOR_FILTER.average as usize,
-                MOTOR_FILTER.smoothing_permille,
-                MOTOR_DECAY,
-            ),
+            FilterKind::Presence => self.push_with(raw, PRESENCE_FILTER, PRESENCE_DECAY),
+            FilterKind::Motor => self.push_with(raw, MOTOR_FILTER, MOTOR_DECAY),
         }
     }
 
@@ -446,29 +434,15 @@ impl Filter {
     /// length and weight.
     #[cfg(test)]
     fn push_config(&mut self, raw: u16, config: &FilterConfig) -> u16 {
-        let decay = Decay::new(config.smoothing_permille);
-        self.push_with(
-            raw,
-            config.median.into(),
-            config.average.into(),
-            config.smoothing_permille,
-            decay,
-        )
+        self.push_with(raw, *config, Decay::new(config.smoothing_permille))
     }
 
-    /// [`Self::push`] with the settings spelled out; `decay` is `smoothing_permille` prepared.
+    /// [`Self::push`] with the settings `config`; `decay` is its smoothing prepared.
     #[inline(always)]
-    fn push_with(
-        &mut self,
-        raw: u16,
-        median: usize,
-        average: usize,
-        smoothing_permille: u16,
-        decay: Decay,
-    ) -> u16 {
-        let median = self.medians.push(raw, median);
-        let mean = self.averages.push(median, average);
-        let weight = smoothing_permille.clamp(1, 1000);
+    fn push_with(&mut self, raw: u16, config: FilterConfig, decay: Decay) -> u16 {
+        let median = self.medians.push(raw, config.median.into());
+        let mean = self.averages.push(median, config.average.into());
+        let weight = config.smoothing_permille.clamp(1, 1000);
         // At w = 1000 (or on the first sample) the smoothed value is the mean itself.
         let smoothed = match self.smoothed {
             Some(previous) if weight < 1000 => decay.next(previous, mean),
