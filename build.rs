@@ -1,14 +1,30 @@
-//! Puts `memory.x` on the linker path, and only for the bare-metal firmware build.
+//! Puts the board's memory layout on the linker path and names the firmware binary's link
+//! scripts, only for the bare-metal firmware build: `memory.x` (the NUCLEO-G071RB, feature
+//! `g071`) or `src/board/pico/memory.x` (the Raspberry Pi Pico, feature `pico`).
 
 use std::{env, fs, path::PathBuf};
 
 fn main() {
     println!("cargo:rerun-if-changed=memory.x");
+    println!("cargo:rerun-if-changed=src/board/pico/memory.x");
     println!("cargo:rerun-if-changed=build.rs");
     if env::var("CARGO_CFG_TARGET_OS").as_deref() != Ok("none") {
         return;
     }
+    let pico = env::var_os("CARGO_FEATURE_PICO").is_some();
+    let memory = if pico {
+        "src/board/pico/memory.x"
+    } else {
+        "memory.x"
+    };
     let out = PathBuf::from(env::var_os("OUT_DIR").expect("cargo sets OUT_DIR"));
-    fs::copy("memory.x", out.join("memory.x")).expect("memory.x is readable and OUT_DIR writable");
+    fs::copy(memory, out.join("memory.x")).expect("the memory layout is readable and OUT_DIR writable");
     println!("cargo:rustc-link-search={}", out.display());
+    println!("cargo:rustc-link-arg-bins=--nmagic");
+    println!("cargo:rustc-link-arg-bins=-Tlink.x");
+    if pico {
+        // embassy-rp's: places boot2 first in the flash.
+        println!("cargo:rustc-link-arg-bins=-Tlink-rp.x");
+    }
+    println!("cargo:rustc-link-arg-bins=-Tdefmt.x");
 }

@@ -73,6 +73,22 @@ pub const RX_RING: usize = 256;
 
 const _: () = assert!(RX_RING >= rx_ring_needed(RX_GAP_MS));
 
+/// The longest a flash page erase stalls the NUCLEO-G071RB's CPU, ms (RM0444 / the STM32G071
+/// datasheet: page erase 40 ms at most). The UART's DMA keeps receiving meanwhile.
+pub const G071_ERASE_STALL_MS: usize = 40;
+/// The printer UART's DMA receive ring on the NUCLEO-G071RB: what arrives during the longest
+/// erase with the printer sending without pause, plus a step's worth (`crate::uart` tests it).
+pub const G071_DMA_RING: usize = 512;
+/// The longest a 4 KiB sector erase of the Pico's QSPI flash stalls its CPU, ms (W25Q16JV
+/// datasheet, sector erase: 45 ms typical, 400 ms at most; embassy-rp's flash driver runs it
+/// with interrupts off).
+pub const PICO_ERASE_STALL_MS: usize = 400;
+/// The printer UART's DMA receive ring on the Pico, as [`G071_DMA_RING`].
+pub const PICO_DMA_RING: usize = 8192;
+
+const _: () = assert!(G071_DMA_RING >= rx_ring_needed(G071_ERASE_STALL_MS));
+const _: () = assert!(PICO_DMA_RING >= rx_ring_needed(PICO_ERASE_STALL_MS));
+
 /// The bytes received from the printer that wait for the control loop, oldest first, with the
 /// loop's rule: each step takes at most [`MAX_RX_PER_STEP`] of them. The board's UART driver
 /// ([`crate::uart`]) does the same, and its tests check that it hands out what this does; this

@@ -15,14 +15,9 @@ pub mod control;
 pub mod drive;
 pub mod feeder;
 pub mod follower;
-// The MCU's memcpy/memclr (its own module doc); here rather than in the binary so that the
-// step-cost benchmark, which links this library, runs the same ones.
-#[cfg(all(target_arch = "arm", target_os = "none"))]
-mod div;
-#[cfg(all(target_arch = "arm", target_os = "none"))]
-mod mem;
 pub mod persist;
 pub mod phases;
+pub mod port;
 pub mod registers;
 pub mod runner;
 pub mod sensor;

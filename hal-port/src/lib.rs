@@ -145,6 +145,30 @@ impl<P: embedded_hal::digital::InputPin> Button for P {
     }
 }
 
+/// Every analog sensor of a unit with `N` slots, scanned together: the board's ADC (by DMA on the
+/// NUCLEO-G071RB, through an analog multiplexer on the Pico). The firmware's control task bounds
+/// the wait with a timeout, so an implementation may simply wait for its converter.
+#[allow(async_fn_in_trait)] // called from one executor thread; no `Send` bound is wanted
+pub trait SensorScan<const N: usize> {
+    /// The converter's error.
+    type Error;
+
+    /// One scan of every sensor, raw 12-bit values (`0..=ADC_MAX`).
+    async fn scan(&mut self) -> Result<Samples<N>, Self::Error>;
+}
+
+/// Every slot motor of a unit with `N` slots, driven as one.
+pub trait Motors<const N: usize> {
+    /// Carries out one step's commands, slot by slot.
+    fn apply(&mut self, commands: &[MotorCommand; N]);
+}
+
+/// A hardware watchdog that resets the MCU unless fed in time.
+pub trait Watchdog {
+    /// Restarts the watchdog's countdown.
+    fn feed(&mut self);
+}
+
 /// Raw samples of one slot's two analog Hall sensors.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]

@@ -1,0 +1,647 @@
+//! The reference board: a NUCLEO-G071RB (STM32G071RB, Cortex-M0+, 64 MHz, 3.3 V) driving two
+//! TB6612FNG dual H-bridges and nine analog Hall sensors, wired to a Prusa printer's MMU port,
+//! on embassy-stm32's drivers: the ADC scanned by DMA, `SimplePwm` on TIM3, the printer UART
+//! (USART1) received by DMA into a ring (`RingBufferedUartRx`) and sent by DMA, the blocking flash
+//! driver under the store, `IndependentWatchdog`, the CRC unit, the button on EXTI, and
+//! embassy-time's driver on TIM2.
+//!
+//! The `pin_map!` table below is the single source of truth for pins, timers, DMA channels and
+//! the UART: the book's wiring table mirrors it (`scripts/check-pinmap.sh` compares the two), the
+//! emergency stop derives its pins from it, and the sensor scan order is computed from the
+//! channels it names. Register code is left only where the HAL has no driver: the emergency stop
+//! (raw GPIO writes, usable in the fault handler), the reset flags and the flash's ECC register.
+
+use core::ops::Range;
+use core::sync::atomic::{AtomicBool, Ordering};
+
+use embassy_stm32::adc::{self, Adc, AdcChannel as _, AdcConfig, AnyAdcChannel, Averaging, SampleTime};
+use embassy_stm32::exti::{self, ExtiInput};
+use embassy_stm32::flash::{self, Blocking, Flash};
+use embassy_stm32::gpio::{AnyPin, Level, Output, OutputType, Pin, Pull, Speed};
+use embassy_stm32::peripherals::{self, ADC1, DMA1_CH1, TIM3};
+use embassy_stm32::rcc::{self, Pll, PllMul, PllPreDiv, PllRDiv, PllSource, Sysclk};
+use embassy_stm32::time::khz;
+use embassy_stm32::timer::low_level::CountingMode;
+use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm, SimplePwmChannel};
+use embassy_stm32::usart::{self, RingBufferedUartRx, Uart, UartTx};
+use embassy_stm32::wdg::IndependentWatchdog;
+use embassy_stm32::{Peri, bind_interrupts, crc, dma, interrupt, pac};
+use embedded_storage::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
+use mmu_firmware::persist::EntryCrc;
+use mmu_hal_port::tb6612::Tb6612;
+use mmu_hal_port::{HubSamples, Samples, SensorScan, SlotSamples};
+use static_cell::StaticCell;
+
+use super::{Bridges, LineError, NotConnected};
+
+/// The board, as the boot log names it.
+pub const NAME: &str = "NUCLEO-G071RB";
+/// Filament slots on this board.
+pub const SLOTS: usize = 3;
+/// PWM carrier of the motor bridges: above hearing, well below the TB6612FNG's 100 kHz limit.
+const PWM_KHZ: u32 = 20;
+/// Independent watchdog timeout. The control task feeds it every on-time step (1 ms); ~100
+/// steps missed in a row and the MCU resets, which leaves every bridge off (see
+/// [`emergency_stop`]). Longer than a page erase (40 ms), the longest the store stalls the CPU.
+pub const WATCHDOG_TIMEOUT_US: u32 = 100_000;
+/// The printer line's rate, 8N1.
+const BAUD: u32 = 115_200;
+/// ADC sample time per conversion (ADC clock 32 MHz): 2.5 µs, plenty for a Hall sensor output.
+const SAMPLE_TIME: SampleTime = SampleTime::CYCLES79_5;
+
+bind_interrupts!(struct Irqs {
+    USART1 => usart::InterruptHandler<peripherals::USART1>;
+    DMA1_CHANNEL1 => dma::InterruptHandler<peripherals::DMA1_CH1>;
+    DMA1_CHANNEL2_3 => dma::InterruptHandler<peripherals::DMA1_CH2>, dma::InterruptHandler<peripherals::DMA1_CH3>;
+    EXTI4_15 => exti::InterruptHandler<interrupt::typelevel::EXTI4_15>;
+});
+
+/// Declares the board's pin map once and derives from it: the [`Parts`] struct that takes every
+/// used singleton out of the HAL's `Peripherals`, and the constants [`STOP_STBY`] and [`STOP_OFF`]:
+/// the pins of the rows marked `stby` and of the rows marked `off`, for [`emergency_stop`] to
+/// drive low in that order.
+///
+/// Row layout: `field: PIN, "function", "NUCLEO header", "wired to", safe-state;`
+/// where safe-state is `stby` (standby pins, forced low first), `off` (PWM and IN pins, forced low
+/// next) or `-` (not touched by the emergency stop).
+macro_rules! pin_map {
+    (
+        peripherals { $( $pfield:ident : $periph:ident, $pdoc:literal; )* }
+        pins { $( $field:ident : $pin:ident, $func:literal, $header:literal, $to:literal, $safe:tt; )* }
+    ) => {
+        /// Every singleton this board uses, named by role.
+        struct Parts {
+            $( #[doc = $pdoc] $pfield: Peri<'static, peripherals::$periph>, )*
+            $( #[doc = concat!(stringify!($pin), " (", $func, ", ", $header, "): ", $to)]
+               $field: Peri<'static, peripherals::$pin>, )*
+        }
+
+        impl Parts {
+            fn take(p: embassy_stm32::Peripherals) -> Self {
+                Parts { $( $pfield: p.$periph, )* $( $field: p.$pin, )* }
+            }
+        }
+
+        /// The TB6612 standby pins, forced low first (see [`emergency_stop`]).
+        const STOP_STBY: StopPins = StopPins::of(&[$( pin_map!(@stop stby $safe $pin) ),*]);
+        /// The PWM and IN pins, forced low next.
+        const STOP_OFF: StopPins = StopPins::of(&[$( pin_map!(@stop off $safe $pin) ),*]);
+    };
+    (@stop stby stby $pin:ident) => { Some(stringify!($pin)) };
+    (@stop off off $pin:ident) => { Some(stringify!($pin)) };
+    (@stop $pass:ident $safe:tt $pin:ident) => { None };
+}
+
+// ================================ PIN MAP (single source of truth) ================================
+//
+// TB6612 #1 drives slots 0 (bridge A) and 1 (bridge B); TB6612 #2 drives slot 2 (bridge A, bridge
+// B unused). Arduino names are the NUCLEO-G071RB's (UM2324); every pin is also on the ST morpho
+// headers CN7/CN10. Pins the NUCLEO itself uses are avoided: PA2/PA3 (ST-LINK VCP, USART2),
+// PA13/PA14 (SWD), PC14/PC15 (32 kHz crystal), PF0-PF2 (HSE/NRST); and so are the USB-C PD pins
+// (PA8, PA9, PA10, PB15, PD0-PD3), whose dead-battery pull-downs are active until the HAL starts.
+//
+// Logic levels: the STM32G0 runs at 3.3 V. The printer UART is USART1 (PB6/PB7), not USART3: the
+// G071's USART3 has no FIFO (RM0444, "USART implementation": FIFO mode on USART1 and USART2 only)
+// while embassy-stm32 0.6.0 sets FIFOEN on every USART of the family (usart/mod.rs, `configure`),
+// a reserved bit on USART3. A 5 V printer port (MK3S Einsy) drives the unit's RX through a level
+// shifter or a divider (the book's wiring page), whatever the pin's tolerance. ADC pins are NOT
+// 5 V tolerant (analog pins of the G0 are 3.6 V tolerant): power the Hall sensors from 3.3 V.
+pin_map! {
+    peripherals {
+        pwm_timer: TIM3, "Motor PWM, 20 kHz, channels 1-3 (TIM2 is embassy-time's driver)";
+        adc: ADC1, "All nine Hall sensors, one scan per millisecond";
+        adc_dma: DMA1_CH1, "The ADC scan's DMA channel";
+        printer_uart: USART1, "Printer MMU port, 115200 8N1: a USART with FIFO (USART2 stays on the ST-LINK VCP)";
+        printer_rx_dma: DMA1_CH2, "The printer UART's receive ring";
+        printer_tx_dma: DMA1_CH3, "The printer UART's transmit DMA";
+        button_exti: EXTI13, "The button's edge interrupt";
+        watchdog: IWDG, "Independent watchdog, fed by the control task";
+        flash: FLASH, "Internal flash: the persisted state in its last 16 pages (STORE_RANGE)";
+        crc: CRC, "CRC unit: the CRC-32 of the persisted state's entries (HardwareCrc)";
+    }
+    pins {
+        // field         pin    function      NUCLEO header   wired to                                   safe
+        stby1:           PC2,  "GPIO out",   "morpho",       "TB6612 #1 STBY (10k pull-down to GND)",   stby;
+        stby2:           PC3,  "GPIO out",   "morpho",       "TB6612 #2 STBY (10k pull-down to GND)",   stby;
+        slot0_pwm:       PC6,  "TIM3_CH1",   "morpho",       "TB6612 #1 PWMA (10k pull-down to GND)",   off;
+        slot0_in1:       PB3,  "GPIO out",   "Arduino D3",   "TB6612 #1 AIN1",                          off;
+        slot0_in2:       PB5,  "GPIO out",   "Arduino D4",   "TB6612 #1 AIN2",                          off;
+        slot1_pwm:       PC7,  "TIM3_CH2",   "Arduino D9",   "TB6612 #1 PWMB (10k pull-down to GND)",   off;
+        slot1_in1:       PB4,  "GPIO out",   "Arduino D5",   "TB6612 #1 BIN1",                          off;
+        slot1_in2:       PB14, "GPIO out",   "Arduino D6",   "TB6612 #1 BIN2",                          off;
+        slot2_pwm:       PC8,  "TIM3_CH3",   "morpho",       "TB6612 #2 PWMA (10k pull-down to GND)",   off;
+        slot2_in1:       PC0,  "GPIO out",   "morpho",       "TB6612 #2 AIN1",                          off;
+        slot2_in2:       PC1,  "GPIO out",   "morpho",       "TB6612 #2 AIN2",                          off;
+        slot0_hall:      PA0,  "ADC1_IN0",   "Arduino A0",   "slot 0 motor Hall sensor output",         -;
+        slot0_filament:  PA1,  "ADC1_IN1",   "Arduino A1",   "slot 0 filament sensor output",           -;
+        slot1_hall:      PA4,  "ADC1_IN4",   "Arduino A2",   "slot 1 motor Hall sensor output",         -;
+        slot1_filament:  PB1,  "ADC1_IN9",   "Arduino A3",   "slot 1 filament sensor output",           -;
+        slot2_hall:      PB11, "ADC1_IN15",  "Arduino A4",   "slot 2 motor Hall sensor output",         -;
+        slot2_filament:  PB12, "ADC1_IN16",  "Arduino A5",   "slot 2 filament sensor output",           -;
+        hub_filament:    PA6,  "ADC1_IN6",   "Arduino D12",  "hub filament sensor output",              -;
+        hub_tension:     PA7,  "ADC1_IN7",   "Arduino D11",  "hub tension sensor output",               -;
+        hub_cutter:      PB0,  "ADC1_IN8",   "Arduino D10",  "hub cutter sensor output",                -;
+        printer_tx:      PB6,  "USART1_TX",  "morpho",       "printer MMU port RX (3.3 V push-pull)",   -;
+        printer_rx:      PB7,  "USART1_RX",  "morpho",       "printer MMU port TX (via the level shifter)", -;
+        status_led:      PA5,  "GPIO out",   "LD4 (on board)", "green user LED",                        -;
+        button:          PC13, "GPIO in",    "B1 (on board)", "blue user button, active low: Middle",   -;
+    }
+}
+
+// ==================================================================================================
+
+/// GPIO ports of the STM32G071RB that the HAL numbers: A (0) to F (5).
+const GPIO_PORTS: usize = 6;
+
+/// A set of pins to force low, as one bit mask of pin numbers per GPIO port.
+struct StopPins([u16; GPIO_PORTS]);
+
+impl StopPins {
+    /// The pins named (`"PC2"`: port C, pin 2), numbered as the HAL numbers them: the port from
+    /// the letter (GPIOA = 0, its register blocks 0x400 apart), the pin from the digits
+    /// (embassy-stm32 0.6.0 `build.rs`, `pin_port = port_num * 16 + pin_num`). A name that is not
+    /// a pin fails the build.
+    const fn of(names: &[Option<&str>]) -> Self {
+        let mut masks = [0u16; GPIO_PORTS];
+        let mut i = 0;
+        while i < names.len() {
+            if let Some(name) = names[i] {
+                let name = name.as_bytes();
+                assert!(name.len() >= 3 && name[0] == b'P' && name[1] >= b'A');
+                let port = (name[1] - b'A') as usize;
+                assert!(port < GPIO_PORTS);
+                let mut pin = 0u32;
+                let mut digit = 2;
+                while digit < name.len() {
+                    assert!(name[digit].is_ascii_digit());
+                    pin = pin * 10 + (name[digit] - b'0') as u32;
+                    digit += 1;
+                }
+                assert!(pin < 16);
+                masks[port] |= 1 << pin;
+            }
+            i += 1;
+        }
+        StopPins(masks)
+    }
+
+    /// Drives every pin of the set low as a push-pull output through raw register writes, one
+    /// port at a time: its clock on (RCC_IOPENR), the output latches low (GPIOx_BSRR, the BRy
+    /// bits: atomic), then output mode (GPIOx_MODER = 01 for each pin; OTYPER is left at
+    /// push-pull, its reset value and what the HAL sets; RM0444, RCC and GPIO register
+    /// descriptions). Works before and after the HAL starts.
+    #[inline(never)]
+    fn force_low(&self) {
+        for (port, &mask) in self.0.iter().enumerate() {
+            if mask == 0 {
+                continue;
+            }
+            let pins = u32::from(mask);
+            // MODER has two bits per pin: 01 (output) in each pin's pair, both bits cleared first.
+            let mut moder_output = 0u32;
+            for pin in 0..16 {
+                moder_output |= ((pins >> pin) & 1) << (2 * pin);
+            }
+            let moder_mask = moder_output * 0b11;
+            // SAFETY: only the port's register block is taken, never a pin driver.
+            let gpio = unsafe { AnyPin::steal(16 * port as u8) }.block();
+            pac::RCC.gpioenr().modify(|w| w.0 |= 1 << port);
+            gpio.bsrr().write_value(pac::gpio::regs::Bsrr(pins << 16));
+            gpio.moder().modify(|w| w.0 = (w.0 & !moder_mask) | moder_output);
+        }
+    }
+}
+
+/// Turns every motor bridge off at once, without the HAL and without allocation: both TB6612 STBY
+/// pins low (outputs high impedance), then every PWM and IN pin low (duty 0, coast).
+///
+/// Called first thing at boot, from the panic handler and the HardFault handler, and before any
+/// reset. The pins float while the MCU is held in reset (STM32G0 pins reset to analog mode), so
+/// STBY and PWM need external pull-downs to keep the bridges off then.
+///
+/// It does not take ownership: the HAL drivers that own these pins must not be used afterwards
+/// (every caller resets or halts).
+pub fn emergency_stop() {
+    STOP_STBY.force_low();
+    STOP_OFF.force_low();
+}
+
+/// Why the MCU last started.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, defmt::Format)]
+pub enum ResetCause {
+    /// The independent watchdog expired: the control loop stalled.
+    Watchdog,
+    /// The window watchdog (unused).
+    WindowWatchdog,
+    /// `SCB::sys_reset`: an `X0`/`X42` request.
+    Software,
+    /// Illegal low-power mode entry.
+    LowPower,
+    /// Option bytes reloaded.
+    OptionBytes,
+    /// Power-on or brown-out.
+    PowerOn,
+    /// The NRST pin (reset button, ST-LINK, or the printer's reset line).
+    Pin,
+    /// No flag set.
+    Unknown,
+}
+
+/// Reads and clears the reset flags (RCC_CSR). Call once at boot.
+pub fn reset_cause() -> ResetCause {
+    let csr = pac::RCC.csr().read();
+    // Every internal reset also pulses NRST, so PINRSTF is checked last.
+    let cause = if csr.iwdgrstf() {
+        ResetCause::Watchdog
+    } else if csr.wwdgrstf() {
+        ResetCause::WindowWatchdog
+    } else if csr.sftrstf() {
+        ResetCause::Software
+    } else if csr.lpwrrstf() {
+        ResetCause::LowPower
+    } else if csr.oblrstf() {
+        ResetCause::OptionBytes
+    } else if csr.pwrrstf() {
+        ResetCause::PowerOn
+    } else if csr.pinrstf() {
+        ResetCause::Pin
+    } else {
+        ResetCause::Unknown
+    };
+    pac::RCC.csr().modify(|w| w.set_rmvf(true));
+    cause
+}
+
+/// The persisted state's region, as offsets from the flash base (0x0800_0000): the last 16 pages
+/// (2 KiB each) of the 128 KiB, 0x0801_8000..0x0802_0000. memory.x ends FLASH before it, so no
+/// code or data is ever linked there, and `probe-rs` (which only erases the pages it programs)
+/// leaves it alone when the firmware is flashed again.
+pub const STORE_RANGE: Range<u32> = 0x1_8000..0x2_0000;
+
+/// The STM32G0's CRC unit computing the store's CRC-32/ISO-HDLC (`persist::iso_hdlc`, RM0444
+/// "Cyclic redundancy check calculation unit"): polynomial 0x04C11DB7 on 32 bits, initial value
+/// 0xFFFFFFFF, input bit-reversed by byte, output bit-reversed, the final XOR in software. No
+/// 1 KiB table in flash, and one register write per byte instead of a table lookup.
+///
+/// Untested on a board so far (the host tests check the software CRC, and a model of the unit set
+/// up as here, against CRC-32/ISO-HDLC). `main` checks it on the catalogue's check value at boot
+/// (`mmu_firmware::port::CheckedCrc`) and falls back to the software CRC if it computes another
+/// CRC, so the store stays readable by every build.
+pub struct HardwareCrc(crc::Crc<'static>);
+
+impl HardwareCrc {
+    /// Set up as `persist::iso_hdlc` says (the host tests check a model of the unit with the
+    /// same values).
+    fn new(unit: Peri<'static, peripherals::CRC>) -> Self {
+        use crc::{Config, InputReverseConfig, PolySize};
+        use mmu_firmware::persist::iso_hdlc::{INIT, POLY, REVERSE_INPUT_BYTES, REVERSE_OUTPUT};
+        let reverse_input = if REVERSE_INPUT_BYTES {
+            InputReverseConfig::Byte
+        } else {
+            InputReverseConfig::None
+        };
+        // The polynomial is odd: the only thing the configuration refuses is an even one.
+        let config = defmt::unwrap!(Config::new(
+            reverse_input,
+            REVERSE_OUTPUT,
+            PolySize::Width32,
+            INIT,
+            POLY
+        ));
+        HardwareCrc(crc::Crc::new(unit, config))
+    }
+}
+
+impl EntryCrc for HardwareCrc {
+    /// Loads `CRC_INIT` into the data register.
+    fn start(&mut self) {
+        self.0.reset();
+    }
+
+    /// One 8-bit write of the data register per byte.
+    fn add(&mut self, bytes: &[u8]) {
+        self.0.feed_bytes(bytes);
+    }
+
+    fn value(&mut self) -> u32 {
+        self.0.read() ^ mmu_firmware::persist::iso_hdlc::FINAL_XOR
+    }
+}
+
+/// Set by [`on_flash_double_ecc_error`] when a read of the store met a double ECC error;
+/// [`EccFlash`]'s read turns it into an error, which costs the store one entry.
+static STORE_ECC_ERROR: AtomicBool = AtomicBool::new(false);
+
+/// A flash read hit a double ECC error (the NMI; RM0444 §3.3.9). On this part a double-word
+/// program cut by a power loss leaves one in the store: the read that met it is in
+/// [`EccFlash`]'s read, which is told so and returns an error (the store then skips that
+/// entry, see `mmu_firmware::persist`). Anywhere else (code, constants) the MCU cannot go on:
+/// motors off, reset.
+pub fn on_flash_double_ecc_error() {
+    let eccr = pac::FLASH.eccr().read();
+    // ADDR_ECC: the failing double word's offset from the flash base, in double words.
+    let offset = u32::from(eccr.addr_ecc()) * 8;
+    if eccr.eccd() && !eccr.sysf_ecc() && STORE_RANGE.contains(&offset) {
+        pac::FLASH.eccr().modify(|w| w.set_eccd(true));
+        STORE_ECC_ERROR.store(true, Ordering::SeqCst);
+        return;
+    }
+    emergency_stop();
+    cortex_m::peripheral::SCB::sys_reset()
+}
+
+/// Stops every motor and restarts the MCU.
+pub fn reset() -> ! {
+    emergency_stop();
+    cortex_m::peripheral::SCB::sys_reset()
+}
+
+/// The internal flash under the store, turning a double ECC error in the store into a failed
+/// read ([`on_flash_double_ecc_error`]).
+///
+/// The STM32G071RB has a single flash bank: while a page is erased (22 ms typical, 40 ms at most)
+/// or a double word programmed (85 µs typical), every fetch from flash stalls, so the CPU stops
+/// altogether: no task, no interrupt (the vectors are in flash too). The motors keep the last
+/// command applied, the DMA keeps receiving the printer's bytes into its ring, the timers and the
+/// ADC carry on. It never feeds the watchdog: `main` wraps it in
+/// `mmu_firmware::port::WatchedFlash`.
+pub struct EccFlash(Flash<'static, Blocking>);
+
+impl ErrorType for EccFlash {
+    type Error = flash::Error;
+}
+
+impl ReadNorFlash for EccFlash {
+    const READ_SIZE: usize = <Flash<'static, Blocking> as ReadNorFlash>::READ_SIZE;
+
+    /// A double word with a double ECC error (a program cut by a power loss) makes the read
+    /// fail (see [`on_flash_double_ecc_error`]).
+    fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), flash::Error> {
+        STORE_ECC_ERROR.store(false, Ordering::SeqCst);
+        self.0.blocking_read(offset, bytes)?;
+        // The NMI of a failing load is taken before the barrier completes.
+        cortex_m::asm::dsb();
+        cortex_m::asm::isb();
+        if STORE_ECC_ERROR.load(Ordering::SeqCst) {
+            STORE_ECC_ERROR.store(false, Ordering::SeqCst);
+            return Err(flash::Error::Prog);
+        }
+        Ok(())
+    }
+
+    fn capacity(&self) -> usize {
+        self.0.capacity()
+    }
+}
+
+impl NorFlash for EccFlash {
+    const WRITE_SIZE: usize = <Flash<'static, Blocking> as NorFlash>::WRITE_SIZE;
+    const ERASE_SIZE: usize = <Flash<'static, Blocking> as NorFlash>::ERASE_SIZE;
+
+    fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), flash::Error> {
+        self.0.blocking_write(offset, bytes)
+    }
+
+    fn erase(&mut self, from: u32, to: u32) -> Result<(), flash::Error> {
+        self.0.blocking_erase(from, to)
+    }
+}
+
+/// The NMI: on this part a double ECC error reading the flash (see [`on_flash_double_ecc_error`]:
+/// in the store it fails the read, elsewhere it resets).
+#[cortex_m_rt::exception]
+unsafe fn NonMaskableInt() {
+    on_flash_double_ecc_error()
+}
+
+/// The board's flash for the store.
+pub type StoreFlash = EccFlash;
+/// The board's CRC for the store's entries.
+pub type Crc = HardwareCrc;
+/// The PWM input of one bridge.
+type Pwm = SimplePwmChannel<'static, TIM3>;
+/// The slot motors.
+pub type Motors = Bridges<
+    Tb6612<Pwm, Output<'static>, Output<'static>, Pwm, Output<'static>, Output<'static>, Output<'static>>,
+    Tb6612<Pwm, Output<'static>, Output<'static>, Pwm, NotConnected, NotConnected, Output<'static>>,
+>;
+/// The printer UART's receive side.
+pub type LinkRx = RingBufferedUartRx<'static>;
+/// The printer UART's transmit side.
+pub type LinkTx = UartTx<'static, embassy_stm32::mode::Async>;
+/// LD4.
+pub type Led = Output<'static>;
+/// B1.
+pub type ButtonPin = ExtiInput<'static, embassy_stm32::mode::Async>;
+
+/// A receive error of the printer link.
+pub type LinkRxError = usart::Error;
+
+/// What a receive error of the USART counts as.
+pub fn line_error(error: &usart::Error) -> LineError {
+    match error {
+        usart::Error::Framing | usart::Error::Noise | usart::Error::Parity => LineError::Garbled,
+        // Overrun (the DMA ring or the USART), and any error a later HAL adds.
+        _ => LineError::Overrun,
+    }
+}
+
+/// The independent watchdog, as the hal-port trait.
+pub struct Watchdog(IndependentWatchdog<'static, peripherals::IWDG>);
+
+impl mmu_hal_port::Watchdog for Watchdog {
+    fn feed(&mut self) {
+        self.0.pet();
+    }
+}
+
+/// Analog inputs: two per slot and three on the hub, in this order: slot `s`'s motor Hall sensor
+/// at `2 s`, its filament sensor at `2 s + 1`, then the hub's filament, tension and cutter
+/// sensors from [`HUB_INPUTS`].
+const ANALOG_INPUTS: usize = 2 * SLOTS + 3;
+/// The first hub input.
+const HUB_INPUTS: usize = 2 * SLOTS;
+
+/// The ADC: one scan of all nine Hall sensors by DMA per call, about 210 µs (9 channels x 8
+/// oversampled conversions of 2.9 µs), during which the CPU sleeps or runs other tasks.
+pub struct Sampler {
+    adc: Adc<'static, ADC1>,
+    dma: Peri<'static, DMA1_CH1>,
+    inputs: [AnyAdcChannel<'static, ADC1>; ANALOG_INPUTS],
+    /// Where each input's conversion lands in a scan's results. The G0 ADC converts the selected
+    /// channels (CHSELR) in ascending channel number whatever order they are listed in (RM0444,
+    /// ADC: CHSELRMOD = 0, SCANDIR = 0), so it is the number of inputs on a lower channel.
+    scan_positions: [u8; ANALOG_INPUTS],
+}
+
+impl Sampler {
+    /// Embassy's driver for the regulator, calibration, clock (64 MHz system clock / 2 = 32 MHz,
+    /// the G0 allows 35) and 8x hardware oversampling. `inputs` in the order of [`ANALOG_INPUTS`].
+    fn new(
+        adc: Peri<'static, ADC1>,
+        dma: Peri<'static, DMA1_CH1>,
+        inputs: [AnyAdcChannel<'static, ADC1>; ANALOG_INPUTS],
+    ) -> Self {
+        let config = AdcConfig {
+            clock: Some(adc::Clock::Async {
+                div: adc::Presc::DIV2,
+            }),
+            averaging: Some(Averaging::Samples8),
+            ..AdcConfig::default()
+        };
+        let adc = Adc::new_with_config(adc, config);
+        let mut scan_positions = [0u8; ANALOG_INPUTS];
+        for (position, own) in scan_positions.iter_mut().zip(&inputs) {
+            for other in &inputs {
+                *position += u8::from(other.get_hw_channel() < own.get_hw_channel());
+            }
+        }
+        Sampler {
+            adc,
+            dma,
+            inputs,
+            scan_positions,
+        }
+    }
+}
+
+impl SensorScan<SLOTS> for Sampler {
+    type Error = core::convert::Infallible;
+
+    /// embassy-stm32's DMA `read` of the whole sequence. The caller bounds the wait: a scan that
+    /// never completes is dropped (the DMA transfer stops; the next read stops the ADC first).
+    async fn scan(&mut self) -> Result<Samples<SLOTS>, Self::Error> {
+        let mut raw = [0u16; ANALOG_INPUTS];
+        let sequence = self.inputs.iter_mut().map(|input| (input, SAMPLE_TIME));
+        self.adc.read(self.dma.reborrow(), Irqs, sequence, &mut raw).await;
+        let positions = &self.scan_positions;
+        let input = |index: usize| {
+            let position = positions.get(index).map_or(usize::MAX, |&at| usize::from(at));
+            raw.get(position).copied().unwrap_or_default()
+        };
+        Ok(Samples {
+            slots: core::array::from_fn(|slot| SlotSamples {
+                motor_hall: input(2 * slot),
+                filament: input(2 * slot + 1),
+            }),
+            hub: HubSamples {
+                filament: input(HUB_INPUTS),
+                tension: input(HUB_INPUTS + 1),
+                cutter: input(HUB_INPUTS + 2),
+            },
+        })
+    }
+}
+
+/// A GPIO output, low from the start.
+fn low(pin: Peri<'static, impl Pin>) -> Output<'static> {
+    Output::new(pin, Level::Low, Speed::Low)
+}
+
+/// The board's parts, as `main` takes them.
+pub type BoardParts =
+    super::Parts<Sampler, Motors, LinkRx, LinkTx, Led, ButtonPin, Watchdog, StoreFlash, Crc>;
+
+/// Starts the clocks and every peripheral of the board. The watchdog first, right after the
+/// clocks; the bridges come up in standby with both inputs low and duty 0.
+pub fn init() -> BoardParts {
+    let mut config = embassy_stm32::Config::default();
+    // 64 MHz from the internal 16 MHz oscillator: VCO 16 x 8 = 128 MHz, R / 2.
+    config.rcc.pll = Some(Pll {
+        source: PllSource::HSI,
+        prediv: PllPreDiv::DIV1,
+        mul: PllMul::MUL8,
+        divp: None,
+        divq: None,
+        divr: Some(PllRDiv::DIV2),
+    });
+    config.rcc.sys = Sysclk::PLL1_R;
+    config.rcc.mux.adcsel = rcc::mux::Adcsel::SYS;
+    let parts = Parts::take(embassy_stm32::init(config));
+
+    // The watchdog first: from here on a stalled init resets the MCU too.
+    let mut watchdog = IndependentWatchdog::new(parts.watchdog, WATCHDOG_TIMEOUT_US);
+    watchdog.unleash();
+
+    // Motors: duty 0 on every channel before the pins switch to the timer, STBY and IN low.
+    let pwm = SimplePwm::new(
+        parts.pwm_timer,
+        Some(PwmPin::new(parts.slot0_pwm, OutputType::PushPull)),
+        Some(PwmPin::new(parts.slot1_pwm, OutputType::PushPull)),
+        Some(PwmPin::new(parts.slot2_pwm, OutputType::PushPull)),
+        None,
+        khz(PWM_KHZ),
+        CountingMode::EdgeAlignedUp,
+    );
+    let mut pwm = pwm.split();
+    for channel in [&mut pwm.ch1, &mut pwm.ch2, &mut pwm.ch3] {
+        channel.set_duty_cycle_fully_off();
+        channel.enable();
+    }
+    let chip1 = Tb6612::new(
+        pwm.ch1,
+        low(parts.slot0_in1),
+        low(parts.slot0_in2),
+        pwm.ch2,
+        low(parts.slot1_in1),
+        low(parts.slot1_in2),
+        low(parts.stby1),
+    );
+    let chip2 = Tb6612::new(
+        pwm.ch3,
+        low(parts.slot2_in1),
+        low(parts.slot2_in2),
+        pwm.ch4,
+        NotConnected,
+        NotConnected,
+        low(parts.stby2),
+    );
+    // Every error of these drivers is `Infallible`.
+    let (Ok(chip1), Ok(chip2)) = (chip1, chip2);
+
+    // The printer UART: 115 200 8N1, received by DMA into a ring the CPU need not attend.
+    let mut uart_config = usart::Config::default();
+    uart_config.baudrate = BAUD;
+    let uart = defmt::unwrap!(Uart::new(
+        parts.printer_uart,
+        parts.printer_rx,
+        parts.printer_tx,
+        parts.printer_tx_dma,
+        parts.printer_rx_dma,
+        Irqs,
+        uart_config,
+    ));
+    let (link_tx, link_rx) = uart.split();
+    static RX_RING: StaticCell<[u8; mmu_firmware::control::G071_DMA_RING]> = StaticCell::new();
+    let mut link_rx = link_rx.into_ring_buffered(RX_RING.init([0; mmu_firmware::control::G071_DMA_RING]));
+    link_rx.start_uart();
+
+    // In the order of `ANALOG_INPUTS`.
+    let sampler = Sampler::new(
+        parts.adc,
+        parts.adc_dma,
+        [
+            parts.slot0_hall.degrade_adc(),
+            parts.slot0_filament.degrade_adc(),
+            parts.slot1_hall.degrade_adc(),
+            parts.slot1_filament.degrade_adc(),
+            parts.slot2_hall.degrade_adc(),
+            parts.slot2_filament.degrade_adc(),
+            parts.hub_filament.degrade_adc(),
+            parts.hub_tension.degrade_adc(),
+            parts.hub_cutter.degrade_adc(),
+        ],
+    );
+
+    super::Parts {
+        sampler,
+        motors: Bridges::new(chip1, chip2),
+        link_rx,
+        link_tx,
+        led: low(parts.status_led),
+        button: ExtiInput::new(parts.button, parts.button_exti, Pull::Up, Irqs),
+        watchdog: Watchdog(watchdog),
+        flash: EccFlash(Flash::new_blocking(parts.flash)),
+        crc: HardwareCrc::new(parts.crc),
+    }
+}
