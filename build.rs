@@ -1,11 +1,13 @@
 //! Puts the board's memory layout on the linker path and names the firmware binary's link
-//! scripts, only for the bare-metal firmware build: `memory.x` (the NUCLEO-G071RB, feature
-//! `g071`) or `src/board/pico/memory.x` (the Raspberry Pi Pico, feature `pico`).
+//! scripts, only for the bare-metal firmware build: `src/board/g071/memory.x` (the
+//! NUCLEO-G071RB, feature `g071`) or `src/board/pico/memory.x` (the Raspberry Pi Pico, feature
+//! `pico`), as `board-memory.x`, which the root `memory.x` includes.
 
 use std::{env, fs, path::PathBuf};
 
 fn main() {
     println!("cargo:rerun-if-changed=memory.x");
+    println!("cargo:rerun-if-changed=src/board/g071/memory.x");
     println!("cargo:rerun-if-changed=src/board/pico/memory.x");
     println!("cargo:rerun-if-changed=build.rs");
     if env::var("CARGO_CFG_TARGET_OS").as_deref() != Ok("none") {
@@ -18,7 +20,7 @@ fn main() {
         "memory.x"
     };
     let out = PathBuf::from(env::var_os("OUT_DIR").expect("cargo sets OUT_DIR"));
-    fs::copy(memory, out.join("memory.x")).expect("the memory layout is readable and OUT_DIR writable");
+    fs::copy(memory, out.join("board-memory.x")).expect("the memory layout is readable and OUT_DIR writable");
     println!("cargo:rustc-link-search={}", out.display());
     println!("cargo:rustc-link-arg-bins=--nmagic");
     println!("cargo:rustc-link-arg-bins=-Tlink.x");

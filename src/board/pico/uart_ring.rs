@@ -1,0 +1,162 @@
+//! The printer UART's receive ring on the Pico: one DMA channel copies every byte UART0 receives
+//! into an 8 KiB ring in RAM, whatever the CPU does; [`RingRx`] reads it.
+//!
+//! Hand-written, in this one place, because embassy-rp 0.10 has no ring-buffered UART receiver
+//! (its `UartRx::read` fills a buffer of a given length, its `BufferedUart` is interrupt-driven)
+//! and the need is measured: embassy-rp's flash driver erases a 4 KiB sector with interrupts
+//! off, up to 400 ms (W25Q16JV), while the UART's FIFO holds 32 bytes (2.8 ms at 115 200 Bd).
+//! The decisions (how many bytes wait, what was lost) are `mmu_firmware::uart::DmaRing`, host
+//! tested; this module only programs the channel (RP2040 datasheet, 2.5 DMA: CTRL.RING_SIZE and
+//! RING_SEL wrap the write address on a naturally aligned ring, TREQ_SEL paces it by UART0's RX
+//! request, TRANS_COUNT counts down) and UART0's DMACR.RXDMAE (4.2, UART).
+
+use core::cell::UnsafeCell;
+use core::ptr;
+
+use embassy_rp::Peri;
+use embassy_rp::pac;
+use embassy_rp::pac::dma::vals::{DataSize, TreqSel};
+use embassy_rp::peripherals::DMA_CH2;
+use embassy_rp::uart::{self, Async, UartRx};
+use embassy_time::Timer;
+use mmu_firmware::control::PICO_DMA_RING;
+use mmu_firmware::uart::DmaRing;
+
+/// The DMA channel of the ring (DMA_CH0 and DMA_CH1 are embassy-rp's, for the UART).
+const CHANNEL: usize = 2;
+/// log2 of the ring's size, CTRL.RING_SIZE.
+const RING_BITS: u8 = PICO_DMA_RING.trailing_zeros() as u8;
+/// How often a read waiting for bytes looks at the ring, µs: the DMA raises no interrupt per
+/// byte (and the UART's receive timeout never fires while the DMA empties its FIFO).
+const POLL_US: u64 = 500;
+/// The transfer count a start loads: the channel stops after this many bytes (4.3 days of a
+/// line that never pauses) and is started again by [`RingRx::written`].
+const TRANSFER: u32 = u32::MAX;
+
+/// The ring, aligned to its size as the DMA's address wrap requires. Written only by the DMA,
+/// read only through volatile reads of the one [`RingRx`] (which owns the DMA channel).
+#[repr(C, align(8192))]
+struct Ring(UnsafeCell<[u8; PICO_DMA_RING]>);
+
+// SAFETY: see above: the CPU never writes it, and reads it only where the DMA has written.
+unsafe impl Sync for Ring {}
+
+const _: () = assert!(core::mem::align_of::<Ring>() == PICO_DMA_RING);
+
+/// Not a `StaticCell`: its flag beside the ring would double the ring's footprint (8 KiB
+/// alignment).
+static RING: Ring = Ring(UnsafeCell::new([0; PICO_DMA_RING]));
+
+/// The printer UART's receive side: the DMA ring and its reader.
+pub struct RingRx {
+    /// Keeps UART0's RX pin in its UART function (never read through).
+    _rx: UartRx<'static, Async>,
+    _channel: Peri<'static, DMA_CH2>,
+    ring: *const u8,
+    reader: DmaRing<PICO_DMA_RING>,
+    /// Bytes written by the transfers before the current one, wrapping.
+    base: u32,
+    /// Lost bytes already reported.
+    reported_lost: u32,
+}
+
+impl RingRx {
+    /// Starts the channel: UART0's data register into the ring, paced by its RX request.
+    pub fn start(rx: UartRx<'static, Async>, channel: Peri<'static, DMA_CH2>) -> Self {
+        let ring = RING.0.get().cast::<u8>().cast_const();
+        pac::UART0.uartdmacr().modify(|w| w.set_rxdmae(true));
+        let ch = pac::DMA.ch(CHANNEL);
+        ch.read_addr().write_value(pac::UART0.uartdr().as_ptr() as u32);
+        ch.write_addr().write_value(ring as u32);
+        ch.trans_count().write_value(TRANSFER);
+        Self::trigger();
+        RingRx {
+            _rx: rx,
+            _channel: channel,
+            ring,
+            reader: DmaRing::new(),
+            base: 0,
+            reported_lost: 0,
+        }
+    }
+
+    /// Starts (or restarts) a transfer of [`TRANSFER`] bytes; the write address goes on where
+    /// the last one stopped.
+    fn trigger() {
+        pac::DMA.ch(CHANNEL).ctrl_trig().write(|w| {
+            w.set_en(true);
+            w.set_data_size(DataSize::SIZE_BYTE);
+            w.set_incr_read(false);
+            w.set_incr_write(true);
+            w.set_ring_size(RING_BITS);
+            w.set_ring_sel(true);
+            // Chaining to itself means no chaining.
+            w.set_chain_to(CHANNEL as u8);
+            w.set_treq_sel(TreqSel::UART0_RX);
+            w.set_irq_quiet(true);
+        });
+    }
+
+    /// Bytes the DMA has written since the start, wrapping; restarts a finished transfer.
+    fn written(&mut self) -> u32 {
+        let ch = pac::DMA.ch(CHANNEL);
+        let remaining = ch.trans_count().read();
+        if remaining == 0 && !ch.ctrl_trig().read().busy() {
+            self.base = self.base.wrapping_add(TRANSFER);
+            ch.trans_count().write_value(TRANSFER);
+            Self::trigger();
+            return self.base;
+        }
+        self.base.wrapping_add(TRANSFER - remaining)
+    }
+
+    /// UART0's receive errors since the last look (UARTRSR, cleared by a write).
+    fn line_error() -> Option<uart::Error> {
+        let rsr = pac::UART0.uartrsr().read();
+        if !(rsr.oe() || rsr.be() || rsr.pe() || rsr.fe()) {
+            return None;
+        }
+        pac::UART0.uartrsr().write_value(Default::default());
+        Some(if rsr.oe() {
+            uart::Error::Overrun
+        } else if rsr.be() {
+            uart::Error::Break
+        } else if rsr.pe() {
+            uart::Error::Parity
+        } else {
+            uart::Error::Framing
+        })
+    }
+}
+
+impl embedded_io_async::ErrorType for RingRx {
+    type Error = uart::Error;
+}
+
+impl embedded_io_async::Read for RingRx {
+    /// The bytes waiting, as many as fit (at least one: waits for it). An error is reported
+    /// once, with no bytes: the ring lapped (bytes lost, reported at the read after the one that
+    /// found it) or UART0 saw a bad frame.
+    async fn read(&mut self, buf: &mut [u8]) -> Result<usize, uart::Error> {
+        if self.reader.lost() != self.reported_lost {
+            self.reported_lost = self.reader.lost();
+            return Err(uart::Error::Overrun);
+        }
+        loop {
+            if let Some(error) = Self::line_error() {
+                return Err(error);
+            }
+            let written = self.written();
+            if self.reader.waiting(written) > 0 {
+                let ring = self.ring;
+                // SAFETY: `i < PICO_DMA_RING`, inside the ring; a volatile read, as the DMA
+                // writes it.
+                let count = self
+                    .reader
+                    .take(written, |i| unsafe { ptr::read_volatile(ring.add(i)) }, buf);
+                return Ok(count);
+            }
+            Timer::after_micros(POLL_US).await;
+        }
+    }
+}
