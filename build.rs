@@ -17,7 +17,7 @@ fn main() {
     let memory = if pico {
         "src/board/pico/memory.x"
     } else {
-        "memory.x"
+        "src/board/g071/memory.x"
     };
     let out = PathBuf::from(env::var_os("OUT_DIR").expect("cargo sets OUT_DIR"));
     fs::copy(memory, out.join("board-memory.x")).expect("the memory layout is readable and OUT_DIR writable");
