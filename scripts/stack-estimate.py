@@ -133,6 +133,8 @@ def main():
     parser.add_argument("--indirect", action="append", default=[], metavar="CALLER=CALLEE",
                         help="an indirect call: CALLER's blx reaches every function whose name contains CALLEE")
     parser.add_argument("--no-interrupts", action="store_true", help="only the root's path")
+    parser.add_argument("--vector-table", default="0x08000000",
+                        help="address of the vector table (the G071: 0x08000000; the Pico: 0x10000100)")
     args = parser.parse_args()
     mem, frame, calls, indirect, start = analyse(args.elf)
     names = list(frame)
@@ -163,7 +165,7 @@ def main():
         # The vector table: word 1 is Reset, words 2.. the exceptions and interrupts.
         handlers = {}
         for i in range(2, 48):
-            target = read_word(mem, 0x08000000 + 4 * i)
+            target = read_word(mem, int(args.vector_table, 0) + 4 * i)
             if target and (target & ~1) in start:
                 handlers[i] = start[target & ~1]
         faults = {i: h for i, h in handlers.items() if i in (2, 3)}  # NMI, HardFault

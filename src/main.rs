@@ -92,6 +92,8 @@ static BUTTON: Watch<CriticalSectionRawMutex, bool, 1> = Watch::new();
 static LED: Signal<CriticalSectionRawMutex, bool> = Signal::new();
 /// A control step is done; true if it was busy with the printer (took bytes or answered).
 static STEPPED: Signal<CriticalSectionRawMutex, bool> = Signal::new();
+/// The store has restored the logic's state: the control task may step.
+static BOOTED: Signal<CriticalSectionRawMutex, ()> = Signal::new();
 /// A reset is due: save (or forget) whole, then say so on [`RESET_SAVED`].
 static RESET: Signal<CriticalSectionRawMutex, BoardAction> = Signal::new();
 /// The save before a reset is done.
@@ -125,17 +127,24 @@ async fn main(spawner: Spawner) {
     let parts = board::init();
     WATCHDOG.lock(|watchdog| watchdog.replace(Some(parts.watchdog)));
 
-    static LOGIC: StaticCell<Logic> = StaticCell::new();
-    let logic = LOGIC.init_with(|| RefCell::new(ControlLoop::new(App::new(Config::default()), now())));
-    let keeper = boot_store(logic.get_mut().app_mut(), parts.flash, parts.crc);
-    let logic: &'static Logic = logic;
+    let logic: &'static Logic = new_logic();
 
+    // The store task restores the logic's state first; the control task waits for it.
+    spawner.spawn(unwrap!(store(parts.flash, parts.crc, logic)));
     spawner.spawn(unwrap!(control(parts.sampler, parts.motors, logic)));
-    spawner.spawn(unwrap!(store(keeper, logic)));
     spawner.spawn(unwrap!(link_rx(parts.link_rx)));
     spawner.spawn(unwrap!(link_tx(parts.link_tx)));
     spawner.spawn(unwrap!(button(parts.button)));
     spawner.spawn(unwrap!(status_led(parts.led)));
+}
+
+/// The unit logic, in a static. Out of line: `App::new` builds it on the stack first (about
+/// 2.5 KiB), and this frame is gone before the tasks run, whereas in `main`'s task it would stay
+/// in the frame the executor polls (the worst-case stack, `scripts/firmware-size.sh`).
+#[inline(never)]
+fn new_logic() -> &'static mut Logic {
+    static LOGIC: StaticCell<Logic> = StaticCell::new();
+    LOGIC.init_with(|| RefCell::new(ControlLoop::new(App::new(Config::default()), now())))
 }
 
 /// The uptime, µs.
@@ -170,6 +179,7 @@ async fn run_control<S: SensorScan<SLOTS>, M: Motors<SLOTS>>(
     mut motors: M,
     logic: &Logic,
 ) -> ! {
+    BOOTED.wait().await;
     let mut ticker = Ticker::every(PERIOD);
     let mut schedule = Schedule::new(now_us(), PERIOD.as_micros());
     let mut samples = Samples::<SLOTS>::uniform(mmu_hal_port::ADC_MAX / 2);
@@ -280,12 +290,18 @@ impl<M: Motors<SLOTS>> ResetBoard for Resetting<'_, M> {
 }
 
 #[embassy_executor::task]
-async fn store(keeper: BoardKeeper, logic: &'static Logic) {
-    run_store(keeper, logic).await
+async fn store(flash: board::StoreFlash, crc: board::Crc, logic: &'static Logic) {
+    run_store(flash, crc, logic).await
 }
 
-/// The store task: a bounded piece of a save after each step, or the whole save before a reset.
-async fn run_store(mut keeper: BoardKeeper, logic: &Logic) -> ! {
+/// The store task: restores what the flash holds into the logic (then [`BOOTED`]), and then a
+/// bounded piece of a save after each step, or the whole save before a reset.
+async fn run_store(flash: board::StoreFlash, crc: board::Crc, logic: &Logic) -> ! {
+    let mut keeper = match logic.try_borrow_mut() {
+        Ok(mut control) => boot_store(control.app_mut(), flash, crc),
+        Err(_) => defmt::panic!("the logic is borrowed at boot"),
+    };
+    BOOTED.signal(());
     loop {
         match select(STEPPED.wait(), RESET.wait()).await {
             Either::First(busy) => {
@@ -320,6 +336,8 @@ async fn run_store(mut keeper: BoardKeeper, logic: &Logic) -> ! {
 }
 
 /// Checks the CRC unit, then restores into `app` what the flash holds, before its first step.
+/// Out of line, for the same reason as [`new_logic`].
+#[inline(never)]
 fn boot_store(app: &mut App<SLOTS>, flash: board::StoreFlash, crc: board::Crc) -> BoardKeeper {
     let (crc, check) = CheckedCrc::check(crc);
     if !crc.is_unit() {
