@@ -1,18 +1,21 @@
-# Reproducible firmware build for the reference board (NUCLEO-G071RB), and a flashing image.
+# Reproducible firmware build for both boards (NUCLEO-G071RB and Raspberry Pi Pico), and a
+# flashing image.
 #
 #   docker build -t mmu-firmware .
-#       builds the firmware and an image with probe-rs (compiled once: ~10 min on 2 cores)
+#       builds both firmwares and an image with probe-rs (compiled once: ~10 min on 2 cores)
 #   docker run --rm -it --privileged -v /dev/bus/usb:/dev/bus/usb mmu-firmware
 #       flashes the NUCLEO over its ST-LINK (USB passthrough), runs the firmware and prints its
-#       defmt log until Ctrl-C; extra arguments replace the ELF path, e.g. to flash another build
+#       defmt log until Ctrl-C; extra arguments replace the ELF path
+#   docker run --rm -it --privileged -v /dev/bus/usb:/dev/bus/usb mmu-firmware \
+#           --chip RP2040 /firmware/mmu-firmware-pico.elf
+#       the same for a Pico behind a debug probe (a second Pico running debugprobe, on SWD)
 #   docker build --target firmware --output dist .
-#       only the firmware: writes dist/mmu-firmware.elf (BuildKit)
+#       only the firmware: writes dist/mmu-firmware-g071.elf and dist/mmu-firmware-pico.elf
 #
 # The build steps are not written here but in scripts/build-firmware.sh, which CI (.ci/run) runs
 # too: what this image builds is what CI checks.
 
-# Pinned: the same Rust release as the CI machines (rust-toolchain.toml asks for "stable";
-# RUSTUP_TOOLCHAIN below keeps rustup on this image's toolchain instead of fetching a newer one).
+# Pinned: the same Rust release as rust-toolchain.toml (1.95.0) and the CI machines.
 ARG RUST_IMAGE=rust:1.95.0-bookworm
 ARG PROBE_RS_VERSION=0.32.0
 
@@ -23,11 +26,11 @@ ENV RUSTUP_TOOLCHAIN=1.95.0 \
     DEFMT_LOG=info
 WORKDIR /src
 COPY . .
-RUN bash scripts/build-firmware.sh /out
+RUN bash scripts/build-firmware.sh g071 /out && bash scripts/build-firmware.sh pico /out
 
 # ---- firmware: just the ELF, for `docker build --target firmware --output dist .` ----
 FROM scratch AS firmware
-COPY --from=build /out/mmu-firmware.elf /mmu-firmware.elf
+COPY --from=build /out/mmu-firmware-g071.elf /out/mmu-firmware-pico.elf /
 
 # ---- flash (default): probe-rs and the firmware ----
 FROM ${RUST_IMAGE} AS flash
@@ -38,6 +41,6 @@ RUN apt-get update \
     && rm -rf /var/lib/apt/lists/*
 RUN cargo install probe-rs-tools --version "${PROBE_RS_VERSION}" --locked \
     && rm -rf /usr/local/cargo/registry /usr/local/cargo/git
-COPY --from=build /out/mmu-firmware.elf /firmware/mmu-firmware.elf
-ENTRYPOINT ["probe-rs", "run", "--chip", "STM32G071RBTx"]
-CMD ["/firmware/mmu-firmware.elf"]
+COPY --from=build /out/mmu-firmware-g071.elf /out/mmu-firmware-pico.elf /firmware/
+ENTRYPOINT ["probe-rs", "run"]
+CMD ["--chip", "STM32G071RBTx", "/firmware/mmu-firmware-g071.elf"]
