@@ -29,6 +29,7 @@ use core::convert::Infallible;
 
 use embedded_hal::digital::OutputPin;
 use embedded_hal::pwm::SetDutyCycle;
+pub use mmu_firmware::tasks::LineError;
 use mmu_hal_port::MotorCommand;
 use mmu_hal_port::tb6612::{Channel, Error, Tb6612};
 
@@ -52,14 +53,6 @@ pub struct Parts<Sampler, Motors, LinkRx, LinkTx, Led, ButtonPin, Watchdog, Stor
     pub flash: StoreFlash,
     /// The CRC the store's entries are checked with.
     pub crc: Crc,
-}
-
-/// What a receive error of the printer link counts as.
-pub enum LineError {
-    /// Bytes lost: the ring or the USART overran.
-    Overrun,
-    /// A frame with a framing, noise or parity error.
-    Garbled,
 }
 
 /// An IN input of the unused bridge: not wired to the MCU.

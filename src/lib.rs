@@ -21,6 +21,8 @@ pub mod port;
 pub mod registers;
 pub mod runner;
 pub mod sensor;
+#[cfg(feature = "tasks")]
+pub mod tasks;
 pub mod time;
 pub mod uart;
 pub mod unit;

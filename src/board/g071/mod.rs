@@ -434,9 +434,6 @@ pub type Led = Output<'static>;
 /// B1.
 pub type ButtonPin = ExtiInput<'static, embassy_stm32::mode::Async>;
 
-/// A receive error of the printer link.
-pub type LinkRxError = usart::Error;
-
 /// What a receive error of the USART counts as.
 pub fn line_error(error: &usart::Error) -> LineError {
     match error {

@@ -284,8 +284,6 @@ pub type Motors = Bridges<
 >;
 /// The printer UART's receive side.
 pub type LinkRx = RingRx;
-/// A receive error of the printer link.
-pub type LinkRxError = uart::Error;
 /// The on-board LED.
 pub type Led = Output<'static>;
 /// The unit's button.

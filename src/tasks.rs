@@ -1,0 +1,420 @@
+//! The firmware's tasks, written against the hal-port traits only, so that every board runs the
+//! same ones (src/main.rs spawns them, each behind a thin non-generic `#[task]` wrapper that names
+//! the board's types: Embassy tasks cannot be generic) and the step-cost benchmark
+//! (bench-mcu/harness) polls the same code on Embassy's raw executor.
+//!
+//! - [`run_control`], every millisecond on an embassy-time [`Ticker`] (1 MHz ticks: the period is
+//!   exact): scans the sensors (the wait bounded by [`SCAN_TIMEOUT`]), takes at most
+//!   [`control::MAX_RX_PER_STEP`] bytes from [`RX_PIPE`], steps the [`ControlLoop`], applies the
+//!   motor commands, queues the answer in [`TX_PIPE`], feeds the watchdog when the step was on
+//!   time with fresh samples, and signals [`STEPPED`];
+//! - [`run_store`]: restores what the flash holds (then [`BOOTED`]); woken by [`STEPPED`], writes
+//!   what changed, one bounded piece after a step; on [`RESET`] the whole save before a reset;
+//! - [`run_link_rx`] / [`run_link_tx`]: the printer UART (received by DMA into a ring, so no byte
+//!   is lost while a flash erase stalls the CPU) to and from [`RX_PIPE`] / [`TX_PIPE`];
+//! - [`run_button`]: the button's level, at each edge, in [`BUTTON`] (the control loop debounces);
+//! - [`run_status_led`]: the LED, from [`LED`].
+//!
+//! Only the control task feeds the watchdog (through the board's `feed`), and the store's flash
+//! only within an allowance ([`WatchedFlash`]).
+
+use core::cell::RefCell;
+use core::ops::Range;
+
+use embassy_futures::select::{Either, select};
+use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+use embassy_sync::pipe::Pipe;
+use embassy_sync::signal::Signal;
+use embassy_sync::watch::Watch;
+use embassy_time::{Duration, Ticker, Timer, with_timeout};
+use embedded_storage::nor_flash::NorFlash;
+use mmu_hal_port::{Button, Motors, SensorScan, StatusLed};
+use portable_atomic::{AtomicBool, AtomicU32, Ordering};
+
+use crate::control::{self, ControlLoop, ResetBoard, Schedule, Tick};
+use crate::persist::{Boot, EntryCrc, Keeper, Store};
+use crate::port::{CheckedCrc, SampleClock, WatchedFlash};
+use crate::uart::LineErrors;
+use crate::{App, BoardAction, Instant, Samples, drive};
+
+/// defmt's logging macros when the crate logs (feature `defmt`), nothing otherwise (the
+/// step-cost harness).
+macro_rules! log {
+    ($level:ident, $($arg:tt)*) => {{
+        #[cfg(feature = "defmt")]
+        ::defmt::$level!($($arg)*);
+    }};
+}
+
+/// The control period: 1 ms, exact at embassy-time's 1 MHz tick.
+pub const PERIOD: Duration = Duration::from_micros(1_000);
+/// The longest the control task waits for a sensor scan (the G071's DMA scan takes about 210 µs,
+/// the Pico's multiplexed one about 170 µs); past it the step runs on the previous samples,
+/// whose age then grows until `control::MAX_SAMPLE_AGE_US` stops the watchdog feed.
+pub const SCAN_TIMEOUT: Duration = Duration::from_micros(600);
+/// The longest a reset waits for the last response to leave the UART.
+pub const FLUSH_BEFORE_RESET: Duration = Duration::from_millis(20);
+/// Watchdog feeds the flash may give during a job that must run whole (the boot's repair, the
+/// save before a reset): a save erases at most two pages, the one in progress finished first two
+/// more; two spare. A loop in the save path runs out of them and the watchdog resets the MCU.
+pub const WHOLE_JOB_FEEDS: u32 = 6;
+/// Bytes of responses waiting for the UART: more than five steps' worth
+/// (`crate::TX_CAPACITY` = 48).
+pub const TX_QUEUE: usize = 256;
+
+/// Bytes from the printer waiting for the control task (it takes at most
+/// `control::MAX_RX_PER_STEP` a step); the UART's DMA ring holds what does not fit yet.
+pub static RX_PIPE: Pipe<CriticalSectionRawMutex, { control::RX_RING }> = Pipe::new();
+/// Responses waiting for the UART.
+pub static TX_PIPE: Pipe<CriticalSectionRawMutex, TX_QUEUE> = Pipe::new();
+/// True while the link's transmit task has bytes in flight.
+pub static TX_BUSY: AtomicBool = AtomicBool::new(false);
+/// The button's level (true: held down).
+pub static BUTTON: Watch<CriticalSectionRawMutex, bool, 1> = Watch::new();
+/// The status LED's state, sent when it changes.
+pub static LED: Signal<CriticalSectionRawMutex, bool> = Signal::new();
+/// A control step is done; true if it was busy with the printer (took bytes or answered).
+pub static STEPPED: Signal<CriticalSectionRawMutex, bool> = Signal::new();
+/// The store has restored the logic's state: the control task may step.
+pub static BOOTED: Signal<CriticalSectionRawMutex, ()> = Signal::new();
+/// A reset is due: save (or forget) whole, then say so on [`RESET_SAVED`].
+pub static RESET: Signal<CriticalSectionRawMutex, BoardAction> = Signal::new();
+/// The save before a reset is done.
+pub static RESET_SAVED: Signal<CriticalSectionRawMutex, ()> = Signal::new();
+/// The store wrote to flash after the last step (the CPU stalled): the control task drops the
+/// ticks it missed instead of catching up in a burst.
+pub static STORE_WROTE: AtomicBool = AtomicBool::new(false);
+/// Overruns the link reported.
+pub static OVERRUNS: AtomicU32 = AtomicU32::new(0);
+/// Garbled frames the link reported.
+pub static GARBLED: AtomicU32 = AtomicU32::new(0);
+
+/// The unit logic, shared by the control task (which steps it) and the store task (which saves
+/// what it holds). Both run on the one thread executor and never hold it across an `.await`.
+pub type Logic<const N: usize> = RefCell<ControlLoop<N>>;
+
+/// What a receive error of the printer link counts as.
+pub enum LineError {
+    /// Bytes lost: the ring or the USART overran.
+    Overrun,
+    /// A frame with a framing, noise or parity error.
+    Garbled,
+}
+
+/// The uptime, µs.
+pub fn now_us() -> u64 {
+    embassy_time::Instant::now().as_micros()
+}
+
+/// The logic's clock: the uptime in ms.
+pub fn now() -> Instant {
+    Instant::from_millis(now_us() / 1000)
+}
+
+/// The control task: a step every [`PERIOD`] (see the module header), once the store has
+/// restored the logic's state. `feed` reloads the board's watchdog; `restart` stops the motors
+/// and restarts the MCU.
+pub async fn run_control<const N: usize, S: SensorScan<N>, M: Motors<N>>(
+    mut sampler: S,
+    mut motors: M,
+    logic: &Logic<N>,
+    feed: fn(),
+    restart: fn() -> !,
+) -> ! {
+    BOOTED.wait().await;
+    let mut ticker = Ticker::every(PERIOD);
+    let mut schedule = Schedule::new(now_us(), PERIOD.as_micros());
+    let mut samples = Samples::<N>::uniform(mmu_hal_port::ADC_MAX / 2);
+    let mut sample_clock = SampleClock::new(now_us());
+    let mut button = BUTTON.receiver();
+    let mut rx = [0u8; control::MAX_RX_PER_STEP];
+    let mut led = None;
+    let mut line_errors = LineErrors::default();
+    loop {
+        ticker.next().await;
+        let lateness_us = schedule.start(now_us());
+        if let Ok(Ok(scan)) = with_timeout(SCAN_TIMEOUT, sampler.scan()).await {
+            samples = scan;
+            sample_clock.fresh(now_us());
+        }
+        let at_us = now_us();
+        let received = RX_PIPE.try_read(&mut rx).unwrap_or(0);
+        let button_down = button.as_mut().and_then(|b| b.try_get()).unwrap_or(false);
+        // The step, in a block of its own: the logic is never borrowed across an `.await`.
+        let (action, busy) = {
+            let Ok(mut control) = logic.try_borrow_mut() else {
+                continue;
+            };
+            let step = control.step(&Tick {
+                now: Instant::from_millis(at_us / 1000),
+                lateness_us,
+                sample_age_us: sample_clock.age_us(at_us),
+                samples: &samples,
+                rx: rx.get(..received).unwrap_or_default(),
+                button_down,
+            });
+            motors.apply(&step.out.motors);
+            if led != Some(step.out.status_led) {
+                led = Some(step.out.status_led);
+                LED.signal(step.out.status_led);
+            }
+            if !step.out.tx.is_empty() && !send(&step.out.tx) {
+                control.tx_dropped();
+            }
+            if step.button_pressed {
+                log!(info, "button: Middle");
+            }
+            if step.feed_watchdog {
+                feed();
+            }
+            if let Some(stats) = step.report {
+                let now_errors = line_errors_now();
+                log_stats(&stats, &now_errors.since(&line_errors));
+                line_errors = now_errors;
+            }
+            (step.out.action, received > 0 || !step.out.tx.is_empty())
+        };
+        if let Some(action) = action {
+            let mut resetting = Resetting::<M, N> {
+                motors: &mut motors,
+                restart,
+            };
+            control::reset(&mut resetting, action).await;
+        }
+        STEPPED.signal(busy);
+        // A flash write stalled the CPU (or the step overran): the ticks missed are dropped
+        // rather than caught up in a burst of late, unfed steps.
+        if STORE_WROTE.swap(false, Ordering::Relaxed) || lateness_us > control::ON_TIME_US {
+            ticker.reset();
+            schedule.restart(now_us());
+        }
+    }
+}
+
+/// Queues a whole response for the printer, or nothing when it does not fit.
+pub fn send(bytes: &[u8]) -> bool {
+    TX_PIPE.free_capacity() >= bytes.len() && TX_PIPE.try_write(bytes) == Ok(bytes.len())
+}
+
+/// The receive errors so far.
+pub fn line_errors_now() -> LineErrors {
+    LineErrors {
+        overruns: OVERRUNS.load(Ordering::Relaxed),
+        garbled: GARBLED.load(Ordering::Relaxed),
+        dropped: 0,
+    }
+}
+
+/// The board's side of a reset ([`control::reset`] fixes the order): motors off, the answer
+/// flushed, the state saved by the store task, then the restart.
+struct Resetting<'a, M, const N: usize> {
+    motors: &'a mut M,
+    restart: fn() -> !,
+}
+
+impl<M: Motors<N>, const N: usize> ResetBoard for Resetting<'_, M, N> {
+    fn stop_motors(&mut self) {
+        self.motors.apply(&drive::stopped());
+    }
+
+    async fn flush(&mut self) {
+        let sent = async {
+            while !TX_PIPE.is_empty() || TX_BUSY.load(Ordering::Relaxed) {
+                Timer::after_micros(200).await;
+            }
+        };
+        let _ = with_timeout(FLUSH_BEFORE_RESET, sent).await;
+    }
+
+    async fn persist(&mut self, action: BoardAction) {
+        RESET.signal(action);
+        RESET_SAVED.wait().await;
+    }
+
+    fn restart(&mut self) {
+        (self.restart)()
+    }
+}
+
+/// The store task: restores what the flash holds into the logic (then [`BOOTED`]), and then a
+/// bounded piece of a save after each step, or the whole save before a reset. `range` is the
+/// store's region of `flash`; `feed` reloads the board's watchdog.
+pub async fn run_store<const N: usize, F: NorFlash, C: EntryCrc>(
+    flash: F,
+    crc: C,
+    range: Range<u32>,
+    logic: &Logic<N>,
+    feed: fn(),
+) -> ! {
+    let mut keeper = {
+        // The control task waits for BOOTED: nothing else borrows the logic yet.
+        let Ok(mut control) = logic.try_borrow_mut() else {
+            panic!("the logic is borrowed at boot")
+        };
+        boot_store(control.app_mut(), flash, crc, range, feed)
+    };
+    BOOTED.signal(());
+    loop {
+        match select(STEPPED.wait(), RESET.wait()).await {
+            Either::First(busy) => {
+                let Ok(control) = logic.try_borrow() else {
+                    continue;
+                };
+                let wrote = keeper.update_after(control.app(), now(), busy);
+                if let Some(_health) = keeper.take_news() {
+                    log!(warn, "store: {}", _health);
+                }
+                drop(control);
+                // A failed write stalled the CPU too.
+                if wrote.unwrap_or(true) {
+                    STORE_WROTE.store(true, Ordering::Relaxed);
+                    if let Ok(mut control) = logic.try_borrow_mut() {
+                        control.saved();
+                    }
+                }
+            }
+            Either::Second(action) => {
+                if let Ok(control) = logic.try_borrow() {
+                    keeper.store().flash().allow_feeds(WHOLE_JOB_FEEDS);
+                    match keeper.before(action, control.app()) {
+                        Ok(()) => log!(info, "store: {} done", action),
+                        Err(_e) => log!(error, "store: {} failed: {}", action, _e),
+                    }
+                }
+                RESET_SAVED.signal(());
+            }
+        }
+    }
+}
+
+/// Checks the CRC unit, then restores into `app` what the flash holds, before its first step.
+/// Out of line: its frame (the keeper is built there) is gone before the store task loops.
+#[inline(never)]
+fn boot_store<const N: usize, F: NorFlash, C: EntryCrc>(
+    app: &mut App<N>,
+    flash: F,
+    crc: C,
+    range: Range<u32>,
+    feed: fn(),
+) -> Keeper<WatchedFlash<F>, N, CheckedCrc<C>> {
+    let (crc, _check) = CheckedCrc::check(crc);
+    if !crc.is_unit() {
+        log!(
+            error,
+            "CRC unit: {=u32:#x} for the check value, not {=u32:#x}: the store uses the software CRC",
+            _check,
+            crate::persist::iso_hdlc::CHECK
+        );
+    }
+    let mut flash = WatchedFlash::new(flash, feed);
+    // The boot may repair the store (erase a damaged page): a job that runs whole.
+    flash.allow_feeds(WHOLE_JOB_FEEDS);
+    let Ok(store) = Store::with_crc(flash, crc, range) else {
+        panic!("the store's region does not fit the flash")
+    };
+    let (mut keeper, boot) = Keeper::boot(store, app);
+    keeper.store().flash().allow_feeds(0);
+    match boot {
+        Boot::Restored => log_restored(&keeper, app),
+        Boot::Damaged(_damage) => log!(
+            warn,
+            "store: {=u16} unreadable double words, {=u16} torn entries (a power cut): the newest complete records are restored",
+            _damage.unreadable,
+            _damage.torn
+        ),
+    }
+    keeper
+}
+
+/// What the boot restored.
+fn log_restored<const N: usize, F: NorFlash, C: EntryCrc>(_keeper: &Keeper<F, N, C>, _app: &App<N>) {
+    #[cfg(feature = "defmt")]
+    {
+        let snapshot = _keeper.snapshot(_app);
+        let c = &snapshot.counters;
+        defmt::info!(
+            "restored: lanes {=[?]}, {=usize} settings, errors {=u16}, tool changes {=[?]}, failures {=[?]}, fed {=[?]} mm",
+            &snapshot.lanes[..],
+            snapshot.settings.len(),
+            c.drive_errors,
+            &c.tool_changes[..],
+            &c.failures[..],
+            &c.fed_mm[..]
+        );
+    }
+}
+
+/// The link's receive task: moves what the UART's DMA ring received into [`RX_PIPE`], waiting
+/// for room when the control task is behind (the ring holds the rest), and counts the receive
+/// errors; `classify` tells what an error of the board's UART counts as.
+pub async fn run_link_rx<R: embedded_io_async::Read>(mut rx: R, classify: fn(&R::Error) -> LineError) -> ! {
+    let mut buf = [0u8; 32];
+    loop {
+        match rx.read(&mut buf).await {
+            Ok(count) => RX_PIPE.write_all(buf.get(..count).unwrap_or_default()).await,
+            Err(e) => {
+                let counter = match classify(&e) {
+                    LineError::Overrun => &OVERRUNS,
+                    LineError::Garbled => &GARBLED,
+                };
+                counter.fetch_add(1, Ordering::Relaxed);
+            }
+        }
+    }
+}
+
+/// The link's transmit task: sends what the control task queued in [`TX_PIPE`].
+pub async fn run_link_tx<W: embedded_io_async::Write>(mut tx: W) -> ! {
+    let mut buf = [0u8; 64];
+    loop {
+        let count = TX_PIPE.read(&mut buf).await;
+        TX_BUSY.store(true, Ordering::Relaxed);
+        // A write error leaves nothing to retry: the printer asks again.
+        let _ = tx.write_all(buf.get(..count).unwrap_or_default()).await;
+        let _ = tx.flush().await;
+        TX_BUSY.store(!TX_PIPE.is_empty(), Ordering::Relaxed);
+    }
+}
+
+/// The button task: publishes the button's level at every edge (the control loop debounces it).
+pub async fn run_button<B: Button + embedded_hal_async::digital::Wait>(mut button: B) -> ! {
+    let sender = BUTTON.sender();
+    loop {
+        sender.send(button.is_pressed().unwrap_or(false));
+        let _ = button.wait_for_any_edge().await;
+    }
+}
+
+/// The status LED task: lights the LED as the control task says.
+pub async fn run_status_led<L: StatusLed>(mut led: L) -> ! {
+    loop {
+        let lit = LED.wait().await;
+        let _ = led.set_lit(lit);
+    }
+}
+
+/// The period's statistics, with what went wrong on the printer's receive line meanwhile.
+fn log_stats(_stats: &control::Stats, _line: &LineErrors) {
+    #[cfg(feature = "defmt")]
+    if _stats.troubled() || _line.total() > 0 {
+        defmt::warn!(
+            "control: {=u32} steps, {=u32} late (max {=u64} us), {=u32} with stale samples, {=u32} watchdog feeds skipped, {=u32} responses dropped, {=u32} flash writes; received: {=u32} overruns, {=u32} garbled",
+            _stats.steps,
+            _stats.late,
+            _stats.max_lateness_us,
+            _stats.stale,
+            _stats.unfed,
+            _stats.tx_dropped,
+            _stats.saves,
+            _line.overruns,
+            _line.garbled
+        );
+    } else {
+        defmt::info!(
+            "control: {=u32} steps on time, max lateness {=u64} us, {=u32} flash writes",
+            _stats.steps,
+            _stats.max_lateness_us,
+            _stats.saves
+        );
+    }
+}
