@@ -44,7 +44,7 @@ PAINT = 0xA5
 MARKS = {
     1: "calibrate_begin", 2: "calibrate_end", 3: "boot_begin", 4: "boot_end",
     5: "step_begin", 6: "step_end", 7: "save_begin", 8: "save_end", 9: "done",
-    10: "panic", 11: "bad_session",
+    10: "panic", 11: "bad_session", 12: "step_context",
 }
 STATUS = {0: "running", 1: "error", 2: "finished"}
 
@@ -279,6 +279,17 @@ class Bench:
                     self.call_profile = {}
                     if self.exact and len(self.steps) >= self.exact_steps:
                         uc.emu_stop()
+            return
+        if kind == 13:
+            if os.environ.get("STEP_DIGESTS"):
+                print("tx " + repr(struct.pack("<I", a)[:b]), file=sys.stderr)
+            return
+        if name == "step_context":
+            if self.steps:
+                index, instr, _, _, stack = self.steps[-1]
+                self.steps[-1] = (index, instr, a, b, stack)
+                if os.environ.get("STEP_DIGESTS"):
+                    print(f"step {index} digest {c:08x}", file=sys.stderr)
             return
         if name == "done":
             self.done = (a, b, c)

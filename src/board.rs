@@ -13,7 +13,8 @@
 //!   ([`EntryCrc`](mmu_firmware::persist::EntryCrc));
 //! - `line_error(&error)`: what a receive error of the link counts as.
 //!
-//! What both boards share is here: the motors on two TB6612FNG ([`Bridges`]) and [`Parts`].
+//! What both boards share is here: [`Parts`], and the motors on two TB6612FNG ([`Bridges`],
+//! from mmu-hal-port, which the step-cost harness drives too).
 
 #[cfg(feature = "g071")]
 mod g071;
@@ -28,10 +29,8 @@ pub use pico::*;
 use core::convert::Infallible;
 
 use embedded_hal::digital::OutputPin;
-use embedded_hal::pwm::SetDutyCycle;
 pub use mmu_firmware::tasks::LineError;
-use mmu_hal_port::MotorCommand;
-use mmu_hal_port::tb6612::{Channel, Error, Tb6612};
+pub use mmu_hal_port::tb6612::Bridges;
 
 /// What a board's `init` hands to `main`.
 pub struct Parts<Sampler, Motors, LinkRx, LinkTx, Led, ButtonPin, Watchdog, StoreFlash, Crc> {
@@ -71,88 +70,3 @@ impl OutputPin for NotConnected {
         Ok(())
     }
 }
-
-/// The three slot motors on two TB6612FNG: chip 1 drives slots 0 (bridge A) and 1 (bridge B),
-/// chip 2 slot 2 (bridge A; bridge B unused). A chip whose motors all coast is put in standby
-/// (STBY low), so a bridge is only powered while the logic drives or brakes it.
-pub struct Bridges<C1, C2> {
-    chip1: C1,
-    chip2: C2,
-    /// Whether each chip is in standby.
-    standby: [bool; 2],
-}
-
-impl<PA, A1, A2, PB, B1, B2, S1, QA, C1, C2, QB, D1, D2, S2, E>
-    Bridges<Tb6612<PA, A1, A2, PB, B1, B2, S1>, Tb6612<QA, C1, C2, QB, D1, D2, S2>>
-where
-    PA: SetDutyCycle<Error = E>,
-    PB: SetDutyCycle<Error = E>,
-    QA: SetDutyCycle<Error = E>,
-    QB: SetDutyCycle<Error = E>,
-    A1: OutputPin<Error = Infallible>,
-    A2: OutputPin<Error = Infallible>,
-    B1: OutputPin<Error = Infallible>,
-    B2: OutputPin<Error = Infallible>,
-    S1: OutputPin<Error = Infallible>,
-    C1: OutputPin<Error = Infallible>,
-    C2: OutputPin<Error = Infallible>,
-    D1: OutputPin<Error = Infallible>,
-    D2: OutputPin<Error = Infallible>,
-    S2: OutputPin<Error = Infallible>,
-{
-    /// Both chips, in standby (as `Tb6612::new` leaves them).
-    pub fn new(chip1: Tb6612<PA, A1, A2, PB, B1, B2, S1>, chip2: Tb6612<QA, C1, C2, QB, D1, D2, S2>) -> Self {
-        Bridges {
-            chip1,
-            chip2,
-            standby: [true; 2],
-        }
-    }
-}
-
-impl<PA, A1, A2, PB, B1, B2, S1, QA, C1, C2, QB, D1, D2, S2, E> mmu_hal_port::Motors<3>
-    for Bridges<Tb6612<PA, A1, A2, PB, B1, B2, S1>, Tb6612<QA, C1, C2, QB, D1, D2, S2>>
-where
-    PA: SetDutyCycle<Error = E>,
-    PB: SetDutyCycle<Error = E>,
-    QA: SetDutyCycle<Error = E>,
-    QB: SetDutyCycle<Error = E>,
-    A1: OutputPin<Error = Infallible>,
-    A2: OutputPin<Error = Infallible>,
-    B1: OutputPin<Error = Infallible>,
-    B2: OutputPin<Error = Infallible>,
-    S1: OutputPin<Error = Infallible>,
-    C1: OutputPin<Error = Infallible>,
-    C2: OutputPin<Error = Infallible>,
-    D1: OutputPin<Error = Infallible>,
-    D2: OutputPin<Error = Infallible>,
-    S2: OutputPin<Error = Infallible>,
-{
-    /// A PWM or pin error (none on either HAL: their errors are `Infallible`) leaves that
-    /// bridge's state unknown to its driver, which rewrites it at the next command.
-    fn apply(&mut self, motors: &[MotorCommand; 3]) {
-        let coast = MotorCommand::Coast;
-        if motors[0] == coast && motors[1] == coast {
-            if !self.standby[0] {
-                ignore(self.chip1.standby());
-                self.standby[0] = true;
-            }
-        } else {
-            ignore(self.chip1.apply(Channel::A, motors[0]));
-            ignore(self.chip1.apply(Channel::B, motors[1]));
-            self.standby[0] = false;
-        }
-        if motors[2] == coast {
-            if !self.standby[1] {
-                ignore(self.chip2.standby());
-                self.standby[1] = true;
-            }
-        } else {
-            ignore(self.chip2.apply(Channel::A, motors[2]));
-            self.standby[1] = false;
-        }
-    }
-}
-
-/// A driver error: nothing to do about it here (see [`Bridges`]'s `apply`).
-fn ignore<E>(_: Result<(), Error<E, Infallible>>) {}

@@ -138,7 +138,7 @@ pub async fn run_control<const N: usize, S: SensorScan<N>, M: Motors<N>>(
             sample_clock.fresh(now_us());
         }
         let at_us = now_us();
-        let received = RX_PIPE.try_read(&mut rx).unwrap_or(0);
+        let received = take_received(&mut rx);
         let button_down = button.as_mut().and_then(|b| b.try_get()).unwrap_or(false);
         // The step, in a block of its own: the logic is never borrowed across an `.await`.
         let (action, busy) = {
@@ -191,9 +191,36 @@ pub async fn run_control<const N: usize, S: SensorScan<N>, M: Motors<N>>(
     }
 }
 
-/// Queues a whole response for the printer, or nothing when it does not fit.
+/// Moves the oldest bytes waiting in [`RX_PIPE`] into `rx`, as many as wait and fit; returns how
+/// many. Two reads: the pipe's `try_read` hands out only the part before its ring wraps, and a
+/// step must take as many as the rule allows (`control::RxQueue::take_step`), not fewer.
+fn take_received(rx: &mut [u8]) -> usize {
+    let mut taken = 0;
+    while let Some(rest) = rx.get_mut(taken..)
+        && !rest.is_empty()
+        && let Ok(count) = RX_PIPE.try_read(rest)
+    {
+        taken += count;
+    }
+    taken
+}
+
+/// Queues a whole response for the printer, or nothing when it does not fit. Several writes:
+/// the pipe's `try_write` takes only what fits before its ring wraps (a single call sent the
+/// printer half a response; the step-cost harness caught it).
 pub fn send(bytes: &[u8]) -> bool {
-    TX_PIPE.free_capacity() >= bytes.len() && TX_PIPE.try_write(bytes) == Ok(bytes.len())
+    if TX_PIPE.free_capacity() < bytes.len() {
+        return false;
+    }
+    let mut rest = bytes;
+    while !rest.is_empty() {
+        match TX_PIPE.try_write(rest) {
+            Ok(count) => rest = rest.get(count..).unwrap_or_default(),
+            // Cannot happen: the room was checked, and only this task writes.
+            Err(_) => return false,
+        }
+    }
+    true
 }
 
 /// The receive errors so far.

@@ -1,30 +1,46 @@
-//! The step-cost harness: the unit logic (`App<3>`) and its persistence policy (`Keeper`),
-//! built for thumbv6m-none-eabi with the firmware's profile, replaying a recorded session in an
-//! emulator (`bench-mcu/run.py`).
+//! The step-cost harness: the firmware's tasks (`mmu_firmware::tasks`: control, store, the
+//! printer link, button, LED) on Embassy's executor and embassy-time, built for thumbv6m-none-eabi
+//! with the firmware's profile, replaying a recorded session in an emulator (`bench-mcu/run.py`).
 //!
-//! Every control step is done as the firmware's control loop does it: the bytes that arrived on
-//! the line join the receive queue (`control::RxQueue`, the board's UART ring), `App::step` gets
-//! the step's time, samples and at most `control::MAX_RX_PER_STEP` of the waiting bytes, then
-//! `Keeper::update_after` (or `Keeper::before` for a reset), told whether the step was busy with
-//! the printer (took bytes or answered) as the firmware tells it. The emulator counts the instructions between the calls to [`bench_mark`], which say
-//! what is measured and give each step's context. No runtime, no interrupts: the emulator sets
-//! the stack pointer and starts at [`bench_main`].
+//! Every millisecond of the session is what the firmware's CPU does in it: the bytes that arrived
+//! on the line are handed to the link's receive task half a millisecond before the tick (as the
+//! UART's DMA ring would, the task woken as by its interrupt), then the tick: the time driver's
+//! alarm (embassy's timer queue, as the driver's interrupt runs it) and the executor polled until
+//! no task is ready (the thread executor's loop without its WFE): the control task (Ticker, sensor
+//! scan with its timeout, `ControlLoop::step` with at most `control::MAX_RX_PER_STEP` bytes, the
+//! motors through the TB6612 driver, the answer queued, the watchdog fed), the store task's save
+//! piece and the link's transmit task. The emulator counts the instructions between the calls to
+//! [`bench_mark`] around each millisecond.
+//!
+//! Stand-ins for the HAL drivers, which the emulator does not model: the sensor scan returns the
+//! session's samples (the G071's DMA scan sleeps meanwhile), pins and PWM compare registers are
+//! volatile stores to RAM, the UART's receive ring is a buffer the harness fills and its transmit
+//! side digests what it is given (the DMA sends it), the flash is RAM with NOR semantics, the
+//! watchdog a volatile store. No runtime, no interrupts: the emulator sets the stack pointer and
+//! starts at [`bench_main`].
 
 #![no_std]
 #![no_main]
 
+use core::cell::{Cell, RefCell, UnsafeCell};
+use core::convert::Infallible;
 use core::panic::PanicInfo;
+use core::task::Waker;
 
+use embassy_executor::raw::Executor;
 use embedded_storage::nor_flash::{ErrorType, NorFlash, NorFlashErrorKind, ReadNorFlash};
-use mmu_firmware::control::{RX_RING, RxQueue};
-use mmu_firmware::persist::{Keeper, Store};
+use mmu_firmware::control::ControlLoop;
+use mmu_firmware::persist::SoftwareCrc;
 use mmu_firmware::runner::Status;
-use mmu_firmware::{App, Config, HubSamples, Instant, Outputs, Samples, SlotSamples};
+use mmu_firmware::tasks::{self, LineError, Logic};
+use mmu_firmware::{App, Config, HubSamples, Samples, SlotSamples};
+use mmu_hal_port::tb6612::{Bridges, Tb6612};
+use mmu_hal_port::SensorScan;
 
 const SLOTS: usize = 3;
 /// Where the emulator maps the session file's length (u32), followed by the file (read-only).
 const SESSION: usize = 0x6000_0000;
-/// The persisted state's region of the internal flash, as offsets from its base (board.rs).
+/// The persisted state's region of the internal flash, as offsets from its base (board g071).
 const STORE_RANGE: core::ops::Range<u32> = 0x1_8000..0x2_0000;
 const FLASH_BASE: usize = 0x0800_0000;
 const PAGE: usize = 2048;
@@ -51,6 +67,8 @@ enum Mark {
     Panic = 10,
     /// The session file is not what the harness expects.
     BadSession = 11,
+    /// a: the step's info, b: its code (see StepEnd), after the step's millisecond.
+    StepContext = 12,
 }
 
 /// The emulator hooks this function's address; the registers carry the mark's words.
@@ -184,22 +202,277 @@ impl Session {
     }
 }
 
-/// One step of the unit logic, out of line as in the firmware (src/main.rs).
-#[inline(never)]
-fn step(app: &mut App<SLOTS>, now: Instant, samples: &Samples<SLOTS>, rx: &[u8]) -> Outputs<SLOTS> {
-    app.step(now, samples, rx)
+/// The harness's state, shared with the stand-ins: single-threaded, no interrupts.
+struct Shared<T>(T);
+// SAFETY: the harness runs on one core without interrupts.
+unsafe impl<T> Sync for Shared<T> {}
+
+/// The virtual clock, µs.
+static NOW_US: Shared<Cell<u64>> = Shared(Cell::new(0));
+/// Embassy's timer queue, as the time driver keeps it.
+static QUEUE: Shared<RefCell<embassy_time_queue_utils::Queue>> =
+    Shared(RefCell::new(embassy_time_queue_utils::Queue::new()));
+/// The executor asked to be polled again (its pender ran).
+static PENDED: Shared<Cell<bool>> = Shared(Cell::new(false));
+/// The samples of the current millisecond.
+static SAMPLES: Shared<Cell<Option<Samples<SLOTS>>>> = Shared(Cell::new(None));
+/// Bytes that arrived on the line and wait for the link's receive task.
+static LINE: Shared<RefCell<(&'static [u8], Option<Waker>)>> = Shared(RefCell::new((&[], None)));
+/// The FNV-1a digest of every byte the link's transmit task was given.
+static DIGEST: Shared<Cell<u32>> = Shared(Cell::new(0x811c_9dc5));
+/// Where the stand-ins' pins, compare registers and the watchdog's key register are written.
+static REGISTERS: Shared<UnsafeCell<[u32; 8]>> = Shared(UnsafeCell::new([0; 8]));
+
+/// A volatile store to a stand-in register, as a driver's register write.
+fn write_register(index: usize, value: u32) {
+    // SAFETY: inside the array; single-threaded.
+    unsafe { (REGISTERS.0.get().cast::<u32>()).add(index % 8).write_volatile(value) };
 }
 
-/// A step's context for the report: the command, its status, the bytes received.
-fn context(app: &App<SLOTS>, rx_len: usize) -> (u32, u32) {
-    let operation = app.operation();
-    let (status, code) = match operation.status() {
-        Status::Running(progress) => (0, u32::from(progress.0)),
-        Status::Failed(error) => (1, u32::from(error.0)),
-        Status::Finished => (2, 0),
-    };
-    let request = u32::from(operation.request.0.as_byte()) | (u32::from(operation.request.1) << 8);
-    (request | (status << 16) | ((rx_len.min(255) as u32) << 24), code)
+/// The time driver on the virtual clock.
+struct Driver;
+
+impl embassy_time_driver::Driver for Driver {
+    fn now(&self) -> u64 {
+        NOW_US.0.get()
+    }
+
+    fn schedule_wake(&self, at: u64, waker: &Waker) {
+        // The real driver would set its alarm when the queue says so; the harness looks at the
+        // queue every millisecond.
+        let _ = QUEUE.0.borrow_mut().schedule_wake(at, waker);
+    }
+}
+
+embassy_time_driver::time_driver_impl!(static DRIVER: Driver = Driver);
+
+/// The executor's pender: the thread executor's SEV.
+#[unsafe(export_name = "__pender")]
+fn pender(_context: *mut ()) {
+    PENDED.0.set(true);
+}
+
+/// No interrupts: a critical section has nothing to mask.
+struct SingleCore;
+critical_section::set_impl!(SingleCore);
+// SAFETY: one core, no interrupts.
+unsafe impl critical_section::Impl for SingleCore {
+    unsafe fn acquire() -> critical_section::RawRestoreState {
+        true
+    }
+
+    unsafe fn release(_restore: critical_section::RawRestoreState) {}
+}
+
+/// The sensor scan: the session's samples of this millisecond.
+struct Sampler;
+
+impl SensorScan<SLOTS> for Sampler {
+    type Error = Infallible;
+
+    async fn scan(&mut self) -> Result<Samples<SLOTS>, Infallible> {
+        Ok(SAMPLES.0.get().unwrap_or_default())
+    }
+}
+
+/// A GPIO output: a store to its port's set/reset register.
+struct Pin(usize);
+
+impl embedded_hal::digital::ErrorType for Pin {
+    type Error = Infallible;
+}
+
+impl embedded_hal::digital::OutputPin for Pin {
+    fn set_low(&mut self) -> Result<(), Infallible> {
+        write_register(0, 1 << (16 + self.0));
+        Ok(())
+    }
+
+    fn set_high(&mut self) -> Result<(), Infallible> {
+        write_register(0, 1 << self.0);
+        Ok(())
+    }
+}
+
+/// A PWM channel: a store to its compare register.
+struct Pwm(usize);
+
+impl embedded_hal::pwm::ErrorType for Pwm {
+    type Error = Infallible;
+}
+
+impl embedded_hal::pwm::SetDutyCycle for Pwm {
+    fn max_duty_cycle(&self) -> u16 {
+        3199
+    }
+
+    fn set_duty_cycle(&mut self, duty: u16) -> Result<(), Infallible> {
+        write_register(1 + self.0, u32::from(duty));
+        Ok(())
+    }
+}
+
+type Motors = Bridges<Tb6612<Pwm, Pin, Pin, Pwm, Pin, Pin, Pin>, Tb6612<Pwm, Pin, Pin, Pwm, Pin, Pin, Pin>>;
+
+/// The link's receive side: what the harness put on the line.
+struct LinkRx;
+
+impl embedded_io_async::ErrorType for LinkRx {
+    type Error = Infallible;
+}
+
+impl embedded_io_async::Read for LinkRx {
+    async fn read(&mut self, buf: &mut [u8]) -> Result<usize, Infallible> {
+        core::future::poll_fn(|cx| {
+            let mut line = LINE.0.borrow_mut();
+            if line.0.is_empty() {
+                line.1 = Some(cx.waker().clone());
+                return core::task::Poll::Pending;
+            }
+            let count = line.0.len().min(buf.len());
+            let (taken, rest) = line.0.split_at(count);
+            buf[..count].copy_from_slice(taken);
+            line.0 = rest;
+            core::task::Poll::Ready(Ok(count))
+        })
+        .await
+    }
+}
+
+/// The link's transmit side: digests what it is given.
+struct LinkTx;
+
+impl embedded_io_async::ErrorType for LinkTx {
+    type Error = Infallible;
+}
+
+impl embedded_io_async::Write for LinkTx {
+    async fn write(&mut self, bytes: &[u8]) -> Result<usize, Infallible> {
+        let mut digest = DIGEST.0.get();
+        for &byte in bytes {
+            digest = (digest ^ u32::from(byte)).wrapping_mul(0x0100_0193);
+        }
+        DIGEST.0.set(digest);
+        Ok(bytes.len())
+    }
+
+    async fn flush(&mut self) -> Result<(), Infallible> {
+        Ok(())
+    }
+}
+
+/// The button: never pressed; an edge never comes.
+struct Button;
+
+impl embedded_hal::digital::ErrorType for Button {
+    type Error = Infallible;
+}
+
+impl embedded_hal::digital::InputPin for Button {
+    fn is_high(&mut self) -> Result<bool, Infallible> {
+        Ok(true)
+    }
+
+    fn is_low(&mut self) -> Result<bool, Infallible> {
+        Ok(false)
+    }
+}
+
+impl embedded_hal_async::digital::Wait for Button {
+    async fn wait_for_high(&mut self) -> Result<(), Infallible> {
+        core::future::pending().await
+    }
+    async fn wait_for_low(&mut self) -> Result<(), Infallible> {
+        core::future::pending().await
+    }
+    async fn wait_for_rising_edge(&mut self) -> Result<(), Infallible> {
+        core::future::pending().await
+    }
+    async fn wait_for_falling_edge(&mut self) -> Result<(), Infallible> {
+        core::future::pending().await
+    }
+    async fn wait_for_any_edge(&mut self) -> Result<(), Infallible> {
+        core::future::pending().await
+    }
+}
+
+/// The watchdog's key register.
+fn feed() {
+    write_register(7, 0xAAAA);
+}
+
+/// A reset: the harness stops there (a session has none).
+fn restart() -> ! {
+    mark(Mark::BadSession, 3, 0, 0);
+    halt()
+}
+
+static LOGIC: Shared<UnsafeCell<Option<Logic<SLOTS>>>> = Shared(UnsafeCell::new(None));
+
+fn logic() -> &'static Logic<SLOTS> {
+    // SAFETY: written once, before any task runs, then only shared.
+    match unsafe { &*LOGIC.0.get() } {
+        Some(logic) => logic,
+        None => halt(),
+    }
+}
+
+#[embassy_executor::task]
+async fn control(motors: Motors) {
+    tasks::run_control(Sampler, motors, logic(), feed, restart).await
+}
+
+#[embassy_executor::task]
+async fn store() {
+    tasks::run_store(EmulatedFlash, SoftwareCrc::default(), STORE_RANGE, logic(), feed).await
+}
+
+#[embassy_executor::task]
+async fn link_rx() {
+    tasks::run_link_rx(LinkRx, |_| LineError::Garbled).await
+}
+
+#[embassy_executor::task]
+async fn link_tx() {
+    tasks::run_link_tx(LinkTx).await
+}
+
+#[embassy_executor::task]
+async fn button() {
+    tasks::run_button(Button).await
+}
+
+#[embassy_executor::task]
+async fn status_led() {
+    tasks::run_status_led(Pin(13)).await
+}
+
+/// Runs what the CPU runs at `now_us`: the time driver's alarm, then the executor until no task
+/// is ready.
+fn run_at(executor: &'static Executor, now_us: u64) {
+    NOW_US.0.set(now_us);
+    let _ = QUEUE.0.borrow_mut().next_expiration(now_us);
+    PENDED.0.set(true);
+    while PENDED.0.get() {
+        PENDED.0.set(false);
+        // SAFETY: not from the pender; one thread.
+        unsafe { executor.poll() };
+    }
+}
+
+fn tb6612(first: usize) -> Tb6612<Pwm, Pin, Pin, Pwm, Pin, Pin, Pin> {
+    match Tb6612::new(
+        Pwm(first),
+        Pin(first),
+        Pin(first + 1),
+        Pwm(first + 1),
+        Pin(first + 2),
+        Pin(first + 3),
+        Pin(first + 4),
+    ) {
+        Ok(chip) => chip,
+        Err(_) => halt(),
+    }
 }
 
 /// The emulator starts here with the stack pointer at the top of RAM.
@@ -220,53 +493,79 @@ pub extern "C" fn bench_main() -> ! {
     }
     let steps = session.u32().unwrap_or(0);
 
+    // SAFETY: before any task runs.
+    unsafe { *LOGIC.0.get() = Some(RefCell::new(ControlLoop::new(App::new(Config::default()), tasks::now()))) };
+    static EXECUTOR: Shared<UnsafeCell<Option<Executor>>> = Shared(UnsafeCell::new(None));
+    // SAFETY: written once, here.
+    let executor: &'static Executor = unsafe { (*EXECUTOR.0.get()).insert(Executor::new(core::ptr::null_mut())) };
+    let spawner = executor.spawner();
+    let motors = Bridges::new(tb6612(0), tb6612(5));
+    macro_rules! spawn {
+        ($($task:expr),*) => {$(
+            match $task {
+                Ok(token) => spawner.spawn(token),
+                Err(_) => halt(),
+            }
+        )*};
+    }
+    spawn!(store(), control(motors), link_rx(), link_tx(), button(), status_led());
+
+    // The boot: the store task restores from the blank flash, the control task starts its Ticker.
     mark(Mark::BootBegin, 0, 0, 0);
-    let Ok(store) = Store::new(EmulatedFlash, STORE_RANGE) else {
-        mark(Mark::BadSession, 1, 0, 0);
-        halt();
-    };
-    let mut app = App::<SLOTS>::new(Config::default());
-    let (mut keeper, _) = Keeper::boot(store, &mut app);
+    run_at(executor, 0);
     mark(Mark::BootEnd, 0, 0, 0);
 
-    let mut digest: u32 = 0x811c_9dc5;
-    let mut received = RxQueue::<RX_RING>::new();
+    let mut waiting = 0usize;
     for index in 0..steps {
         let Some((samples, line)) = session.step() else {
             mark(Mark::BadSession, 2, index, 0);
             halt();
         };
-        let now = Instant::from_millis(u64::from(index));
-        received.receive(line);
-        let waiting = received.len();
-        let rx = received.take_step();
+        let tick_us = (u64::from(index) + 1) * 1000;
         mark(Mark::StepBegin, index, 0, 0);
-        let out = step(&mut app, now, &samples, &rx);
-        let (info, code) = context(&app, rx.len());
-        mark(
-            Mark::StepEnd,
-            index,
-            info,
-            code | ((waiting.min(0xffff) as u32) << 16),
-        );
-        for &byte in out.tx.iter() {
-            digest = (digest ^ u32::from(byte)).wrapping_mul(0x0100_0193);
-        }
-        // As the firmware's control loop: no save piece after a step busy with the printer.
-        let busy = !rx.is_empty() || !out.tx.is_empty();
-        mark(Mark::SaveBegin, index, 0, 0);
-        let wrote = match out.action {
-            None => keeper.update_after(&app, now, busy).unwrap_or(true),
-            Some(action) => {
-                let _ = keeper.before(action, &app);
-                true
+        // Half a millisecond before the tick, the line's bytes reach the link's receive task.
+        {
+            let mut pending = LINE.0.borrow_mut();
+            pending.0 = line;
+            if let Some(waker) = pending.1.take() {
+                waker.wake();
             }
+        }
+        run_at(executor, tick_us - 500);
+        waiting += line.len();
+        SAMPLES.0.set(Some(samples));
+        run_at(executor, tick_us);
+        mark(Mark::StepEnd, index, 0, 0);
+        let taken = waiting.min(mmu_firmware::control::MAX_RX_PER_STEP);
+        let (info, code) = match logic().try_borrow() {
+            Ok(control) => context(control.app(), taken),
+            Err(_) => (0, 0),
         };
+        // The step's context, reported with an empty save (the save piece is inside the tick).
+        mark(Mark::StepContext, info, code | ((waiting.min(0xffff) as u32) << 16), DIGEST.0.get());
+        waiting -= taken;
+        let wrote = tasks::STORE_WROTE.load(portable_atomic_ordering());
+        mark(Mark::SaveBegin, index, 0, 0);
         mark(Mark::SaveEnd, index, u32::from(wrote), 0);
     }
-    let expected = session.u32().unwrap_or(0);
-    mark(Mark::Done, steps, digest, expected);
+    mark(Mark::Done, steps, DIGEST.0.get(), session.u32().unwrap_or(0));
     halt()
+}
+
+/// A step's context for the report: the command, its status, the bytes received.
+fn context(app: &App<SLOTS>, rx_len: usize) -> (u32, u32) {
+    let operation = app.operation();
+    let (status, code) = match operation.status() {
+        Status::Running(progress) => (0, u32::from(progress.0)),
+        Status::Failed(error) => (1, u32::from(error.0)),
+        Status::Finished => (2, 0),
+    };
+    let request = u32::from(operation.request.0.as_byte()) | (u32::from(operation.request.1) << 8);
+    (request | (status << 16) | ((rx_len.min(255) as u32) << 24), code)
+}
+
+fn portable_atomic_ordering() -> core::sync::atomic::Ordering {
+    core::sync::atomic::Ordering::Relaxed
 }
 
 fn halt() -> ! {

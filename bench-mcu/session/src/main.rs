@@ -124,7 +124,9 @@ impl Recorder {
         let samples: Samples<SLOTS> = self.model.samples();
         self.received.receive(&line);
         let rx = self.received.take_step();
-        let out = self.app.step(Instant::from_millis(self.now), &samples, &rx);
+        // The firmware's first control tick comes a period after the control task starts its
+        // Ticker (at 0): step `k` runs at `k + 1` ms (bench-mcu/harness polls the tasks so).
+        let out = self.app.step(Instant::from_millis(self.now + 1), &samples, &rx);
         for slot in samples.slots {
             self.out.extend_from_slice(&slot.motor_hall.to_le_bytes());
             self.out.extend_from_slice(&slot.filament.to_le_bytes());
@@ -136,6 +138,9 @@ impl Recorder {
         self.out.extend_from_slice(&line);
         for &byte in out.tx.iter() {
             self.digest = (self.digest ^ u32::from(byte)).wrapping_mul(0x0100_0193);
+        }
+        if self.debug {
+            eprintln!("step {} rx {} tx {:?} digest {:08x}", self.steps, rx.len(), String::from_utf8_lossy(&out.tx), self.digest);
         }
         self.model.step(1, &out.motors);
         self.printer_mechanics();
