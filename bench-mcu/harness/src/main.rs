@@ -34,8 +34,8 @@ use mmu_firmware::persist::SoftwareCrc;
 use mmu_firmware::runner::Status;
 use mmu_firmware::tasks::{self, LineError, Logic};
 use mmu_firmware::{App, Config, HubSamples, Samples, SlotSamples};
-use mmu_hal_port::tb6612::{Bridges, Tb6612};
 use mmu_hal_port::SensorScan;
+use mmu_hal_port::tb6612::{Bridges, Tb6612};
 
 const SLOTS: usize = 3;
 /// Where the emulator maps the session file's length (u32), followed by the file (read-only).
@@ -226,7 +226,11 @@ static REGISTERS: Shared<UnsafeCell<[u32; 8]>> = Shared(UnsafeCell::new([0; 8]))
 /// A volatile store to a stand-in register, as a driver's register write.
 fn write_register(index: usize, value: u32) {
     // SAFETY: inside the array; single-threaded.
-    unsafe { (REGISTERS.0.get().cast::<u32>()).add(index % 8).write_volatile(value) };
+    unsafe {
+        (REGISTERS.0.get().cast::<u32>())
+            .add(index % 8)
+            .write_volatile(value)
+    };
 }
 
 /// The time driver on the virtual clock.
@@ -494,10 +498,16 @@ pub extern "C" fn bench_main() -> ! {
     let steps = session.u32().unwrap_or(0);
 
     // SAFETY: before any task runs.
-    unsafe { *LOGIC.0.get() = Some(RefCell::new(ControlLoop::new(App::new(Config::default()), tasks::now()))) };
+    unsafe {
+        *LOGIC.0.get() = Some(RefCell::new(ControlLoop::new(
+            App::new(Config::default()),
+            tasks::now(),
+        )))
+    };
     static EXECUTOR: Shared<UnsafeCell<Option<Executor>>> = Shared(UnsafeCell::new(None));
     // SAFETY: written once, here.
-    let executor: &'static Executor = unsafe { (*EXECUTOR.0.get()).insert(Executor::new(core::ptr::null_mut())) };
+    let executor: &'static Executor =
+        unsafe { (*EXECUTOR.0.get()).insert(Executor::new(core::ptr::null_mut())) };
     let spawner = executor.spawner();
     let motors = Bridges::new(tb6612(0), tb6612(5));
     macro_rules! spawn {
@@ -508,7 +518,14 @@ pub extern "C" fn bench_main() -> ! {
             }
         )*};
     }
-    spawn!(store(), control(motors), link_rx(), link_tx(), button(), status_led());
+    spawn!(
+        store(),
+        control(motors),
+        link_rx(),
+        link_tx(),
+        button(),
+        status_led()
+    );
 
     // The boot: the store task restores from the blank flash, the control task starts its Ticker.
     mark(Mark::BootBegin, 0, 0, 0);
@@ -542,7 +559,12 @@ pub extern "C" fn bench_main() -> ! {
             Err(_) => (0, 0),
         };
         // The step's context, reported with an empty save (the save piece is inside the tick).
-        mark(Mark::StepContext, info, code | ((waiting.min(0xffff) as u32) << 16), DIGEST.0.get());
+        mark(
+            Mark::StepContext,
+            info,
+            code | ((waiting.min(0xffff) as u32) << 16),
+            DIGEST.0.get(),
+        );
         waiting -= taken;
         let wrote = tasks::STORE_WROTE.load(portable_atomic_ordering());
         mark(Mark::SaveBegin, index, 0, 0);
