@@ -252,7 +252,8 @@ class Bench:
                                                   arm.UC_ARM_REG_R2, arm.UC_ARM_REG_R3))
         name = MARKS.get(kind, f"mark {kind}")
         sp = uc.reg_read(arm.UC_ARM_REG_SP)
-        self.in_step = name == f"{self.profile_call}_begin"
+        self.in_step = name == f"{self.profile_call}_begin" and (
+            self.profile_call != "step" or self.profile_at is None or a == self.profile_at)
         if name.endswith("_begin"):
             self.stack_used(sp)
             self.open[name[:-6]] = (self.count, sp)
@@ -334,7 +335,7 @@ def main():
     parser.add_argument("--profile-writes", action="store_true",
                         help="with --profile-save: only the saves that wrote to the flash")
     parser.add_argument("--profile-at", type=int, metavar="STEP",
-                        help="with --profile-save: only the save of this step")
+                        help="with --profile-save: only the save of this step; with --profile: only this step")
     parser.add_argument("--exact-steps", type=int, default=300,
                         help="recount this many first steps instruction by instruction (0: skip)")
     args = parser.parse_args()
@@ -342,6 +343,7 @@ def main():
     if args.profile or args.profile_save:
         bench = Bench(args.elf, session, exact_steps=args.profile or args.profile_save)
         bench.profile = {}
+        bench.profile_at = args.profile_at
         if args.profile_save:
             bench.profile_call = "save"
             bench.profile_writes_only = args.profile_writes
