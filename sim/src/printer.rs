@@ -77,7 +77,7 @@ pub struct PrinterOptions {
 impl Default for PrinterOptions {
     fn default() -> Self {
         PrinterOptions {
-            version: (3, 0, 4),
+            version: (3, 0, 3),
             extra_load_mm: 5,
             slow_feed_mm_s: 20,
             command_timeout_ms: 10 * 60 * 1000,

@@ -52,7 +52,7 @@ pub struct TargetArgs {
     pub fsensor_events: Option<PathBuf>,
     /// The unit firmware version to expect; S0..S2 must answer it (3.0.2 for a unit set up for
     /// an MK3S).
-    #[arg(long, value_name = "X.Y.Z", default_value = "3.0.4", value_parser = parse_version)]
+    #[arg(long, value_name = "X.Y.Z", default_value = "3.0.3", value_parser = parse_version)]
     pub expect_version: (u8, u8, u8),
     /// Show every frame sent (`>`) and received (`<`).
     #[arg(short, long)]
