@@ -368,6 +368,14 @@ const COMMANDS: &[(&str, Check)] = &[
     ("sudo udevadm trigger", Check::NotRun("root, udev")),
     ("docker build -t mmu-firmware .", Check::NotRun("needs Docker")),
     (
+        "picocom --omap crlf --imap lfcrlf --echo /dev/pts/7",
+        Check::NotRun("an interactive terminal program"),
+    ),
+    (
+        "tio --map OCRNL,INLCRNL --local-echo /dev/pts/7",
+        Check::NotRun("an interactive terminal program"),
+    ),
+    (
         "docker run --rm -it --privileged -v /dev/bus/usb:/dev/bus/usb mmu-firmware",
         Check::NotRun("needs Docker and a board"),
     ),
@@ -382,8 +390,11 @@ const COMMANDS: &[(&str, Check)] = &[
         "mmu sensors --port /dev/ttyUSB0 --plot hub.png --seconds 10",
         Check::OnPtyExits(0),
     ),
-    ("load 0", Check::Exits(0)),
-    ("read slot0", Check::Exits(0)),
+    ("t 1", Check::Exits(0)),
+    ("read bowden", Check::Exits(0)),
+    ("set bowden 410", Check::Exits(0)),
+    ("status", Check::Exits(0)),
+    ("motor 0", Check::Exits(0)),
     (
         "mmu calibrate --port /dev/ttyUSB0 --merge-mm 8",
         Check::NeedsHardware("a person presses Enter when the filament reaches the printer's sensor"),
@@ -455,6 +466,13 @@ const COMMANDS: &[(&str, Check)] = &[
         "cargo calibrate --port /dev/pts/7 --fsensor-events /tmp/mmu-events.jsonl bowden",
         Check::OnPtyExits(0),
     ),
+    ("mmu motor --port /dev/ttyUSB0 0", Check::OnPtyExits(0)),
+    ("mmu motor --sim 1", Check::Exits(0)),
+    ("mmu motor --sim --fault motor-dead:0 0", Check::Exits(1)),
+    ("mmu slots set 1 PETG red", Check::Exits(0)),
+    ("mmu slots clear 1", Check::Exits(0)),
+    ("mmu slots --port /dev/ttyUSB0", Check::OnPtyExits(0)),
+    ("mmu slots --sim", Check::Exits(0)),
     ("mmu encode request T 1", Check::Exits(0)),
     ("mmu encode request X 42", Check::Exits(0)),
     ("mmu encode request W 0xb 5", Check::Exits(0)),
@@ -584,6 +602,8 @@ fn shell(command: &str, dir: &Path) -> Command {
         .args(["-c", command])
         .current_dir(dir)
         .env("PATH", path)
+        // The console's files (slot map, statistics) stay in the work folder, not the user's.
+        .env("MMU_CONFIG_DIR", dir)
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped());
