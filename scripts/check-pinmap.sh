@@ -4,7 +4,7 @@
 # src/board/pico/mod.rs (PIN_n, tables whose rows start `| GP6 |`). Every pin of a map is in a
 # table with the same function and header pin, and the tables name no pin the map does not use.
 #
-#   scripts/check-pinmap.sh [doc files...]   (default: README.md and every book/src/**/*.md)
+#   scripts/check-pinmap.sh [doc files...]   (default: book/src/firmware.md, the book's wiring page)
 #
 # A wiring-table row is a Markdown table row whose first cell is a pin name, with the columns:
 # pin | header (NUCLEO header / Pico pin) | function | connect to.
@@ -12,10 +12,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 if [ "$#" -eq 0 ]; then
-    set -- README.md
-    if [ -d book/src ]; then
-        while IFS= read -r page; do set -- "$@" "$page"; done < <(find book/src -name '*.md' | sort)
-    fi
+    set -- book/src/firmware.md
 fi
 
 # Map rows: `field: PIN, "function", "header", "wired to", safe;` -> "PIN|header|function"
