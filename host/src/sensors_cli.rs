@@ -33,7 +33,7 @@ use crate::usage::{Interrupted, usage};
 /// `mmu sensors` options.
 #[derive(Debug, clap::Args)]
 pub struct SensorsArgs {
-    /// A real unit on this serial port (115200 8N1): a USB-serial adapter on USART3 (PC10/PC11),
+    /// A real unit on this serial port (115200 8N1): a USB-serial adapter on USART1 (PB6/PB7; Pico: UART0, GP0/GP1),
     /// e.g. /dev/ttyUSB0 (not the NUCLEO's /dev/ttyACM0, the ST-LINK port).
     #[arg(long, value_name = "DEV", conflicts_with = "sim")]
     pub port: Option<String>,

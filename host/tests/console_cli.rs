@@ -197,7 +197,7 @@ fn the_console_drives_the_simulator_over_a_pty() {
     assert!(!out.contains("link lost"), "{out}");
 }
 
-/// The protocol is on USART3 (PC10/PC11), reached through a USB-serial adapter; the NUCLEO's
+/// The protocol is on USART1 (PB6/PB7; Pico: UART0, GP0/GP1), reached through a USB-serial adapter; the NUCLEO's
 /// `/dev/ttyACM0` is its ST-LINK port, which the firmware leaves free. Neither the book's (and
 /// the README's) examples nor the tool's help may send a user there.
 #[test]

@@ -46,7 +46,7 @@ use words::{done_text, fsensor_text, lane_text, unknown_register, value_note};
 #[derive(Debug, clap::Args)]
 pub struct TargetArgs {
     /// A real unit on this serial port, 115200 8N1: the USB-serial adapter wired to the unit's
-    /// USART3 (PC10/PC11), e.g. /dev/ttyUSB0; or the path `mmu sim --pty` prints.
+    /// USART1 (PB6/PB7; Pico: UART0, GP0/GP1), e.g. /dev/ttyUSB0; or the path `mmu sim --pty` prints.
     #[arg(long, value_name = "DEV", conflicts_with = "sim")]
     pub port: Option<String>,
     /// The in-process simulator, in virtual time.

@@ -84,7 +84,7 @@ pub fn error_help(error: ErrorCode) -> ErrorHelp {
         ),
         ErrorCode::MMU_NOT_RESPONDING => help(
             "the unit does not answer",
-            "the unit's power; the serial wiring (the protocol is on USART3, PC10 TX and PC11 RX, not on the ST-LINK's USB port); TX and RX not swapped; a common ground",
+            "the unit's power; the serial wiring (the protocol is on USART1, PB6 TX and PB7 RX, on a NUCLEO (UART0, GP0 TX and GP1 RX, on a Pico), not on the ST-LINK's USB port); TX and RX not swapped; a common ground",
         ),
         _ => help(
             "an MMU3 error for a part this unit does not have (selector, idler, stepper drivers) or for the printer's side: this unit never raises it",
