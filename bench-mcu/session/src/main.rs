@@ -344,7 +344,11 @@ impl Recorder {
                 Act::Idle(ms) => self.idle(ms),
                 Act::Burst => self.burst(),
                 Act::Handshake => {
-                    for part in 0..4 {
+                    // A printer that wants 3.0.3 (Buddy 6.4.x): it asks S2 again after the
+                    // unit's first offer (3.0.4), which the unit answers with 3.0.3, then S3.
+                    // The script's unloads are the 3.0.3 contract's: the unit pulls at once
+                    // (a 3.0.4 printer retracts past its own sensor first).
+                    for part in [0, 1, 2, 2, 3] {
                         self.send(Request::new(RequestCode::Version, part));
                     }
                     self.drain();
