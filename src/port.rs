@@ -305,4 +305,94 @@ mod tests {
         assert_eq!(last_fed, Some(10 + MAX_SAMPLE_AGE_US / 1000));
         assert!(fed[..10].iter().all(|&f| f));
     }
+
+    /// The Pico's flash as the store sees it through embassy-rp's driver: 4 KiB sectors, byte
+    /// writes and reads (`embassy_rp::flash`: ERASE_SIZE 4096, WRITE_SIZE 1, READ_SIZE 1).
+    struct QspiFlash(Vec<u8>, u32);
+
+    const SECTOR: usize = 4096;
+
+    impl ErrorType for QspiFlash {
+        type Error = NorFlashErrorKind;
+    }
+
+    impl ReadNorFlash for QspiFlash {
+        const READ_SIZE: usize = 1;
+        fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
+            let from = self.0.get(offset as usize..offset as usize + bytes.len());
+            bytes.copy_from_slice(from.ok_or(NorFlashErrorKind::OutOfBounds)?);
+            Ok(())
+        }
+        fn capacity(&self) -> usize {
+            self.0.len()
+        }
+    }
+
+    impl NorFlash for QspiFlash {
+        const WRITE_SIZE: usize = 1;
+        const ERASE_SIZE: usize = SECTOR;
+        fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
+            if !(from as usize).is_multiple_of(SECTOR) || !(to as usize).is_multiple_of(SECTOR) {
+                return Err(NorFlashErrorKind::NotAligned);
+            }
+            self.1 += (to - from) / SECTOR as u32;
+            let sectors = self.0.get_mut(from as usize..to as usize);
+            sectors.ok_or(NorFlashErrorKind::OutOfBounds)?.fill(0xff);
+            Ok(())
+        }
+        fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
+            let to = self.0.get_mut(offset as usize..offset as usize + bytes.len());
+            for (to, byte) in to.ok_or(NorFlashErrorKind::OutOfBounds)?.iter_mut().zip(bytes) {
+                *to &= byte;
+            }
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn the_store_keeps_the_state_in_the_picos_4_kib_sectors() {
+        use crate::persist::{Keeper, Snapshot, Store};
+        use crate::unit::Lane;
+        // The Pico's store: its last 16 sectors, here at offset 0 of a 64 KiB flash.
+        let range = 0..16 * SECTOR as u32;
+        let flash = WatchedFlash::new(QspiFlash(std::vec![0xff; 16 * SECTOR], 0), feed);
+        let (crc, _) = CheckedCrc::check(SoftwareCrc::default());
+        let mut app = App::<3>::default();
+        let store =
+            Store::with_crc(flash, crc, range.clone()).expect("4 KiB sectors fit the store's page model");
+        let (mut keeper, _) = Keeper::boot(store, &mut app);
+        let lanes = [
+            [Lane::Parked, Lane::Empty, Lane::InHub],
+            [Lane::Empty, Lane::Parked, Lane::Parked],
+            [Lane::InHub, Lane::Parked, Lane::Empty],
+        ];
+        let mut now = Instant::ZERO;
+        // Enough saves to fill sectors and move on to fresh ones (4 KiB erases).
+        let rounds = 3000;
+        for round in 0..rounds {
+            // A minute between changes: the keeper's erase allowance (60 an hour) refills.
+            now = now + 60_000;
+            let snapshot = Snapshot {
+                lanes: lanes[round % lanes.len()],
+                ..app.snapshot()
+            };
+            app.restore(&snapshot);
+            for _ in 0..5000 {
+                keeper.update_after(&app, now, false).expect("the save goes on");
+                now = now + 1;
+                if !keeper.is_saving() && keeper.snapshot(&app).lanes == snapshot.lanes {
+                    break;
+                }
+            }
+        }
+        let last = lanes[(rounds - 1) % lanes.len()];
+        let erased = keeper.store().flash().inner().1;
+        // The 16 sectors start blank; an erase means the log came round to a used sector.
+        assert!(erased > 0, "the saves never came round to a used sector");
+        // A restart restores the last state from the sectors.
+        let flash = keeper.into_store().into_flash();
+        let (crc, _) = CheckedCrc::check(SoftwareCrc::default());
+        let mut store = Store::<_, 3, _>::with_crc(flash, crc, range).expect("fits");
+        assert_eq!(store.load().lanes, last);
+    }
 }
