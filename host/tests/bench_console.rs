@@ -10,7 +10,7 @@ use std::time::Duration;
 
 mod common;
 
-use common::text;
+use common::{interrupt_when_ready, text};
 
 /// A folder of its own for the console's files (slot map, statistics), so tests do not share one
 /// and never touch the user's.
@@ -109,37 +109,19 @@ fn only_the_printer_s_three_buttons_are_pressed() {
     );
 }
 
-/// Send Ctrl-C to `child` after `ms`.
-fn interrupt(child: Child, ms: u64) -> Output {
-    thread::sleep(Duration::from_millis(ms));
-    let sent = Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status()
-        .expect("kill runs");
-    assert!(sent.success());
-    child.wait_with_output().expect("mmu ends")
-}
-
 /// Before: Ctrl-C quit the console silently while the unit was mid-command. Now it says what the
 /// unit goes on doing, and exits 130.
 #[test]
 fn ctrl_c_during_a_command_says_what_the_unit_goes_on_doing() {
     let config = config_dir("ctrl-c");
-    let mut child = Command::new(env!("CARGO_BIN_EXE_mmu"))
+    let mut command = Command::new(env!("CARGO_BIN_EXE_mmu"));
+    command
         .args(["console", "--sim", "--time-scale", "1"])
-        .env("MMU_CONFIG_DIR", &config)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("mmu runs");
-    let mut stdin = child.stdin.take().expect("piped");
-    stdin.write_all(b"t 1\n").expect("the command goes in");
-    // Keep stdin open: the console is in the tool change when Ctrl-C comes.
-    let output = interrupt(child, 2000);
-    drop(stdin);
-    let all = text(&output);
-    assert_eq!(output.status.code(), Some(130), "{all}");
+        .env("MMU_CONFIG_DIR", &config);
+    // At 1 × real time the tool change takes 6 s: Ctrl-C comes in its middle.
+    let run = interrupt_when_ready(command, Some("t 1\n"), "T1: ", None, 500);
+    let all = format!("{}{}", run.stdout, run.stderr);
+    assert_eq!(run.code, Some(130), "{all}");
     assert!(all.contains("stopped by Ctrl-C while the unit runs T1"), "{all}");
     assert!(all.contains("`status`"), "{all}");
 }

@@ -19,7 +19,7 @@ use std::time::{Duration, Instant};
 
 mod common;
 
-use common::documentation;
+use common::{documentation, interrupt_when_ready};
 
 /// The repository's root.
 fn root() -> PathBuf {
@@ -385,7 +385,7 @@ const COMMANDS: &[(&str, Check)] = &[
     ),
     // Bring-up on the bench.
     ("mmu printer --port /dev/ttyUSB0 status", Check::OnPtyExits(0)),
-    ("mmu sensors --port /dev/ttyUSB0", Check::OnPtyInterrupted(1500)),
+    ("mmu sensors --port /dev/ttyUSB0", Check::OnPtyInterrupted(500)),
     (
         "mmu sensors --port /dev/ttyUSB0 --plot hub.png --seconds 10",
         Check::OnPtyExits(0),
@@ -402,7 +402,7 @@ const COMMANDS: &[(&str, Check)] = &[
     // The simulator.
     (
         "cargo sim --pty --events /tmp/mmu-events.jsonl",
-        Check::Interrupted(1000),
+        Check::Interrupted(500),
     ),
     (
         "(sleep 0.2; cat requests; sleep 0.5) | cargo sim --stdio --time-scale 20 > answers",
@@ -437,7 +437,7 @@ const COMMANDS: &[(&str, Check)] = &[
     ),
     (
         "mmu sensors --port /dev/ttyUSB0 --csv > s.csv",
-        Check::OnPtyInterrupted(1500),
+        Check::OnPtyInterrupted(500),
     ),
     (
         "mmu sensors --port /dev/ttyUSB0 --plot s.png --seconds 20",
@@ -623,15 +623,32 @@ fn finish(mut child: Child, limit: Duration, what: &str) -> Output {
     child.wait_with_output().expect("its output")
 }
 
-/// Send Ctrl-C (SIGINT) to `child` after `ms`, and collect its output.
-fn interrupt_after(child: Child, ms: u64, what: &str) -> Output {
-    thread::sleep(Duration::from_millis(ms));
-    let status = Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status()
-        .expect("kill runs");
-    assert!(status.success(), "kill -INT failed for `{what}`");
-    finish(child, Duration::from_secs(20), what)
+/// Run `command` (a shell line) in `dir` and press Ctrl-C `ms` after it showed a sign of life:
+/// the simulator's terminal, `mmu sensors` saying it reads until Ctrl-C, or the first rows in
+/// the file it writes to.
+fn run_interrupted(command: &str, dir: &Path, ms: u64) -> Output {
+    let file = command.split("> ").nth(1).map(|name| dir.join(name.trim()));
+    let ready = if command.contains("sim --pty") {
+        "/dev/"
+    } else {
+        "Ctrl-C"
+    };
+    let shell = shell(&format!("exec {command}"), dir);
+    let run = interrupt_when_ready(shell, None, ready, file.as_deref(), ms);
+    Output {
+        status: exit_status(run.code),
+        stdout: run.stdout.into_bytes(),
+        stderr: run.stderr.into_bytes(),
+    }
+}
+
+/// An exit status with `code` (`None`: ended by a signal, as the simulator is).
+fn exit_status(code: Option<i32>) -> std::process::ExitStatus {
+    use std::os::unix::process::ExitStatusExt;
+    match code {
+        Some(code) => std::process::ExitStatus::from_raw(code << 8),
+        None => std::process::ExitStatus::from_raw(2), // ended by SIGINT
+    }
 }
 
 /// `mmu sim --pty` serving for one command, killed when dropped.
@@ -642,10 +659,11 @@ struct PtyUnit {
 }
 
 impl PtyUnit {
-    fn start(dir: &Path) -> PtyUnit {
+    /// A unit at `time_scale` × real time.
+    fn start(dir: &Path, time_scale: &str) -> PtyUnit {
         let events = dir.join("mmu-events.jsonl");
         let mut child = Command::new(env!("CARGO_BIN_EXE_mmu"))
-            .args(["sim", "--pty", "--quiet", "--time-scale", "5", "--events"])
+            .args(["sim", "--pty", "--quiet", "--time-scale", time_scale, "--events"])
             .arg(&events)
             .stdin(Stdio::null())
             .stdout(Stdio::piped())
@@ -716,16 +734,14 @@ fn check(shown: &Shown, how: Check, index: usize) -> Option<String> {
             (finish(child, limit, &command), Some(code))
         }
         Check::Interrupted(ms) => {
-            let command = format!(
-                "exec {}",
-                as_run_here(&shown.command, Some(("/dev/null", &dir.join("mmu-events.jsonl"))))
-            );
-            let child = shell(&command, &dir).spawn().expect("bash runs");
-            let output = interrupt_after(child, ms, &command);
-            (output, None)
+            let events = dir.join("mmu-events.jsonl");
+            let command = as_run_here(&shown.command, Some(("/dev/null", &events)));
+            (run_interrupted(&command, &dir, ms), None)
         }
         Check::OnPtyExits(_) | Check::OnPtyInterrupted(_) => {
-            let unit = PtyUnit::start(&dir);
+            // The motor test reads while the motor turns: at real time, as on a real unit.
+            let time_scale = if shown.command.contains("motor") { "1" } else { "5" };
+            let unit = PtyUnit::start(&dir, time_scale);
             let command = as_run_here(&shown.command, Some((&unit.path, &unit.events)));
             if command.contains("settings load") {
                 let save = command.replace("settings load", "settings save");
@@ -733,12 +749,7 @@ fn check(shown: &Shown, how: Check, index: usize) -> Option<String> {
                 finish(child, limit, &save);
             }
             match how {
-                Check::OnPtyInterrupted(ms) => {
-                    let child = shell(&format!("exec {command}"), &dir)
-                        .spawn()
-                        .expect("bash runs");
-                    (interrupt_after(child, ms, &command), Some(130))
-                }
+                Check::OnPtyInterrupted(ms) => (run_interrupted(&command, &dir, ms), Some(130)),
                 Check::OnPtyExits(code) => {
                     let child = shell(&command, &dir).spawn().expect("bash runs");
                     (finish(child, limit, &command), Some(code))
@@ -806,19 +817,14 @@ fn every_command_in_the_book_works() {
         .enumerate()
         .filter_map(|(index, s)| checks.get(s.command.as_str()).map(|&how| (index, s, how)))
         .collect();
-    // A few at a time: the pty runs wait on the simulator's real-time clock.
-    let mut failures = Vec::new();
-    for batch in runs.chunks(12) {
-        let handles: Vec<_> = batch
-            .iter()
-            .cloned()
-            .map(|(index, s, how)| thread::spawn(move || check(&s, how, index)))
-            .collect();
-        for handle in handles {
-            if let Some(failure) = handle.join().expect("a check thread ends") {
-                failures.push(failure);
-            }
-        }
-    }
+    // All at once: most of them wait on a simulator's real-time clock, not on the CPU.
+    let handles: Vec<_> = runs
+        .into_iter()
+        .map(|(index, s, how)| thread::spawn(move || check(&s, how, index)))
+        .collect();
+    let failures: Vec<String> = handles
+        .into_iter()
+        .filter_map(|handle| handle.join().expect("a check thread ends"))
+        .collect();
     assert!(failures.is_empty(), "{}", failures.join("\n\n"));
 }
