@@ -274,8 +274,14 @@ impl Drop for PtyUnit {
 }
 
 fn pty_unit() -> PtyUnit {
+    pty_unit_with(&[])
+}
+
+/// `mmu sim --pty` with `extra` options.
+fn pty_unit_with(extra: &[&str]) -> PtyUnit {
     let mut child = Command::new(env!("CARGO_BIN_EXE_mmu"))
         .args(["sim", "--pty", "--quiet", "--time-scale", "10"])
+        .args(extra)
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
         .stderr(Stdio::null())
@@ -300,4 +306,32 @@ fn a_tool_change_on_the_bench_says_how_to_play_the_printer_s_sensor() {
     let all = text(&output);
     assert!(all.contains("on the bench there is no printer"), "{all}");
     assert!(all.contains("`fsensor on`"), "{all}");
+}
+
+/// With a real unit the statistics outlive the session (kept on this PC); a damaged statistics
+/// file does not keep the console from the unit.
+#[test]
+fn a_real_unit_s_statistics_outlive_the_session() {
+    let config = config_dir("stats-kept");
+    let events = config_dir("stats-events").with_extension("jsonl");
+    let events_path = events.to_str().expect("UTF-8 path");
+    let unit = pty_unit_with(&["--events", events_path]);
+    let console = [
+        "console",
+        "--port",
+        unit.1.as_str(),
+        "--fsensor-events",
+        events_path,
+    ];
+    let first = text(&run(&console, "t 1\nquit\n", &config));
+    assert!(first.contains("tool change to slot 1: "), "{first}");
+    let second = text(&run(&console, "stats\nquit\n", &config));
+    assert!(second.contains("1 tool change(s) to it timed here"), "{second}");
+
+    std::fs::write(config.join("stats.txt"), "this is not a statistics file\n").expect("written");
+    let output = run(&console, "stats\nquit\n", &config);
+    let third = text(&output);
+    assert!(output.status.success(), "{third}");
+    assert!(third.contains("the statistics start again"), "{third}");
+    let _ = std::fs::remove_file(events);
 }
