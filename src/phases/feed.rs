@@ -38,16 +38,18 @@ impl Feed {
                 max_mm,
                 ErrorCode::FINDA_DIDNT_SWITCH_ON,
             ),
-            Feed::ClearMerge => Bounds {
-                past_slot_sensor: true,
-                ..Bounds::new(
-                    Direction::Reverse,
-                    config.load_speed,
-                    config.park_mm,
-                    ErrorCode::MOVE_PULLEY_FAILED,
-                )
-            },
+            Feed::ClearMerge => Bounds::new(
+                Direction::Reverse,
+                config.load_speed,
+                config.park_mm,
+                ErrorCode::MOVE_PULLEY_FAILED,
+            ),
         }
+    }
+
+    /// The merge clearance pulls the tip out of the merge, back to its drive gear.
+    pub(super) const fn past_slot_sensor(self) -> bool {
+        matches!(self, Feed::ClearMerge)
     }
 
     pub(super) fn goal<const N: usize>(

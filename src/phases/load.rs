@@ -49,33 +49,27 @@ impl Load {
         }
     }
 
-    /// `P1c` ends on the printer's `f1` while it co-feeds, `P7` pushes into its extruder as it
-    /// takes the filament: they hold while the link to the printer is in doubt.
     pub(super) fn bounds(self, config: &Config) -> Bounds {
-        let paced = |speed, max_mm, error| Bounds {
-            paced_by_printer: true,
-            ..Bounds::new(Direction::Forward, speed, max_mm, error)
-        };
+        let forward = |speed, max_mm, error| Bounds::new(Direction::Forward, speed, max_mm, error);
         match self {
-            Load::ThroughBowden => Bounds::new(
-                Direction::Forward,
+            Load::ThroughBowden => forward(
                 config.load_speed,
                 config.bowden_mm.saturating_sub(config.bowden_slowdown_mm),
                 ErrorCode::FSENSOR_DIDNT_SWITCH_ON,
             ),
-            Load::ToFsensor => paced(
+            Load::ToFsensor => forward(
                 config.slow_speed,
                 config.bowden_slowdown_mm.saturating_add(config.fsensor_search_mm),
                 ErrorCode::FSENSOR_DIDNT_SWITCH_ON,
             ),
-            Load::SearchFsensor => paced(
+            Load::SearchFsensor => forward(
                 config.slow_speed,
                 config.bowden_mm.saturating_add(config.fsensor_search_mm),
                 ErrorCode::FSENSOR_DIDNT_SWITCH_ON,
             ),
             // Faster than the printer's push (its slow feed), so a tip its turning gears hold
             // compresses the tube at once and the push stops while they still pull.
-            Load::ToNozzle => paced(
+            Load::ToNozzle => forward(
                 config.slow_speed.saturating_mul(2),
                 config
                     .extra_load_mm
@@ -84,6 +78,12 @@ impl Load {
                 ErrorCode::MOVE_PULLEY_FAILED,
             ),
         }
+    }
+
+    /// `P1c` ends on the printer's `f1` while it co-feeds, `P7` pushes into its extruder as it
+    /// takes the filament.
+    pub(super) const fn paced_by_printer(self) -> bool {
+        !matches!(self, Load::ThroughBowden)
     }
 
     pub(super) fn goal<const N: usize>(

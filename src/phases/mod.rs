@@ -159,6 +159,9 @@ impl Phase {
     }
 
     /// The family module that holds this phase's goal, bounds, progress and errors.
+    // Inlined: the questions below then switch on the phase once, as one table (measured with
+    // scripts/firmware-size.sh).
+    #[inline(always)]
     const fn family(self) -> Family {
         match self {
             Phase::FeedToHub { max_mm, .. } => Family::Feed(Feed::ToHub { max_mm }),
@@ -186,10 +189,13 @@ enum Family {
     Check(Check),
 }
 
-impl Family {
+/// The catalogue's questions about a phase, each answered by its family's module.
+impl Phase {
     /// How the phase moves; `None` for a check.
+    // Out of line: the table of bounds is one function rather than code inside the step.
+    #[inline(never)]
     fn bounds(self, config: &Config) -> Option<Bounds> {
-        match self {
+        match self.family() {
             Family::Feed(phase) => Some(phase.bounds(config)),
             Family::Unload(phase) => Some(phase.bounds(config)),
             Family::Load(phase) => Some(phase.bounds(config)),
@@ -199,7 +205,7 @@ impl Family {
 
     /// Where the phase stands against its goal, and what it learned on the way.
     fn goal<const N: usize>(self, run: &mut PhaseRun, sight: &Sight<'_, N>) -> Result<Decision, ErrorCode> {
-        match self {
+        match self.family() {
             Family::Feed(phase) => phase.goal(run, sight),
             Family::Unload(phase) => phase.goal(run, sight),
             Family::Load(phase) => phase.goal(run, sight),
@@ -208,8 +214,10 @@ impl Family {
     }
 
     /// Where the slot's filament is once the phase is done.
+    // Out of line: smaller in flash (measured with scripts/firmware-size.sh).
+    #[inline(never)]
     fn arrival(self) -> Option<Lane> {
-        match self {
+        match self.family() {
             Family::Feed(phase) => phase.arrival(),
             Family::Unload(phase) => phase.arrival(),
             Family::Load(phase) => phase.arrival(),
@@ -220,15 +228,31 @@ impl Family {
     /// The phase pulled its tip back to the slot sensor, which sits just after the drive gear:
     /// the tip is about to leave the gear. Where that still counts as done, the lane it leaves.
     fn stopped_at_gear(self, hub: bool) -> Option<Lane> {
-        match self {
+        match self.family() {
             Family::Unload(phase) => phase.stopped_at_gear(hub),
             Family::Feed(_) | Family::Load(_) | Family::Check(_) => None,
         }
     }
 
+    /// May pull the tip back past the slot sensor, out of the drive gear's reach (an eject, a
+    /// merge clearance); any other pull back stops there.
+    const fn past_slot_sensor(self) -> bool {
+        match self.family() {
+            Family::Feed(phase) => phase.past_slot_sensor(),
+            Family::Unload(phase) => phase.past_slot_sensor(),
+            Family::Load(_) | Family::Check(_) => false,
+        }
+    }
+
+    /// Progress rests on the printer: the motor holds while the link to it is in doubt
+    /// ([`PrinterLink::in_doubt`]).
+    const fn paced_by_printer(self) -> bool {
+        matches!(self.family(), Family::Load(phase) if phase.paced_by_printer())
+    }
+
     /// What the drive stopping on `error` means for the phase.
     fn stopped<const N: usize>(self, error: ErrorCode, unit: &Unit<N>, slot: usize) -> Outcome {
-        match self {
+        match self.family() {
             Family::Feed(phase) => phase.stopped(error, unit, slot),
             Family::Unload(phase) => Outcome::Fail(phase.first_cause(error, unit.fsensor_triggered())),
             Family::Load(phase) => Outcome::Fail(phase.first_cause(error)),
@@ -246,12 +270,6 @@ struct Bounds {
     error: ErrorCode,
     /// Time on top of the nominal duration at `speed`: part of the way goes slower, ms.
     slower_ms: u32,
-    /// May pull the tip back past the slot sensor, out of the drive gear's reach (an eject, a
-    /// merge clearance); any other pull back stops there.
-    past_slot_sensor: bool,
-    /// Progress rests on the printer (its `f1`, its extruder): the motor holds while the link
-    /// to it is in doubt ([`PrinterLink::in_doubt`]).
-    paced_by_printer: bool,
 }
 
 impl Bounds {
@@ -263,8 +281,6 @@ impl Bounds {
             max_mm,
             error,
             slower_ms: 0,
-            past_slot_sensor: false,
-            paced_by_printer: false,
         }
     }
 
@@ -355,6 +371,9 @@ enum Milestone {
 
 /// Write what the phase on `slot` learned into the unit and the command's notes: the one place
 /// where phases change what the unit knows (besides the sensor check's lanes).
+// Inlined: each caller passes only some milestones, and its copy keeps only those (out of
+// line it took 150 B more flash, measured with scripts/firmware-size.sh).
+#[inline(always)]
 fn learn<const N: usize>(milestone: Milestone, slot: usize, notes: &mut Notes, unit: &mut Unit<N>) {
     match milestone {
         Milestone::LeavingPark => {
@@ -377,6 +396,7 @@ fn learn<const N: usize>(milestone: Milestone, slot: usize, notes: &mut Notes, u
                 *clear = true;
             }
         }
+        // Parked from where the hub cleared unseen: behind the park position, nobody knows where.
         Milestone::Arrived(Lane::Parked) if notes.park_unsure => unit.set_lane(slot, Lane::Unknown),
         Milestone::Arrived(lane) => unit.set_lane(slot, lane),
     }
@@ -463,14 +483,14 @@ pub fn step<const N: usize>(
             unit.lanes = lanes;
             outcome
         }
-        (family, Some(slot)) => step_motion(family, slot, run, resume_goal_from, notes, unit, now, config),
+        (_, Some(slot)) => step_motion(phase, slot, run, resume_goal_from, notes, unit, now, config),
         (_, None) => Outcome::Fail(ErrorCode::INTERNAL),
     }
 }
 
 #[allow(clippy::too_many_arguments)]
 fn step_motion<const N: usize>(
-    family: Family,
+    phase: Phase,
     slot: usize,
     run: &mut Option<PhaseRun>,
     resume_goal_from: Option<i32>,
@@ -479,7 +499,7 @@ fn step_motion<const N: usize>(
     now: Instant,
     config: &Config,
 ) -> Outcome {
-    let Some(bounds) = family.bounds(config) else {
+    let Some(bounds) = phase.bounds(config) else {
         return Outcome::Fail(ErrorCode::INTERNAL);
     };
     let (Some(feeder), Some(drive)) = (unit.feeders.get(slot), unit.drives.get_mut(slot)) else {
@@ -528,7 +548,7 @@ fn step_motion<const N: usize>(
         now,
         config,
     };
-    let goal = match family.goal(run, &sight) {
+    let goal = match phase.goal(run, &sight) {
         Ok(Decision { goal, learned }) => {
             if let Some(milestone) = learned {
                 learn(milestone, slot, notes, unit);
@@ -545,16 +565,16 @@ fn step_motion<const N: usize>(
     let motion = match goal {
         Goal::Reached => {
             drive.brake(now);
-            if let Some(lane) = family.arrival() {
+            if let Some(lane) = phase.arrival() {
                 learn(Milestone::Arrived(lane), slot, notes, unit);
             }
             return Outcome::Done;
         }
         Goal::Drive | Goal::DriveAt(_)
-            if bounds.direction == Direction::Reverse && !slot_sees && !bounds.past_slot_sensor =>
+            if bounds.direction == Direction::Reverse && !slot_sees && !phase.past_slot_sensor() =>
         {
             drive.brake(now);
-            if let Some(lane) = family.stopped_at_gear(hub) {
+            if let Some(lane) = phase.stopped_at_gear(hub) {
                 learn(Milestone::Arrived(lane), slot, notes, unit);
                 return Outcome::Done;
             }
@@ -562,7 +582,7 @@ fn step_motion<const N: usize>(
             // another filament is there. Not parked.
             return Outcome::Fail(bounds.error);
         }
-        Goal::Drive if !(bounds.paced_by_printer && notes.printer.in_doubt(now)) => Motion::Run {
+        Goal::Drive if !(phase.paced_by_printer() && notes.printer.in_doubt(now)) => Motion::Run {
             direction: bounds.direction,
             speed: bounds.speed,
         },
@@ -594,6 +614,6 @@ fn step_motion<const N: usize>(
     }
     match drive.run(motion, feeder, tension, now, config) {
         Ok(()) => Outcome::Continue,
-        Err(error) => family.stopped(error, unit, slot),
+        Err(error) => phase.stopped(error, unit, slot),
     }
 }

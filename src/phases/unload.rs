@@ -73,15 +73,17 @@ impl Unload {
                 config.hub_search_mm.saturating_add(config.park_mm),
                 ErrorCode::FINDA_DIDNT_SWITCH_OFF,
             ),
-            Unload::FromSlot => Bounds {
-                past_slot_sensor: true,
-                ..reverse(
-                    config.load_speed,
-                    config.eject_max_mm,
-                    ErrorCode::MOVE_PULLEY_FAILED,
-                )
-            },
+            Unload::FromSlot => reverse(
+                config.load_speed,
+                config.eject_max_mm,
+                ErrorCode::MOVE_PULLEY_FAILED,
+            ),
         }
+    }
+
+    /// Only the eject means to pull the tip out of its drive gear.
+    pub(super) const fn past_slot_sensor(self) -> bool {
+        matches!(self, Unload::FromSlot)
     }
 
     pub(super) fn goal<const N: usize>(
