@@ -160,6 +160,7 @@ fn the_bench_reads_without_writing_counts_and_keeps_settings() {
     assert!(out.contains("unit firmware: 3.0.3"), "{out}");
     let out = sim.printer(&["--expect-version", "3.0.2", "status"]);
     assert!(out.contains("unit firmware: 3.0.2"), "{out}");
+    // Looking is not connecting: the bench never tells the unit which revision it accepted.
     let out = sim.printer(&["read", "0x52"]);
     assert!(out.contains("= 2"), "{out}");
 }

@@ -60,7 +60,8 @@ pub trait Link {
 /// What the printer's firmware is set up with.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct PrinterOptions {
-    /// The unit version it supports: S0..S2 must answer exactly this (3.0.3 on Buddy firmware).
+    /// The unit version it supports: S0..S2 must answer exactly this (3.0.4 on Buddy 6.5.3 and
+    /// later, 3.0.3 on Buddy 6.4 and MK3S 3.14.1, 3.0.2 on MK3S 3.13.3/3.14.0).
     pub version: (u8, u8, u8),
     /// Written to register 0x0b at every start (Buddy firmware writes 5).
     pub extra_load_mm: u16,
@@ -610,8 +611,16 @@ impl<L: Link> Printer<L> {
         let mut wrong = 0;
         let mut part = 0u8;
         while part < 4 {
-            let answer = self.exchange(op, Request::new(RequestCode::Version, part))?;
-            if (answer.code, answer.value, answer.param) != (RequestCode::Version, part, ParamCode::Accepted)
+            // A bench that only looks reads the build (register 3) instead of asking `S3`: `S3`
+            // right after a matching `S2` tells the unit which revision a printer accepted, and
+            // the unit keeps it.
+            let request = if part == 3 && self.options.read_only {
+                Request::new(RequestCode::Read, 3)
+            } else {
+                Request::new(RequestCode::Version, part)
+            };
+            let answer = self.exchange(op, request)?;
+            if (answer.code, answer.value, answer.param) != (request.code, request.value, ParamCode::Accepted)
             {
                 wrong += 1;
                 if wrong >= MAX_WRONG_ANSWERS {

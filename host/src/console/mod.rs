@@ -198,7 +198,7 @@ impl Bench {
                 input,
                 eject: EjectDialog::TakeOut,
                 quit: false,
-                // Unit version 3.0.2 is what MK3S firmware expects; 3.0.3 Buddy firmware.
+                // MK3S firmware expects 3.0.2 (3.13.3, 3.14.0) or 3.0.3 (3.14.1); Buddy 3.0.3 or 3.0.4.
                 family: if options.version.2 == 2 {
                     Family::Mk3s
                 } else {
