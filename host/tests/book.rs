@@ -3,7 +3,8 @@
 //! page is in the book's table of contents; and every command shown in a code block is run here,
 //! or by CI (`.ci/run` must hold the same line), or is named below with the reason it cannot run
 //! on a CI machine. A command run here must end as the book says, and where a block shows its
-//! output (`$ command` then the lines it prints) the output must be what the tool prints.
+//! output (`$ command` then the lines it prints) the output must be what the tool prints. The
+//! `mmu` commands named in the prose's inline code must at least parse (subcommands, options).
 //!
 //! How a command is run: `cargo <alias>` and `cargo run ... --bin mmu --` are the `mmu` binary
 //! (the aliases are checked against `.cargo/config.toml`); a real unit's port (`/dev/ttyUSB0`,
@@ -827,4 +828,81 @@ fn every_command_in_the_book_works() {
         .filter_map(|handle| handle.join().expect("a check thread ends"))
         .collect();
     assert!(failures.is_empty(), "{}", failures.join("\n\n"));
+}
+
+/// The `mmu` commands the book's prose names in inline code (`mmu slots set 0 PLA white`): their
+/// subcommands and options exist. Each is parsed with `--help` added (which prints the help
+/// instead of running it): a misspelt option or subcommand fails with status 2. Placeholders
+/// become examples (`DEV` a port, `N` and `S` numbers); mentions that stop at an option waiting
+/// for its value (`mmu printer --port`) or elide arguments (`...`) are only mentions.
+#[test]
+fn every_mmu_command_named_in_the_prose_parses() {
+    let mut checked = 0;
+    let mut failures = Vec::new();
+    for (page, text) in documentation() {
+        for (number, line) in prose_lines(&text) {
+            for (index, span) in line.split('`').enumerate() {
+                if index % 2 == 0 {
+                    continue;
+                }
+                let mut words: Vec<String> = span.split_whitespace().map(str::to_string).collect();
+                let is_mmu = words.first().is_some_and(|w| w == "mmu");
+                let is_alias = words.first().is_some_and(|w| w == "cargo")
+                    && words.get(1).is_some_and(|w| MMU_ALIASES.contains(&w.as_str()));
+                if !(is_mmu || is_alias) {
+                    continue;
+                }
+                // `cargo demo ...` is `mmu demo ...`: drop `cargo`; `mmu ...`: drop `mmu`.
+                words.remove(0);
+                let mention = words.is_empty()
+                    || span.contains("...")
+                    || words
+                        .last()
+                        .is_some_and(|w| w.starts_with("--") && takes_a_value(w));
+                if mention {
+                    continue;
+                }
+                let args: Vec<String> = words
+                    .iter()
+                    .map(|w| match w.as_str() {
+                        "DEV" => "/dev/ttyUSB0".to_string(),
+                        "N" | "S" => "3".to_string(),
+                        other => other.to_string(),
+                    })
+                    .chain(["--help".to_string()])
+                    .collect();
+                let output = Command::new(env!("CARGO_BIN_EXE_mmu"))
+                    .args(&args)
+                    .output()
+                    .expect("mmu runs");
+                checked += 1;
+                if !output.status.success() {
+                    failures.push(format!(
+                        "{page}:{number}: `{span}`: {}",
+                        String::from_utf8_lossy(&output.stderr).trim()
+                    ));
+                }
+            }
+        }
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+    assert!(checked >= 10, "only {checked} commands found in the prose");
+}
+
+/// Whether option `flag` takes a value (so a mention ending with it names the option only).
+fn takes_a_value(flag: &str) -> bool {
+    !matches!(
+        flag,
+        "--sim"
+            | "--pty"
+            | "--stdio"
+            | "--fast"
+            | "--json"
+            | "--csv"
+            | "--frames-only"
+            | "--verbose"
+            | "--quiet"
+            | "--help"
+            | "--version"
+    )
 }
