@@ -31,7 +31,7 @@ use embedded_storage::nor_flash::NorFlash;
 use mmu_hal_port::{Button, Motors, SensorScan, StatusLed};
 use portable_atomic::{AtomicBool, AtomicU32, Ordering};
 
-use crate::control::{self, ControlLoop, ResetBoard, Schedule, Tick};
+use crate::control::{self, ControlLoop, ResetBoard, Tick, TickSchedule};
 use crate::persist::{Boot, EntryCrc, Keeper, Store};
 use crate::port::{CheckedCrc, SampleClock, WatchedFlash};
 use crate::uart::LineErrors;
@@ -123,7 +123,7 @@ pub async fn run_control<const N: usize, S: SensorScan<N>, M: Motors<N>>(
 ) -> ! {
     BOOTED.wait().await;
     let mut ticker = Ticker::every(PERIOD);
-    let mut schedule = Schedule::new(now_us(), PERIOD.as_micros());
+    let mut schedule = TickSchedule::new(now_us(), PERIOD.as_micros());
     let mut samples = Samples::<N>::uniform(mmu_hal_port::ADC_MAX / 2);
     let mut sample_clock = SampleClock::new(now_us());
     let mut button = BUTTON.receiver();

@@ -336,6 +336,15 @@ fn watch<L: Link>(mut sampler: Sampler<L>, args: &SensorsArgs) -> Result<(), Box
             states: vec![None; sampler.selected.len()],
         },
     };
+    let until = match args.seconds {
+        Some(seconds) => format!("for {seconds} s"),
+        None => "until Ctrl-C".to_string(),
+    };
+    eprintln!(
+        "mmu sensors: reading {} sensor(s), a sample every {} ms, {until}",
+        sampler.selected.len(),
+        args.every
+    );
     let mut out = std::io::stdout().lock();
     if let Output::Csv = output {
         writeln!(out, "{}", csv_header(&sampler.selected))?;

@@ -10,7 +10,7 @@ use std::time::Duration;
 
 mod common;
 
-use common::text;
+use common::{interrupt_when_ready, text};
 
 /// A folder of its own for the console's files (slot map, statistics), so tests do not share one
 /// and never touch the user's.
@@ -109,37 +109,19 @@ fn only_the_printer_s_three_buttons_are_pressed() {
     );
 }
 
-/// Send Ctrl-C to `child` after `ms`.
-fn interrupt(child: Child, ms: u64) -> Output {
-    thread::sleep(Duration::from_millis(ms));
-    let sent = Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status()
-        .expect("kill runs");
-    assert!(sent.success());
-    child.wait_with_output().expect("mmu ends")
-}
-
 /// Before: Ctrl-C quit the console silently while the unit was mid-command. Now it says what the
 /// unit goes on doing, and exits 130.
 #[test]
 fn ctrl_c_during_a_command_says_what_the_unit_goes_on_doing() {
     let config = config_dir("ctrl-c");
-    let mut child = Command::new(env!("CARGO_BIN_EXE_mmu"))
+    let mut command = Command::new(env!("CARGO_BIN_EXE_mmu"));
+    command
         .args(["console", "--sim", "--time-scale", "1"])
-        .env("MMU_CONFIG_DIR", &config)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("mmu runs");
-    let mut stdin = child.stdin.take().expect("piped");
-    stdin.write_all(b"t 1\n").expect("the command goes in");
-    // Keep stdin open: the console is in the tool change when Ctrl-C comes.
-    let output = interrupt(child, 2000);
-    drop(stdin);
-    let all = text(&output);
-    assert_eq!(output.status.code(), Some(130), "{all}");
+        .env("MMU_CONFIG_DIR", &config);
+    // At 1 × real time the tool change takes 6 s: Ctrl-C comes in its middle.
+    let run = interrupt_when_ready(command, Some("t 1\n"), "T1: ", None, 500);
+    let all = format!("{}{}", run.stdout, run.stderr);
+    assert_eq!(run.code, Some(130), "{all}");
     assert!(all.contains("stopped by Ctrl-C while the unit runs T1"), "{all}");
     assert!(all.contains("`status`"), "{all}");
 }
@@ -292,8 +274,14 @@ impl Drop for PtyUnit {
 }
 
 fn pty_unit() -> PtyUnit {
+    pty_unit_with(&[])
+}
+
+/// `mmu sim --pty` with `extra` options.
+fn pty_unit_with(extra: &[&str]) -> PtyUnit {
     let mut child = Command::new(env!("CARGO_BIN_EXE_mmu"))
         .args(["sim", "--pty", "--quiet", "--time-scale", "10"])
+        .args(extra)
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
         .stderr(Stdio::null())
@@ -318,4 +306,32 @@ fn a_tool_change_on_the_bench_says_how_to_play_the_printer_s_sensor() {
     let all = text(&output);
     assert!(all.contains("on the bench there is no printer"), "{all}");
     assert!(all.contains("`fsensor on`"), "{all}");
+}
+
+/// With a real unit the statistics outlive the session (kept on this PC); a damaged statistics
+/// file does not keep the console from the unit.
+#[test]
+fn a_real_unit_s_statistics_outlive_the_session() {
+    let config = config_dir("stats-kept");
+    let events = config_dir("stats-events").with_extension("jsonl");
+    let events_path = events.to_str().expect("UTF-8 path");
+    let unit = pty_unit_with(&["--events", events_path]);
+    let console = [
+        "console",
+        "--port",
+        unit.1.as_str(),
+        "--fsensor-events",
+        events_path,
+    ];
+    let first = text(&run(&console, "t 1\nquit\n", &config));
+    assert!(first.contains("tool change to slot 1: "), "{first}");
+    let second = text(&run(&console, "stats\nquit\n", &config));
+    assert!(second.contains("1 tool change(s) to it timed here"), "{second}");
+
+    std::fs::write(config.join("stats.txt"), "this is not a statistics file\n").expect("written");
+    let output = run(&console, "stats\nquit\n", &config);
+    let third = text(&output);
+    assert!(output.status.success(), "{third}");
+    assert!(third.contains("the statistics start again"), "{third}");
+    let _ = std::fs::remove_file(events);
 }

@@ -3,7 +3,8 @@
 //! page is in the book's table of contents; and every command shown in a code block is run here,
 //! or by CI (`.ci/run` must hold the same line), or is named below with the reason it cannot run
 //! on a CI machine. A command run here must end as the book says, and where a block shows its
-//! output (`$ command` then the lines it prints) the output must be what the tool prints.
+//! output (`$ command` then the lines it prints) the output must be what the tool prints. The
+//! `mmu` commands named in the prose's inline code must at least parse (subcommands, options).
 //!
 //! How a command is run: `cargo <alias>` and `cargo run ... --bin mmu --` are the `mmu` binary
 //! (the aliases are checked against `.cargo/config.toml`); a real unit's port (`/dev/ttyUSB0`,
@@ -19,7 +20,7 @@ use std::time::{Duration, Instant};
 
 mod common;
 
-use common::documentation;
+use common::{documentation, interrupt_when_ready};
 
 /// The repository's root.
 fn root() -> PathBuf {
@@ -385,7 +386,7 @@ const COMMANDS: &[(&str, Check)] = &[
     ),
     // Bring-up on the bench.
     ("mmu printer --port /dev/ttyUSB0 status", Check::OnPtyExits(0)),
-    ("mmu sensors --port /dev/ttyUSB0", Check::OnPtyInterrupted(1500)),
+    ("mmu sensors --port /dev/ttyUSB0", Check::OnPtyInterrupted(500)),
     (
         "mmu sensors --port /dev/ttyUSB0 --plot hub.png --seconds 10",
         Check::OnPtyExits(0),
@@ -402,7 +403,7 @@ const COMMANDS: &[(&str, Check)] = &[
     // The simulator.
     (
         "cargo sim --pty --events /tmp/mmu-events.jsonl",
-        Check::Interrupted(1000),
+        Check::Interrupted(500),
     ),
     (
         "(sleep 0.2; cat requests; sleep 0.5) | cargo sim --stdio --time-scale 20 > answers",
@@ -437,7 +438,7 @@ const COMMANDS: &[(&str, Check)] = &[
     ),
     (
         "mmu sensors --port /dev/ttyUSB0 --csv > s.csv",
-        Check::OnPtyInterrupted(1500),
+        Check::OnPtyInterrupted(500),
     ),
     (
         "mmu sensors --port /dev/ttyUSB0 --plot s.png --seconds 20",
@@ -623,15 +624,32 @@ fn finish(mut child: Child, limit: Duration, what: &str) -> Output {
     child.wait_with_output().expect("its output")
 }
 
-/// Send Ctrl-C (SIGINT) to `child` after `ms`, and collect its output.
-fn interrupt_after(child: Child, ms: u64, what: &str) -> Output {
-    thread::sleep(Duration::from_millis(ms));
-    let status = Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status()
-        .expect("kill runs");
-    assert!(status.success(), "kill -INT failed for `{what}`");
-    finish(child, Duration::from_secs(20), what)
+/// Run `command` (a shell line) in `dir` and press Ctrl-C `ms` after it showed a sign of life:
+/// the simulator's terminal, `mmu sensors` saying it reads until Ctrl-C, or the first rows in
+/// the file it writes to.
+fn run_interrupted(command: &str, dir: &Path, ms: u64) -> Output {
+    let file = command.split("> ").nth(1).map(|name| dir.join(name.trim()));
+    let ready = if command.contains("sim --pty") {
+        "/dev/"
+    } else {
+        "Ctrl-C"
+    };
+    let shell = shell(&format!("exec {command}"), dir);
+    let run = interrupt_when_ready(shell, None, ready, file.as_deref(), ms);
+    Output {
+        status: exit_status(run.code),
+        stdout: run.stdout.into_bytes(),
+        stderr: run.stderr.into_bytes(),
+    }
+}
+
+/// An exit status with `code` (`None`: ended by a signal, as the simulator is).
+fn exit_status(code: Option<i32>) -> std::process::ExitStatus {
+    use std::os::unix::process::ExitStatusExt;
+    match code {
+        Some(code) => std::process::ExitStatus::from_raw(code << 8),
+        None => std::process::ExitStatus::from_raw(2), // ended by SIGINT
+    }
 }
 
 /// `mmu sim --pty` serving for one command, killed when dropped.
@@ -642,10 +660,11 @@ struct PtyUnit {
 }
 
 impl PtyUnit {
-    fn start(dir: &Path) -> PtyUnit {
+    /// A unit at `time_scale` × real time.
+    fn start(dir: &Path, time_scale: &str) -> PtyUnit {
         let events = dir.join("mmu-events.jsonl");
         let mut child = Command::new(env!("CARGO_BIN_EXE_mmu"))
-            .args(["sim", "--pty", "--quiet", "--time-scale", "5", "--events"])
+            .args(["sim", "--pty", "--quiet", "--time-scale", time_scale, "--events"])
             .arg(&events)
             .stdin(Stdio::null())
             .stdout(Stdio::piped())
@@ -716,16 +735,14 @@ fn check(shown: &Shown, how: Check, index: usize) -> Option<String> {
             (finish(child, limit, &command), Some(code))
         }
         Check::Interrupted(ms) => {
-            let command = format!(
-                "exec {}",
-                as_run_here(&shown.command, Some(("/dev/null", &dir.join("mmu-events.jsonl"))))
-            );
-            let child = shell(&command, &dir).spawn().expect("bash runs");
-            let output = interrupt_after(child, ms, &command);
-            (output, None)
+            let events = dir.join("mmu-events.jsonl");
+            let command = as_run_here(&shown.command, Some(("/dev/null", &events)));
+            (run_interrupted(&command, &dir, ms), None)
         }
         Check::OnPtyExits(_) | Check::OnPtyInterrupted(_) => {
-            let unit = PtyUnit::start(&dir);
+            // The motor test reads while the motor turns: at real time, as on a real unit.
+            let time_scale = if shown.command.contains("motor") { "1" } else { "5" };
+            let unit = PtyUnit::start(&dir, time_scale);
             let command = as_run_here(&shown.command, Some((&unit.path, &unit.events)));
             if command.contains("settings load") {
                 let save = command.replace("settings load", "settings save");
@@ -733,12 +750,7 @@ fn check(shown: &Shown, how: Check, index: usize) -> Option<String> {
                 finish(child, limit, &save);
             }
             match how {
-                Check::OnPtyInterrupted(ms) => {
-                    let child = shell(&format!("exec {command}"), &dir)
-                        .spawn()
-                        .expect("bash runs");
-                    (interrupt_after(child, ms, &command), Some(130))
-                }
+                Check::OnPtyInterrupted(ms) => (run_interrupted(&command, &dir, ms), Some(130)),
                 Check::OnPtyExits(code) => {
                     let child = shell(&command, &dir).spawn().expect("bash runs");
                     (finish(child, limit, &command), Some(code))
@@ -806,19 +818,91 @@ fn every_command_in_the_book_works() {
         .enumerate()
         .filter_map(|(index, s)| checks.get(s.command.as_str()).map(|&how| (index, s, how)))
         .collect();
-    // A few at a time: the pty runs wait on the simulator's real-time clock.
+    // All at once: most of them wait on a simulator's real-time clock, not on the CPU.
+    let handles: Vec<_> = runs
+        .into_iter()
+        .map(|(index, s, how)| thread::spawn(move || check(&s, how, index)))
+        .collect();
+    let failures: Vec<String> = handles
+        .into_iter()
+        .filter_map(|handle| handle.join().expect("a check thread ends"))
+        .collect();
+    assert!(failures.is_empty(), "{}", failures.join("\n\n"));
+}
+
+/// The `mmu` commands the book's prose names in inline code (`mmu slots set 0 PLA white`): their
+/// subcommands and options exist. Each is parsed with `--help` added (which prints the help
+/// instead of running it): a misspelt option or subcommand fails with status 2. Placeholders
+/// become examples (`DEV` a port, `N` and `S` numbers); mentions that stop at an option waiting
+/// for its value (`mmu printer --port`) or elide arguments (`...`) are only mentions.
+#[test]
+fn every_mmu_command_named_in_the_prose_parses() {
+    let mut checked = 0;
     let mut failures = Vec::new();
-    for batch in runs.chunks(12) {
-        let handles: Vec<_> = batch
-            .iter()
-            .cloned()
-            .map(|(index, s, how)| thread::spawn(move || check(&s, how, index)))
-            .collect();
-        for handle in handles {
-            if let Some(failure) = handle.join().expect("a check thread ends") {
-                failures.push(failure);
+    for (page, text) in documentation() {
+        for (number, line) in prose_lines(&text) {
+            for (index, span) in line.split('`').enumerate() {
+                if index % 2 == 0 {
+                    continue;
+                }
+                let mut words: Vec<String> = span.split_whitespace().map(str::to_string).collect();
+                let is_mmu = words.first().is_some_and(|w| w == "mmu");
+                let is_alias = words.first().is_some_and(|w| w == "cargo")
+                    && words.get(1).is_some_and(|w| MMU_ALIASES.contains(&w.as_str()));
+                if !(is_mmu || is_alias) {
+                    continue;
+                }
+                // `cargo demo ...` is `mmu demo ...`: drop `cargo`; `mmu ...`: drop `mmu`.
+                words.remove(0);
+                let mention = words.is_empty()
+                    || span.contains("...")
+                    || words
+                        .last()
+                        .is_some_and(|w| w.starts_with("--") && takes_a_value(w));
+                if mention {
+                    continue;
+                }
+                let args: Vec<String> = words
+                    .iter()
+                    .map(|w| match w.as_str() {
+                        "DEV" => "/dev/ttyUSB0".to_string(),
+                        "N" | "S" => "3".to_string(),
+                        other => other.to_string(),
+                    })
+                    .chain(["--help".to_string()])
+                    .collect();
+                let output = Command::new(env!("CARGO_BIN_EXE_mmu"))
+                    .args(&args)
+                    .output()
+                    .expect("mmu runs");
+                checked += 1;
+                if !output.status.success() {
+                    failures.push(format!(
+                        "{page}:{number}: `{span}`: {}",
+                        String::from_utf8_lossy(&output.stderr).trim()
+                    ));
+                }
             }
         }
     }
-    assert!(failures.is_empty(), "{}", failures.join("\n\n"));
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+    assert!(checked >= 10, "only {checked} commands found in the prose");
+}
+
+/// Whether option `flag` takes a value (so a mention ending with it names the option only).
+fn takes_a_value(flag: &str) -> bool {
+    !matches!(
+        flag,
+        "--sim"
+            | "--pty"
+            | "--stdio"
+            | "--fast"
+            | "--json"
+            | "--csv"
+            | "--frames-only"
+            | "--verbose"
+            | "--quiet"
+            | "--help"
+            | "--version"
+    )
 }

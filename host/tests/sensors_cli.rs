@@ -3,36 +3,24 @@
 //! cannot be written is refused before anything is recorded, and one sensor alone is sampled
 //! fast enough to follow a motor Hall sensor.
 
-use std::process::{Command, Stdio};
-use std::thread;
+use std::process::Command;
 use std::time::{Duration, Instant};
 
 mod common;
 
-use common::{mmu, text};
+use common::{interrupt_when_ready, mmu, text};
 
 /// Before: Ctrl-C ended the table with status 0, though the book (and every other subcommand)
 /// says 130.
 #[test]
 fn ctrl_c_ends_the_live_view_with_status_130_after_showing_it() {
-    let child = Command::new(env!("CARGO_BIN_EXE_mmu"))
-        .args(["sensors", "--sim"])
-        .stdin(Stdio::null())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("mmu runs");
-    thread::sleep(Duration::from_millis(1500));
-    let sent = Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status()
-        .expect("kill runs");
-    assert!(sent.success());
-    let output = child.wait_with_output().expect("mmu ends");
-    let all = text(&output);
-    assert_eq!(output.status.code(), Some(130), "{all}");
-    assert!(all.contains("hub filament"), "the table is shown: {all}");
-    assert!(all.contains("stopped by Ctrl-C"), "{all}");
+    let mut command = Command::new(env!("CARGO_BIN_EXE_mmu"));
+    command.args(["sensors", "--sim"]);
+    let run = interrupt_when_ready(command, None, "until Ctrl-C", None, 500);
+    let all = format!("{}{}", run.stdout, run.stderr);
+    assert_eq!(run.code, Some(130), "{all}");
+    assert!(run.stdout.contains("hub filament"), "the table is shown: {all}");
+    assert!(run.stderr.contains("stopped by Ctrl-C"), "{all}");
 }
 
 /// Before: `--every 10` sampled every 19 ms without a word, and `--seconds 1` ran for a hundred

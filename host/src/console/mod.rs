@@ -180,7 +180,11 @@ impl Bench {
         let mut bench = Bench::on_wire(wire, options, input, target.verbose);
         bench.fsensor_events = target.fsensor_events.is_some();
         if bench.is_real_unit() {
-            bench.stats = Stats::load()?;
+            // A damaged statistics file must not keep the console from the unit.
+            bench.stats = Stats::load().unwrap_or_else(|error| {
+                eprintln!("mmu: the statistics start again: {error}");
+                Stats::default()
+            });
         }
         Ok(bench)
     }

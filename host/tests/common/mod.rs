@@ -73,3 +73,99 @@ pub fn documentation() -> Vec<(String, String)> {
         })
         .collect()
 }
+
+/// What an interrupted run left: its exit status code (`None`: ended by the signal itself), and
+/// what it printed on stdout and stderr.
+pub struct Interrupted {
+    pub code: Option<i32>,
+    pub stdout: String,
+    pub stderr: String,
+}
+
+/// Start `command` (stdout and stderr piped, `input` on its stdin, which stays open), wait until
+/// it printed `ready` (or, when a file is named, that file is not empty), let `after_ms`
+/// pass, send Ctrl-C (SIGINT) and collect what it printed. Waiting for a sign of life first keeps
+/// the signal from arriving before the program set up its Ctrl-C handling on a busy machine.
+pub fn interrupt_when_ready(
+    mut command: Command,
+    input: Option<&str>,
+    ready: &str,
+    file: Option<&std::path::Path>,
+    after_ms: u64,
+) -> Interrupted {
+    use std::io::Read;
+    use std::sync::{Arc, Mutex};
+    use std::time::{Duration, Instant};
+
+    let stdin = if input.is_some() {
+        Stdio::piped()
+    } else {
+        Stdio::null()
+    };
+    let mut child = command
+        .stdin(stdin)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("the command runs");
+    // Kept open until the end: the program is still reading when Ctrl-C comes.
+    let mut open_stdin = child.stdin.take();
+    if let (Some(pipe), Some(text)) = (open_stdin.as_mut(), input) {
+        pipe.write_all(text.as_bytes()).expect("the input goes in");
+    }
+    let collect = |mut pipe: Box<dyn Read + Send>| {
+        let text = Arc::new(Mutex::new(Vec::new()));
+        let sink = Arc::clone(&text);
+        let reader = std::thread::spawn(move || {
+            let mut buffer = [0u8; 4096];
+            while let Ok(n) = pipe.read(&mut buffer) {
+                if n == 0 {
+                    break;
+                }
+                sink.lock().expect("not poisoned").extend_from_slice(&buffer[..n]);
+            }
+        });
+        (text, reader)
+    };
+    let (stdout, out_reader) = collect(Box::new(child.stdout.take().expect("piped")));
+    let (stderr, err_reader) = collect(Box::new(child.stderr.take().expect("piped")));
+    let deadline = Instant::now() + Duration::from_secs(60);
+    loop {
+        let said = |pipe: &Arc<Mutex<Vec<u8>>>| {
+            String::from_utf8_lossy(&pipe.lock().expect("not poisoned")).contains(ready)
+        };
+        let printed = said(&stdout) || said(&stderr);
+        let written = file.is_some_and(|f| std::fs::metadata(f).is_ok_and(|m| m.len() > 0));
+        let ended = child.try_wait().expect("waitable").is_some();
+        if printed || written || ended || Instant::now() > deadline {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    std::thread::sleep(Duration::from_millis(after_ms));
+    let _ = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status();
+    let deadline = Instant::now() + Duration::from_secs(30);
+    let status = loop {
+        if let Some(status) = child.try_wait().expect("waitable") {
+            break status;
+        }
+        if Instant::now() > deadline {
+            let _ = child.kill();
+            panic!("{command:?} did not end within 30 s of Ctrl-C");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    drop(open_stdin);
+    let _ = out_reader.join();
+    let _ = err_reader.join();
+    let text = |pipe: &Arc<Mutex<Vec<u8>>>| {
+        String::from_utf8_lossy(&pipe.lock().expect("not poisoned")).into_owned()
+    };
+    Interrupted {
+        code: status.code(),
+        stdout: text(&stdout),
+        stderr: text(&stderr),
+    }
+}
