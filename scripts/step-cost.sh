@@ -16,9 +16,9 @@
 # (P % of 1 ms at 64 MHz; the 25 % bar is 7273 instr: within|OVER), ...`.
 #
 # The design bar is 25 % of 1 ms (7 272 instructions). Measured 2026-11-27 on the Embassy
-# firmware (after merging main's 3.0.4 contracts): idle median 4 521 (15.5 %), worst millisecond
-# 9 496 (32.6 %: a 12-byte burst of requests answered in an error), worst millisecond with a
-# flash write 7 444 (25.6 %). The worst millisecond
+# firmware (after merging main's 3.0.4 contracts and phase families): idle median 4 502
+# (15.5 %), worst millisecond 9 471 (32.6 %: a 12-byte burst of requests answered in an error),
+# worst millisecond with a flash write 7 443 (25.6 %). The worst millisecond
 # is OVER the bar: the executor, the tasks and their glue (the link's pipes, the timers of the
 # Ticker and the scan's timeout, the wakers) cost about 1 700 instructions a millisecond over the
 # logic's own step (the old loop's idle step was 2 839), compiler-builtins' memcpy about 1 000 in
