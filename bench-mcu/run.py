@@ -320,6 +320,7 @@ def percent(instr):
 
 
 def main():
+    global MHZ, PERIOD_INSTR
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("elf")
     parser.add_argument("session")
@@ -336,9 +337,13 @@ def main():
                         help="with --profile-save: only the saves that wrote to the flash")
     parser.add_argument("--profile-at", type=int, metavar="STEP",
                         help="with --profile-save: only the save of this step; with --profile: only this step")
+    parser.add_argument("--mhz", type=float, default=MHZ,
+                        help="the MCU's clock for the percentages (the G071: 64; the Pico: 125)")
     parser.add_argument("--exact-steps", type=int, default=300,
                         help="recount this many first steps instruction by instruction (0: skip)")
     args = parser.parse_args()
+    MHZ = args.mhz
+    PERIOD_INSTR = MHZ * 1000 / CYCLES_PER_INSTR
     session = open(args.session, "rb").read()
     if args.profile or args.profile_save:
         bench = Bench(args.elf, session, exact_steps=args.profile or args.profile_save)
@@ -444,7 +449,7 @@ def main():
             status = 1
     bar = PERIOD_INSTR / 4
     print(f"step cost: idle {idle_median} instr median ({percent(idle_median):.1f} %), worst millisecond "
-          f"{worst_tick} instr ({percent(worst_tick):.1f} % of 1 ms at 64 MHz; the 25 % bar is {bar:.0f} instr: "
+          f"{worst_tick} instr ({percent(worst_tick):.1f} % of 1 ms at {MHZ:g} MHz; the 25 % bar is {bar:.0f} instr: "
           f"{'within' if worst_tick <= bar else 'OVER'}), worst with a flash write {save_max} instr")
     sys.exit(status)
 

@@ -186,6 +186,16 @@ impl TickSchedule {
     pub fn restart(&mut self, now_us: u64) {
         self.next_us = now_us + self.period_us;
     }
+
+    /// The loop stalled until `now_us` (a flash write, a late step): the ticks missed meanwhile
+    /// are dropped, and the next step is the first tick of the grid after `now_us`, so the steps
+    /// keep their place in the millisecond (the firmware's `Ticker` is reset to it).
+    pub fn skip_missed(&mut self, now_us: u64) {
+        if self.next_us <= now_us && self.period_us > 0 {
+            let missed = (now_us - self.next_us) / self.period_us + 1;
+            self.next_us += missed * self.period_us;
+        }
+    }
 }
 
 /// True when a step may feed the watchdog: it started at most [`ON_TIME_US`] late and its samples
@@ -566,6 +576,20 @@ mod tests {
         schedule.restart(50_000);
         assert_eq!(schedule.deadline_us(), 51_000);
         assert_eq!(schedule.start(51_000), 0);
+    }
+
+    #[test]
+    fn skipping_missed_ticks_keeps_the_grid() {
+        let mut schedule = TickSchedule::new(0, 1_000);
+        assert_eq!(schedule.start(1_000), 0);
+        // A save stalled the CPU until 41 090: the ticks up to 41 000 are dropped, the next is
+        // 42 000, still on the grid.
+        schedule.skip_missed(41_090);
+        assert_eq!(schedule.deadline_us(), 42_000);
+        assert_eq!(schedule.start(42_000), 0);
+        // On time: nothing to skip.
+        schedule.skip_missed(42_300);
+        assert_eq!(schedule.deadline_us(), 43_000);
     }
 
     #[test]

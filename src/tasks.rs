@@ -183,10 +183,11 @@ pub async fn run_control<const N: usize, S: SensorScan<N>, M: Motors<N>>(
         }
         STEPPED.signal(busy);
         // A flash write stalled the CPU (or the step overran): the ticks missed are dropped
-        // rather than caught up in a burst of late, unfed steps.
+        // rather than caught up in a burst of late, unfed steps; the next is the grid's next
+        // tick, so the scan and the step keep their place in the millisecond.
         if STORE_WROTE.swap(false, Ordering::Relaxed) || lateness_us > control::ON_TIME_US {
-            ticker.reset();
-            schedule.restart(now_us());
+            schedule.skip_missed(now_us());
+            ticker.reset_at(embassy_time::Instant::from_micros(schedule.deadline_us()));
         }
     }
 }
