@@ -8,6 +8,9 @@ store task's save piece, the link's transmit task) and the stack they use.
     run.py HARNESS_ELF SESSION_BIN --profile STEPS          # where App::step spends its instructions
     run.py HARNESS_ELF SESSION_BIN --profile-save STEPS [--profile-writes | --profile-at STEP]
                                                           # where one Keeper::update spends them
+    STEP_DIGESTS=1 run.py ...   # each millisecond's digest of what was sent, on stderr, to find
+                                # where the firmware and the recording part (bench-mcu/session
+                                # prints its own with SESSION_DEBUG=1)
 
 Unicorn (PyPI `unicorn`) runs the ELF as a Cortex-M0 (ARMv6-M: an instruction the M0+ lacks
 faults). Counting is exact: every translated block is counted with its instructions (16-bit
@@ -282,10 +285,6 @@ class Bench:
                     self.call_profile = {}
                     if self.exact and len(self.steps) >= self.exact_steps:
                         uc.emu_stop()
-            return
-        if kind == 13:
-            if os.environ.get("STEP_DIGESTS"):
-                print("tx " + repr(struct.pack("<I", a)[:b]), file=sys.stderr)
             return
         if name == "step_context":
             if self.steps:
