@@ -20,7 +20,6 @@ use std::path::PathBuf;
 
 use clap::Subcommand;
 use mmu_protocol::{ErrorCode, ParamCode, Request, RequestCode, Response};
-use mmu_sim::printer::POLLED_REGISTERS;
 use mmu_sim::{
     FAULT_HELP, Outcome, Printer, PrinterError, PrinterOptions, ScheduledFault, Sim, SimLink, SimOptions,
 };
@@ -357,7 +356,7 @@ impl<L: Target> Session<L> {
         details.insert("finda".into(), finda.into());
         self.console.say("polled registers:");
         let mut registers = Vec::new();
-        for address in POLLED_REGISTERS {
+        for &address in self.printer.polled_registers() {
             let Some(value) = self.printer.polled(address) else {
                 self.console.say(&format!("  register 0x{address:02x}: not read"));
                 continue;

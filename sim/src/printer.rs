@@ -1,8 +1,10 @@
 //! The printer's side of the protocol, as Prusa's firmware plays it (spec §5): the handshake with
-//! its exact version check, `Q0` about every second after the last activity, `f` reports the
+//! its exact version check, `Q0` one heartbeat after the last activity, `f` reports the
 //! moment the printer's filament sensor changes, the register poll, automatic Retry (`B1`) up to
-//! three times per command, a 2 s link timeout followed by a new handshake, and the mmu2 layer's
-//! "unload, then again" when the unit restarted under a command.
+//! three times per command, a link timeout followed by a new handshake, and the mmu2 layer's
+//! "unload, then again" when the unit restarted under a command. The heartbeat, the timeout, the
+//! version, the registers polled and the 6.5.3 "premature finish" of a tool change depend on the
+//! printer played, its [`Personality`].
 //!
 //! It talks through a [`Link`] (the in-process simulator, or a serial port in `mmu`), and a
 //! person at the printer (an [`Operator`]) sees what happens and decides on errors.
@@ -14,10 +16,7 @@ use mmu_protocol::{
     ResultCode,
 };
 
-/// Max silence while waiting for an answer, ms (`linkLayerTimeout`).
-pub const LINK_TIMEOUT_MS: u64 = 2000;
-/// `Q0` comes this long after the last activity, ms (`heartBeatPeriod`).
-pub const HEARTBEAT_MS: u64 = 1000;
+use crate::personality::Personality;
 /// Consecutive link faults before the printer reports MMU_NOT_RESPONDING or PROTOCOL_ERROR,
 /// whichever came first (`DropOutFilter`: one count for both, reset by every version answer
 /// the printer accepts, `ProcessVersionResponse` calls `ResetCommunicationTimeoutAttempts`).
@@ -28,9 +27,6 @@ const BOOT_WAIT_MS: u64 = 100;
 pub const VERSION_RETRIES: u8 = 6;
 /// Automatic Retry presses per command (`MAX_RETRIES`).
 pub const AUTO_RETRIES: u8 = 3;
-/// The registers the printer reads after every `Q0` (FINDA, pulley position, selector slot,
-/// error count, idler slot).
-pub const POLLED_REGISTERS: [u8; 5] = [0x08, 0x1b, 0x1c, 0x04, 0x1a];
 /// How long the printer keeps sending a rejected command again (a unit still starting up rejects
 /// commands for a moment) before this tool gives up, ms; the printer itself never gives up.
 const REJECTS_FOR_MS: u64 = 2000;
@@ -60,7 +56,10 @@ pub trait Link {
 /// What the printer's firmware is set up with.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct PrinterOptions {
-    /// The unit version it supports: S0..S2 must answer exactly this (3.0.3 on Buddy firmware).
+    /// The printer firmware played: its timing, its register poll, its tool change.
+    pub personality: Personality,
+    /// The unit version it supports: S0..S2 must answer exactly this (the personality's,
+    /// [`Personality::version`], unless a test wants another).
     pub version: (u8, u8, u8),
     /// Written to register 0x0b at every start (Buddy firmware writes 5).
     pub extra_load_mm: u16,
@@ -73,10 +72,23 @@ pub struct PrinterOptions {
     pub read_only: bool,
 }
 
+impl PrinterOptions {
+    /// The printer `personality` with the unit version it wants and Prusa's start-up writes.
+    pub fn of(personality: Personality) -> Self {
+        PrinterOptions {
+            personality,
+            version: personality.version(),
+            ..PrinterOptions::default()
+        }
+    }
+}
+
 impl Default for PrinterOptions {
     fn default() -> Self {
+        let personality = Personality::default();
         PrinterOptions {
-            version: (3, 0, 3),
+            personality,
+            version: personality.version(),
             extra_load_mm: 5,
             slow_feed_mm_s: 20,
             command_timeout_ms: 10 * 60 * 1000,
@@ -115,12 +127,16 @@ pub enum PrinterEvent {
     Interrupted(Request),
     /// One `Q0` cycle of a command passed.
     Heartbeat(Request),
+    /// The printer left the tool change before the unit finished it (Buddy 6.5.3: its own
+    /// sensor saw the filament during `P1c`, or the unit went on to `P2`); it loads on to the
+    /// nozzle and keeps polling until the unit's `F`.
+    PrematureFinish(Request),
 }
 
 /// Why the printer lost the link.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum LinkFault {
-    /// No complete answer within [`LINK_TIMEOUT_MS`] (the printer's `CommunicationTimeout`).
+    /// No complete answer within the link timeout (the printer's `CommunicationTimeout`).
     Timeout,
     /// An answer that does not decode or does not fit (`ProtocolError`).
     Garbled,
@@ -266,8 +282,8 @@ pub struct Printer<L> {
     /// (the printer's `DropOutFilter` and its initial cause).
     dropouts: u8,
     dropout_cause: Option<LinkFault>,
-    /// The last values of [`POLLED_REGISTERS`].
-    registers: [Option<u16>; POLLED_REGISTERS.len()],
+    /// The last values of the polled registers ([`Personality::polled_registers`]).
+    registers: Vec<Option<u16>>,
 }
 
 impl<L: Link> Printer<L> {
@@ -283,7 +299,7 @@ impl<L: Link> Printer<L> {
             reported_fsensor: None,
             dropouts: 0,
             dropout_cause: None,
-            registers: [None; POLLED_REGISTERS.len()],
+            registers: vec![None; options.personality.polled_registers().len()],
         }
     }
 
@@ -297,9 +313,14 @@ impl<L: Link> Printer<L> {
         &mut self.link
     }
 
-    /// The last polled value of register `address`, if it is one of [`POLLED_REGISTERS`].
+    /// The registers the printer reads after every `Q0`, in order.
+    pub fn polled_registers(&self) -> &'static [u8] {
+        self.options.personality.polled_registers()
+    }
+
+    /// The last polled value of register `address`, if it is one of the polled registers.
     pub fn polled(&self, address: u8) -> Option<u16> {
-        POLLED_REGISTERS
+        self.polled_registers()
             .iter()
             .position(|&a| a == address)
             .and_then(|i| self.registers[i])
@@ -370,7 +391,7 @@ impl<L: Link> Printer<L> {
     /// again, as the printer does. Returns the first `Q0` answer after the restart.
     pub fn reset(&mut self, op: &mut impl Operator<L>, value: u8) -> Result<Response, PrinterError> {
         self.send(op, Request::new(RequestCode::Reset, value))?;
-        self.wait_silence(LINK_TIMEOUT_MS)?;
+        self.wait_silence(self.options.personality.link_timeout_ms())?;
         op.event(&mut self.link, &PrinterEvent::LinkLost(LinkFault::Timeout));
         self.flush();
         self.connect(op)
@@ -486,6 +507,13 @@ impl<L: Link> Printer<L> {
     ) -> Result<Option<Outcome>, PrinterError> {
         let mut retries_left = AUTO_RETRIES;
         let mut shown: Option<Response> = None;
+        // Buddy 6.5.3's premature finish of a tool change (`MMU2::OnMMUProgressMsgChanged` and
+        // `OnMMUProgressMsgSame` in `mmu2_mk4.cpp`): armed on the change to `P1c`
+        // (`loadFilamentStarted`), taken once.
+        let may_finish_early =
+            request.code == RequestCode::Tool && self.options.personality.premature_finish();
+        let mut load_started = false;
+        let mut left_early = false;
         loop {
             if self.link.now_ms().saturating_sub(started) > self.options.command_timeout_ms {
                 return Err(PrinterError::Stuck(request));
@@ -509,11 +537,24 @@ impl<L: Link> Printer<L> {
             shown = Some(answer);
             let value = answer.param_value.unwrap_or(0);
             match answer.param {
-                ParamCode::Processing if new => {
+                ParamCode::Processing => {
                     let progress = ProgressCode(value as u8);
-                    op.event(&mut self.link, &PrinterEvent::Progress(request, progress));
+                    if new {
+                        op.event(&mut self.link, &PrinterEvent::Progress(request, progress));
+                    }
+                    if may_finish_early && !left_early {
+                        let feeding = progress == ProgressCode::FEEDING_TO_FSENSOR;
+                        if feeding && new {
+                            load_started = true;
+                        }
+                        let sensor = feeding && load_started && self.link.fsensor() != 0;
+                        let disengaging = load_started && progress == ProgressCode::DISENGAGING_IDLER;
+                        if sensor || disengaging {
+                            left_early = true;
+                            op.event(&mut self.link, &PrinterEvent::PrematureFinish(request));
+                        }
+                    }
                 }
-                ParamCode::Processing => {}
                 ParamCode::Error => {
                     let error = ErrorCode(value);
                     if new {
@@ -566,7 +607,8 @@ impl<L: Link> Printer<L> {
     /// `f` (after every `P`/`E` answer while a command runs, else on a change) and the register
     /// poll.
     fn poll(&mut self, op: &mut impl Operator<L>, in_command: bool) -> Result<Response, Fault> {
-        while self.link.now_ms() < self.last_activity_ms + HEARTBEAT_MS {
+        let heartbeat_ms = self.options.personality.heartbeat_ms();
+        while self.link.now_ms() < self.last_activity_ms + heartbeat_ms {
             self.report_fsensor(op)?;
             // Nothing is expected between exchanges; the printer drops it.
             self.link.receive(POLL_STEP_MS, &mut Vec::new())?;
@@ -593,7 +635,7 @@ impl<L: Link> Printer<L> {
     }
 
     fn poll_registers(&mut self, op: &mut impl Operator<L>) -> Result<(), Fault> {
-        for (i, &address) in POLLED_REGISTERS.iter().enumerate() {
+        for (i, &address) in self.polled_registers().iter().enumerate() {
             let answer = self.exchange(op, Request::new(RequestCode::Read, address))?;
             self.registers[i] = (answer.param == ParamCode::Accepted)
                 .then_some(answer.param_value)
@@ -670,7 +712,7 @@ impl<L: Link> Printer<L> {
             });
         }
         if why == LinkFault::Garbled {
-            self.wait_silence(HEARTBEAT_MS)?;
+            self.wait_silence(self.options.personality.heartbeat_ms())?;
         }
         self.flush();
         Ok(())
@@ -703,7 +745,8 @@ impl<L: Link> Printer<L> {
         self.flush();
         self.send(op, request)?;
         // Bytes keep the link alive, but a stream that never makes a frame is garbage.
-        let give_up = self.last_activity_ms + 2 * LINK_TIMEOUT_MS;
+        let timeout_ms = self.options.personality.link_timeout_ms();
+        let give_up = self.last_activity_ms + 2 * timeout_ms;
         loop {
             for byte in std::mem::take(&mut self.inbox).into_iter() {
                 match self.decoder.feed(byte) {
@@ -716,13 +759,13 @@ impl<L: Link> Printer<L> {
                 }
             }
             let now = self.link.now_ms();
-            if now >= self.last_activity_ms + LINK_TIMEOUT_MS {
+            if now >= self.last_activity_ms + timeout_ms {
                 return Err(Fault::Link(LinkFault::Timeout));
             }
             if now >= give_up {
                 return Err(Fault::Link(LinkFault::Garbled));
             }
-            let wait = (self.last_activity_ms + LINK_TIMEOUT_MS - now).min(POLL_STEP_MS);
+            let wait = (self.last_activity_ms + timeout_ms - now).min(POLL_STEP_MS);
             let before = self.inbox.len();
             self.link.receive(wait, &mut self.inbox)?;
             if self.inbox.len() > before {
