@@ -14,7 +14,7 @@ use mmu_protocol::{
     ResultCode,
 };
 
-use crate::config::{Config, offered_revision};
+use crate::config::{Config, Contract, offered_revision};
 use crate::drive;
 use crate::follower;
 use crate::persist::{Counters, MAX_SETTINGS, Snapshot};
@@ -82,8 +82,8 @@ pub struct App<const N: usize> {
     /// answers nothing, as MMU 3.0.3, which enables its receiver only after the check
     /// (`main.cpp` `setup2`; printer-truth §4): an `X0 P1a` opens Buddy's Homing dialog.
     started_up: bool,
-    /// `S2` requests in a row, none other between (version negotiation).
-    s2_in_a_row: u8,
+    /// The version negotiation ([`Negotiation`]).
+    negotiation: Negotiation,
     /// The Bowden length the last Retry of FSENSOR TOO EARLY learned since start, mm (0: none).
     bowden_learned_mm: u16,
     /// The link to the printer as the phases that depend on it see it (`P1c`, `P7` hold their
@@ -118,7 +118,7 @@ impl<const N: usize> App<N> {
             now: Instant::ZERO,
             pending_button: None,
             started_up: false,
-            s2_in_a_row: 0,
+            negotiation: Negotiation::default(),
             bowden_learned_mm: 0,
             printer: PrinterLink {
                 heard: Instant::ZERO,
@@ -169,6 +169,8 @@ impl<const N: usize> App<N> {
             status_led: false,
         };
         self.now = now;
+        // The answers of the last step have gone out: an `S2` from now on follows them.
+        self.negotiation.answered_this_step = None;
         self.unit.sense(samples, now, &self.config);
         if !rx.is_empty() {
             self.printer.heard = now;
@@ -247,25 +249,27 @@ impl<const N: usize> App<N> {
     /// transmit buffer is not acted on at all (and counted in register 0x51): the printer, left
     /// without an answer, sends it again, and nothing happens that it was never told about.
     fn handle(&mut self, request: &Request, out: &mut Outputs<N>) {
-        let answered = !matches!(
-            request.code,
-            RequestCode::Reset | RequestCode::FilamentType | RequestCode::Mode
-        );
+        let answered = !matches!(request.code, RequestCode::Reset | RequestCode::FilamentType)
+            && (request.code != RequestCode::Mode
+                || self.config.version.contract() == Contract::AwaitRelease);
         if answered && out.tx.capacity() - out.tx.len() < MAX_FRAME_LEN {
             self.dropped_responses = self.dropped_responses.saturating_add(1);
             return;
         }
         let asks_revision = request.code == RequestCode::Version && request.value == 2;
-        let s2_repeat = if asks_revision { self.s2_in_a_row } else { 0 };
-        self.s2_in_a_row = if asks_revision {
-            self.s2_in_a_row.saturating_add(1)
-        } else {
-            0
-        };
+        if request.code == RequestCode::Version
+            && request.value == 3
+            && let Some(accepted) = self.negotiation.accepted()
+            && accepted != self.config.version.revision
+        {
+            // The printer asks for the build only once the revision matched: keep it.
+            self.config.version.revision = accepted;
+            self.settings_revision = self.settings_revision.wrapping_add(1);
+        }
         let response = match request.code {
             RequestCode::Version if asks_revision => Some(Response::read(
                 request,
-                offered_revision(self.config.version.revision, s2_repeat).into(),
+                self.negotiation.offer(self.config.version.revision).into(),
             )),
             RequestCode::Query => Some(self.query_answer()),
             code if code.is_command() => Some(self.start_command(request)),
@@ -298,9 +302,18 @@ impl<const N: usize> App<N> {
                 self.unit.fsensor = request.value;
                 Some(Response::accepted(request))
             }
+            // MMU 3.0.4 plans the motor mode as a command that finishes at once (`M<n> A`, then
+            // `F0`: Prusa-Firmware-MMU `application.cpp`, `39b24f8`); this unit's DC motors have
+            // no stealth mode to switch.
+            RequestCode::Mode if self.config.version.contract() == Contract::AwaitRelease => {
+                Some(self.start_command(request))
+            }
             // MMU 3.0.3 answers neither the filament type nor the motor mode.
             _ => None,
         };
+        if !asks_revision {
+            self.negotiation.other_request(request);
+        }
         if let Some(response) = response {
             let frame = response.encode();
             if out.tx.extend_from_slice(frame.as_bytes()).is_err() {
@@ -345,10 +358,11 @@ impl<const N: usize> App<N> {
             _ => false,
         };
         self.pending_button = None;
-        if usize::from(request.value) < N
-            && request.code != RequestCode::Unload
-            && request.code != RequestCode::Home
-        {
+        let names_a_slot = matches!(
+            request.code,
+            RequestCode::Tool | RequestCode::Load | RequestCode::Eject | RequestCode::Cut
+        );
+        if names_a_slot && usize::from(request.value) < N {
             self.unit.selected = Some(request.value.into());
         }
         self.operation = if superseded {
@@ -519,6 +533,53 @@ fn add_centi(mm: u32, centi: u8, more: u32) -> (u32, u8) {
     let carry = u32::from(centi >= 100);
     // Below 100 after the carry; `more_mm + carry` is below 2³².
     (mm.saturating_add(more_mm + carry), (centi - carry * 100) as u8)
+}
+
+/// The version handshake as the unit sees it. Prusa's printer sends the same `S2` again after a
+/// wrong answer, and `S3` only once `S2` matched (`protocol_logic.cpp` `ProcessVersionResponse`):
+/// each repeated `S2` gets the next revision of the cycle ([`offered_revision`]), and the one
+/// answered last before `S3` is the one the printer accepted.
+#[derive(Debug, Clone, Copy, Default)]
+struct Negotiation {
+    /// `S2` requests answered in a row (in different steps), none other between.
+    repeats: u8,
+    /// The revision the last `S2` was answered with, while nothing but `S2` and `S3` followed.
+    offered: Option<u8>,
+    /// The revision an `S2` of this step was answered with: that answer has not gone out yet, so
+    /// an `S2` in the same step was queued before the printer heard it, and gets the same answer
+    /// (a burst answered 4, 3, 2, 1, 0 could cost a printer its budget).
+    answered_this_step: Option<u8>,
+}
+
+impl Negotiation {
+    /// The answer to an `S2`, the cycle starting from `accepted`.
+    fn offer(&mut self, accepted: u8) -> u8 {
+        let revision = match self.answered_this_step {
+            Some(revision) => revision,
+            None => {
+                let revision = offered_revision(accepted, self.repeats);
+                self.repeats = self.repeats.wrapping_add(1);
+                revision
+            }
+        };
+        self.offered = Some(revision);
+        self.answered_this_step = Some(revision);
+        revision
+    }
+
+    /// The revision the printer accepted, when it asks for the build (`S3`) right after an `S2`.
+    fn accepted(&self) -> Option<u8> {
+        self.offered
+    }
+
+    /// Any request but `S2` ends a run of them; any but `S3` forgets the last offer.
+    fn other_request(&mut self, request: &Request) {
+        self.repeats = 0;
+        self.answered_this_step = None;
+        if !(request.code == RequestCode::Version && request.value == 3) {
+            self.offered = None;
+        }
+    }
 }
 
 impl<const N: usize> Default for App<N> {

@@ -8,43 +8,89 @@ use crate::MAX_SLOTS;
 use crate::sensor::Thresholds;
 
 /// The version reported through `S0`..`S3`. The printer checks major, minor and revision for
-/// exact equality: 3.0.3 for Prusa-Firmware-Buddy 6.x (MK4, MK3.5, Core One), 3.0.2 for MK3S
-/// firmware 3.13.3/3.14.
+/// exact equality (`protocol_logic.cpp` `ProcessVersionResponse`); which revision it wants
+/// depends on its firmware ([`REVISIONS`]), so the unit negotiates it ([`offered_revision`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Version {
     /// `S0`.
     pub major: u8,
     /// `S1`.
     pub minor: u8,
-    /// `S2`.
+    /// `S2` as the first answer of a handshake: the revision a printer accepted last (register
+    /// 0x52, kept across restarts and `X42`).
     pub revision: u8,
-    /// `S3`: stored by the printer, never checked.
-    pub build: u16,
 }
 
-/// The `S2` revisions of MMU firmware 3.0.x the unit speaks the wire of, newest first: 3.0.1
-/// added register 0x22, 3.0.2 register 0x23, 3.0.3 nothing on the wire; requests, answers and
-/// the printers' register use are the same (Prusa-Firmware-MMU tags v3.0.0..v3.0.3; research
-/// notes `printer-truth.md` §5). A printer expecting any of them can talk to this unit.
-pub const WIRE_COMPATIBLE_REVISIONS: [u8; 4] = [3, 2, 1, 0];
+impl Version {
+    /// `S3`: the build number of MMU firmware 3.0.`revision` (the printer stores it, never checks).
+    pub const fn build(&self) -> u16 {
+        build_of(self.revision)
+    }
 
-/// The revision to answer to the `repeat`-th `S2` in a row (0: the first): the configured one
-/// (register 0x52), then every other wire-compatible revision, newest first, then round again.
-/// Prusa's printer sends the same `S<n>` again at once on a mismatch, up to six mismatches per
-/// handshake (`protocol_logic.cpp` `ProcessVersionResponse`, Buddy and MK3S firmware alike), so
-/// every printer family finds its revision within one handshake.
-pub fn offered_revision(configured: u8, repeat: u8) -> u8 {
-    let mut others = WIRE_COMPATIBLE_REVISIONS
-        .iter()
-        .copied()
-        .filter(|&r| r != configured);
-    let offers = 1 + WIRE_COMPATIBLE_REVISIONS
-        .iter()
-        .filter(|&&r| r != configured)
-        .count();
+    /// The contract a printer that accepted this revision was released with.
+    pub const fn contract(&self) -> Contract {
+        if self.revision >= 4 {
+            Contract::AwaitRelease
+        } else {
+            Contract::PullAtOnce
+        }
+    }
+}
+
+/// The `S2` revisions of MMU firmware 3.0.x the unit speaks, newest first. The wire is the same
+/// for all (3.0.1 added register 0x22, 3.0.2 register 0x23; 3.0.4 left the codec, the error and
+/// the progress codes byte for byte as they were: Prusa-Firmware-MMU `git diff v3.0.3 48d4d92 --
+/// src/logic/error_codes.h src/logic/progress_codes.h src/modules/protocol.*` is empty); 3.0.4
+/// changed the unload ([`Contract`]). Which printer wants which: 3.0.4 Prusa-Firmware-Buddy 6.5.3
+/// and later (`mmu2_supported_version.h`, `ccb208bf5af1`), 3.0.3 Buddy 6.4.x and MK3S 3.14.1,
+/// 3.0.2 MK3S 3.13.3/3.14.0, 3.0.1 and 3.0.0 older firmware.
+pub const REVISIONS: [u8; 5] = [4, 3, 2, 1, 0];
+
+/// The build number MMU firmware 3.0.`revision` reports through `S3`: its commit count
+/// (Prusa-Firmware-MMU `cmake/ProjectVersion.cmake`, `git rev-list --count` of tags v3.0.0 to
+/// v3.0.3: 814, 844, 878, 896; 3.0.4's release is `MMU3_FW3.0.4+936.hex`).
+pub const fn build_of(revision: u8) -> u16 {
+    match revision {
+        0 => 814,
+        1 => 844,
+        2 => 878,
+        3 => 896,
+        _ => 936,
+    }
+}
+
+/// What a printer expects of an unload that starts with the filament in its extruder, by the
+/// MMU revision it accepted (`mmu-3.0.4.md`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Contract {
+    /// MMU 3.0.4 (Buddy >= 6.5.3): the printer sends `T` at the start of its own finishing
+    /// retract, its gears still gripping the filament. Nothing pulls until it reports its sensor
+    /// off (`f0`/`W9 0`), at most 4 s from the command's acceptance (else `8004` with nothing
+    /// pulled); then the first 20 mm at the slow speed (0x14), then fast
+    /// (Prusa-Firmware-MMU `src/logic/unload_to_finda.cpp`, `3d32c30`, `9e3b300`).
+    AwaitRelease,
+    /// MMU 3.0.3 and older: the printer retracts before it sends `T`/`U0`; the unit pulls at once
+    /// and the printer's sensor must clear within 0x0c mm (else `8004`, whose Retry makes the
+    /// printer help: Buddy `mmu2_mk4.cpp` `CheckUserInput`, `HelpUnloadToFinda`).
+    PullAtOnce,
+}
+
+/// The revision to answer to the `repeat`-th `S2` of a handshake (0: the first): the one accepted
+/// last (`accepted`, register 0x52), then every other of [`REVISIONS`], newest first, then round
+/// again. Prusa's printer sends the same `S<n>` again at once on a mismatch and gives up on the
+/// sixth (`protocol_logic.cpp` `ProcessVersionResponse`, Buddy and MK3S firmware alike), so every
+/// printer finds its revision within four wrong answers.
+pub fn offered_revision(accepted: u8, repeat: u8) -> u8 {
+    let offers = 1 + REVISIONS.iter().filter(|&&r| r != accepted).count();
     match usize::from(repeat) % offers {
-        0 => configured,
-        k => others.nth(k - 1).unwrap_or(configured),
+        0 => accepted,
+        k => REVISIONS
+            .iter()
+            .copied()
+            .filter(|&r| r != accepted)
+            .nth(k - 1)
+            .unwrap_or(accepted),
     }
 }
 
@@ -113,8 +159,7 @@ impl Config {
         version: Version {
             major: 3,
             minor: 0,
-            revision: 3,
-            build: 1,
+            revision: 4,
         },
         extra_load_mm: 30,
         unload_check_mm: 40,

@@ -452,7 +452,7 @@ registers! {
     VersionRevision: read_only(0x02, "version.revision", |v, _, _| Some(
         v.config.version.revision.into()
     )),
-    VersionBuild: read_only(0x03, "version.build", |v, _, _| Some(v.config.version.build)),
+    VersionBuild: read_only(0x03, "version.build", |v, _, _| Some(v.config.version.build())),
     Errors: read_only(0x04, "errors", |v, _, _| Some(v.drive_errors)),
     Progress: read_only(0x05, "progress", |v, _, _| Some(match v.status {
         Status::Running(progress) => progress.0.into(),
@@ -529,13 +529,14 @@ registers! {
             .fold(0u16, |mask, i| mask | (1 << i))
     )),
     DroppedResponses: read_only(0x51, "dropped_responses", |v, _, _| Some(v.dropped_responses)),
-    // The revision the first `S2` reports; asked again, the unit offers the other wire-compatible
-    // revisions (app.rs), so every printer family finds its own.
+    // The revision the first `S2` of a handshake reports: the one a printer accepted last (the
+    // unit keeps it on `S3`, app.rs). Asked again, the unit offers the other revisions of
+    // `config::REVISIONS`, so every printer finds its own.
     ReportedRevision: writable(
         REPORTED_REVISION,
         One,
         "reported_revision",
-        0..=255,
+        0..=4,
         |v, _, _| Some(v.config.version.revision.into()),
         |t, _, _, value| {
             t.config.version.revision = value as u8;

@@ -267,21 +267,21 @@ fn version(rig: &mut Rig<3>, part: u8) -> Option<u16> {
 /// On a version answer that does not match, Prusa's printer sends the same `S<n>` again at once,
 /// up to six mismatches per handshake (`protocol_logic.cpp` `ProcessVersionResponse`;
 /// printer-truth §5). `S2` asked again with nothing between is answered with the next
-/// wire-compatible revision: 3, 2, 1, 0 (MMU 3.0.0 to 3.0.3 speak the same wire).
+/// revision of the cycle 4, 3, 2, 1, 0 (MMU 3.0.0 to 3.0.4 speak the same wire).
 #[test]
-fn s2_asked_again_answers_the_next_wire_compatible_revision() {
+fn s2_asked_again_answers_the_next_revision_of_the_cycle() {
     let mut rig = Rig::<3>::new();
     rig.idle(200);
     assert_eq!(version(&mut rig, 0), Some(3));
     assert_eq!(version(&mut rig, 1), Some(0));
-    let answers: Vec<_> = (0..4).map(|_| version(&mut rig, 2)).collect();
-    assert_eq!(answers, [Some(3), Some(2), Some(1), Some(0)]);
+    let answers: Vec<_> = (0..6).map(|_| version(&mut rig, 2)).collect();
+    assert_eq!(answers, [Some(4), Some(3), Some(2), Some(1), Some(0), Some(4)]);
     // Any other request starts the sequence over.
-    assert_eq!(version(&mut rig, 3), Some(1));
-    assert_eq!(version(&mut rig, 2), Some(3));
-    assert_eq!(version(&mut rig, 2), Some(2));
     rig.query();
+    assert_eq!(version(&mut rig, 2), Some(4));
     assert_eq!(version(&mut rig, 2), Some(3));
+    rig.query();
+    assert_eq!(version(&mut rig, 2), Some(4));
 }
 
 /// Register 0x52 stays the first answer (and the override); the other revisions follow.
@@ -293,8 +293,13 @@ fn s2_negotiation_starts_from_register_0x52() {
         rig.send(Request::write(0x52, 2)).map(|a| a.param),
         Some(ParamCode::Accepted)
     );
-    let answers: Vec<_> = (0..4).map(|_| version(&mut rig, 2)).collect();
-    assert_eq!(answers, [Some(2), Some(3), Some(1), Some(0)]);
+    let answers: Vec<_> = (0..5).map(|_| version(&mut rig, 2)).collect();
+    assert_eq!(answers, [Some(2), Some(4), Some(3), Some(1), Some(0)]);
+    assert_eq!(
+        rig.send(Request::write(0x52, 5)).map(|a| a.param),
+        Some(ParamCode::Rejected),
+        "no MMU 3.0.5 to offer"
+    );
 }
 
 // ---- #8: dropped answers are invisible ------------------------------------------------------------

@@ -67,8 +67,8 @@ pub struct PrinterArgs {
     #[arg(long, value_name = "STATE", requires = "port", value_parser = clap::value_parser!(u8).range(0..=3))]
     pub fsensor: Option<u8>,
     /// The unit firmware version the printer supports; S0..S2 must answer it exactly
-    /// (MK4, MK3.5, Core One: 3.0.3; MK3S: 3.0.2).
-    #[arg(long, value_name = "X.Y.Z", default_value = "3.0.3", value_parser = parse_version)]
+    /// (Buddy 6.5.3 and later: 3.0.4; Buddy 6.4 and MK3S 3.14.1: 3.0.3; MK3S 3.13.3/3.14.0: 3.0.2).
+    #[arg(long, value_name = "X.Y.Z", default_value = "3.0.4", value_parser = parse_version)]
     pub expect_version: (u8, u8, u8),
     /// One JSON object per line per event, and a final `result` object.
     #[arg(long, global = true)]

@@ -52,7 +52,7 @@ pub struct SensorsArgs {
     #[arg(long, value_name = "MS", default_value_t = 100, value_parser = clap::value_parser!(u64).range(10..=60_000))]
     pub every: u64,
     /// The unit firmware version to expect (3.0.2 for a unit set up for an MK3S).
-    #[arg(long, value_name = "X.Y.Z", default_value = "3.0.3", value_parser = parse_version)]
+    #[arg(long, value_name = "X.Y.Z", default_value = "3.0.4", value_parser = parse_version)]
     pub expect_version: (u8, u8, u8),
 }
 

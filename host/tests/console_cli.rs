@@ -177,7 +177,7 @@ fn the_console_drives_the_simulator_over_a_pty() {
     );
     let out = text(&output);
     assert!(output.status.success(), "{out}");
-    assert!(out.contains("connected: unit firmware 3.0.3"), "{out}");
+    assert!(out.contains("connected: unit firmware 3.0.4"), "{out}");
     assert!(out.contains("slot 1 is loaded"), "{out}");
     assert!(
         out.contains("lane.slot1 (0xb9) = 8 (loaded in the printer's extruder)"),

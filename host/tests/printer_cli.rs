@@ -60,7 +60,7 @@ fn events<'a>(lines: &'a [Value], kind: &str) -> Vec<&'a Value> {
 #[test]
 fn a_tool_change_names_its_phases_and_finishes() {
     let out = printer_ok(&["tool", "1"]);
-    assert!(out.contains("connected: unit firmware 3.0.3"), "{out}");
+    assert!(out.contains("connected: unit firmware 3.0.4"), "{out}");
     assert!(out.contains("T1: FeedingToFSensor"), "{out}");
     assert!(out.contains("T1: finished OK"), "{out}");
 }
@@ -166,7 +166,7 @@ fn registers_read_and_write() {
 fn status_shows_version_state_and_registers() {
     let out = printer_ok(&["status"]);
     for expected in [
-        "unit firmware: 3.0.3, build 1",
+        "unit firmware: 3.0.4, build 936",
         "state (Q0): X0 F0 (finished OK)",
         "hub filament sensor (FINDA): no filament",
         "register 0x08 FINDA_State = 0",
@@ -214,7 +214,7 @@ fn the_demo_runs_its_script() {
     let out = stdout(&output);
     assert!(output.status.success(), "{out}{}", stderr(&output));
     for expected in [
-        "connected: unit firmware 3.0.3",
+        "connected: unit firmware 3.0.4",
         "T2: finished OK",
         "the hub filament sensor (the printer's FINDA) sees filament: the printer unloads first",
         "E1: printer dialog FILAMENT_EJECTED",
@@ -230,12 +230,12 @@ fn the_demo_runs_its_script() {
 /// Before: `S2 answered Some(2)`, a Rust `Option` in a user message, with no way out.
 #[test]
 fn a_version_mismatch_says_what_the_unit_reports_and_what_to_do() {
-    // 3.0.0 to 3.0.3 are negotiated; a revision the unit does not offer by itself fails.
-    let text = printer_fails(&["--expect-version", "3.0.4", "status"]);
+    // 3.0.0 to 3.0.4 are negotiated; a revision the unit does not speak fails.
+    let text = printer_fails(&["--expect-version", "3.0.5", "status"]);
     assert!(!text.contains("Some("), "{text}");
-    assert!(text.contains("the printer expects 3.0.4"), "{text}");
+    assert!(text.contains("the printer expects 3.0.5"), "{text}");
     assert!(text.contains("--expect-version 3.0."), "{text}");
-    assert!(text.contains("write 0x52 4"), "{text}");
+    assert!(text.contains("speaks MMU 3.0.0 to 3.0.4"), "{text}");
 }
 
 /// Before: `printer --slots 9` exited 1, `sim --slots 9` 2; `--fault jam:7` on 3 slots was

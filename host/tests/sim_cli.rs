@@ -245,7 +245,7 @@ impl Printer {
         // As a printer does, let the unit boot first: it takes a frame only at the start of a
         // quiet line (mmu_protocol::SILENCE_MS).
         std::thread::sleep(Duration::from_millis(200));
-        let versions = [(0, 3), (1, 0), (2, 3)];
+        let versions = [(0, 3), (1, 0), (2, 4)];
         for (register, version) in versions {
             let request = Request::new(RequestCode::Version, register);
             assert_eq!(self.ask(request), Response::read(&request, version));
@@ -479,7 +479,7 @@ fn the_printer_tool_drives_the_simulator_over_a_pty() {
             "{action:?}: {out}{}",
             String::from_utf8_lossy(&output.stderr)
         );
-        assert!(out.contains("connected: unit firmware 3.0.3"), "{out}");
+        assert!(out.contains("connected: unit firmware 3.0.4"), "{out}");
         assert!(!out.contains("link lost"), "{out}");
     }
 }

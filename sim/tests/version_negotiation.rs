@@ -1,7 +1,7 @@
 //! Any Prusa printer finds its version with default settings (issue 12, "Any Prusa printer, no
 //! configuration"): the printer's handshake (as `protocol_logic.cpp` `ProcessVersionResponse`
 //! plays it: the same `S<n>` again on a mismatch, six mismatches per handshake) against the
-//! simulated unit, for each revision a printer family expects (printer-truth §5: Buddy 6.x 3.0.3,
+//! simulated unit, for each revision a printer family expects (Buddy >= 6.5.3 3.0.4, Buddy 6.4 3.0.3,
 //! Buddy 5.2 / MK3S 3.13.3 3.0.2, MK3S 3.13.2 3.0.1, MK3S 3.13.0 3.0.0).
 
 use mmu_protocol::{ErrorCode, Request, RequestCode};
@@ -23,8 +23,8 @@ impl Operator<SimLink> for Watcher {
 }
 
 #[test]
-fn printers_expecting_3_0_0_to_3_0_3_connect_with_default_settings() {
-    for revision in [3u8, 2, 1, 0] {
+fn printers_expecting_3_0_0_to_3_0_4_connect_with_default_settings() {
+    for revision in [4u8, 3, 2, 1, 0] {
         let mut link = SimLink::new(Sim::new(SimOptions::default()).unwrap());
         link.idle(200);
         let options = PrinterOptions {
@@ -40,7 +40,7 @@ fn printers_expecting_3_0_0_to_3_0_3_connect_with_default_settings() {
             .iter()
             .filter(|e| matches!(e, PrinterEvent::Sent(r) if r.code == RequestCode::Version && r.value == 2))
             .count();
-        assert_eq!(s2_sent, usize::from(4 - revision), "3.0.{revision}: S2 sent");
+        assert_eq!(s2_sent, usize::from(5 - revision), "3.0.{revision}: S2 sent");
         assert!(
             op.events.iter().any(
                 |e| matches!(e, PrinterEvent::Connected { version, .. } if *version == (3, 0, revision))

@@ -14,6 +14,7 @@
 //! | `E<n>` | Eject | [`eject`] |
 //! | `K<n>` | Cut | [`cut`] |
 //! | `H0` | Home | [`home`] |
+//! | `M<n>` | the motor mode: finishes at once, answered only to a printer that accepted 3.0.4 | |
 //! | start-up | the start-up check | [`start_up`] |
 
 pub mod cut;
@@ -57,6 +58,9 @@ pub enum Command {
     Cut,
     /// `H0`.
     Home,
+    /// `M<n>`, as MMU 3.0.4 takes it: accepted and finished at once (a DC-motor unit has no
+    /// stealth mode).
+    Mode,
 }
 
 /// What a button does in an error state.
@@ -165,6 +169,7 @@ impl Command {
             RequestCode::Cut => Command::Cut,
             RequestCode::Home => Command::Home,
             RequestCode::Reset => Command::StartUp,
+            RequestCode::Mode => Command::Mode,
             _ => return None,
         })
     }
@@ -204,6 +209,7 @@ impl Command {
                 home::plan(plan);
                 Ok(())
             }
+            Command::Mode => Ok(()),
         }
     }
 
@@ -227,6 +233,7 @@ impl Command {
                 MOTION,
             ],
             Command::Home => &[home::RECOVERY, MOTION],
+            Command::Mode => &[],
         }
     }
 

@@ -233,7 +233,7 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Keeper<F, N, C> {
             .set_erase_allowance(self.erase_credit.max(ERASES_BEFORE_RESET));
         let result = match action {
             BoardAction::Reset => self.store.save(&self.snapshot(app), None).map(drop),
-            BoardAction::EraseAndReset => self.store.forget(),
+            BoardAction::EraseAndReset => self.store.forget(&Scan::all(app, &self.defaults)),
         };
         self.settle(result, now)
     }

@@ -286,6 +286,15 @@ impl<const N: usize> Records<N> {
         self.identity.clone_from(&from.identity);
     }
 
+    /// Become blank records but for the identity registers among `settings`, in place.
+    pub(super) fn blank_but_identity_of(&mut self, settings: &[(u8, u16)]) {
+        self.set(&[Lane::Unknown; N], &Counters::default(), &[]);
+        for &entry in settings.iter().filter(|(address, _)| is_identity(*address)) {
+            // Room for one entry per identity register, and a register appears once.
+            let _ = self.identity.push(entry);
+        }
+    }
+
     /// Become `from`, in place.
     pub(super) fn copy_from(&mut self, from: &Records<N>) {
         self.lanes = from.lanes;

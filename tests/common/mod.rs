@@ -130,6 +130,9 @@ pub struct Rig<const N: usize> {
     load_started: bool,
     /// The model's sensor state and since when (for a printer whose sensor reports late).
     sensed: (u8, u64),
+    /// The MMU revision the printer's firmware requires (`S2`): 4 for Buddy >= 6.5.3, 3 for
+    /// Buddy 6.4 and MK3S 3.14.1, 2 for MK3S 3.13.3/3.14.0.
+    pub wants_revision: u8,
 }
 
 impl<const N: usize> Rig<N> {
@@ -150,6 +153,7 @@ impl<const N: usize> Rig<N> {
             seen_progress: None,
             load_started: false,
             sensed: (0, 0),
+            wants_revision: 4,
         }
     }
 
@@ -203,12 +207,17 @@ impl<const N: usize> Rig<N> {
         first
     }
 
-    /// The printer's handshake: versions, the two register writes, the filament sensor.
+    /// The printer's handshake: versions (as Prusa's printer checks them, wanting
+    /// [`Rig::wants_revision`]), the two register writes, the filament sensor.
     pub fn handshake(&mut self) -> Vec<Response> {
         let mut answers = Vec::new();
-        for part in 0..4 {
-            answers.extend(self.send(Request::new(RequestCode::Version, part)));
-        }
+        let wrong = self.negotiate(self.wants_revision);
+        assert!(
+            wrong.is_ok(),
+            "the printer wanting 3.0.{} gave up",
+            self.wants_revision
+        );
+        answers.extend(self.send(Request::new(RequestCode::Version, 3)));
         answers.extend(self.send(Request::write(0x0b, 5)));
         answers.extend(self.send(Request::write(0x14, 20)));
         answers.extend(self.send(Request::new(
@@ -216,6 +225,29 @@ impl<const N: usize> Rig<N> {
             self.model.fsensor_state(),
         )));
         answers
+    }
+
+    /// The version check of Prusa's printer for 3.0.`revision` (`protocol_logic.cpp`
+    /// `StartSeqRestart`, `ProcessVersionResponse`): `S0`, `S1`, `S2`, each asked again at once
+    /// after a wrong answer, six wrong answers and it gives up. The wrong answers it got, or
+    /// `Err` with them when it gave up. `S3` is left to the caller.
+    pub fn negotiate(&mut self, revision: u8) -> Result<Vec<u16>, Vec<u16>> {
+        let expected = [3, 0, u16::from(revision)];
+        let mut wrong = Vec::new();
+        let mut stage = 0;
+        while stage < expected.len() {
+            let answer = self.send(Request::new(RequestCode::Version, stage as u8));
+            let value = answer.and_then(|a| a.param_value);
+            if value == Some(expected[stage]) {
+                stage += 1;
+                continue;
+            }
+            wrong.push(value.unwrap_or(u16::MAX));
+            if wrong.len() == 6 {
+                return Err(wrong);
+            }
+        }
+        Ok(wrong)
     }
 
     /// The slow feed the printer co-feeds and pushes at (register 0x14, as it wrote it).

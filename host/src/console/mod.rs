@@ -52,7 +52,7 @@ pub struct TargetArgs {
     pub fsensor_events: Option<PathBuf>,
     /// The unit firmware version to expect; S0..S2 must answer it (3.0.2 for a unit set up for
     /// an MK3S).
-    #[arg(long, value_name = "X.Y.Z", default_value = "3.0.3", value_parser = parse_version)]
+    #[arg(long, value_name = "X.Y.Z", default_value = "3.0.4", value_parser = parse_version)]
     pub expect_version: (u8, u8, u8),
     /// Show every frame sent (`>`) and received (`<`).
     #[arg(short, long)]
@@ -133,7 +133,7 @@ impl Bench {
                 input,
                 eject: EjectDialog::TakeOut,
                 quit: false,
-                // Unit version 3.0.2 is what MK3S firmware expects; 3.0.3 Buddy firmware.
+                // MK3S firmware expects 3.0.2 (3.13.3, 3.14.0) or 3.0.3 (3.14.1); Buddy 3.0.3 or 3.0.4.
                 family: if options.version.2 == 2 {
                     Family::Mk3s
                 } else {

@@ -92,10 +92,14 @@ pub(crate) fn printer_failure(error: PrinterError, expected: (u8, u8, u8)) -> Fa
     }
     let reported = parts.join(".");
     let mut message = format!("the unit reports version {reported}, the printer expects {want} ({screen})");
-    if part == 2 {
+    if part == 2 && mmu_firmware::config::REVISIONS.contains(&revision) {
         message.push_str(&format!(
-            ".\n  To talk to this unit as it is, add --expect-version {reported}.\n  To make it offer {want} first (register 0x52; it offers 3.0.3 to 3.0.0 by itself): \
+            ".\n  To talk to this unit as it is, add --expect-version {reported}.\n  To make it offer {want} first (register 0x52; it offers 3.0.4 to 3.0.0 by itself): \
              mmu printer --port DEV --expect-version {reported} write 0x52 {revision}"
+        ));
+    } else if part == 2 {
+        message.push_str(&format!(
+            ".\n  This unit speaks MMU 3.0.0 to 3.0.4; to talk to it anyway, add --expect-version {reported}"
         ));
     } else {
         message.push_str(&format!(

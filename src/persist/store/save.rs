@@ -132,10 +132,18 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
     /// counters zero, no settings) written as ordinary entries, so a power cut leaves each record
     /// either as it was or blank. (Erasing pages instead could bring old records back: a cut
     /// erase leaves old entries behind.)
-    pub fn begin_forget(&mut self) {
-        self.target.blank_but_identity(&self.saved);
+    ///
+    /// `settings` are the unit's settings as they are now: their identity registers are kept,
+    /// whether or not a save has stored them yet (`W52 2` at once followed by `X42` keeps the 2).
+    pub fn begin_forget(&mut self, settings: &[(u8, u16)]) {
+        self.target.blank_but_identity_of(settings);
+        let identity = if self.target.identity == self.saved.identity {
+            0
+        } else {
+            bit(Record::Identity)
+        };
         self.slow_due = None;
-        self.begin(bit(Record::Settings) | bit(Record::Counters) | bit(Record::Lanes));
+        self.begin(bit(Record::Settings) | bit(Record::Counters) | bit(Record::Lanes) | identity);
     }
 
     /// Append `records` to the head, or open a fresh page when there is no head to append to.
@@ -210,9 +218,9 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
         Ok(records)
     }
 
-    /// Forget everything but the identity, whole (see [`Store::begin_forget`]).
-    pub fn forget(&mut self) -> Result<(), StoreError> {
-        self.begin_forget();
+    /// Forget everything but the identity in `settings`, whole (see [`Store::begin_forget`]).
+    pub fn forget(&mut self, settings: &[(u8, u16)]) -> Result<(), StoreError> {
+        self.begin_forget(settings);
         self.finish()
     }
 
