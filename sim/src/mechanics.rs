@@ -51,11 +51,11 @@ pub const PRINTER_UNLOAD_MM_S: f32 = 80.0;
 /// Buddy 6.5.3's finishing retract after it sent `T`, mm, at its copy of register 0x14
 /// (`MMU2_RETRY_UNLOAD_FINISH_LENGTH`, BFW v6.5.3 `mmu2_config.h`, since `2178f416c2eb`).
 pub const FINISH_RETRACT_MM: f32 = 80.0;
-/// Where the slicer's ramming leaves the tip on a Buddy 6.5.3 printer, mm past the extruder
-/// gears: "ramming which ends with the filament tip still in extruder gears" (`mmu2_mk4.cpp`);
-/// with the finishing retract at 20 mm/s the sensor goes off about 0.7 s later, as measured
-/// with Prusa's code.
-pub const RAMMED_TIP_PAST_GEARS_MM: f32 = 10.0;
+/// Where the slicer's ramming leaves the tip on a Buddy 6.5.3 printer, mm past its filament
+/// sensor: "ramming which ends with the filament tip still in extruder gears" (`mmu2_mk4.cpp`),
+/// and the sensor goes off this far into the finishing retract (`nominalEMotorFSOff`, 14 mm,
+/// BFW v6.5.3 `mmu2_mk4.h`): 0.7 s at 20 mm/s, as measured with Prusa's code.
+pub const RAMMED_TIP_PAST_SENSOR_MM: f32 = 14.0;
 /// After a tool change the printer loads the new filament from its gears into the nozzle, mm.
 pub const LOAD_TO_NOZZLE_MM: f32 = 60.0;
 /// Speed of the printer's load to the nozzle, mm/s.
@@ -262,7 +262,7 @@ impl Mechanics {
                 if self.personality.sends_tool_before_retract() {
                     // The slicer's ramming ends with the tip still in the gears; the printer's
                     // finishing retract follows at its 0x14 copy, the command already out.
-                    let rammed = model.config().extruder_gears_mm + RAMMED_TIP_PAST_GEARS_MM;
+                    let rammed = model.config().bowden_length_mm + RAMMED_TIP_PAST_SENSOR_MM;
                     if tip > rammed {
                         self.plan(model, events, "ramming", rammed - tip, PRINTER_UNLOAD_MM_S);
                     }

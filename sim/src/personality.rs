@@ -116,6 +116,19 @@ impl Personality {
         matches!(self, Personality::Buddy65)
     }
 
+    /// Where the printer's extruder gears sit before its filament sensor, mm, if they do. On
+    /// Buddy 6.5.3 the sensor goes off while the gears still pull the filament back: its
+    /// finishing retract expects the sensor off 14 mm into it (`nominalEMotorFSOff`, BFW v6.5.3
+    /// `mmu2_mk4.h`), and MMU 3.0.4 pulls its first 20 mm at the retract's own speed, with the
+    /// gears. The default model has the MK3S's order (the sensor 4 mm before the gears), where
+    /// no retract can clear the sensor: the reason the MK3S is left out of 3.0.4.
+    pub const fn gears_before_sensor_mm(self) -> Option<f32> {
+        match self {
+            Personality::Buddy65 => Some(10.0),
+            Personality::Buddy64 | Personality::Mk3s => None,
+        }
+    }
+
     /// The longest the simulator may hold the printer's bytes back while it plays a printer move
     /// that comes before them on the real printer, ms: well inside the printer's link timeout.
     pub const fn max_hold_ms(self) -> u64 {

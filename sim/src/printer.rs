@@ -545,11 +545,12 @@ impl<L: Link> Printer<L> {
                         op.event(&mut self.link, &PrinterEvent::Progress(request, progress));
                     }
                     if may_finish_early && !left_early {
-                        let feeding = progress == ProgressCode::FEEDING_TO_FSENSOR;
-                        if feeding && new {
+                        if progress == ProgressCode::FEEDING_TO_FSENSOR && new {
                             load_started = true;
                         }
-                        let sensor = feeding && load_started && self.link.fsensor() != 0;
+                        // Prusa's layer looks at its sensor between polls too, so the unit may
+                        // have moved on from `P1c` by the answer that shows it here.
+                        let sensor = load_started && self.link.fsensor() != 0;
                         let disengaging = load_started && progress == ProgressCode::DISENGAGING_IDLER;
                         if sensor || disengaging {
                             left_early = true;

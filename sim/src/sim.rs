@@ -52,7 +52,9 @@ pub struct SimOptions {
     pub print_mm_s: f32,
     /// How long the unit takes to boot after a reset or power-up, ms.
     pub boot_ms: u32,
-    /// The printer whose mechanics (its extruder around a tool change) are played.
+    /// The printer whose mechanics (its extruder around a tool change) are played. On Buddy
+    /// 6.5.3 the extruder gears sit before the filament sensor
+    /// ([`Personality::gears_before_sensor_mm`]), whatever [`SimOptions::model`] says.
     pub printer: Personality,
 }
 
@@ -132,7 +134,11 @@ impl Sim {
                 options.slots
             ))
         })?;
-        let model = Model::new(options.model.clone(), options.slots, options.seed);
+        let mut geometry = options.model.clone();
+        if let Some(before) = options.printer.gears_before_sensor_mm() {
+            geometry.extruder_gears_mm = geometry.bowden_length_mm - before;
+        }
+        let model = Model::new(geometry, options.slots, options.seed);
         let printer = Mechanics::new(
             options.printer,
             f32::from(options.unit.extra_load_mm),

@@ -1,7 +1,8 @@
 //! Soak runs: many tool changes across all slots with random faults injected and later cleared,
 //! recovered as the printer and its user would, and the figures that come out.
 //!
-//! [`run`] plays a printer ([`Printer`] over [`SimLink`]) against a fresh [`Sim`] and asks for
+//! [`run`] plays a printer ([`Printer`] over [`SimLink`], the firmware of
+//! [`SoakOptions::personality`] in its protocol and its mechanics) against a fresh [`Sim`] and asks for
 //! tool changes, each to a random slot other than the loaded one. With random faults, some changes
 //! ([`FAULT_PROBABILITY`]) get a fault from a mix that matters to the unit (a jam of the target
 //! slot or of the Bowden tube, a slipping or dead drive, sensor noise, a disconnected sensor, a
@@ -40,6 +41,7 @@ use mmu_protocol::{ButtonCode, ErrorCode, Request, RequestCode, ResultCode};
 use crate::fault::SimFault;
 use crate::flash::FlashWear;
 use crate::link::SimLink;
+use crate::personality::Personality;
 use crate::printer::{Decision, Link, Operator, Outcome, Printer, PrinterEvent, PrinterOptions};
 use crate::sim::{CommandRecord, PRINTER_UNLOAD_MM, PRINTER_UNLOAD_MM_S, Sim, SimOptions, status_text};
 use crate::timing::tool_change_minimum;
@@ -80,6 +82,10 @@ pub struct SoakOptions {
     pub sim: SimOptions,
     /// The printer.
     pub printer: PrinterOptions,
+    /// The printer played, by its protocol logic and by its mechanics in the simulator (it
+    /// overrides [`PrinterOptions::personality`] and [`SimOptions::printer`]; the version the
+    /// printer wants is [`PrinterOptions::version`]).
+    pub personality: Personality,
 }
 
 /// How one kind of fault fared.
@@ -587,10 +593,15 @@ impl Rig {
             .wrapping_add(generation.wrapping_mul(0x9e37_79b9_7f4a_7c15));
         let sim = Sim::new(SimOptions {
             seed,
+            printer: options.personality,
             ..options.sim.clone()
         })
         .map_err(|error| error.to_string())?;
-        let mut printer = Printer::new(StrikingLink::new(sim), options.printer);
+        let printer_options = PrinterOptions {
+            personality: options.personality,
+            ..options.printer
+        };
+        let mut printer = Printer::new(StrikingLink::new(sim), printer_options);
         printer
             .connect(&mut SoakUser::default())
             .map_err(|error| format!("the printer could not connect: {error}"))?;

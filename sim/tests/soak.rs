@@ -6,10 +6,11 @@
 //! runs a random-fault soak and prints its report and notes.
 
 use mmu_sim::soak::{self, SoakOptions, SoakReport};
-use mmu_sim::{PrinterOptions, SimOptions};
+use mmu_sim::{Personality, PrinterOptions, SimOptions};
 
 fn options(changes: u32, random_faults: bool, seed: u64) -> SoakOptions {
     SoakOptions {
+        personality: Personality::default(),
         changes,
         random_faults,
         seed,

@@ -20,7 +20,7 @@ use std::error::Error;
 use std::path::PathBuf;
 
 use mmu_protocol::{ButtonCode, ErrorCode, Family, ParamCode, Request, RequestCode, Response, ResultCode};
-use mmu_sim::{Link, Outcome, Printer, PrinterOptions};
+use mmu_sim::{Link, Outcome, Personality, Printer, PrinterOptions};
 
 use crate::explain::{error_meaning, request_label, response_meaning};
 use crate::printer_cli::console::{Console, state_text};
@@ -112,7 +112,7 @@ impl Bench {
                 };
                 Wire::Serial(SerialLink::open(port, fsensor)?)
             }
-            (None, true) => Wire::Sim(Box::new(sim_link(&target.sim_options)?)),
+            (None, true) => Wire::Sim(Box::new(sim_link(&target.sim_options, Personality::default())?)),
             _ => return Err(crate::usage::usage(crate::printer_cli::CHOOSE_THE_UNIT)),
         };
         let options = PrinterOptions {
