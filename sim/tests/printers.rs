@@ -135,7 +135,7 @@ fn buddy_printers_poll_the_bowden_length_and_the_mk3s_does_not() {
         };
         assert_eq!(reads.get(..poll.len()), Some(poll), "{personality}: {reads:x?}");
         assert!(
-            !reads.is_empty() && reads.len() % poll.len() == 0,
+            !reads.is_empty() && reads.len().is_multiple_of(poll.len()),
             "{personality}"
         );
         let bowden = printer.polled(0x22);
