@@ -5,9 +5,11 @@
 //! watches the traffic and moves it the way the printer's firmware does (spec §5.7) for the
 //! printer [`Personality`] played:
 //!
-//! - **Before an unload.** Buddy 6.4 and the MK3S send `T` (and `U`, `E`, `K`) only once the
-//!   filament is out of their gears: the simulator plays that retract when it sees the frame and
-//!   holds the frame back until it is done, never longer than [`Personality::max_hold_ms`].
+//! - **Before an unload.** Buddy 6.4 and the MK3S send `T` (and every printer `U`, `E`, `K`)
+//!   only once the filament is out of their gears (`UnloadObeyAutoRetracted`: ramming first):
+//!   the simulator plays that retract when it sees the frame and holds the frame back until it
+//!   is done, never longer than [`Personality::max_hold_ms`] (the retract runs as fast as that
+//!   needs: 1 s on a printer with a 2 s timeout, 0.1 s on Buddy 6.5.3).
 //!   Buddy 6.5.3 sends `T` first (`MMU2::ToolChangeCommonOnce` in BFW v6.5.3 `mmu2_mk4.cpp`):
 //!   the frame passes at once, and the slicer's ramming and the printer's own retract (80 mm at
 //!   its copy of register 0x14) run while the unit has it. The model's gears hold the filament
@@ -166,10 +168,12 @@ impl Mechanics {
             self.release_frame(&mut out);
         }
         for &byte in rx {
-            let gather = self.at_line_start
-                && self.frame.is_empty()
-                && !self.personality.sends_tool_before_retract()
-                && matches!(byte, b'T' | b'U' | b'E' | b'K');
+            let may_wait = match byte {
+                b'T' => !self.personality.sends_tool_before_retract(),
+                b'U' | b'E' | b'K' => true,
+                _ => false,
+            };
+            let gather = self.at_line_start && self.frame.is_empty() && may_wait;
             if gather || !self.frame.is_empty() {
                 self.frame.push(byte);
             } else if self.hold_until_ms.is_some() {
@@ -259,7 +263,7 @@ impl Mechanics {
                 else {
                     return false;
                 };
-                if self.personality.sends_tool_before_retract() {
+                if code == RequestCode::Tool && self.personality.sends_tool_before_retract() {
                     // The slicer's ramming ends with the tip still in the gears; the printer's
                     // finishing retract follows at its 0x14 copy, the command already out.
                     let rammed = model.config().bowden_length_mm + RAMMED_TIP_PAST_SENSOR_MM;

@@ -215,6 +215,37 @@ fn buddy_6_5_sends_t_before_its_retract_and_the_unit_has_it_at_once() {
 }
 
 #[test]
+fn every_printer_unloads_its_extruder_before_u0_within_its_timeout() {
+    for personality in Personality::ALL {
+        let (mut printer, _op) = loaded(personality);
+        let link = printer.link_mut();
+        let sent = link.now_ms();
+        link.send(Request::new(RequestCode::Unload, 0).encode().as_bytes())
+            .unwrap();
+        let mut took = None;
+        while link.now_ms() < sent + 2000 {
+            link.receive(1, &mut Vec::new()).unwrap();
+            if link.sim().unit_command().0 == (RequestCode::Unload, 0) {
+                took = Some(link.now_ms() - sent);
+                break;
+            }
+        }
+        let took = took.expect("the unit runs U0");
+        assert!(
+            took <= personality.link_timeout_ms() / 2 + 10,
+            "{personality}: {took} ms"
+        );
+        let model = link.sim().model();
+        let gears = model.config().extruder_gears_mm;
+        assert!(model.tip_mm(0).unwrap() <= gears + 1e-3, "{personality}");
+        if personality.gears_before_sensor_mm().is_some() {
+            // On Buddy 6.5.3 `U0` goes out with the printer's sensor off already.
+            assert_eq!(model.fsensor_state(), 0, "{personality}");
+        }
+    }
+}
+
+#[test]
 fn buddy_6_4_and_the_mk3s_send_t_once_the_filament_is_out_of_their_gears() {
     for personality in [Personality::Buddy64, Personality::Mk3s] {
         let (mut printer, _op) = loaded(personality);
