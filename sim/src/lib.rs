@@ -6,7 +6,8 @@
 //! - [`printer`]: the printer's side of the protocol over any [`Link`]; [`SimLink`] is the
 //!   in-process one (`mmu printer --sim`).
 //! - [`Personality`]: which printer firmware both play (Buddy 6.5.3, Buddy 6.4, MK3S), and
-//!   [`mechanics`]: the printer's extruder as the simulator moves it around a tool change.
+//!   [`mechanics`]: the printer's extruder as the simulator moves it around a tool change;
+//!   [`scenario`]: Prusa's expected Buddy 6.5.3 exchange, replayed against the unit.
 //! - [`soak`]: long runs of tool changes with random faults, and the figures they give;
 //!   [`timing`]: the physical minimum a tool change is measured against.
 
@@ -19,6 +20,7 @@ pub mod logic;
 pub mod mechanics;
 pub mod personality;
 pub mod printer;
+pub mod scenario;
 pub mod sim;
 pub mod soak;
 pub mod timing;

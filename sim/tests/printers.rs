@@ -504,3 +504,27 @@ fn a_command_lost_on_the_line_does_not_stop_the_printers_extruder() {
     let end = end.expect("T1 ends");
     assert_eq!((end.code, end.param), (RequestCode::Tool, ParamCode::Finished));
 }
+
+#[test]
+fn prusas_expected_6_5_3_tool_change_replays_against_the_unit() {
+    let mut sim = Sim::new(SimOptions {
+        printer: Personality::Buddy65,
+        ..SimOptions::default()
+    })
+    .unwrap();
+    for _ in 0..300 {
+        sim.step(&[], &mut Vec::new());
+    }
+    let seen =
+        mmu_sim::scenario::replay_tool_change(&mut sim, 0).unwrap_or_else(|departure| panic!("{departure}"));
+    let (left_ms, answer) = seen.premature_finish.expect("the printer left early");
+    assert!(seen.sensor_on_ms.is_some_and(|on| on <= left_ms), "{seen:?}");
+    assert_eq!(answer.code, RequestCode::Tool);
+    // The unit's order: P5, P6, P1c, P7 (it has no idler to engage or disengage).
+    assert!(
+        seen.progress.starts_with(&[ProgressCode::FEEDING_TO_FINDA]),
+        "{seen:?}"
+    );
+    assert!(seen.finished_ms.is_some_and(|f| f >= left_ms));
+    assert_eq!(sim.model().loaded_slot(), Some(0));
+}
