@@ -236,6 +236,11 @@ impl Mechanics {
                 self.slow_mm_s = f32::from(request.value2);
                 false
             }
+            code if code.is_command() && self.command == Some((code, request.value)) => {
+                // The same command again (the unit answered `R`, or the answer was lost): the
+                // printer resends it at once and its moves go on.
+                false
+            }
             code if code.is_command() => {
                 // The printer matches the answers against the command it sent (`ReqMsg()`),
                 // whether or not it heard the unit accept it.

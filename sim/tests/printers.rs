@@ -246,6 +246,26 @@ fn every_printer_unloads_its_extruder_before_u0_within_its_timeout() {
 }
 
 #[test]
+fn a_command_sent_again_does_not_restart_the_printers_moves() {
+    // The printer sends a command again at once when the unit answered `R` or the answer was
+    // lost; its own moves (here Buddy 6.5.3's retract after `T`) go on meanwhile.
+    let (mut printer, _op) = loaded(Personality::Buddy65);
+    let link = printer.link_mut();
+    send_tool_1(link, 50).expect("the unit runs T1");
+    link.idle(700);
+    let t1 = Request::new(RequestCode::Tool, 1);
+    link.send(t1.encode().as_bytes()).unwrap();
+    link.idle(3000);
+    let moves: Vec<&str> = extruder_moves(link).into_iter().map(|(_, a, _)| a).collect();
+    let count = |what: &str| moves.iter().filter(|&&m| m == what).count();
+    assert_eq!(
+        (count("ramming"), count("finishing-retract")),
+        (1, 1),
+        "{moves:?}"
+    );
+}
+
+#[test]
 fn buddy_6_4_and_the_mk3s_send_t_once_the_filament_is_out_of_their_gears() {
     for personality in [Personality::Buddy64, Personality::Mk3s] {
         let (mut printer, _op) = loaded(personality);
