@@ -233,6 +233,21 @@ fn soak_runs_each_printer() {
 }
 
 #[test]
+#[ignore = "needs the unit's 3.0.4 contract"]
+fn soak_runs_buddy_6_5() {
+    let out = printer_ok(&[
+        "--printer",
+        "buddy-6.5",
+        "soak",
+        "--changes",
+        "20",
+        "--faults",
+        "random",
+    ]);
+    assert!(out.starts_with("soak: 20 tool changes"), "{out}");
+}
+
+#[test]
 fn the_unit_must_be_chosen() {
     let output = mmu(&["printer", "status"]);
     assert!(!output.status.success());

@@ -21,6 +21,16 @@
 //!   The others load to the nozzle on `T<n> F`.
 //! - **Helping an unload.** During `P3` of a recovery the printer retracts 20 mm.
 //!
+//! Where the simulator departs from the firmware, knowingly: Buddy 6.4.1 retracts 40 mm at
+//! 20 mm/s after the slicer's ramming before it sends `T` (2 s, its whole timeout); the
+//! simulator plays ramming and retract as 80 mm in the hold of 1 s. It co-feeds as soon as it
+//! sees `P1c`, where 6.4.1 waits for the next poll. It pushes the extra load the moment the
+//! sensor triggers, where the firmware does at its next look (within one heartbeat). On Buddy
+//! 6.5.3 the slicer's ramming, which the printer finishes before it sends `T`, runs right after
+//! it (0.6 s at 80 mm/s), so the sensor goes off about 1.3 s after the `T` instead of 0.7 s.
+//! The printer's own load check after a tool change (`VerifyFilamentEnteredPTFE`) and its retry
+//! path (-60 mm at 10 mm/s and -120 mm at 60 mm/s before `U0`) are not played.
+//!
 //! The printer takes a `Q0` answer's progress or error as its command's whatever command the
 //! answer echoes; only `F` has to echo it (`ProtocolLogic::ProcessCommandQueryResponse`, BFW
 //! `M2/protocol_logic.cpp`, PFW `Firmware/mmu2_protocol_logic.cpp`). An answer that shows a
