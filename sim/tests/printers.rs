@@ -548,3 +548,49 @@ fn prusas_expected_6_5_3_tool_change_replays_against_the_unit() {
     assert!(seen.finished_ms.is_some_and(|f| f >= left_ms));
     assert_eq!(sim.model().loaded_slot(), Some(0));
 }
+
+#[test]
+fn buddy_6_5_retract_alone_clears_its_sensor_when_the_unit_lets_the_filament_go() {
+    // What a 3.0.4 unit counts on: with its motor free (coasting), the printer's ramming and
+    // finishing retract push the filament back through the tube and clear the printer's sensor
+    // while its gears still hold it, then let it go.
+    use mmu_model::{Model, ModelConfig, MotorCommand};
+    let mut geometry = ModelConfig::default();
+    let before = Personality::Buddy65
+        .gears_before_sensor_mm()
+        .expect("gears before the sensor");
+    geometry.extruder_gears_mm = geometry.bowden_length_mm - before;
+    let gears = geometry.extruder_gears_mm;
+    let mut model = Model::new(geometry, 1, 1);
+    model.insert_filament(0, 420.0);
+    let rammed = 360.0 + mmu_sim::mechanics::RAMMED_TIP_PAST_SENSOR_MM;
+    let ramming_ms = ((420.0 - rammed) / mmu_sim::mechanics::PRINTER_UNLOAD_MM_S * 1000.0) as u64;
+    model.extruder_move(rammed - 420.0, mmu_sim::mechanics::PRINTER_UNLOAD_MM_S);
+    for _ in 0..ramming_ms {
+        model.step(1, &[MotorCommand::Coast]);
+    }
+    assert!(
+        (model.tip_mm(0).unwrap() - rammed).abs() < 0.5,
+        "{:?}",
+        model.tip_mm(0)
+    );
+    model.extruder_move(-mmu_sim::mechanics::FINISH_RETRACT_MM, 20.0);
+    let mut off_ms = None;
+    let mut released_ms = None;
+    for ms in 1..=4000u64 {
+        model.step(1, &[MotorCommand::Coast]);
+        let tip = model.tip_mm(0).unwrap();
+        if off_ms.is_none() && model.fsensor_state() == 0 {
+            off_ms = Some(ms);
+            assert!(tip > gears, "the gears still hold it when the sensor goes off");
+        }
+        if released_ms.is_none() && tip <= gears {
+            released_ms = Some(ms);
+        }
+    }
+    // 14 mm at 20 mm/s (`nominalEMotorFSOff`), then 10 mm more in the gears.
+    let off_ms = off_ms.expect("the sensor goes off");
+    assert!((650..=800).contains(&off_ms), "{off_ms} ms");
+    let released_ms = released_ms.expect("the gears let go");
+    assert!((1100..=1300).contains(&released_ms), "{released_ms} ms");
+}
