@@ -1,9 +1,9 @@
 #!/usr/bin/env bash
-# Checks that the README wiring table matches the pin map in src/board.rs (the single source of
+# Checks that the wiring table (book/src/firmware.md) matches the pin map in src/board.rs (the single source of
 # truth): every pin of the map is in the table with the same function and header, and the table
 # names no pin the map does not use.
 #
-#   scripts/check-pinmap.sh [README files...]   (default: README.md, README-firmware-section.md)
+#   scripts/check-pinmap.sh [Markdown files...]   (default: book/src/firmware.md, README.md, README-firmware-section.md)
 #
 # A wiring-table row is a Markdown table row whose first cell is a pin name (`| PC6 | ...`), with
 # the columns: pin | header | function | connect to.
@@ -11,7 +11,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 if [ "$#" -eq 0 ]; then
-    set -- README.md README-firmware-section.md
+    set -- book/src/firmware.md README.md README-firmware-section.md
 fi
 
 # board.rs rows: `field: PIN, "function", "header", "wired to", safe;` -> "PIN|header|function"

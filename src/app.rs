@@ -413,6 +413,8 @@ impl<const N: usize> App<N> {
             fed_mm: &self.counters.fed_mm,
             dropped_responses: self.dropped_responses,
             bowden_learned_mm: self.bowden_learned_mm,
+            // Right after an `S2`, the build of the revision it offered: what `S3` would report.
+            build: crate::config::build_of(self.negotiation.offered.unwrap_or(self.config.version.revision)),
             now: self.now,
         };
         registers::read(&view, address)

@@ -10,7 +10,7 @@
 use mmu_hal_port::Direction;
 use mmu_protocol::{ErrorCode, ProgressCode};
 
-use crate::config::Config;
+use crate::config::{Config, Contract};
 use crate::drive::{Budget, Motion};
 use crate::time::Instant;
 use crate::unit::{Lane, SensorId, Unit};
@@ -35,6 +35,21 @@ const NOZZLE_PUSH_MARGIN_MM: u16 = 10;
 /// its nominal duration (extra load + 2 mm at the slow speed), ms: the printer starts it when it
 /// sees its sensor and `P1c` together, the unit when it hears both, within a few ms.
 const PRINTER_PUSH_MARGIN_MS: u64 = 600;
+
+/// How long an unload waits for the printer to release the filament (its sensor off), ms, before
+/// it fails with `8004` having pulled nothing: MMU 3.0.4's limit (`unload_to_finda.cpp`, 4000 ms
+/// from the command's acceptance).
+const RELEASE_WAIT_MS: u64 = 4000;
+/// How far an unload pulls at the slow speed (register 0x14) once the printer has released the
+/// filament, mm, in 3.0.4 mode: MMU 3.0.4's `fsensorToNozzleAvoidGrindUnload`, which helps the
+/// printer relieve the filament.
+const RELEASE_SLOW_MM: u16 = 20;
+
+/// How long a printer that accepted 3.0.3 or older retracts when it helps an unload, ms, from its
+/// first `Q0` that saw `P3`: 20 mm at 20 mm/s (Buddy `mmu2_config.h`
+/// `MMU2_RETRY_UNLOAD_TO_FINDA_LENGTH`, `_FEED_RATE`; `mmu2_mk4.cpp` `HelpUnloadToFinda`), and
+/// half a second for its planner to start the move.
+const PRINTER_HELP_MS: u64 = 1500;
 
 /// How long the printer may stay silent before a phase that depends on it holds its motor, ms.
 /// While a command runs, Prusa's printer sends `Q0` one heartbeat (1 s, `heartBeatPeriod` in
@@ -88,10 +103,15 @@ pub enum Phase {
         /// The slot.
         slot: u8,
     },
-    /// `P3`: pull back until the printer's sensor and then the hub sensor clear.
+    /// `P3`: pull back until the printer's sensor and then the hub sensor clear. With
+    /// `await_release`, first wait, the motor free to turn, while the printer's gears may still
+    /// grip the filament: until it reports its sensor off, or (3.0.3 and older) its help with
+    /// its own extruder has had its time ([`still_gripped`]).
     UnloadToHub {
         /// The slot.
         slot: u8,
+        /// Wait for the printer to release the filament before pulling.
+        await_release: bool,
     },
     /// `P3`, for a slot only believed to hold the hub path (a stored lane): pull back at most the
     /// hub search distance, which leaves a parked filament in its drive gear whichever slot it
@@ -148,7 +168,7 @@ impl Phase {
             | Phase::FeedToFsensor { slot }
             | Phase::SearchFsensor { slot }
             | Phase::FeedToNozzle { slot }
-            | Phase::UnloadToHub { slot }
+            | Phase::UnloadToHub { slot, .. }
             | Phase::ProveOwner { slot }
             | Phase::ClearMerge { slot }
             | Phase::EjectFromSlot { slot } => Some(slot as usize),
@@ -181,14 +201,17 @@ struct Bounds {
     speed: u16,
     max_mm: u16,
     error: ErrorCode,
+    /// Time on top of the nominal duration at `speed`: part of the way goes slower, ms.
+    slower_ms: u32,
 }
 
 impl Bounds {
     /// The drive's budget: the distance, and twice the nominal duration plus slack.
     fn budget(&self, config: &Config) -> Budget {
         // At most 65 535 × 2000 + 65 535.
-        let max_ms =
-            u32::from(self.max_mm) * 2000 / u32::from(self.speed.max(1)) + u32::from(config.phase_slack_ms);
+        let max_ms = u32::from(self.max_mm) * 2000 / u32::from(self.speed.max(1))
+            + self.slower_ms
+            + u32::from(config.phase_slack_ms);
         Budget {
             max_mm: self.max_mm,
             max_ms,
@@ -207,6 +230,7 @@ fn bounds(phase: Phase, config: &Config) -> Option<Bounds> {
             speed,
             max_mm,
             error,
+            slower_ms: 0,
         })
     };
     let reverse = |speed, max_mm, error| {
@@ -215,6 +239,7 @@ fn bounds(phase: Phase, config: &Config) -> Option<Bounds> {
             speed,
             max_mm,
             error,
+            slower_ms: 0,
         })
     };
     match phase {
@@ -258,7 +283,12 @@ fn bounds(phase: Phase, config: &Config) -> Option<Bounds> {
                 .saturating_add(config.fsensor_search_mm)
                 .saturating_add(config.hub_search_mm),
             ErrorCode::FINDA_DIDNT_SWITCH_OFF,
-        ),
+        )
+        .map(|bounds| Bounds {
+            // The slow start, twice its nominal duration as every bound.
+            slower_ms: u32::from(RELEASE_SLOW_MM) * 2000 / u32::from(config.slow_speed.max(1)),
+            ..bounds
+        }),
         Phase::ClearMerge { .. } => reverse(config.load_speed, config.park_mm, ErrorCode::MOVE_PULLEY_FAILED),
         Phase::ProveOwner { .. } => reverse(
             config.load_speed,
@@ -304,6 +334,10 @@ pub struct PhaseRun {
     lease: Lease,
     /// The motor is held while the printer is silent.
     held: bool,
+    /// When the printer's `Q0` first saw this phase (it acts on the progress it sees).
+    printer_saw: Option<Instant>,
+    /// An attempt after a Retry: its distance goal counts from the first attempt.
+    retried: bool,
 }
 
 /// What the leases of one phase attempt used of its budget.
@@ -363,6 +397,8 @@ impl PhaseRun {
             pushed: false,
             lease: Lease::new(now, odometry_centi),
             held: false,
+            printer_saw: None,
+            retried: false,
         }
     }
 
@@ -434,8 +470,12 @@ pub type SlotSet = u8;
 enum Goal {
     Reached,
     Drive,
+    /// Drive at this speed instead of the phase's own.
+    DriveAt(u16),
     /// Brake and wait (the lease ends: waiting counts against no bound).
     Hold,
+    /// Let the motor turn freely and wait: something else moves the filament (the lease ends).
+    Yield,
 }
 
 /// Advance `phase` by one step. `run` is its bookkeeping (`None` when it starts, or starts again
@@ -478,7 +518,9 @@ fn step_motion<const N: usize>(
         Some(run) => run,
         None => {
             drive.begin(bounds.budget(config), feeder, now);
-            run.insert(PhaseRun::new(now, resume_goal_from.unwrap_or(odometry), odometry))
+            let run = run.insert(PhaseRun::new(now, resume_goal_from.unwrap_or(odometry), odometry));
+            run.retried = resume_goal_from.is_some();
+            run
         }
     };
     let toward_goal_mm = match bounds.direction {
@@ -570,19 +612,35 @@ fn step_motion<const N: usize>(
             }
             None => Goal::Hold,
         },
-        Phase::UnloadToHub { .. } => {
-            // The printer's sensor must clear within the check distance of where the unload began
-            // (Retry does not start the count again), and never after the tip has left the hub:
-            // pulling on would drag the filament out of its drive gear. MMU 3.0.3 waits too.
-            let stuck = toward_goal_mm >= i32::from(config.unload_check_mm) || !hub;
-            if unit.fsensor_triggered() && stuck {
-                return Outcome::Fail(ErrorCode::FSENSOR_DIDNT_SWITCH_OFF);
+        Phase::UnloadToHub { await_release, .. } => {
+            let waiting = await_release && run.mark_centi.is_none();
+            let gripped = match waiting && unit.fsensor_triggered() {
+                true => still_gripped(run, notes, now, config),
+                false => Ok(false),
+            };
+            if let Err(error) = gripped {
+                return Outcome::Fail(error);
             }
-            if !hub && !unit.fsensor_triggered() {
-                notes.hub_cleared = Some((slot, odometry));
-                Goal::Reached
+            if gripped == Ok(true) {
+                Goal::Yield
             } else {
-                Goal::Drive
+                if waiting {
+                    // Released: the pull starts here, and so does its check distance, unless an
+                    // earlier attempt pulled already (a Retry does not start the count again: a
+                    // stuck sensor must not let every Retry pull the check distance anew).
+                    run.mark_centi = Some(odometry);
+                    if !run.retried {
+                        run.goal_from_centi = odometry;
+                    }
+                }
+                match pull_out_of_printer(run, unit, hub, odometry, config) {
+                    Ok(Goal::Reached) => {
+                        notes.hub_cleared = Some((slot, odometry));
+                        Goal::Reached
+                    }
+                    Ok(goal) => goal,
+                    Err(error) => return Outcome::Fail(error),
+                }
             }
         }
         Phase::ProveOwner { .. } => {
@@ -635,7 +693,7 @@ fn step_motion<const N: usize>(
         }
         // The slot sensor sits just after the drive gear: a tip pulled back past it is about to
         // leave the gear. Only an eject means to go there; any other pull back stops.
-        Goal::Drive
+        Goal::Drive | Goal::DriveAt(_)
             if bounds.direction == Direction::Reverse
                 && !slot_sees
                 && !matches!(phase, Phase::EjectFromSlot { .. } | Phase::ClearMerge { .. }) =>
@@ -654,6 +712,11 @@ fn step_motion<const N: usize>(
             direction: bounds.direction,
             speed: bounds.speed,
         },
+        Goal::DriveAt(speed) => Motion::Run {
+            direction: bounds.direction,
+            speed,
+        },
+        Goal::Yield => return yield_motor(run, unit, slot, odometry, now),
         Goal::Drive | Goal::Hold => {
             // Hold: the phase waits, or the printer's `f` may be lost and its co-feed has
             // stopped. The lease ends, so the hold counts against no bound; what the phase used
@@ -682,8 +745,83 @@ fn step_motion<const N: usize>(
                 suspects => Outcome::Blocked(suspects),
             }
         }
-        Err(error) => Outcome::Fail(first_cause(phase, error)),
+        Err(error) => Outcome::Fail(first_cause(phase, error, unit.fsensor_triggered())),
     }
+}
+
+/// While an unload waits for the printer to release the filament and its sensor still reads it:
+/// whether its gears may still grip it (keep waiting), or `8004`.
+///
+/// A printer that accepted 3.0.4 reports its sensor off once it has released the filament: after
+/// [`RELEASE_WAIT_MS`] without that, `8004`, nothing pulled (MMU 3.0.4). A printer that accepted
+/// 3.0.3 or older helps an unload it did not send as `U0`/`T` when its `Q0` sees `P3`, and after
+/// the Retry of `8004`: once its help has had its time ([`PRINTER_HELP_MS`] from that `Q0`), or
+/// at the latest after [`RELEASE_WAIT_MS`], the unit pulls, as MMU 3.0.3 does.
+fn still_gripped(
+    run: &mut PhaseRun,
+    notes: &Notes,
+    now: Instant,
+    config: &Config,
+) -> Result<bool, ErrorCode> {
+    if notes.printer.polled > run.started && run.printer_saw.is_none() {
+        run.printer_saw = Some(notes.printer.polled);
+    }
+    let waited_out = now.millis_since(run.started) >= RELEASE_WAIT_MS;
+    match config.version.contract() {
+        Contract::AwaitRelease if waited_out => Err(ErrorCode::FSENSOR_DIDNT_SWITCH_OFF),
+        Contract::AwaitRelease => Ok(true),
+        Contract::PullAtOnce => {
+            let helped = run
+                .printer_saw
+                .is_some_and(|saw| now.millis_since(saw) >= PRINTER_HELP_MS);
+            Ok(!(helped || waited_out))
+        }
+    }
+}
+
+/// `P3` once the pull has begun: on until the printer's sensor and then the hub sensor clear. The
+/// printer's sensor must clear within the check distance of where the pull began (Retry does not
+/// start the count again unless it waited for the printer), and never after the tip has left
+/// the hub: pulling on would drag the filament out of its drive gear (MMU 3.0.3 checks too). A
+/// printer that accepted 3.0.4 gets the first [`RELEASE_SLOW_MM`] at the slow speed.
+fn pull_out_of_printer<const N: usize>(
+    run: &PhaseRun,
+    unit: &Unit<N>,
+    hub: bool,
+    odometry: i32,
+    config: &Config,
+) -> Result<Goal, ErrorCode> {
+    let pulled_mm = (run.goal_from_centi - odometry) / 100;
+    let stuck = pulled_mm >= i32::from(config.unload_check_mm) || !hub;
+    Ok(match (unit.fsensor_triggered(), hub) {
+        (true, _) if stuck => return Err(ErrorCode::FSENSOR_DIDNT_SWITCH_OFF),
+        (false, false) => Goal::Reached,
+        _ if config.version.contract() == Contract::AwaitRelease
+            && pulled_mm < i32::from(RELEASE_SLOW_MM) =>
+        {
+            Goal::DriveAt(config.slow_speed)
+        }
+        _ => Goal::Drive,
+    })
+}
+
+/// Let `slot`'s motor turn freely while the phase waits: the lease ends, so the wait counts
+/// against no bound (what the phase used so far stays counted).
+fn yield_motor<const N: usize>(
+    run: &mut PhaseRun,
+    unit: &mut Unit<N>,
+    slot: usize,
+    odometry: i32,
+    now: Instant,
+) -> Outcome {
+    if !run.held {
+        run.lease.end(now, odometry);
+        run.held = true;
+    }
+    if let Some(drive) = unit.drives.get_mut(slot) {
+        drive.release(now);
+    }
+    Outcome::Continue
 }
 
 /// The other slots with filament that rest before the hub (parked, or nobody knows where: lanes
@@ -705,15 +843,22 @@ fn merge_suspects<const N: usize>(unit: &Unit<N>, slot: usize) -> SlotSet {
 /// tube and the printer's sensor; PULLEY CANNOT MOVE (`8047`) would send them to the slot motor,
 /// which moved the filament all the way from the hub. MMU 3.0.3 reports `8003` here too: it has
 /// no pulley stall detection and runs out its planned distance (`feed_to_bondtech.cpp`).
-fn first_cause(phase: Phase, error: ErrorCode) -> ErrorCode {
+///
+/// Likewise an unload stopped while the printer's sensor still reads filament stopped against
+/// the printer's gears: FSENSOR DIDNT CLEAR (`8004`), as MMU 3.0.3 reports it after the check
+/// distance, and whose Retry makes the printer help with its own extruder (Buddy `mmu2_mk4.cpp`
+/// `CheckUserInput`: `HelpUnloadToFinda` on `FSENSOR_DIDNT_SWITCH_OFF`).
+fn first_cause(phase: Phase, error: ErrorCode, fsensor: bool) -> ErrorCode {
     let towards_fsensor = matches!(
         phase,
         Phase::FeedThroughBowden { .. } | Phase::FeedToFsensor { .. } | Phase::SearchFsensor { .. }
     );
-    if towards_fsensor && error == ErrorCode::STALLED_PULLEY {
-        ErrorCode::FSENSOR_DIDNT_SWITCH_ON
-    } else {
-        error
+    match (phase, error) {
+        (_, ErrorCode::STALLED_PULLEY) if towards_fsensor => ErrorCode::FSENSOR_DIDNT_SWITCH_ON,
+        (Phase::UnloadToHub { .. }, ErrorCode::STALLED_PULLEY) if fsensor => {
+            ErrorCode::FSENSOR_DIDNT_SWITCH_OFF
+        }
+        _ => error,
     }
 }
 

@@ -56,6 +56,8 @@ pub struct View<'a> {
     pub dropped_responses: u16,
     /// The Bowden length the last Retry of FSENSOR TOO EARLY learned since start, mm (0: none).
     pub bowden_learned_mm: u16,
+    /// The build number `S3` reports now (register 0x03).
+    pub build: u16,
     /// The time of the current step.
     pub now: Instant,
 }
@@ -452,7 +454,7 @@ registers! {
     VersionRevision: read_only(0x02, "version.revision", |v, _, _| Some(
         v.config.version.revision.into()
     )),
-    VersionBuild: read_only(0x03, "version.build", |v, _, _| Some(v.config.version.build())),
+    VersionBuild: read_only(0x03, "version.build", |v, _, _| Some(v.build)),
     Errors: read_only(0x04, "errors", |v, _, _| Some(v.drive_errors)),
     Progress: read_only(0x05, "progress", |v, _, _| Some(match v.status {
         Status::Running(progress) => progress.0.into(),
@@ -661,6 +663,7 @@ pub fn settings_view<'a>(config: &'a Config, hub: &'a Hub) -> View<'a> {
         fed_mm: &[],
         dropped_responses: 0,
         bowden_learned_mm: 0,
+        build: config.version.build(),
         now: Instant::ZERO,
     }
 }

@@ -193,7 +193,9 @@ impl Runner {
             },
             Action::UnloadFirst => {
                 let mut unload = Plan::new();
-                if let Err(error) = clear_hub(&mut unload, unit) {
+                // The printer helps an unload it did not ask for on `P3` (`mmu2_mk4.cpp`
+                // `OnMMUProgressMsgChanged`): wait for it to release the filament.
+                if let Err(error) = clear_hub(&mut unload, unit, true) {
                     self.status = Status::Failed(error);
                     return None;
                 }
@@ -213,6 +215,12 @@ impl Runner {
         // Only `P1c` seen anew makes the printer push its extruder again, and only its push can
         // show the gears taking the tip (printer-truth §8): the push into the extruder is retried
         // from the phase before it, the feed to the printer's sensor (every plan has one there).
+        // The printer helps an unload after `8004`'s Retry with its own extruder (Buddy
+        // `mmu2_mk4.cpp` `CheckUserInput`, `HelpUnloadToFinda`): an unload retried waits for it
+        // to release the filament before it pulls, whatever the printer.
+        if let Some(Phase::UnloadToHub { await_release, .. }) = self.plan.get_mut(self.index) {
+            *await_release = true;
+        }
         let before = self.index.checked_sub(1);
         if let (Some(Phase::FeedToNozzle { .. }), Some(before)) = (self.phase(), before)
             && matches!(

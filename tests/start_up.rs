@@ -26,6 +26,7 @@ fn boot_reports_x0_f0_and_the_handshake_matches_mmu_3_0_4() {
         .collect();
     // 3.0.4 build 936 (`MMU3_FW3.0.4+936.hex`), as a fresh unit offers it first.
     assert_eq!(versions, ["S0 A3*22", "S1 A0*34", "S2 A4*1b", "S3 A3a8*df"]);
+    rig.wants_revision = 4;
     let wire: Vec<String> = rig.handshake().iter().map(|r| r.encode().to_string()).collect();
     assert_eq!(wire, ["S3 A3a8*df", "Wb A*5c", "W14 A*52", "f0 A*c5"]);
     assert_eq!(rig.app.config().extra_load_mm, 5);

@@ -70,7 +70,7 @@ pub fn run(args: &DemoArgs) -> Result<(), Box<dyn Error>> {
 fn script(session: &mut Session<SimLink>) -> Result<(), Failure> {
     let tool = |slot| Request::new(RequestCode::Tool, slot);
     session.console().heading(
-        "1/5 handshake: the printer checks the unit's version (exactly 3.0.4, as Buddy 6.5.3 does), writes its settings and polls",
+        "1/5 handshake: the printer checks the unit's version (exactly 3.0.3, as Buddy 6.4 does), writes its settings and polls",
     );
     session.connect()?;
 

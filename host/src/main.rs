@@ -9,6 +9,8 @@
 //! - `mmu sensors`: every sensor of a unit live, as a table, CSV or a plotted PNG ([`sensors_cli`]);
 //! - `mmu console`: plain commands to a unit or the simulator, by hand or from a script, and
 //!   `mmu calibrate`: measure and save its distances and sensor thresholds ([`console`]);
+//! - `mmu motor`: a slot's motor test, and `mmu slots`: the slot map (material, colour, where
+//!   each filament is) ([`console::motor`], [`console::pc_files`]);
 //! - `mmu demo`: a scripted session against the simulator ([`demo`]).
 //!
 //! Exit status: 0 success, 1 a failure (the unit stopped on an error, a port cannot be opened),
@@ -68,6 +70,12 @@ enum Command {
     /// Measure and save the unit's mm per motor revolution, Bowden length, sensor thresholds and
     /// park distance.
     Calibrate(console::CalibrateArgs),
+    /// Motor test of a slot: its filament forward to the hub sensor and back to park (a
+    /// preload), with how far the odometry counted each way and how the motor Hall sensor swung.
+    Motor(console::MotorArgs),
+    /// The slot map: each slot's material and colour (kept on this PC) and where its filament is
+    /// ("unknown" apart from "empty"); `set SLOT MATERIAL COLOUR`, `clear SLOT`.
+    Slots(console::SlotsArgs),
 }
 
 fn main() -> ExitCode {
@@ -81,6 +89,8 @@ fn main() -> ExitCode {
         Command::Demo(args) => demo::run(args),
         Command::Console(args) => console::run(args),
         Command::Calibrate(args) => console::run_calibrate(args),
+        Command::Motor(args) => console::run_motor(args),
+        Command::Slots(args) => console::run_slots(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

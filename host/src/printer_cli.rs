@@ -69,14 +69,14 @@ pub struct PrinterArgs {
     pub fsensor: Option<u8>,
     /// The unit firmware version the printer supports; S0..S2 must answer it exactly
     /// (Buddy 6.5.3 and later: 3.0.4; Buddy 6.4 and MK3S 3.14.1: 3.0.3; MK3S 3.13.3/3.14.0: 3.0.2).
-    /// Default: the --printer's, or 3.0.4 without --printer.
+    /// Default: the --printer's (3.0.3 without --printer).
     #[arg(long, value_name = "X.Y.Z", value_parser = parse_version)]
     pub expect_version: Option<(u8, u8, u8)>,
     /// The printer firmware played, in its protocol (version, Q0 period, answer timeout,
     /// registers polled, premature finish) and, with --sim, its extruder: buddy-6.5 (Buddy 6.5.3
     /// and later: 3.0.4, Q0 every 100 ms, 200 ms timeout, T before its own retract),
     /// buddy-6.4 (3.0.3, 1 s, 2 s, T after its retract), mk3s (3.0.2, 1 s, 2 s, no R22).
-    /// Default: buddy-6.4's timing and tool change with version 3.0.4.
+    /// Default: buddy-6.4.
     #[arg(long, value_name = "PRINTER", global = true, value_parser = parse_personality)]
     pub printer: Option<Personality>,
     /// One JSON object per line per event, and a final `result` object.
@@ -502,9 +502,7 @@ fn perform<L: Target>(session: &mut Session<L>, action: &Action) -> Result<Detai
 /// The printer's set-up: its personality and supported unit version, the rest as Prusa's
 /// firmware has it.
 fn printer_options(args: &PrinterArgs) -> PrinterOptions {
-    let defaults = args
-        .printer
-        .map_or_else(PrinterOptions::default, PrinterOptions::of);
+    let defaults = PrinterOptions::of(personality(args));
     PrinterOptions {
         version: args.expect_version.unwrap_or(defaults.version),
         ..defaults

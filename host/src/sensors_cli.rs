@@ -6,6 +6,12 @@
 //! at `0x60 + i`, filtered at `0x70 + i`, "on"/"off" thresholds at `0x90 + i`/`0xa0 + i` and the
 //! stuck-at-a-rail mask at `0x50`. Sensor `i`: 0 hub filament, 1 hub tension, 2 hub cutter, then
 //! slot `k`'s filament sensor at `3 + 2k` and its motor Hall sensor at `4 + 2k`.
+//!
+//! Each reading is a request and its answer, about a millisecond apiece on the wire: all nine
+//! sensors take some 19 ms a sample, so `--sensor NAME` reads only the named ones (one sensor:
+//! a sample every 3 ms or so). A sample that takes longer than `--every` is said once, and
+//! `--seconds` counts the unit's clock, not rows. Ctrl-C ends the run with what it has (the
+//! table, the rows, the plot of the samples so far) and exit status 130.
 
 mod plot;
 
@@ -22,7 +28,7 @@ use mmu_sim::{Decision, Link, Operator, Personality, Printer, PrinterEvent, Prin
 
 use crate::printer_cli::serial::{FsensorSource, SerialLink};
 use crate::printer_cli::{CHOOSE_THE_UNIT, SimTargetArgs, ctrl_c_flag, parse_version, sim_link};
-use crate::usage::usage;
+use crate::usage::{Interrupted, usage};
 
 /// `mmu sensors` options.
 #[derive(Debug, clap::Args)]
@@ -48,17 +54,24 @@ pub struct SensorsArgs {
     /// Stop after this many seconds (the unit's clock: virtual with --sim).
     #[arg(long, value_name = "N", value_parser = parse_seconds)]
     pub seconds: Option<f64>,
-    /// Time between samples, ms.
-    #[arg(long, value_name = "MS", default_value_t = 100, value_parser = clap::value_parser!(u64).range(10..=60_000))]
+    /// Time between samples, ms. Reading all nine sensors takes about 19 ms over the wire; read
+    /// fewer (--sensor) to sample faster.
+    #[arg(long, value_name = "MS", default_value_t = 100, value_parser = clap::value_parser!(u64).range(1..=60_000))]
     pub every: u64,
+    /// Read only this sensor (repeatable): hub.filament, hub.tension, hub.cutter,
+    /// slotK.filament, slotK.hall (K from 0), or its number 0-8. Fewer sensors, faster samples.
+    #[arg(long = "sensor", value_name = "NAME")]
+    pub sensors: Vec<String>,
     /// The unit firmware version to expect (3.0.2 for a unit set up for an MK3S).
-    #[arg(long, value_name = "X.Y.Z", default_value = "3.0.4", value_parser = parse_version)]
+    #[arg(long, value_name = "X.Y.Z", default_value = "3.0.3", value_parser = parse_version)]
     pub expect_version: (u8, u8, u8),
 }
 
 /// One sensor's readings at one time.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Reading {
+    /// The sensor's number (0 hub filament ... 4 + 2k slot k's motor Hall).
+    pub sensor: u8,
     /// Raw ADC sample, 0..=4095.
     pub raw: u16,
     /// After the unit's filter.
@@ -72,7 +85,7 @@ pub struct Reading {
 pub struct Sample {
     /// The unit's clock since the first sample, ms.
     pub t_ms: u64,
-    /// One per sensor.
+    /// One per sensor read.
     pub readings: Vec<Reading>,
 }
 
@@ -94,6 +107,44 @@ pub fn sensor_name(index: u8) -> String {
         i if i % 2 == 1 => format!("slot {} filament", (i - 3) / 2),
         i => format!("slot {} motor Hall", (i - 4) / 2),
     }
+}
+
+/// The sensor's short name, as `--sensor` takes it and the console's registers use it:
+/// `hub.filament`, `slot1.hall`.
+pub fn sensor_subject(index: u8) -> String {
+    match index {
+        0 => "hub.filament".to_string(),
+        1 => "hub.tension".to_string(),
+        2 => "hub.cutter".to_string(),
+        i if i % 2 == 1 => format!("slot{}.filament", (i - 3) / 2),
+        i => format!("slot{}.hall", (i - 4) / 2),
+    }
+}
+
+/// The sensors `names` pick out of a unit's `count`: each a short name or a number; all of them
+/// for none.
+fn select_sensors(names: &[String], count: u8) -> Result<Vec<u8>, String> {
+    if names.is_empty() {
+        return Ok((0..count).collect());
+    }
+    let mut selected = Vec::new();
+    for name in names {
+        let wanted = name.trim().to_ascii_lowercase();
+        let index = (0..count)
+            .find(|&i| sensor_subject(i) == wanted || i.to_string() == wanted)
+            .ok_or_else(|| {
+                let known: Vec<String> = (0..count).map(sensor_subject).collect();
+                format!(
+                    "--sensor {name}: this unit has no such sensor; it has {} (or their numbers 0-{})",
+                    known.join(", "),
+                    count.saturating_sub(1)
+                )
+            })?;
+        if !selected.contains(&index) {
+            selected.push(index);
+        }
+    }
+    Ok(selected)
 }
 
 /// The sensor's CSV column prefix: `hub_filament`, `slot1_hall`.
@@ -152,7 +203,10 @@ impl<L> Operator<L> for Silent {
 /// Reads the sensors of a unit over a read-only printer connection.
 struct Sampler<L: Link> {
     printer: Printer<L>,
+    /// The unit's sensors.
     sensors: u8,
+    /// The sensors read, by number.
+    selected: Vec<u8>,
 }
 
 impl<L: Link> Sampler<L> {
@@ -166,7 +220,11 @@ impl<L: Link> Sampler<L> {
         printer
             .connect(&mut Silent)
             .map_err(|error| crate::printer_cli::printer_failure(error, version))?;
-        let mut sampler = Sampler { printer, sensors: 0 };
+        let mut sampler = Sampler {
+            printer,
+            sensors: 0,
+            selected: Vec::new(),
+        };
         let slots = sampler
             .read(SLOT_COUNT)?
             .ok_or("the unit does not tell its number of slots (register 0x40): is it this firmware?")?;
@@ -188,8 +246,11 @@ impl<L: Link> Sampler<L> {
             .flatten())
     }
 
+    /// The selected sensors' thresholds, in their order.
     fn thresholds(&mut self) -> Result<Vec<Option<Thresholds>>, Box<dyn Error>> {
-        (0..self.sensors)
+        self.selected
+            .clone()
+            .into_iter()
             .map(|i| {
                 let on = self.read(THRESHOLD_ON + i)?;
                 let off = self.read(THRESHOLD_OFF + i)?;
@@ -200,10 +261,11 @@ impl<L: Link> Sampler<L> {
 
     fn sample(&mut self, t_ms: u64) -> Result<Sample, Box<dyn Error>> {
         let stuck = self.read(STUCK)?.unwrap_or(0);
-        let mut readings = Vec::with_capacity(usize::from(self.sensors));
-        for i in 0..self.sensors {
+        let mut readings = Vec::with_capacity(self.selected.len());
+        for i in self.selected.clone() {
             let missing = || format!("the unit refused to read sensor {i} ({})", sensor_name(i));
             readings.push(Reading {
+                sensor: i,
                 raw: self.read(RAW + i)?.ok_or_else(missing)?,
                 filtered: self.read(FILTERED + i)?.ok_or_else(missing)?,
                 stuck: stuck & (1 << i) != 0,
@@ -262,6 +324,10 @@ pub fn run(args: &SensorsArgs) -> Result<(), Box<dyn Error>> {
 
 /// Sample until --seconds or Ctrl-C, showing each sample as asked.
 fn watch<L: Link>(mut sampler: Sampler<L>, args: &SensorsArgs) -> Result<(), Box<dyn Error>> {
+    sampler.selected = select_sensors(&args.sensors, sampler.sensors).map_err(usage)?;
+    if let Some(file) = &args.plot {
+        check_plot_file(file)?;
+    }
     let thresholds = sampler.thresholds()?;
     let stop = ctrl_c_flag()?;
     let mut output = match (&args.plot, args.csv) {
@@ -270,22 +336,45 @@ fn watch<L: Link>(mut sampler: Sampler<L>, args: &SensorsArgs) -> Result<(), Box
         (None, false) => Output::Table {
             live: std::io::stdout().is_terminal(),
             shown_lines: 0,
-            states: vec![None; usize::from(sampler.sensors)],
+            states: vec![None; sampler.selected.len()],
         },
     };
     let mut out = std::io::stdout().lock();
     if let Output::Csv = output {
-        writeln!(out, "{}", csv_header(sampler.sensors))?;
+        writeln!(out, "{}", csv_header(&sampler.selected))?;
     }
     let start = sampler.now_ms();
     let end = args.seconds.map(|s| start + (s * 1000.0) as u64);
     let mut recorded = Vec::new();
     let mut last = None;
     let mut next = start;
+    let mut said_slow = false;
     while !stop.load(Ordering::Relaxed) && end.is_none_or(|end| next <= end) {
         sampler.wait_until(next)?;
-        let sample = sampler.sample(sampler.now_ms() - start)?;
+        let taken_at = sampler.now_ms();
+        let sample = sampler.sample(taken_at - start)?;
+        let done = sampler.now_ms();
         next += args.every;
+        if done > next {
+            // Reading took longer than --every: the next sample comes when this one is read.
+            if !said_slow {
+                let hint = if sampler.selected.len() > 1 {
+                    " (--sensor NAME reads fewer, faster)"
+                } else {
+                    ""
+                };
+                eprintln!(
+                    "mmu sensors: reading {} sensor(s) takes {} ms over this link, longer than --every {}: \
+                     a sample every {} ms or so{hint}",
+                    sampler.selected.len(),
+                    done - taken_at,
+                    args.every,
+                    done - taken_at
+                );
+                said_slow = true;
+            }
+            next = done;
+        }
         match &mut output {
             Output::Csv => {
                 if writeln!(out, "{}", csv_row(&sample, &thresholds)).is_err() {
@@ -311,6 +400,10 @@ fn watch<L: Link>(mut sampler: Sampler<L>, args: &SensorsArgs) -> Result<(), Box
         }
         last = Some(sample);
     }
+    let samples = match &output {
+        Output::Plot(_) => recorded.len(),
+        _ => usize::from(last.is_some()),
+    };
     match output {
         Output::Table {
             live: false,
@@ -327,18 +420,52 @@ fn watch<L: Link>(mut sampler: Sampler<L>, args: &SensorsArgs) -> Result<(), Box
                 out,
                 "{} samples of {} sensors drawn to {}",
                 recorded.len(),
-                sampler.sensors,
+                sampler.selected.len(),
                 file.display()
             )?;
         }
         _ => {}
     }
+    if stop.load(Ordering::Relaxed) {
+        out.flush()?;
+        let what = if samples > 0 {
+            "what was read is shown above"
+        } else {
+            "no sample was read"
+        };
+        return Err(Box::new(Interrupted(format!("stopped by Ctrl-C: {what}"))));
+    }
     Ok(())
 }
 
-fn csv_header(sensors: u8) -> String {
+/// A plot goes to a PNG file that can be written: said before recording, not after.
+fn check_plot_file(file: &std::path::Path) -> Result<(), Box<dyn Error>> {
+    let png = file
+        .extension()
+        .is_some_and(|ext| ext.eq_ignore_ascii_case("png"));
+    if !png {
+        return Err(usage(format!(
+            "--plot {}: the plot is a PNG image: give a file name ending in .png",
+            file.display()
+        )));
+    }
+    std::fs::OpenOptions::new()
+        .write(true)
+        .create(true)
+        .truncate(false)
+        .open(file)
+        .map_err(|error| {
+            usage(format!(
+                "--plot {}: cannot write there ({error}); nothing was recorded",
+                file.display()
+            ))
+        })?;
+    Ok(())
+}
+
+fn csv_header(sensors: &[u8]) -> String {
     let mut columns = vec!["t_ms".to_string()];
-    for i in 0..sensors {
+    for &i in sensors {
         let name = column_name(i);
         for field in ["raw", "filtered", "on", "off", "stuck"] {
             columns.push(format!("{name}_{field}"));
@@ -380,11 +507,11 @@ fn table(
         "on",
         "off"
     );
-    for (i, (reading, limits)) in sample.readings.iter().zip(thresholds).enumerate() {
-        let index = u8::try_from(i).unwrap_or(u8::MAX);
-        let previous = states.get(i).copied().flatten();
-        let (word, now) = state(index, reading, *limits, previous);
-        if let Some(slot) = states.get_mut(i) {
+    for (position, (reading, limits)) in sample.readings.iter().zip(thresholds).enumerate() {
+        let i = reading.sensor;
+        let previous = states.get(position).copied().flatten();
+        let (word, now) = state(i, reading, *limits, previous);
+        if let Some(slot) = states.get_mut(position) {
             *slot = now;
         }
         let (on, off) = limits.map_or((String::from("-"), String::from("-")), |t| {
@@ -392,7 +519,7 @@ fn table(
         });
         text.push_str(&format!(
             "{i:<3} {:<19} {:>5} {:>8} {on:>5} {off:>5}  {word}{eol}",
-            sensor_name(index),
+            sensor_name(i),
             reading.raw,
             reading.filtered
         ));
@@ -435,6 +562,7 @@ mod tests {
     fn the_state_follows_the_hysteresis() {
         let limits = Some(Thresholds { on: 2600, off: 2400 });
         let at = |filtered| Reading {
+            sensor: 0,
             raw: filtered,
             filtered,
             stuck: false,
@@ -446,10 +574,24 @@ mod tests {
         assert_eq!(state(4, &at(2700), limits, None).0, "high (magnet)");
         assert_eq!(state(1, &at(2700), None, None).0, "");
         let stuck = Reading {
+            sensor: 0,
             raw: 0,
             filtered: 0,
             stuck: true,
         };
         assert!(state(0, &stuck, limits, None).0.contains("wiring"));
+    }
+
+    #[test]
+    fn sensors_are_picked_by_name_or_number() {
+        assert_eq!(select_sensors(&[], 9), Ok((0..9).collect()));
+        let names = |list: &[&str]| list.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+        assert_eq!(select_sensors(&names(&["slot0.hall"]), 9), Ok(vec![4]));
+        assert_eq!(
+            select_sensors(&names(&["8", "HUB.filament", "8"]), 9),
+            Ok(vec![8, 0])
+        );
+        let error = select_sensors(&names(&["slot3.hall"]), 9).expect_err("a 3-slot unit has no slot 3");
+        assert!(error.contains("slot2.hall"), "{error}");
     }
 }

@@ -157,10 +157,11 @@ fn decode_bad_crc_and_invalid_lines_human() {
         lines[1],
         "response X0 F0 finished OK, CRC BAD (carries 86, expected 87)"
     );
-    // Lines that are no frame are said to be so; a broken frame is invalid.
-    assert_eq!(lines[2], "not an MMU line");
+    // Lines that are no frame are said to be so, with their text (before, the text was dropped:
+    // the printer's "Command rejected" never showed); a broken frame is invalid.
+    assert_eq!(lines[2], "not an MMU line: hello");
     assert_eq!(lines[3], "empty line");
-    assert_eq!(lines[4], "not a frame: an MMU log message");
+    assert_eq!(lines[4], "the printer's MMU message: Command rejected");
     assert!(lines[5].starts_with("invalid: "), "{:?}", lines[5]);
 }
 
@@ -284,7 +285,11 @@ fn decode_keeps_the_time_of_real_log_lines() {
         lines[2].starts_with("2026-11-22 10:00:00,145  response T1 A"),
         "{text}"
     );
-    assert_eq!(lines[3], "2026-11-22 10:00:01,010  not an MMU line");
+    assert_eq!(lines[3], "2026-11-22 10:00:01,010  not an MMU line: ok");
+    assert_eq!(
+        lines[0],
+        "2026-11-22 10:00:00,123  not an MMU line (the host's G-code to the printer): N12 T1*38"
+    );
     assert!(lines[4].starts_with("10:00:02.500  response T1 P1c"), "{text}");
     assert!(lines[5].starts_with("10:00:03.123  response R1b A5"), "{text}");
     assert!(lines[5].contains("(none)"), "slot 5 means none: {text}");

@@ -177,7 +177,7 @@ fn the_console_drives_the_simulator_over_a_pty() {
     );
     let out = text(&output);
     assert!(output.status.success(), "{out}");
-    assert!(out.contains("connected: unit firmware 3.0.4"), "{out}");
+    assert!(out.contains("connected: unit firmware 3.0.3"), "{out}");
     assert!(out.contains("slot 1 is loaded"), "{out}");
     assert!(
         out.contains("lane.slot1 (0xb9) = 8 (loaded in the printer's extruder)"),
@@ -198,17 +198,18 @@ fn the_console_drives_the_simulator_over_a_pty() {
 }
 
 /// The protocol is on USART3 (PC10/PC11), reached through a USB-serial adapter; the NUCLEO's
-/// `/dev/ttyACM0` is its ST-LINK port, which the firmware leaves free. Neither the README's
-/// examples nor the tool's help may send a user there.
+/// `/dev/ttyACM0` is its ST-LINK port, which the firmware leaves free. Neither the book's (and
+/// the README's) examples nor the tool's help may send a user there.
 #[test]
 fn real_unit_examples_name_the_adapter_not_the_st_link_port() {
-    let readme = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("../README.md"))
-        .expect("the README is readable");
-    assert!(
-        !readme.contains("--port /dev/ttyACM0"),
-        "the README still says --port /dev/ttyACM0"
-    );
-    assert!(readme.contains("--port /dev/ttyUSB0"));
+    let pages = common::documentation();
+    for (page, text) in &pages {
+        assert!(
+            !text.contains("--port /dev/ttyACM0"),
+            "{page} still says --port /dev/ttyACM0"
+        );
+    }
+    assert!(pages.iter().any(|(_, text)| text.contains("--port /dev/ttyUSB0")));
     for command in ["printer", "console", "calibrate", "sensors"] {
         let output = Command::new(env!("CARGO_BIN_EXE_mmu"))
             .args([command, "--help"])

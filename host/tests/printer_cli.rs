@@ -60,7 +60,7 @@ fn events<'a>(lines: &'a [Value], kind: &str) -> Vec<&'a Value> {
 #[test]
 fn a_tool_change_names_its_phases_and_finishes() {
     let out = printer_ok(&["tool", "1"]);
-    assert!(out.contains("connected: unit firmware 3.0.4"), "{out}");
+    assert!(out.contains("connected: unit firmware 3.0.3"), "{out}");
     assert!(out.contains("T1: FeedingToFSensor"), "{out}");
     assert!(out.contains("T1: finished OK"), "{out}");
 }
@@ -166,7 +166,7 @@ fn registers_read_and_write() {
 fn status_shows_version_state_and_registers() {
     let out = printer_ok(&["status"]);
     for expected in [
-        "unit firmware: 3.0.4, build 936",
+        "unit firmware: 3.0.3, build 896",
         "state (Q0): X0 F0 (finished OK)",
         "hub filament sensor (FINDA): no filament",
         "register 0x08 FINDA_State = 0",
@@ -266,7 +266,7 @@ fn the_demo_runs_its_script() {
     let out = stdout(&output);
     assert!(output.status.success(), "{out}{}", stderr(&output));
     for expected in [
-        "connected: unit firmware 3.0.4",
+        "connected: unit firmware 3.0.3",
         "T2: finished OK",
         "the hub filament sensor (the printer's FINDA) sees filament: the printer unloads first",
         "E1: printer dialog FILAMENT_EJECTED",

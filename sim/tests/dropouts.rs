@@ -45,7 +45,7 @@ impl LossyUnit {
                 if lost {
                     return None;
                 }
-                let version = [3, 0, 4, 936];
+                let version = [3, 0, 3, 896];
                 Response::read(request, *version.get(usize::from(request.value))?)
             }
             RequestCode::Query => Response::finished(RequestCode::Reset, 0, ResultCode::OK),

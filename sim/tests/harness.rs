@@ -35,6 +35,18 @@ impl Wire {
         None
     }
 
+    /// The version check of a printer that wants MMU 3.0.3 (Buddy 6.4, whose mechanics the
+    /// simulator plays): `S2` asked again until it answers 3, then `S3`.
+    fn connect_as_3_0_3(&mut self) {
+        let s2 = Request::new(RequestCode::Version, 2);
+        for _ in 0..5 {
+            if self.ask(s2, 10).and_then(|(a, _)| a.param_value) == Some(3) {
+                break;
+            }
+        }
+        self.ask(Request::new(RequestCode::Version, 3), 10).unwrap();
+    }
+
     fn idle(&mut self, ms: u64) {
         for _ in 0..ms {
             self.sim.step(&[], &mut Vec::new());
@@ -99,6 +111,7 @@ fn power_loss_silences_the_unit_then_it_boots_fresh() {
 fn the_printer_unloads_its_extruder_before_the_unit_hears_the_unload() {
     let mut wire = Wire::new();
     wire.idle(300);
+    wire.connect_as_3_0_3();
     let done = wire.command(Request::new(RequestCode::Tool, 1));
     assert_eq!(done.param, ParamCode::Finished);
     let gears = wire.sim.model().config().extruder_gears_mm;

@@ -428,13 +428,13 @@ fn the_reported_version_is_a_setting_kept_across_restarts() {
     printer.link_mut().idle(11_000);
     let sim = printer.link_mut().sim_mut();
     sim.inject(mmu_sim::SimFault::PowerLoss { off_ms: 500 });
-    // The 3.0.4 printer still connects after the restart (the unit offers the kept 2 first, then
+    // The 3.0.3 printer still connects after the restart (the unit offers the kept 2 first, then
     // the others when `S2` is asked again), and the revision it accepted is kept in its place.
     printer.connect(&mut op).unwrap();
     let reported = printer
         .request(&mut op, Request::new(RequestCode::Read, 0x52))
         .unwrap();
-    assert_eq!(reported.param_value, Some(4));
+    assert_eq!(reported.param_value, Some(3));
     let sim = std::mem::replace(
         printer.link_mut().sim_mut(),
         Sim::new(SimOptions::default()).unwrap(),

@@ -6,7 +6,7 @@
 
 use mmu_protocol::ErrorCode;
 
-use super::{Plan, Recovery, clear_hub, extend, hub_search, preload, retry};
+use super::{Plan, Recovery, clear_hub, extend, hub_search, preload, retry, unload_from_nozzle};
 use crate::config::Config;
 use crate::unit::Unit;
 
@@ -17,7 +17,7 @@ pub fn plan<const N: usize>(
     config: &Config,
     plan: &mut Plan,
 ) -> Result<(), ErrorCode> {
-    clear_hub(plan, unit)?;
+    clear_hub(plan, unit, unload_from_nozzle::awaits_release(config))?;
     extend(plan, &preload::phases(slot, hub_search(slot, unit, config)));
     Ok(())
 }

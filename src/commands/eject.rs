@@ -7,13 +7,17 @@
 use mmu_protocol::{ButtonCode, ErrorCode};
 
 use super::{Action, Plan, Recovery, extend, retry, unload_from_nozzle};
+use crate::config::Config;
 use crate::phases::Phase;
 use crate::unit::Unit;
 
 /// The plan for `E<slot>`, appended to `plan`.
-pub fn plan<const N: usize>(slot: usize, unit: &Unit<N>, plan: &mut Plan) {
+pub fn plan<const N: usize>(slot: usize, unit: &Unit<N>, config: &Config, plan: &mut Plan) {
     if unit.active() == Some(slot) {
-        extend(plan, &unload_from_nozzle::phases(slot));
+        extend(
+            plan,
+            &unload_from_nozzle::phases(slot, unload_from_nozzle::awaits_release(config)),
+        );
     }
     extend(
         plan,

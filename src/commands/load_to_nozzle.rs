@@ -29,7 +29,7 @@ pub const fn phases(slot: usize, hub_search_mm: u16) -> [Phase; 4] {
 /// Back to the park position and load again from there, every phase with its full bound (the
 /// tip's place is known again once the hub sensor clears).
 fn reload_from_park(slot: usize, config: &Config, plan: &mut Plan) {
-    extend(plan, &unload_from_nozzle::phases(slot));
+    extend(plan, &unload_from_nozzle::phases(slot, true));
     extend(plan, &phases(slot, config.hub_search_mm));
 }
 

@@ -199,9 +199,9 @@ impl Command {
             }
             Command::ToolChange => tool_change::plan(slot, unit, config, plan),
             Command::Preload => preload::plan(slot, unit, config, plan),
-            Command::UnloadFromNozzle => unload_from_nozzle::plan(unit, plan),
+            Command::UnloadFromNozzle => unload_from_nozzle::plan(unit, config, plan),
             Command::Eject => {
-                eject::plan(slot, unit, plan);
+                eject::plan(slot, unit, config, plan);
                 Ok(())
             }
             Command::Cut => cut::plan(slot, unit, config, plan),
@@ -262,7 +262,14 @@ pub(crate) fn extend(plan: &mut Plan, phases: &[Phase]) {
 
 /// Whatever occupies the hub path comes out first. With filament in the hub but no slot known
 /// to own it, no motor moves on a guess.
-pub(crate) fn clear_hub<const N: usize>(plan: &mut Plan, unit: &Unit<N>) -> Result<(), ErrorCode> {
+///
+/// `await_release`: an unload from the printer first waits for it to release the filament
+/// ([`Phase::UnloadToHub`]).
+pub(crate) fn clear_hub<const N: usize>(
+    plan: &mut Plan,
+    unit: &Unit<N>,
+    await_release: bool,
+) -> Result<(), ErrorCode> {
     match (unit.active(), unit.hub_present()) {
         // With the hub sensor seeing filament, an unload may pull a long way: a slot only believed
         // to hold the path (a stored lane) is first pulled back a distance safe for any slot,
@@ -281,7 +288,7 @@ pub(crate) fn clear_hub<const N: usize>(plan: &mut Plan, unit: &Unit<N>) -> Resu
             Ok(())
         }
         (Some(active), _) => {
-            extend(plan, &unload_from_nozzle::phases(active));
+            extend(plan, &unload_from_nozzle::phases(active, await_release));
             Ok(())
         }
         (None, Some(false)) => Ok(()),

@@ -21,7 +21,7 @@ pub fn plan<const N: usize>(
     if unit.active().is_some() {
         return Err(ErrorCode::FILAMENT_ALREADY_LOADED);
     }
-    clear_hub(plan, unit)?;
+    clear_hub(plan, unit, true)?;
     extend(plan, &phases(slot, config.preload_max_mm));
     Ok(())
 }

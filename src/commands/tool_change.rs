@@ -8,7 +8,7 @@
 
 use mmu_protocol::ErrorCode;
 
-use super::{Plan, Recovery, clear_hub, extend, hub_search, load_to_nozzle, retry};
+use super::{Plan, Recovery, clear_hub, extend, hub_search, load_to_nozzle, retry, unload_from_nozzle};
 use crate::config::Config;
 use crate::unit::{Lane, Unit};
 
@@ -24,7 +24,7 @@ pub fn plan<const N: usize>(
     if unit.lane(slot) == Lane::Loaded && unit.owner_proven(slot) {
         return Ok(());
     }
-    clear_hub(plan, unit)?;
+    clear_hub(plan, unit, unload_from_nozzle::awaits_release(config))?;
     extend(
         plan,
         &load_to_nozzle::phases(slot, hub_search(slot, unit, config)),

@@ -2,25 +2,42 @@
 //! comes back out of the printer and the hub and is parked.
 //!
 //! `P3` pull back until the printer's sensor (within register `0x0c` mm) and then the hub sensor
-//! clear, `P19` on to the park position. Nothing loaded: done at once.
+//! clear, `P19` on to the park position. Nothing loaded: done at once. For a printer that
+//! accepted MMU 3.0.4, `P3` first waits, pulling nothing, until the printer reports its sensor
+//! off (at most 4 s, else `8004`), then pulls the first 20 mm slowly. FIL. ALREADY LOADED's
+//! Unload and every Retry of an unload wait for the printer's help with its own extruder, whatever
+//! the printer (`crate::phases::Phase::UnloadToHub`).
 
 use mmu_protocol::ErrorCode;
 
 use super::{Plan, Recovery, clear_hub, retry};
+use crate::config::{Config, Contract};
 use crate::phases::Phase;
 use crate::unit::Unit;
 
-/// Pull `slot`'s filament out of the printer and the hub, and park it.
-pub const fn phases(slot: usize) -> [Phase; 2] {
+/// Pull `slot`'s filament out of the printer and the hub, and park it; with `await_release`, only
+/// once the printer has released it ([`Phase::UnloadToHub`]).
+pub const fn phases(slot: usize, await_release: bool) -> [Phase; 2] {
     [
-        Phase::UnloadToHub { slot: slot as u8 },
+        Phase::UnloadToHub {
+            slot: slot as u8,
+            await_release,
+        },
         Phase::RetractToPark { slot: slot as u8 },
     ]
 }
 
+/// Whether `U0`, `T<n>`, `E<n>` and `K<n>` wait for the printer to release the filament before
+/// they pull: for a printer that accepted MMU 3.0.4, which sends `T` while its gears still grip
+/// it. A printer that accepted 3.0.3 or older pulls its filament out of its gears before it
+/// sends them, and the unit pulls at once, as MMU 3.0.3 does (`mmu-3.0.4.md`).
+pub fn awaits_release(config: &Config) -> bool {
+    config.version.contract() == Contract::AwaitRelease
+}
+
 /// The plan for `U0`, appended to `plan`.
-pub fn plan<const N: usize>(unit: &Unit<N>, plan: &mut Plan) -> Result<(), ErrorCode> {
-    clear_hub(plan, unit)
+pub fn plan<const N: usize>(unit: &Unit<N>, config: &Config, plan: &mut Plan) -> Result<(), ErrorCode> {
+    clear_hub(plan, unit, awaits_release(config))
 }
 
 /// What each error of the unload means and what Retry does.

@@ -130,8 +130,10 @@ pub struct Rig<const N: usize> {
     load_started: bool,
     /// The model's sensor state and since when (for a printer whose sensor reports late).
     sensed: (u8, u64),
-    /// The MMU revision the printer's firmware requires (`S2`): 4 for Buddy >= 6.5.3, 3 for
-    /// Buddy 6.4 and MK3S 3.14.1, 2 for MK3S 3.13.3/3.14.0.
+    /// The command the printer is following (`Q0` echoes it).
+    following: Option<RequestCode>,
+    /// The MMU revision the printer's firmware requires (`S2`): 4 for Buddy >= 6.5.3, 3 (the
+    /// rig's default) for Buddy 6.4 and MK3S 3.14.1, 2 for MK3S 3.13.3/3.14.0.
     pub wants_revision: u8,
 }
 
@@ -153,7 +155,8 @@ impl<const N: usize> Rig<N> {
             seen_progress: None,
             load_started: false,
             sensed: (0, 0),
-            wants_revision: 4,
+            wants_revision: 3,
+            following: None,
         }
     }
 
@@ -284,16 +287,19 @@ impl<const N: usize> Rig<N> {
         self.follow(request, 600_000)
     }
 
-    /// Send a command as the printer does (its own unload first when the command unloads) and
-    /// check that it is accepted; nothing more is played.
+    /// Send a command as the printer does (its own unload when the command unloads) and check
+    /// that it is accepted; nothing more is played. A printer that wants MMU 3.0.4 (Buddy
+    /// 6.5.3) sends `T` first and retracts while the unit waits (`ccb208bf5af1`); an older one
+    /// pulls the filament out of its gears before it sends the command.
     pub fn issue(&mut self, request: Request) {
         let same_tool =
             request.code == RequestCode::Tool && self.model.loaded_slot() == Some(request.value.into());
-        if matches!(
+        let unloads = matches!(
             request.code,
             RequestCode::Unload | RequestCode::Tool | RequestCode::Eject | RequestCode::Cut
-        ) && !same_tool
-        {
+        ) && !same_tool;
+        let retract_after = unloads && self.wants_revision >= 4 && request.code == RequestCode::Tool;
+        if unloads && !retract_after {
             self.unload_extruder();
         }
         let answer = self.send(request).expect("a command is answered");
@@ -302,10 +308,16 @@ impl<const N: usize> Rig<N> {
             ParamCode::Accepted,
             "{request:?} was not accepted: {answer:?}"
         );
+        if retract_after && self.model.fsensor_state() != 0 {
+            // Buddy 6.5.3's finishing retract: 80 mm at its slow feed (`2178f416c2eb`).
+            let slow = self.printer_slow_mm_s();
+            self.model.extruder_move(-80.0, slow);
+        }
     }
 
-    /// What the printer does before it asks for an unload or another tool: ram and pull the
-    /// filament out of its extruder gears.
+    /// What a printer that wants MMU 3.0.3 or older does before it asks for an unload or another
+    /// tool (and Buddy 6.5.3 before `U0`, `E`, `K`): ram and pull the filament out of its
+    /// extruder gears.
     pub fn unload_extruder(&mut self) {
         if self.model.fsensor_state() == 0 {
             return;
@@ -324,6 +336,7 @@ impl<const N: usize> Rig<N> {
     /// Keep playing the printer for the command in progress until `Q0` reports `until` (then the
     /// run's `last` is that `P` answer) or the command ends.
     pub fn follow_until(&mut self, request: Request, until: Option<ProgressCode>, timeout_ms: u64) -> Run {
+        self.following = Some(request.code);
         let mut progress: Vec<ProgressCode> = Vec::new();
         let start = self.now;
         loop {
@@ -364,11 +377,14 @@ impl<const N: usize> Rig<N> {
         }
     }
 
-    /// One step of the printer's side: report the sensor when it changed, co-feed on `P1c`. As
-    /// Prusa's printers do (`OnMMUProgressMsgChanged`/`OnMMUProgressMsgSame`): `P1c` newly seen
-    /// starts the load; while it lasts, with its sensor clear the printer co-feeds, with it
-    /// triggered it aborts that and pushes the extra load distance + 2 mm once (less on an
-    /// MK3.5); with it unavailable (`f3`) it does nothing.
+    /// One step of the printer's side: report the sensor when it changed, co-feed on `P1c`, help
+    /// an unload on `P3`. As Prusa's printers do (`OnMMUProgressMsgChanged`/
+    /// `OnMMUProgressMsgSame`): `P1c` newly seen starts the load; while it lasts, with its sensor
+    /// clear the printer co-feeds, with it triggered it aborts that and pushes the extra load
+    /// distance + 2 mm once (less on an MK3.5); with it unavailable (`f3`) it does nothing.
+    /// `P3` of a command other than `U`/`T` (an unload the printer did not prepare itself) makes
+    /// it retract 20 mm at 20 mm/s whenever its extruder is idle and its sensor reads filament
+    /// (`HelpUnloadToFinda`).
     pub fn printer_step(&mut self, progress: Option<ProgressCode>) {
         if progress != self.seen_progress {
             self.seen_progress = progress;
@@ -380,6 +396,14 @@ impl<const N: usize> Rig<N> {
             assert_eq!(answer.map(|a| a.param), Some(ParamCode::Accepted));
             self.reported_fsensor = state;
             return;
+        }
+        let prepared_itself = matches!(self.following, Some(RequestCode::Unload | RequestCode::Tool));
+        if progress == Some(ProgressCode::UNLOADING_TO_FINDA)
+            && !prepared_itself
+            && state != 0
+            && !self.model.extruder_busy()
+        {
+            self.help_unload();
         }
         if self.load_started && progress == Some(ProgressCode::FEEDING_TO_FSENSOR) {
             let slow = self.printer_slow_mm_s();
@@ -406,10 +430,18 @@ impl<const N: usize> Rig<N> {
         self.step_with(&[]);
     }
 
+    /// The printer's help with an unload: 20 mm back at 20 mm/s (Buddy `mmu2_config.h`
+    /// `MMU2_RETRY_UNLOAD_TO_FINDA_LENGTH`, `_FEED_RATE`); also what it does on the Retry of
+    /// `8004` and `8009` (`CheckUserInput`).
+    pub fn help_unload(&mut self) {
+        self.model.extruder_move(-20.0, 20.0);
+    }
+
     /// Play the printer for the command in progress until `until` holds for the model (checked
     /// every millisecond); `Q0` every [`POLL_MS`] as in [`Rig::follow`]. Panics if the command
     /// ends first.
     pub fn follow_until_model(&mut self, request: Request, until: impl Fn(&Model) -> bool, timeout_ms: u64) {
+        self.following = Some(request.code);
         let mut progress: Vec<ProgressCode> = Vec::new();
         let start = self.now;
         while !until(&self.model) {

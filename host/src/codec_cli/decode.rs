@@ -418,7 +418,7 @@ impl Decoded {
                 crc_text(*received_crc, *computed_crc)
             ),
             Decoded::Invalid { reason, .. } => format!("invalid: {reason}"),
-            Decoded::Other { reason, .. } => reason.clone(),
+            Decoded::Other { reason, input } => other_text(reason, input),
         }
     }
 
@@ -471,6 +471,25 @@ fn error_of(response: &Response) -> Option<ErrorCode> {
         .then_some(response.param_value)
         .flatten()
         .map(ErrorCode)
+}
+
+/// A line that holds no frame, with its text: what a log says between the frames (the host's
+/// G-code, the printer's `ok`, the printer's own MMU messages such as `Command rejected`) is
+/// often what explains them.
+fn other_text(reason: &str, input: &str) -> String {
+    let text = log_line::split(input).rest.trim();
+    if text.is_empty() {
+        return reason.to_string();
+    }
+    let message = ["MMU2:", "MMU3:"]
+        .iter()
+        .find_map(|marker| text.split_once(marker).map(|(_, message)| message.trim()));
+    match message {
+        Some(message) if reason.contains("MMU log message") => {
+            format!("the printer's MMU message: {message}")
+        }
+        _ => format!("{reason}: {text}"),
+    }
 }
 
 impl DecodedLine {
@@ -552,7 +571,7 @@ mod tests {
             [
                 "request T1 tool change slot 1, CRC ok",
                 "empty line",
-                "not an MMU line",
+                "not an MMU line: nonsense",
                 "response T0 E8003 FSENSOR_DIDNT_SWITCH_ON (printer screen 04103), CRC ok",
             ]
         );

@@ -133,6 +133,14 @@ fn slot_sensor(slot: u8) -> u8 {
 
 /// Run `step` and save what it measures.
 pub fn run(bench: &mut Bench, step: Step, options: &CalibrateOptions) -> Result<Results, String> {
+    if options.slot >= bench.slots() {
+        return Err(format!(
+            "slot {}: the unit has {} slots (0-{})",
+            options.slot,
+            bench.slots(),
+            bench.slots().saturating_sub(1)
+        ));
+    }
     idle(bench)?;
     let mut results = Results::default();
     let wants = |s: Step| step == Step::All || step == s;
@@ -415,7 +423,7 @@ fn feed_to_fsensor(
         .printer
         .follow(&mut bench.person, tool)
         .map_err(|e| e.to_string())?;
-    bench.outcome(tool, outcome)?;
+    bench.outcome(tool, outcome, None)?;
     let hub = level(bench, 0)?;
     if by_key {
         bench.say("the printer's filament sensor now reads off as the filament comes back");
@@ -541,15 +549,22 @@ fn save_park(bench: &mut Bench, merge_mm: u16) -> Result<u16, String> {
     let was = bench.read(0x41)?;
     let park_mm = merge_mm.saturating_add(PARK_MARGIN_MM).clamp(1, 200);
     bench.write(0x41, park_mm)?;
+    let mut checked = Vec::new();
     for slot in 0..bench.slots() {
         if bench.read(0xb8 + slot)? == 1 {
             bench
                 .command(Request::new(RequestCode::Load, slot))
                 .map_err(|e| format!("slot {slot} could not pass with the new park distance: {e}"))?;
+            checked.push(slot.to_string());
         }
     }
+    let check = if checked.is_empty() {
+        "no slot was parked, so none was checked: `load SLOT` each slot to check it".to_string()
+    } else {
+        format!("parked slot(s) {} preloaded again with it", checked.join(", "))
+    };
     bench.say(&format!(
-        "park distance: {park_mm} mm (register 0x41, was {was}); every parked slot passes"
+        "park distance: {park_mm} mm (register 0x41, was {was}); {check}"
     ));
     Ok(park_mm)
 }

@@ -22,6 +22,12 @@ commands (numbers decimal or 0x hex; slots count from 0):
   retry             press Retry / Continue (B1) and follow the command to its end
   button N          press button N (0 right, 1 middle = Retry, 2 left)
   status            the unit's state, its slots and the printer's filament sensor
+  motor SLOT        motor test: SLOT's motor forward and back (a preload), with what its Hall
+                    sensor and odometry saw
+  slots             each slot: its material and colour (kept on this PC), where its filament is
+  slot SLOT MATERIAL COLOUR   note what is loaded in SLOT (slot SLOT clear forgets it)
+  stats             tool changes, errors and metres per slot since `stats reset`, and the time of
+                    each tool change run here; stats reset starts counting again
   fsensor on|off|auto   the printer's filament sensor: fixed, or (auto) the simulator's / the
                     --fsensor-events file's
   calibrate [all|mm-per-rev|bowden|thresholds|park] [SLOT]   measure and save (see mmu calibrate --help)
@@ -43,6 +49,10 @@ pub const WORDS: &[&str] = &[
     "retry",
     "button",
     "status",
+    "motor",
+    "slots",
+    "slot",
+    "stats",
     "fsensor",
     "calibrate",
     "sim",
@@ -76,6 +86,14 @@ pub enum Command {
     Button(u8),
     /// The unit's state.
     Status,
+    /// The motor test of a slot.
+    Motor(u8),
+    /// The slot map with the unit's lanes.
+    Slots,
+    /// Note a slot's material and colour; `None` forgets it.
+    SlotNote(u8, Option<(String, String)>),
+    /// The statistics; `true`: start counting again.
+    Stats(bool),
     /// The printer's filament sensor from now on.
     Fsensor(FsensorMode),
     /// Calibrate, on a slot when given.
@@ -123,7 +141,29 @@ pub fn parse(line: &str) -> Result<Option<Command>, String> {
             _ => return Err("usage: set REGISTER VALUE".into()),
         },
         "retry" | "continue" => Command::Retry,
-        "button" | "b" => Command::Button(slot("button")?),
+        "button" | "b" => {
+            let button = slot("button")?;
+            if button > 2 {
+                return Err(format!(
+                    "button {button}: the printer's buttons are 0 (right), 1 (middle: Retry, Continue) and 2 (left)"
+                ));
+            }
+            Command::Button(button)
+        }
+        "motor" => Command::Motor(slot("motor")?),
+        "slots" => Command::Slots,
+        "slot" => match args {
+            [slot, word] if word.eq_ignore_ascii_case("clear") => Command::SlotNote(parse_u8(slot)?, None),
+            [slot, material, colour] => {
+                Command::SlotNote(parse_u8(slot)?, Some((material.to_string(), colour.to_string())))
+            }
+            _ => return Err("usage: slot SLOT MATERIAL COLOUR, or slot SLOT clear".into()),
+        },
+        "stats" => match args {
+            [] => Command::Stats(false),
+            ["reset"] => Command::Stats(true),
+            _ => return Err("usage: stats, or stats reset".into()),
+        },
         "status" | "q" => Command::Status,
         "fsensor" | "f" => Command::Fsensor(match args {
             ["on" | "1"] => FsensorMode::Fixed(1),
@@ -202,8 +242,23 @@ mod tests {
         assert!(parse("t 300").is_err());
         assert!(parse("set bowden x").is_err());
         assert!(parse("frobnicate").is_err());
+        assert_eq!(parse("motor 2"), Ok(Some(Command::Motor(2))));
+        assert_eq!(
+            parse("slot 1 PETG red"),
+            Ok(Some(Command::SlotNote(1, Some(("PETG".into(), "red".into())))))
+        );
+        assert_eq!(parse("slot 1 clear"), Ok(Some(Command::SlotNote(1, None))));
+        assert_eq!(parse("stats reset"), Ok(Some(Command::Stats(true))));
         for word in WORDS {
             assert!(HELP.contains(word), "help lacks {word}");
         }
+    }
+
+    /// Before: `button 9` was sent to the unit; the printer has three buttons.
+    #[test]
+    fn only_the_printer_s_three_buttons_are_pressed() {
+        assert_eq!(parse("button 2"), Ok(Some(Command::Button(2))));
+        let error = parse("button 9").unwrap_err();
+        assert!(error.contains("0 (right), 1 (middle"), "{error}");
     }
 }

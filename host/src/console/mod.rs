@@ -7,22 +7,30 @@
 //! one, and [`calibrate`] measures the unit's distances and sensor levels. Commands come from a
 //! terminal (history, tab completion) or a pipe (`printf 't 1\nquit\n' | mmu console --sim`);
 //! a scripted session exits non-zero when one of its commands failed.
+//!
+//! For the bench: [`motor`] tests a slot's motor and Hall sensor, [`pc_files`] keeps the slot map
+//! (material, colour) and the statistics' starting point on this PC. A command is not sent while
+//! the unit waits on an earlier command's error (it would fail with that error and be blamed for
+//! it); Ctrl-C while the unit works says what it was doing and exits 130.
 
 pub mod calibrate;
 mod commands;
 mod input;
 mod link;
+pub mod motor;
 mod names;
+pub mod pc_files;
 mod person;
 mod words;
 
 use std::error::Error;
 use std::path::PathBuf;
+use std::sync::{Arc, Mutex};
 
 use mmu_protocol::{ButtonCode, ErrorCode, Family, ParamCode, Request, RequestCode, Response, ResultCode};
 use mmu_sim::{Link, Outcome, Personality, Printer, PrinterOptions};
 
-use crate::explain::{error_meaning, request_label, response_meaning};
+use crate::explain::{error_meaning, request_label, request_meaning, response_meaning};
 use crate::printer_cli::console::{Console, state_text};
 use crate::printer_cli::serial::{EventsTail, FsensorSource, SerialLink};
 use crate::printer_cli::{SimTargetArgs, parse_version, sim_link};
@@ -30,6 +38,7 @@ use calibrate::{CalibrateOptions, Step};
 use commands::{Command, HELP, parse};
 use input::Input;
 use link::{BenchLink, FsensorMode, Wire, sim_clear, sim_fault};
+use pc_files::{SlotMap, SlotNote, Stats};
 use person::{EjectDialog, Person};
 use words::{done_text, fsensor_text, lane_text, unknown_register, value_note};
 
@@ -52,7 +61,7 @@ pub struct TargetArgs {
     pub fsensor_events: Option<PathBuf>,
     /// The unit firmware version to expect; S0..S2 must answer it (3.0.2 for a unit set up for
     /// an MK3S).
-    #[arg(long, value_name = "X.Y.Z", default_value = "3.0.4", value_parser = parse_version)]
+    #[arg(long, value_name = "X.Y.Z", default_value = "3.0.3", value_parser = parse_version)]
     pub expect_version: (u8, u8, u8),
     /// Show every frame sent (`>`) and received (`<`).
     #[arg(short, long)]
@@ -83,6 +92,49 @@ pub struct CalibrateArgs {
     pub merge_mm: Option<u16>,
 }
 
+/// `mmu motor` options.
+#[derive(Debug, clap::Args)]
+pub struct MotorArgs {
+    /// The unit.
+    #[command(flatten)]
+    pub target: TargetArgs,
+    /// The slot whose motor to test (0 is the first); it must hold filament.
+    #[arg(value_parser = crate::codec_cli::parse_u8)]
+    pub slot: u8,
+}
+
+/// `mmu slots` options.
+#[derive(Debug, clap::Args)]
+pub struct SlotsArgs {
+    /// The unit, to show where each slot's filament is (not needed to note or forget a slot).
+    #[command(flatten)]
+    pub target: TargetArgs,
+    /// Note or forget a slot's material and colour (without: show the map).
+    #[command(subcommand)]
+    pub change: Option<SlotChange>,
+}
+
+/// A change to the slot map.
+#[derive(Debug, clap::Subcommand)]
+pub enum SlotChange {
+    /// Note what slot SLOT holds, e.g. `set 1 PETG red`.
+    Set {
+        /// The slot (0 is the first).
+        #[arg(value_parser = crate::codec_cli::parse_u8)]
+        slot: u8,
+        /// PLA, PETG, ... (one word).
+        material: String,
+        /// red, #ff0000, ... (one word).
+        colour: String,
+    },
+    /// Forget what slot SLOT holds.
+    Clear {
+        /// The slot.
+        #[arg(value_parser = crate::codec_cli::parse_u8)]
+        slot: u8,
+    },
+}
+
 /// `mmu console` options.
 #[derive(Debug, clap::Args)]
 #[command(after_long_help = HELP)]
@@ -99,6 +151,12 @@ pub struct Bench {
     slots: u8,
     /// The printer's filament sensor follows a `mmu sim --events` file.
     fsensor_events: bool,
+    /// The command the unit runs for the console, for Ctrl-C to name.
+    running: Arc<Mutex<Option<String>>>,
+    /// The statistics: kept in their file for a real unit, for the session with the simulator.
+    stats: Stats,
+    /// The person was told how the printer's sensor works on the bench.
+    told_about_the_bench: bool,
 }
 
 impl Bench {
@@ -121,6 +179,9 @@ impl Bench {
         };
         let mut bench = Bench::on_wire(wire, options, input, target.verbose);
         bench.fsensor_events = target.fsensor_events.is_some();
+        if bench.is_real_unit() {
+            bench.stats = Stats::load()?;
+        }
         Ok(bench)
     }
 
@@ -142,7 +203,20 @@ impl Bench {
             },
             slots: 0,
             fsensor_events: false,
+            running: Arc::new(Mutex::new(None)),
+            stats: Stats::default(),
+            told_about_the_bench: false,
         }
+    }
+
+    /// A unit on a serial port (or `mmu sim --pty` behind one), not the in-process simulator.
+    fn is_real_unit(&self) -> bool {
+        self.printer.link().sim().is_none()
+    }
+
+    /// The printer's clock, ms.
+    fn now_ms(&self) -> u64 {
+        self.printer.link().now_ms()
     }
 
     /// Handshake, learn the slot count, and say what state the unit is in.
@@ -180,10 +254,10 @@ impl Bench {
         let answer = self.request(Request::new(RequestCode::Read, address))?;
         match (answer.param, answer.param_value) {
             (ParamCode::Accepted, Some(value)) => Ok(value),
-            _ => Err(format!(
-                "the unit has no register {}",
-                self.register_text(address)
-            )),
+            _ => Err(match names::name(address, self.slots) {
+                Some(name) => format!("the unit refused to read {name} (0x{address:02x})"),
+                None => format!("the unit has no register 0x{address:02x}"),
+            }),
         }
     }
 
@@ -191,13 +265,59 @@ impl Bench {
     pub fn write(&mut self, address: u8, value: u16) -> Result<(), String> {
         let answer = self.request(Request::write(address, value))?;
         if answer.param == ParamCode::Accepted {
-            Ok(())
-        } else {
-            Err(format!(
-                "the unit refused {} = {value}: the value is out of its range",
-                self.register_text(address)
-            ))
+            return Ok(());
         }
+        let register = self.register_text(address);
+        let range =
+            mmu_firmware::registers::describe(address, usize::from(self.slots)).and_then(|r| r.row.range());
+        let why = match range {
+            None => "it is read only".to_string(),
+            Some((low, high)) if value < low || value > high => {
+                format!("{value} is out of its range, {low} to {high}")
+            }
+            Some(_) => match address {
+                0x90..=0x9f => format!(
+                    "a sensor's \"on\" threshold must stay above its \"off\" one ({}): set \"off\" lower first",
+                    self.partner_threshold(address + 0x10)
+                ),
+                0xa0..=0xaf => format!(
+                    "a sensor's \"off\" threshold must stay below its \"on\" one ({}): set \"on\" higher first",
+                    self.partner_threshold(address - 0x10)
+                ),
+                _ => "the unit does not take that value here".to_string(),
+            },
+        };
+        Err(format!("the unit refused {register} = {value}: {why}"))
+    }
+
+    /// The other threshold of a pair, as text (`off is 2400`), for a refused write.
+    fn partner_threshold(&mut self, address: u8) -> String {
+        let name = names::name(address, self.slots).unwrap_or_else(|| format!("0x{address:02x}"));
+        match self.read(address) {
+            Ok(value) => format!("{name} is {value}"),
+            Err(_) => format!("{name} could not be read"),
+        }
+    }
+
+    /// Refuse to send `request` while the unit waits on an error: it would accept the command
+    /// and fail at once with that error, and the console would blame the new command for it.
+    fn refuse_if_waiting(&mut self, request: &Request) -> Result<(), String> {
+        let state = self.request(Request::new(RequestCode::Query, 0))?;
+        // INVALID_TOOL holds nothing: the unit takes the next command as usual (the printer's
+        // Stop print sends nothing to it).
+        let invalid_tool = state.param_value == Some(ErrorCode::INVALID_TOOL.0);
+        if state.param != ParamCode::Error || invalid_tool {
+            return Ok(());
+        }
+        let holder = Request::new(state.code, state.value);
+        Err(format!(
+            "not sent: the unit still waits on {} from {} ({}); answer that first (`retry`, which is \
+             also Continue; `button N`), then {}",
+            response_meaning(&state),
+            request_label(&holder),
+            request_meaning(&holder),
+            request_label(request)
+        ))
     }
 
     /// One request that is not a command, and its answer.
@@ -209,19 +329,50 @@ impl Bench {
 
     /// Run a command to its end; an error the person gave up on is a failure (the unit waits).
     pub fn command(&mut self, request: Request) -> Result<(), String> {
-        let outcome = self
-            .printer
-            .command(&mut self.person, request)
-            .map_err(|e| e.to_string())?;
-        self.outcome(request, outcome)
+        self.command_saying(request, None)
+    }
+
+    /// Run a command to its end and say `done` (else what the command does) when it finished.
+    fn command_saying(&mut self, request: Request, done: Option<String>) -> Result<(), String> {
+        self.refuse_if_waiting(&request)?;
+        let started = self.now_ms();
+        self.set_running(Some(request_label(&request)));
+        let outcome = self.printer.command(&mut self.person, request);
+        self.set_running(None);
+        let outcome = outcome.map_err(|e| e.to_string())?;
+        if request.code == RequestCode::Tool && outcome == Outcome::Finished(ResultCode::OK) {
+            self.timed_change(request.value, self.now_ms() - started);
+        }
+        self.outcome(request, outcome, done)
+    }
+
+    /// What Ctrl-C names as running.
+    fn set_running(&self, what: Option<String>) {
+        if let Ok(mut running) = self.running.lock() {
+            *running = what;
+        }
+    }
+
+    /// Count a tool change to `slot` that took `ms` (kept in the statistics' file for a real unit).
+    fn timed_change(&mut self, slot: u8, ms: u64) {
+        self.stats.changes.push((slot, ms));
+        self.say(&format!(
+            "tool change to slot {slot}: {:.1} s",
+            ms as f64 / 1000.0
+        ));
+        if self.is_real_unit()
+            && let Err(error) = self.stats.save()
+        {
+            self.say(&format!("(the time is not kept: {error})"));
+        }
     }
 
     /// Say how a command ended.
-    fn outcome(&mut self, request: Request, outcome: Outcome) -> Result<(), String> {
+    fn outcome(&mut self, request: Request, outcome: Outcome, done: Option<String>) -> Result<(), String> {
         let label = request_label(&request);
         match outcome {
             Outcome::Finished(ResultCode::OK) => {
-                self.say(&done_text(&request));
+                self.say(&done.unwrap_or_else(|| done_text(&request)));
                 Ok(())
             }
             Outcome::Finished(result) => Err(format!("{label} ended with result {}", result.0)),
@@ -249,11 +400,11 @@ impl Bench {
         let request = Request::new(state.code, state.value);
         match state.param {
             ParamCode::Processing | ParamCode::Error if state.code.is_command() => {
-                let outcome = self
-                    .printer
-                    .follow(&mut self.person, request)
-                    .map_err(|e| e.to_string())?;
-                self.outcome(request, outcome)
+                self.set_running(Some(request_label(&request)));
+                let outcome = self.printer.follow(&mut self.person, request);
+                self.set_running(None);
+                let outcome = outcome.map_err(|e| e.to_string())?;
+                self.outcome(request, outcome, None)
             }
             _ => {
                 self.say(&format!(
@@ -306,8 +457,8 @@ impl Bench {
             }
         ));
         for slot in 0..self.slots {
-            let lane = self.read(0xb8 + slot)?;
-            self.say(&format!("slot {slot}: {}", lane_text(lane)));
+            let text = self.slot_text(slot)?;
+            self.say(&format!("slot {slot}: {text}"));
         }
         let fsensor = self.link().fsensor();
         let is_sim = self.link().sim().is_some();
@@ -331,6 +482,110 @@ impl Bench {
         Ok(())
     }
 
+    /// Where slot `slot`'s filament is, in words. The unit's lane register says 0 both for an
+    /// empty slot and for one whose tip it does not know (after `X42`, or a filament pushed in by
+    /// hand): its slot sensor tells them apart.
+    fn slot_text(&mut self, slot: u8) -> Result<String, String> {
+        let lane = self.read(0xb8 + slot)?;
+        if lane != 0 {
+            return Ok(lane_text(lane).to_string());
+        }
+        let sensor = 3 + 2 * slot;
+        if self.read(0x50)? & (1 << sensor) != 0 {
+            return Ok("unknown: its slot sensor is stuck at a rail (check its wiring: mmu sensors)".into());
+        }
+        let (filtered, on, off) = (
+            self.read(0x70 + sensor)?,
+            self.read(0x90 + sensor)?,
+            self.read(0xa0 + sensor)?,
+        );
+        Ok(if filtered >= on {
+            format!("unknown: filament at the slot sensor, its tip not yet found (`load {slot}` preloads it)")
+        } else if filtered <= off {
+            "empty: no filament at the slot sensor".to_string()
+        } else {
+            format!("unknown: the slot sensor reads {filtered}, between its thresholds ({off} off, {on} on)")
+        })
+    }
+
+    /// `slots`: each slot's material and colour (this PC's slot map) and where its filament is.
+    fn slots_table(&mut self) -> Result<(), String> {
+        let map = SlotMap::load()?;
+        for slot in 0..self.slots {
+            let note = map.get(slot).map_or("(not noted)".to_string(), |n| {
+                format!("{} {}", n.material, n.colour)
+            });
+            let text = self.slot_text(slot)?;
+            self.say(&format!("slot {slot}: {note:<16} {text}"));
+        }
+        Ok(())
+    }
+
+    /// `slot SLOT MATERIAL COLOUR` / `slot SLOT clear`.
+    fn note_slot(&mut self, slot: u8, note: Option<(String, String)>) -> Result<(), String> {
+        if slot >= self.slots {
+            return Err(format!("the unit has no slot {slot}: it has {}", self.slots));
+        }
+        let mut map = SlotMap::load()?;
+        let words = match &note {
+            Some((material, colour)) => format!("slot {slot}: {material} {colour}"),
+            None => format!("slot {slot}: forgotten"),
+        };
+        map.set(slot, note.map(|(material, colour)| SlotNote { material, colour }));
+        let path = map.save()?;
+        self.say(&format!("{words} (kept in {})", path.display()));
+        Ok(())
+    }
+
+    /// `stats` / `stats reset`.
+    fn statistics(&mut self, reset: bool) -> Result<(), String> {
+        let mut now = std::collections::BTreeMap::new();
+        for slot in 0..self.slots {
+            now.insert(
+                slot,
+                [
+                    self.read(0xc0 + slot)?,
+                    self.read(0xc8 + slot)?,
+                    self.read(0xe0 + slot)?,
+                ],
+            );
+        }
+        if reset {
+            self.stats = Stats {
+                baseline: now,
+                changes: Vec::new(),
+            };
+            self.say("statistics: counting from now");
+        } else {
+            for (slot, counters) in now {
+                let line = self.stats.slot_line(slot, counters);
+                self.say(&line);
+            }
+        }
+        if self.is_real_unit() {
+            let path = self.stats.save()?;
+            if reset {
+                self.say(&format!("(kept in {})", path.display()));
+            }
+        }
+        Ok(())
+    }
+
+    /// Before a tool change on the bench: how the printer's filament sensor works there.
+    fn tell_about_the_bench(&mut self) {
+        let on_the_bench = self.is_real_unit() && !self.fsensor_events;
+        if !on_the_bench || self.told_about_the_bench {
+            return;
+        }
+        self.told_about_the_bench = true;
+        self.say(
+            "on the bench there is no printer: its filament sensor is yours (`fsensor`). The tool change stops \
+             at FeedingToFSensor on FSENSOR_DIDNT_SWITCH_ON unless the sensor reads filament: when the tip \
+             comes out of the Bowden tube, answer the error prompt with `fsensor on`, then `retry`. The last \
+             push needs an extruder to pull the filament in: without one it ends on that error again.",
+        );
+    }
+
     /// The printer's filament sensor from now on; the unit is told at once.
     fn set_fsensor(&mut self, mode: FsensorMode) -> Result<(), String> {
         self.link().fsensor = mode;
@@ -347,9 +602,22 @@ impl Bench {
     fn run(&mut self, command: Command) -> Result<(), String> {
         use RequestCode::{Cut, Eject, Home, Load, Tool, Unload};
         match command {
-            Command::Tool(slot) => self.command(Request::new(Tool, slot)),
+            Command::Tool(slot) => {
+                self.tell_about_the_bench();
+                self.command(Request::new(Tool, slot))
+            }
             Command::Load(slot) => self.command(Request::new(Load, slot)),
-            Command::Unload => self.command(Request::new(Unload, 0)),
+            Command::Unload => {
+                let done = if self.anything_loaded()? {
+                    None
+                } else {
+                    Some(
+                        "nothing was loaded: the unit had nothing to unload, every slot is as it was"
+                            .to_string(),
+                    )
+                };
+                self.command_saying(Request::new(Unload, 0), done)
+            }
             Command::Eject(slot) => {
                 self.unload_first()?;
                 self.command(Request::new(Eject, slot))
@@ -391,6 +659,20 @@ impl Bench {
             Command::Retry => self.retry(ButtonCode::MIDDLE),
             Command::Button(button) => self.retry(ButtonCode(button)),
             Command::Status => self.status(),
+            Command::Motor(slot) => {
+                let report = motor::run(self, slot)?;
+                for line in report.lines() {
+                    self.say(&line);
+                }
+                if report.passed() {
+                    Ok(())
+                } else {
+                    Err(format!("slot {slot}'s motor test did not pass"))
+                }
+            }
+            Command::Slots => self.slots_table(),
+            Command::SlotNote(slot, note) => self.note_slot(slot, note),
+            Command::Stats(reset) => self.statistics(reset),
             Command::Fsensor(mode) => self.set_fsensor(mode),
             Command::Calibrate(step, slot) => {
                 let options = CalibrateOptions {
@@ -425,6 +707,17 @@ impl Bench {
         }
     }
 
+    /// Whether a filament is past its park position: a slot's lane says so, or the hub sensor
+    /// sees one.
+    fn anything_loaded(&mut self) -> Result<bool, String> {
+        for slot in 0..self.slots {
+            if matches!(self.read(0xb8 + slot)?, 2 | 4 | 8) {
+                return Ok(true);
+            }
+        }
+        Ok(self.read(0x08)? != 0)
+    }
+
     /// As the printer does before `E`/`K`: unload when the hub sensor sees filament.
     fn unload_first(&mut self) -> Result<(), String> {
         if self.read(0x08)? != 0 {
@@ -435,14 +728,68 @@ impl Bench {
     }
 }
 
+/// On Ctrl-C, say what the unit was left doing (`running`), and end with status 130: the console
+/// cannot stop a command the unit runs, and must not leave the person believing it did.
+fn stop_on_ctrl_c(running: &Arc<Mutex<Option<String>>>, calibrating: bool) {
+    let running = Arc::clone(running);
+    let result = ctrlc::set_handler(move || {
+        let what = running.lock().ok().and_then(|running| running.clone());
+        let mut text = match what {
+            Some(command) => format!(
+                "\nmmu: stopped by Ctrl-C while the unit runs {command}: the unit goes on by itself (every \
+                 motion is bounded); `mmu console` again and `status` tell where it ended"
+            ),
+            None => "\nmmu: stopped by Ctrl-C".to_string(),
+        };
+        if calibrating {
+            text.push_str(
+                "; a Bowden measurement stopped half-way leaves bowden_mm (0x22), the printer-sensor search \
+                 (0x48) and the slow-down distance (0x4a) at its own values: set them back (`set`) or calibrate again",
+            );
+        }
+        eprintln!("{text}");
+        std::process::exit(130);
+    });
+    // Without a handler Ctrl-C still ends the process, only without the words.
+    let _ = result;
+}
+
+/// `--merge-mm`: the park distance it makes (the join plus a margin) must be a distance the unit
+/// takes (register 0x41) and leave the parked tip in front of the slot sensor, or the slot would
+/// read empty.
+fn check_merge(merge_mm: u16, slot_to_hub_mm: f64) -> Result<(), String> {
+    let park = u32::from(merge_mm) + u32::from(calibrate::PARK_MARGIN_MM);
+    let furthest = slot_to_hub_mm - f64::from(calibrate::PARK_MARGIN_MM);
+    if park > 200 || f64::from(park) >= furthest {
+        return Err(format!(
+            "--merge-mm {merge_mm}: the slots would park {park} mm before the hub sensor, behind their slot \
+             sensors ({slot_to_hub_mm} mm before it, --slot-to-hub-mm): measure from the hub sensor back to \
+             where the slot paths join (a few mm to a few tens of mm)"
+        ));
+    }
+    Ok(())
+}
+
 /// Run `mmu calibrate`: connect, calibrate, print what was saved.
 pub fn run_calibrate(args: &CalibrateArgs) -> Result<(), Box<dyn Error>> {
     if !(1.0..=1000.0).contains(&args.slot_to_hub_mm) {
-        return Err("--slot-to-hub-mm must be between 1 and 1000".into());
+        return Err(crate::usage::usage("--slot-to-hub-mm must be between 1 and 1000"));
+    }
+    if let Some(merge_mm) = args.merge_mm {
+        check_merge(merge_mm, args.slot_to_hub_mm).map_err(crate::usage::usage)?;
     }
     let input = Input::from_stdin(args.target.sim_options.slots.try_into().unwrap_or(5));
     let mut bench = Bench::open(&args.target, input)?;
     bench.connect()?;
+    if args.slot >= bench.slots() {
+        return Err(crate::usage::usage(format!(
+            "--slot {}: the unit has {} slots (0-{})",
+            args.slot,
+            bench.slots(),
+            bench.slots().saturating_sub(1)
+        )));
+    }
+    stop_on_ctrl_c(&bench.running, true);
     let options = CalibrateOptions {
         slot: args.slot,
         slot_to_hub_mm: args.slot_to_hub_mm,
@@ -454,12 +801,82 @@ pub fn run_calibrate(args: &CalibrateArgs) -> Result<(), Box<dyn Error>> {
     result.map(|_| ()).map_err(Into::into)
 }
 
+/// The most slots a unit can have (the simulator's limit; the protocol's slot numbers go to 4).
+const MAX_SLOTS: u8 = 5;
+
+/// Run `mmu motor`: connect, test the slot's motor, say what was seen. Fails (exit 1) when the
+/// test does not pass.
+pub fn run_motor(args: &MotorArgs) -> Result<(), Box<dyn Error>> {
+    let input = Input::from_stdin(args.target.sim_options.slots.try_into().unwrap_or(MAX_SLOTS));
+    let mut bench = Bench::open(&args.target, input)?;
+    bench.connect()?;
+    if args.slot >= bench.slots() {
+        return Err(crate::usage::usage(format!(
+            "slot {}: the unit has {} slots (0-{})",
+            args.slot,
+            bench.slots(),
+            bench.slots().saturating_sub(1)
+        )));
+    }
+    stop_on_ctrl_c(&bench.running, false);
+    bench.set_running(Some(format!("the motor test of slot {} (a preload)", args.slot)));
+    let result = bench.run(Command::Motor(args.slot));
+    bench.person.display.close();
+    result.map_err(Into::into)
+}
+
+/// Run `mmu slots`: show the map with the unit's lanes, or note or forget a slot (no unit needed).
+pub fn run_slots(args: &SlotsArgs) -> Result<(), Box<dyn Error>> {
+    match &args.change {
+        Some(change) => {
+            let (slot, note) = match change {
+                SlotChange::Set {
+                    slot,
+                    material,
+                    colour,
+                } => (
+                    *slot,
+                    Some(SlotNote {
+                        material: material.clone(),
+                        colour: colour.clone(),
+                    }),
+                ),
+                SlotChange::Clear { slot } => (*slot, None),
+            };
+            if slot >= MAX_SLOTS {
+                return Err(crate::usage::usage(format!(
+                    "slot {slot}: a unit has at most {MAX_SLOTS} slots (0-{})",
+                    MAX_SLOTS - 1
+                )));
+            }
+            let mut map = SlotMap::load()?;
+            let words = match &note {
+                Some(note) => format!("slot {slot}: {} {}", note.material, note.colour),
+                None => format!("slot {slot}: forgotten"),
+            };
+            map.set(slot, note);
+            let path = map.save()?;
+            println!("{words} (kept in {})", path.display());
+            Ok(())
+        }
+        None => {
+            let input = Input::from_stdin(args.target.sim_options.slots.try_into().unwrap_or(MAX_SLOTS));
+            let mut bench = Bench::open(&args.target, input)?;
+            bench.connect()?;
+            let result = bench.slots_table();
+            bench.person.display.close();
+            result.map_err(Into::into)
+        }
+    }
+}
+
 /// Run `mmu console`.
 pub fn run(args: &ConsoleArgs) -> Result<(), Box<dyn Error>> {
     let input = Input::from_stdin(args.target.sim_options.slots.try_into().unwrap_or(5));
     let scripted = input.is_script();
     let mut bench = Bench::open(&args.target, input)?;
     bench.connect()?;
+    stop_on_ctrl_c(&bench.running, false);
     if !scripted {
         bench.say("type help for the commands, quit to leave");
     }

@@ -1,7 +1,7 @@
 //! What each error the unit raises means on this hardware, and what to check, in the words of
 //! this unit's parts (hub filament sensor, slot motor and its Hall sensor, slot sensor, Bowden
 //! tube, the printer's filament sensor) rather than the MMU3's (FINDA, pulley, selector, idler).
-//! The code names stay Prusa's: they are what the printer shows. The README's error table says
+//! The code names stay Prusa's: they are what the printer shows. The book's error table says
 //! the same.
 
 use mmu_protocol::ErrorCode;
@@ -130,21 +130,22 @@ mod tests {
         }
     }
 
-    /// The README's error table says what `mmu` says: each raised error's "what to check".
+    /// The book's error table (`book/src/errors.md`) says what `mmu` says: each raised error's
+    /// "what to check".
     #[test]
-    fn the_readme_error_table_says_the_same() {
-        let readme = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../README.md"))
-            .expect("the README is readable");
+    fn the_book_s_error_table_says_the_same() {
+        let table = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../book/src/errors.md"))
+            .expect("the book's error chapter is readable");
         for error in RAISED {
-            let row = readme
+            let row = table
                 .lines()
                 .find(|line| line.starts_with(&format!("| `{:04x}` {error} |", error.0)))
-                .unwrap_or_else(|| panic!("no README row for {error}"));
+                .unwrap_or_else(|| panic!("no row for {error} in book/src/errors.md"));
             assert!(row.contains(error_help(error).check), "{error}: {row}");
         }
     }
 
-    /// A new error raised in the firmware must be explained here (and in the README).
+    /// A new error raised in the firmware must be explained here (and in the book's error table).
     #[test]
     fn every_error_the_firmware_names_is_in_the_list() {
         fn sources(dir: &std::path::Path, into: &mut String) {

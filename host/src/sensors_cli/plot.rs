@@ -58,22 +58,22 @@ pub fn draw(
         &(FONT, 20).into_font().color(&BLACK),
         (15, 15),
     )?;
-    let columns = 3;
+    let columns = sensors.clamp(1, 3);
     let rows = sensors.div_ceil(columns).max(1);
     let panels = body.split_evenly((rows, columns));
-    for (index, panel) in panels.iter().enumerate().take(sensors) {
-        let limits = thresholds.get(index).copied().flatten();
-        draw_panel(panel, index, samples, limits, end_s)?;
+    for (position, panel) in panels.iter().enumerate().take(sensors) {
+        let limits = thresholds.get(position).copied().flatten();
+        draw_panel(panel, position, samples, limits, end_s)?;
     }
     root.present()
         .map_err(|error| format!("cannot write {}: {error}", file.display()))?;
     Ok(())
 }
 
-/// One sensor's panel.
+/// One sensor's panel: the sensor at `position` in each sample.
 fn draw_panel<DB: DrawingBackend>(
     panel: &DrawingArea<DB, plotters::coord::Shift>,
-    index: usize,
+    position: usize,
     samples: &[Sample],
     limits: Option<Thresholds>,
     end_s: f64,
@@ -81,7 +81,7 @@ fn draw_panel<DB: DrawingBackend>(
 where
     DB::ErrorType: 'static,
 {
-    let reading = |sample: &Sample| sample.readings.get(index).copied();
+    let reading = |sample: &Sample| sample.readings.get(position).copied();
     let mut low = u16::MAX;
     let mut high = 0u16;
     for r in samples.iter().filter_map(reading) {
@@ -95,7 +95,8 @@ where
     // Room around the traces, within the ADC's range.
     let margin = ((high.saturating_sub(low)) / 10).max(50);
     let (y_low, y_high) = (low.saturating_sub(margin), high.saturating_add(margin).min(4095));
-    let mut name = sensor_name(u8::try_from(index).unwrap_or(u8::MAX));
+    let sensor = samples.iter().find_map(&reading).map_or(u8::MAX, |r| r.sensor);
+    let mut name = sensor_name(sensor);
     // The unit stops believing a sensor stuck at a rail: say so where the trace shows it.
     if let Some(first) = samples.iter().find(|s| reading(s).is_some_and(|r| r.stuck)) {
         name.push_str(&format!(

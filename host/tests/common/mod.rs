@@ -44,3 +44,32 @@ pub fn text(output: &Output) -> String {
         String::from_utf8_lossy(&output.stderr)
     )
 }
+
+/// The user's documentation: the README and every page of the book (`book/src/**/*.md`), each
+/// with its path relative to the repository's root, in a stable order.
+pub fn documentation() -> Vec<(String, String)> {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let mut pages = vec!["README.md".to_string()];
+    let mut folders = vec![root.join("book/src")];
+    while let Some(folder) = folders.pop() {
+        let entries = std::fs::read_dir(&folder).expect("the book's folder is readable");
+        for entry in entries {
+            let path = entry.expect("a book entry is readable").path();
+            if path.is_dir() {
+                folders.push(path);
+            } else if path.extension().is_some_and(|ext| ext == "md") {
+                let relative = path.strip_prefix(&root).expect("under the root");
+                pages.push(relative.to_string_lossy().into_owned());
+            }
+        }
+    }
+    pages.sort();
+    pages
+        .into_iter()
+        .map(|page| {
+            let text = std::fs::read_to_string(root.join(&page))
+                .unwrap_or_else(|e| panic!("{page} is readable: {e}"));
+            (page, text)
+        })
+        .collect()
+}

@@ -27,8 +27,8 @@ pub struct PrinterOptions {
     /// The printer firmware played: its timing, its register poll, its tool change.
     pub personality: Personality,
     /// The unit version it supports: S0..S2 must answer exactly this (3.0.4 on Buddy 6.5.3 and
-    /// later, 3.0.3 on Buddy 6.4 and MK3S 3.14.1, 3.0.2 on MK3S 3.13.3/3.14.0;
-    /// [`Personality::version`] with [`PrinterOptions::of`]).
+    /// later, 3.0.3 on Buddy 6.4 and MK3S 3.14.1, 3.0.2 on MK3S 3.13.3/3.14.0): by default the
+    /// personality's, [`Personality::version`].
     pub version: (u8, u8, u8),
     /// Written to register 0x0b at every start (Buddy firmware writes 5).
     pub extra_load_mm: u16,
@@ -56,9 +56,7 @@ impl Default for PrinterOptions {
     fn default() -> Self {
         PrinterOptions {
             personality: Personality::default(),
-            // What today's Buddy printers want; the timing and tool change stay Buddy 6.4's
-            // until the unit plays the 3.0.4 contract.
-            version: (3, 0, 4),
+            version: Personality::default().version(),
             extra_load_mm: 5,
             slow_feed_mm_s: 20,
             command_timeout_ms: 10 * 60 * 1000,
