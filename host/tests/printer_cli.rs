@@ -233,7 +233,6 @@ fn soak_runs_each_printer() {
 }
 
 #[test]
-#[ignore = "needs the unit's 3.0.4 contract"]
 fn soak_runs_buddy_6_5() {
     let out = printer_ok(&[
         "--printer",

@@ -265,7 +265,7 @@ impl Mechanics {
                     code,
                     RequestCode::Unload | RequestCode::Tool | RequestCode::Eject | RequestCode::Cut
                 ) && !same_tool;
-                let unloading = self.hold_until_ms.is_some() || !self.planned.is_empty();
+                let unloading = self.hold_until_ms.is_some();
                 if !unloading {
                     // A command ends whatever the extruder was doing (its load into the nozzle):
                     // the printer's own moves come before it sends the next command.

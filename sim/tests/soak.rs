@@ -193,7 +193,6 @@ fn buddy_6_4_and_the_mk3s_soak_clean_with_1_3_and_5_slots() {
 }
 
 #[test]
-#[ignore = "needs the unit's 3.0.4 contract"]
 fn buddy_6_5_soaks_clean_with_1_3_and_5_slots() {
     for slots in [1, 3, 5] {
         let report = soak_of(Personality::Buddy65, 6, true, 7, slots);

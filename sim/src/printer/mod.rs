@@ -505,6 +505,11 @@ impl<L: Link> Printer<L> {
         self.dropouts += 1;
         let cause = *self.dropout_cause.get_or_insert(why);
         if self.dropouts >= MAX_DROPOUTS {
+            // Prusa's `SuppressShortDropOuts` starts a new count once it reported the screen
+            // (`ResetCommunicationTimeoutAttempts`): a printer that connects again behind it
+            // gets ten more tries.
+            self.dropouts = 0;
+            self.dropout_cause = None;
             return Err(match cause {
                 LinkFault::Timeout => PrinterError::NotResponding,
                 LinkFault::Garbled => PrinterError::ProtocolError,
