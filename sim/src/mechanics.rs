@@ -40,8 +40,8 @@
 //! The printer's bytes pass to the unit as they arrive, so the silences between them (the MK4's
 //! bootloader probe: `S` bytes 500 ms apart, BFW `src/mmu2/mmu2_bootloader.cpp`) reach the
 //! unit's decoder as they are on the wire. Only a frame that may have to wait for a retract
-//! (it starts with `T`, `U`, `E` or `K` at a line start, on a printer that retracts first) is
-//! gathered until its newline, and a frame never waits past a silence.
+//! (it starts with `U`, `E` or `K` at a line start, or `T` on a printer that retracts before it)
+//! is gathered until its newline, and a frame never waits past a silence.
 
 use std::collections::VecDeque;
 
