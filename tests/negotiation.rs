@@ -121,3 +121,22 @@ fn each_printer_gets_the_contract_of_the_revision_it_accepted() {
     );
     assert_eq!(rig.app.unit().selected, None, "M0 selects no slot");
 }
+
+/// Buddy 6.5.3 sends `S0` at once after power-on and again after each 200 ms answer timeout;
+/// about 2 s of silence shows MMU_NOT_RESPONDING (`f60a5b03b156`). The unit answers once its
+/// start-up check has run: well within that, and in the step the request completes in.
+#[test]
+fn the_first_s0_of_a_printer_without_a_bootloader_probe_is_answered_within_2_s() {
+    let mut rig = Rig::<3>::new();
+    let s0 = version(0);
+    let answered_at = (0..10).find_map(|_| {
+        let answer = rig.send(s0);
+        if answer.is_some() {
+            return Some(rig.now);
+        }
+        rig.idle(199);
+        None
+    });
+    let answered_at = answered_at.expect("no S0 answered in 2 s");
+    assert!(answered_at < 2_000, "first S0 answered at {answered_at} ms");
+}
