@@ -602,16 +602,22 @@ fn ignored_reason(error: &DecodeError<Request>) -> String {
     }
 }
 
-/// What the simulator is set up with, as one line.
+/// What the simulator is set up with, as one line (the printer played only when it is not the
+/// default).
 fn start_line(args: &SimArgs) -> String {
+    let printer = if args.printer == Personality::default() {
+        String::new()
+    } else {
+        format!(", printer {}", args.printer)
+    };
     let faults = if args.faults.is_empty() {
         String::from("none")
     } else {
         args.faults.iter().map(fault_spec).collect::<Vec<_>>().join(", ")
     };
     format!(
-        "{} slots, seed {}, time scale {}x, print rate {} mm/s, printer {}, faults: {faults}",
-        args.slots, args.seed, args.time_scale, args.print_rate, args.printer
+        "{} slots, seed {}, time scale {}x, print rate {} mm/s, faults: {faults}{printer}",
+        args.slots, args.seed, args.time_scale, args.print_rate
     )
 }
 
