@@ -136,17 +136,17 @@ impl<const CAPACITY: usize> RxQueue<CAPACITY> {
 
 /// When the control loop steps: every period on a fixed grid, the way Embassy's `Ticker` paced it
 /// (a step that starts late is followed by the ones it delayed, at once), except after a flash
-/// write, whose missed ticks are dropped ([`Schedule::restart`]).
+/// write, whose missed ticks are dropped ([`TickSchedule::restart`]).
 #[derive(Debug, Clone, Copy)]
-pub struct Schedule {
+pub struct TickSchedule {
     next_us: u64,
     period_us: u64,
 }
 
-impl Schedule {
+impl TickSchedule {
     /// The first step a period after `now_us`.
     pub const fn new(now_us: u64, period_us: u64) -> Self {
-        Schedule {
+        TickSchedule {
             next_us: now_us + period_us,
             period_us,
         }
@@ -537,7 +537,7 @@ mod tests {
 
     #[test]
     fn the_schedule_reports_lateness_keeps_its_grid_and_drops_what_a_flash_write_stalled() {
-        let mut schedule = Schedule::new(500, 1_000);
+        let mut schedule = TickSchedule::new(500, 1_000);
         assert_eq!(schedule.deadline_us(), 1_500);
         assert_eq!(schedule.start(1_500), 0);
         assert_eq!(schedule.start(2_530), 30, "a step 30 us late");

@@ -54,7 +54,7 @@ pub enum Motion {
 
 /// A speed-controlled move in progress.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-struct Schedule {
+struct SpeedSchedule {
     direction: Direction,
     speed: u16,
     since: Instant,
@@ -67,7 +67,7 @@ struct Schedule {
 
 /// The budget of the motion in progress and where it began.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-struct Lease {
+struct DriveLease {
     budget: Budget,
     started: Instant,
     from_centi: i32,
@@ -77,8 +77,8 @@ struct Lease {
 #[derive(Debug, Clone, Copy)]
 pub struct SlotDrive {
     command: MotorCommand,
-    schedule: Option<Schedule>,
-    lease: Option<Lease>,
+    schedule: Option<SpeedSchedule>,
+    lease: Option<DriveLease>,
     /// Since when the motor has been driven at or above the stall duty.
     hard_drive_since: Option<Instant>,
     /// The direction revolutions count in (the extruder pulls forward while the motor coasts).
@@ -106,7 +106,7 @@ impl SlotDrive {
 
     /// Start a supervised motion under `budget`: distance and time count from here.
     pub fn begin(&mut self, budget: Budget, feeder: &Feeder, now: Instant) {
-        self.lease = Some(Lease {
+        self.lease = Some(DriveLease {
             budget,
             started: now,
             from_centi: feeder.odometry_centi(),
@@ -218,7 +218,7 @@ impl SlotDrive {
         let odometry = feeder.odometry_centi();
         let mut schedule = match self.schedule {
             Some(schedule) if schedule.direction == direction && schedule.speed == speed => schedule,
-            _ => Schedule {
+            _ => SpeedSchedule {
                 direction,
                 speed,
                 since: now,

@@ -40,7 +40,7 @@ use cortex_m_rt::{ExceptionFrame, entry, exception};
 use defmt::{error, info, unwrap, warn};
 use defmt_rtt as _;
 use embassy_futures::block_on;
-use mmu_firmware::control::{self, ControlLoop, ResetBoard, Schedule, Tick};
+use mmu_firmware::control::{self, ControlLoop, ResetBoard, Tick, TickSchedule};
 use mmu_firmware::persist::{Boot, Keeper, Store};
 use mmu_firmware::uart::LineErrors;
 use mmu_firmware::{App, BoardAction, Config, Instant, drive};
@@ -85,7 +85,7 @@ fn new_logic() -> &'static mut ControlLoop<SLOTS> {
     )))
 }
 
-/// The control loop: a step every [`CONTROL_PERIOD_US`] of the uptime clock ([`Schedule`]). A
+/// The control loop: a step every [`CONTROL_PERIOD_US`] of the uptime clock ([`TickSchedule`]). A
 /// step that starts late (the previous one overran) runs at once and reports its lateness, which
 /// decides the watchdog feed ([`control::feeds_watchdog`]); the ticks a flash write stalled are
 /// dropped rather than caught up in a burst of late, unfed steps.
@@ -95,7 +95,7 @@ fn run(
     mut persisted: Persisted,
     control: &'static mut ControlLoop<SLOTS>,
 ) -> ! {
-    let mut schedule = Schedule::new(board::uptime_us(), CONTROL_PERIOD_US);
+    let mut schedule = TickSchedule::new(board::uptime_us(), CONTROL_PERIOD_US);
     let mut rx = [0u8; RX_CHUNK];
     let mut line_errors = LineErrors::default();
     loop {

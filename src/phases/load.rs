@@ -1,0 +1,203 @@
+//! The load from the hub into the printer: fast through the Bowden tube (`P6`), slowly to the
+//! printer's sensor while the printer co-feeds (`P1c`, and its search after a Retry), and the
+//! push into the extruder's gears with its proof that they hold the tip (`P7`). MMU 3.0.3 keeps
+//! these in `feed_to_bondtech.cpp`.
+
+use mmu_hal_port::Direction;
+use mmu_protocol::{ErrorCode, ProgressCode};
+
+use super::{Bounds, Decision, Goal, PhaseRun, Sight, sensor_fault_error};
+use crate::config::Config;
+use crate::time::Instant;
+use crate::unit::{Lane, SensorId};
+
+/// How long the Bowden tube must read compressed before the push into the extruder stops, ms:
+/// the tip has met something (the gears, turning or idle, or a jam), and the push must stop
+/// while the printer's own push still runs (one noisy reading is not enough).
+const MET_CONFIRM_MS: u64 = 10;
+/// How long the Bowden tube must read taut, pulled from the extruder's side against the braked
+/// slot motor, before the gears count as holding the tip, ms. A tube only ever goes taut
+/// that way when something pulls the filament on: a jam cannot, a stopped tube cannot.
+const GRIP_CONFIRM_MS: u64 = 100;
+/// How far the push into the extruder may go past the extra load distance (register 0x0b: how
+/// far past the printer's sensor its gears are and the tip is to go), mm, to meet the gears.
+const NOZZLE_PUSH_MARGIN_MM: u16 = 10;
+/// How long after the push began the printer's own push may still pull the filament on, beyond
+/// its nominal duration (extra load + 2 mm at the slow speed), ms: the printer starts it when it
+/// sees its sensor and `P1c` together, the unit when it hears both, within a few ms.
+const PRINTER_PUSH_MARGIN_MS: u64 = 600;
+
+/// The phases of the load into the printer.
+#[derive(Debug, Clone, Copy)]
+pub(super) enum Load {
+    /// [`super::Phase::FeedThroughBowden`].
+    ThroughBowden,
+    /// [`super::Phase::FeedToFsensor`].
+    ToFsensor,
+    /// [`super::Phase::SearchFsensor`].
+    SearchFsensor,
+    /// [`super::Phase::FeedToNozzle`].
+    ToNozzle,
+}
+
+impl Load {
+    pub(super) const fn progress(self) -> ProgressCode {
+        match self {
+            Load::ThroughBowden => ProgressCode::FEEDING_TO_BONDTECH,
+            Load::ToFsensor | Load::SearchFsensor => ProgressCode::FEEDING_TO_FSENSOR,
+            Load::ToNozzle => ProgressCode::FEEDING_TO_NOZZLE,
+        }
+    }
+
+    pub(super) fn bounds(self, config: &Config) -> Bounds {
+        let forward = |speed, max_mm, error| Bounds::new(Direction::Forward, speed, max_mm, error);
+        match self {
+            Load::ThroughBowden => forward(
+                config.load_speed,
+                config.bowden_mm.saturating_sub(config.bowden_slowdown_mm),
+                ErrorCode::FSENSOR_DIDNT_SWITCH_ON,
+            ),
+            Load::ToFsensor => forward(
+                config.slow_speed,
+                config.bowden_slowdown_mm.saturating_add(config.fsensor_search_mm),
+                ErrorCode::FSENSOR_DIDNT_SWITCH_ON,
+            ),
+            Load::SearchFsensor => forward(
+                config.slow_speed,
+                config.bowden_mm.saturating_add(config.fsensor_search_mm),
+                ErrorCode::FSENSOR_DIDNT_SWITCH_ON,
+            ),
+            // Faster than the printer's push (its slow feed), so a tip its turning gears hold
+            // compresses the tube at once and the push stops while they still pull.
+            Load::ToNozzle => forward(
+                config.slow_speed.saturating_mul(2),
+                config
+                    .extra_load_mm
+                    .saturating_mul(2)
+                    .saturating_add(NOZZLE_PUSH_MARGIN_MM),
+                ErrorCode::MOVE_PULLEY_FAILED,
+            ),
+        }
+    }
+
+    /// `P1c` ends on the printer's `f1` while it co-feeds, `P7` pushes into its extruder as it
+    /// takes the filament.
+    pub(super) const fn paced_by_printer(self) -> bool {
+        !matches!(self, Load::ThroughBowden)
+    }
+
+    pub(super) fn goal<const N: usize>(
+        self,
+        run: &mut PhaseRun,
+        at: &Sight<'_, N>,
+    ) -> Result<Decision, ErrorCode> {
+        let fsensor = at.unit.fsensor_triggered();
+        Ok(match self {
+            Load::ThroughBowden if fsensor => return Err(ErrorCode::FSENSOR_TOO_EARLY),
+            Load::ThroughBowden if at.toward_goal_mm >= i32::from(at.bounds.max_mm) => Goal::Reached,
+            Load::ThroughBowden => Goal::Drive,
+            Load::ToFsensor | Load::SearchFsensor if !fsensor => Goal::Drive,
+            Load::ToFsensor | Load::SearchFsensor if at.notes.printer.polled > run.started => Goal::Reached,
+            // The printer pushes its extruder for the load only once it has seen `P1c` with its
+            // sensor triggered (`OnMMUProgressMsgSame`, printer-truth §8): until its next `Q0`
+            // has seen this phase, the tip waits at the sensor.
+            Load::ToFsensor | Load::SearchFsensor => Goal::Hold,
+            Load::ToNozzle => match at.unit.hub.tension.reading() {
+                Some(tension) => push_into_gears(run, tension, at.toward_goal_mm, at.now, at.config)?,
+                // Nothing else shows the gears holding the tip: no load is reported done blind.
+                None if at.unit.hub.tension.fault().is_some() => {
+                    return Err(sensor_fault_error(SensorId::HubTension));
+                }
+                None => Goal::Hold,
+            },
+        }
+        .into())
+    }
+
+    pub(super) const fn arrival(self) -> Option<Lane> {
+        Some(match self {
+            Load::ThroughBowden => Lane::InHub,
+            Load::ToFsensor | Load::SearchFsensor => Lane::AtFsensor,
+            Load::ToNozzle => Lane::Loaded,
+        })
+    }
+
+    /// The error that names what the user must look at. A motor stopped on its way to the
+    /// printer's sensor (`P6`, `P1c`) stopped because the filament did not get there: a jam in
+    /// the Bowden tube, or the tip pressed into the printer's idle extruder because its sensor
+    /// never triggered (or was never heard). That is FSENSOR DIDNT TRIGG. (`8003`), whose screen
+    /// sends the user to the tube and the printer's sensor; PULLEY CANNOT MOVE (`8047`) would send
+    /// them to the slot motor, which moved the filament all the way from the hub. MMU 3.0.3
+    /// reports `8003` here too: it has no pulley stall detection and runs out its planned
+    /// distance (`feed_to_bondtech.cpp`).
+    pub(super) const fn first_cause(self, error: ErrorCode) -> ErrorCode {
+        match (self, error) {
+            (Load::ThroughBowden | Load::ToFsensor | Load::SearchFsensor, ErrorCode::STALLED_PULLEY) => {
+                ErrorCode::FSENSOR_DIDNT_SWITCH_ON
+            }
+            _ => error,
+        }
+    }
+}
+
+/// `P7`, with a tension reading. Push until the tube reads compressed (the tip met the gears,
+/// turning or idle, or a jam) or the push distance is gone, then hold: the printer pushes the
+/// extra load distance + 2 mm after its sensor triggers (less on the MK3.5, whose sensor reports
+/// late), longer than the unit pushes, so gears that hold the tip pull the tube taut against the
+/// braked motor. Taut for [`GRIP_CONFIRM_MS`] is the only proof. None by the end of the
+/// printer's push is `8003`: the filament did not get into the extruder (a jam just before the
+/// gears, idle gears, a printer that never pushed), and Retry runs `P1c` again, whose `Q0`
+/// makes the printer push again.
+fn push_into_gears(
+    run: &mut PhaseRun,
+    tension: u16,
+    pushed_mm: i32,
+    now: Instant,
+    config: &Config,
+) -> Result<Goal, ErrorCode> {
+    if taut_for(run, tension, now, config) >= GRIP_CONFIRM_MS {
+        return Ok(Goal::Reached);
+    }
+    if !run.pushed {
+        let met = compressed_for(run, tension, now, config) >= MET_CONFIRM_MS;
+        let push_mm = config.extra_load_mm.saturating_add(NOZZLE_PUSH_MARGIN_MM);
+        run.pushed = met || pushed_mm >= i32::from(push_mm);
+    }
+    if !run.pushed {
+        return Ok(Goal::Drive);
+    }
+    let printer_push_ms = u64::from(config.extra_load_mm.saturating_add(2)) * 1000
+        / u64::from(config.slow_speed.max(1))
+        + PRINTER_PUSH_MARGIN_MS;
+    if now.millis_since(run.started) > printer_push_ms {
+        Err(ErrorCode::FSENSOR_DIDNT_SWITCH_ON)
+    } else {
+        Ok(Goal::Hold)
+    }
+}
+
+/// How long the Bowden tube has read taut past the follower's deadband (pulled from the
+/// extruder's side), ms. A reading at the supply rail is a loose wire, not a pull.
+// Out of line: smaller in flash (measured with scripts/firmware-size.sh).
+#[inline(never)]
+fn taut_for(run: &mut PhaseRun, tension: u16, now: Instant, config: &Config) -> u64 {
+    let taut = u32::from(tension) > u32::from(config.tension_neutral) + u32::from(config.tension_deadband)
+        && tension < crate::sensor::RAIL_HIGH;
+    run.taut_since = if taut { run.taut_since.or(Some(now)) } else { None };
+    run.taut_since.map_or(0, |since| now.millis_since(since))
+}
+
+/// How long the Bowden tube has read compressed by more than half the follower's deadband, ms:
+/// the push stops as soon as the tip meets something, so the printer's push has the most left to
+/// pull (stopping early is the safe side: the tip may fall short, then no grip shows and Retry
+/// pushes again).
+fn compressed_for(run: &mut PhaseRun, tension: u16, now: Instant, config: &Config) -> u64 {
+    let compressed =
+        u32::from(tension) + u32::from(config.tension_deadband / 2) < u32::from(config.tension_neutral);
+    run.compressed_since = if compressed {
+        run.compressed_since.or(Some(now))
+    } else {
+        None
+    };
+    run.compressed_since.map_or(0, |since| now.millis_since(since))
+}

@@ -1,0 +1,619 @@
+//! The phase catalogue: the bounded motions and checks that commands are made of.
+//!
+//! Each [`Phase`] is one motion of one slot motor towards a goal the sensors confirm (or a check
+//! of the sensors), with the MMU3 progress code that best describes it and the [`Budget`] it may
+//! not exceed. [`step`] decides each step whether the goal is reached, asks the slot's drive for
+//! the motion otherwise, and says whether the phase goes on, is done or failed (and with which
+//! error). Commands ([`crate::commands`]) arrange phases into plans; the runner
+//! ([`crate::runner`]) steps them.
+//!
+//! A phase's goal, bounds, progress code and errors live together in its family's module, as
+//! Prusa keeps `feed_to_finda.cpp` and `unload_to_finda.cpp` apart: `feed.rs` (slot to hub),
+//! `unload.rs` (back to the hub, the park position, out of the slot), `load.rs` (through the
+//! Bowden tube into the printer's extruder) and `check.rs`. This module holds what they share:
+//! the motion driver (sensor faults, the guard at the slot sensor, hold and yield, the drive)
+//! and the one place where what a phase learned (a `Milestone`) is written into the unit.
+
+mod check;
+mod feed;
+mod load;
+mod run;
+mod unload;
+
+use mmu_hal_port::Direction;
+use mmu_protocol::{ErrorCode, ProgressCode};
+
+use crate::config::Config;
+use crate::drive::{Budget, Motion};
+use crate::time::Instant;
+use crate::unit::{Lane, SensorId, Unit};
+
+pub use run::PhaseRun;
+
+use check::Check;
+use feed::Feed;
+use load::Load;
+use unload::Unload;
+
+/// How long the printer may stay silent before a phase that depends on it holds its motor, ms.
+/// While a command runs, Prusa's printer sends `Q0` one heartbeat (1 s, `heartBeatPeriod` in
+/// `protocol_logic.h`) after its last exchange, the register poll right after, and `f` as soon as
+/// its sensor changes; so a line quiet for longer means a request or an answer was lost and the
+/// printer waits out its 2 s link timeout before it handshakes again: its `f` cannot arrive and
+/// its co-feed stops (printer-truth §8). 100 ms above the heartbeat for the exchange in flight
+/// and the printer's loop; at `P1c`'s 20 mm/s the unit then pushes at most about 22 mm past the
+/// printer's last word, inside what the printer's own co-feed and extra push take up before the
+/// slot motor could count as stalled.
+pub const PRINTER_SILENT_MS: u64 = 1100;
+
+/// One bounded step of a command. Its slot is a `u8` (a unit has at most [`crate::MAX_SLOTS`]):
+/// a phase takes 4 bytes, and every plan, copied whole when a command starts, half the room.
+/// Each variant's goal, bounds and errors are in its family's module (named below).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Phase {
+    /// `P5` (`feed.rs`): feed until the hub sensor sees the tip, at most `max_mm`.
+    FeedToHub {
+        /// The slot.
+        slot: u8,
+        /// Distance bound.
+        max_mm: u16,
+    },
+    /// `P19` (`unload.rs`): pull back until the hub sensor clears, then the park distance.
+    RetractToPark {
+        /// The slot.
+        slot: u8,
+    },
+    /// `P6` (`load.rs`): fast feed through most of the Bowden tube; the printer's sensor must
+    /// stay off.
+    FeedThroughBowden {
+        /// The slot.
+        slot: u8,
+    },
+    /// `P1c` (`load.rs`): slow feed until the printer's sensor triggers; the printer co-feeds.
+    FeedToFsensor {
+        /// The slot.
+        slot: u8,
+    },
+    /// `P1c` after Retry of `8003` (`load.rs`): the same slow feed from wherever the tip is past
+    /// the hub sensor, at most the whole Bowden length plus the search distance (the tip may be
+    /// anywhere in the tube: the user may have moved it, a slipping drive may have fed less than
+    /// counted).
+    SearchFsensor {
+        /// The slot.
+        slot: u8,
+    },
+    /// `P7` (`load.rs`): push into the extruder's gears while the printer pushes with its own
+    /// extruder, then hold and see the gears pull the filament on (the tube turns taut): only
+    /// that shows the tip in the gears (a jam just before them stops it the same way).
+    FeedToNozzle {
+        /// The slot.
+        slot: u8,
+    },
+    /// `P3` (`unload.rs`): pull back until the printer's sensor and then the hub sensor clear.
+    /// With `await_release`, first wait, the motor free to turn, while the printer's gears may
+    /// still grip the filament: until it reports its sensor off, or (3.0.3 and older) its help
+    /// with its own extruder has had its time.
+    UnloadToHub {
+        /// The slot.
+        slot: u8,
+        /// Wait for the printer to release the filament before pulling.
+        await_release: bool,
+    },
+    /// `P3` (`unload.rs`), for a slot only believed to hold the hub path (a stored lane): pull
+    /// back at most the hub search distance, which leaves a parked filament in its drive gear
+    /// whichever slot it is, until the hub sensor clears and proves the belief. Still seeing
+    /// filament there is `8008`: someone has to look.
+    ProveOwner {
+        /// The slot.
+        slot: u8,
+    },
+    /// `P19` (`feed.rs`), for a parked slot or one whose tip nobody knows (after `X42` or a wiped
+    /// store), when another slot's feed stalls where the slot paths join: pull back the park
+    /// distance (less if the slot sensor clears: the tip is at the drive gear), so a tip resting
+    /// in the merge cannot block it.
+    ClearMerge {
+        /// The slot.
+        slot: u8,
+    },
+    /// `P18` (`unload.rs`): pull back until the slot sensor clears.
+    EjectFromSlot {
+        /// The slot.
+        slot: u8,
+    },
+    /// `P1a` (`check.rs`): the sensors must be healthy and agree with the known lanes.
+    CheckSensors,
+    /// `E800c` (`check.rs`) until the user presses Continue.
+    AwaitContinue,
+}
+
+impl Phase {
+    /// The progress code the printer sees while this phase runs. Out of line: a dozen callers.
+    #[inline(never)]
+    pub const fn progress(self) -> ProgressCode {
+        match self.family() {
+            Family::Feed(phase) => phase.progress(),
+            Family::Unload(phase) => phase.progress(),
+            Family::Load(phase) => phase.progress(),
+            Family::Check(phase) => phase.progress(),
+        }
+    }
+
+    /// The slot whose motor this phase drives.
+    // Out of line: smaller in flash (measured with scripts/firmware-size.sh).
+    #[inline(never)]
+    pub const fn slot(self) -> Option<usize> {
+        match self {
+            Phase::FeedToHub { slot, .. }
+            | Phase::RetractToPark { slot }
+            | Phase::FeedThroughBowden { slot }
+            | Phase::FeedToFsensor { slot }
+            | Phase::SearchFsensor { slot }
+            | Phase::FeedToNozzle { slot }
+            | Phase::UnloadToHub { slot, .. }
+            | Phase::ProveOwner { slot }
+            | Phase::ClearMerge { slot }
+            | Phase::EjectFromSlot { slot } => Some(slot as usize),
+            Phase::CheckSensors | Phase::AwaitContinue => None,
+        }
+    }
+
+    /// The family module that holds this phase's goal, bounds, progress and errors.
+    // Inlined: the questions below then switch on the phase once, as one table (measured with
+    // scripts/firmware-size.sh).
+    #[inline(always)]
+    const fn family(self) -> Family {
+        match self {
+            Phase::FeedToHub { max_mm, .. } => Family::Feed(Feed::ToHub { max_mm }),
+            Phase::ClearMerge { .. } => Family::Feed(Feed::ClearMerge),
+            Phase::UnloadToHub { await_release, .. } => Family::Unload(Unload::ToHub { await_release }),
+            Phase::ProveOwner { .. } => Family::Unload(Unload::ProveOwner),
+            Phase::RetractToPark { .. } => Family::Unload(Unload::ToPark),
+            Phase::EjectFromSlot { .. } => Family::Unload(Unload::FromSlot),
+            Phase::FeedThroughBowden { .. } => Family::Load(Load::ThroughBowden),
+            Phase::FeedToFsensor { .. } => Family::Load(Load::ToFsensor),
+            Phase::SearchFsensor { .. } => Family::Load(Load::SearchFsensor),
+            Phase::FeedToNozzle { .. } => Family::Load(Load::ToNozzle),
+            Phase::CheckSensors => Family::Check(Check::Sensors),
+            Phase::AwaitContinue => Family::Check(Check::AwaitContinue),
+        }
+    }
+}
+
+/// A phase as its family's module knows it (the slot aside).
+#[derive(Debug, Clone, Copy)]
+enum Family {
+    Feed(Feed),
+    Unload(Unload),
+    Load(Load),
+    Check(Check),
+}
+
+/// The catalogue's questions about a phase, each answered by its family's module.
+impl Phase {
+    /// How the phase moves; `None` for a check.
+    // Out of line: the table of bounds is one function rather than code inside the step.
+    #[inline(never)]
+    fn bounds(self, config: &Config) -> Option<Bounds> {
+        match self.family() {
+            Family::Feed(phase) => Some(phase.bounds(config)),
+            Family::Unload(phase) => Some(phase.bounds(config)),
+            Family::Load(phase) => Some(phase.bounds(config)),
+            Family::Check(_) => None,
+        }
+    }
+
+    /// Where the phase stands against its goal, and what it learned on the way.
+    fn goal<const N: usize>(self, run: &mut PhaseRun, sight: &Sight<'_, N>) -> Result<Decision, ErrorCode> {
+        match self.family() {
+            Family::Feed(phase) => phase.goal(run, sight),
+            Family::Unload(phase) => phase.goal(run, sight),
+            Family::Load(phase) => phase.goal(run, sight),
+            Family::Check(_) => Ok(Goal::Reached.into()),
+        }
+    }
+
+    /// Where the slot's filament is once the phase is done.
+    // Out of line: smaller in flash (measured with scripts/firmware-size.sh).
+    #[inline(never)]
+    fn arrival(self) -> Option<Lane> {
+        match self.family() {
+            Family::Feed(phase) => phase.arrival(),
+            Family::Unload(phase) => phase.arrival(),
+            Family::Load(phase) => phase.arrival(),
+            Family::Check(_) => None,
+        }
+    }
+
+    /// The phase pulled its tip back to the slot sensor, which sits just after the drive gear:
+    /// the tip is about to leave the gear. Where that still counts as done, the lane it leaves.
+    fn stopped_at_gear(self, hub: bool) -> Option<Lane> {
+        match self.family() {
+            Family::Unload(phase) => phase.stopped_at_gear(hub),
+            Family::Feed(_) | Family::Load(_) | Family::Check(_) => None,
+        }
+    }
+
+    /// May pull the tip back past the slot sensor, out of the drive gear's reach (an eject, a
+    /// merge clearance); any other pull back stops there.
+    const fn past_slot_sensor(self) -> bool {
+        match self.family() {
+            Family::Feed(phase) => phase.past_slot_sensor(),
+            Family::Unload(phase) => phase.past_slot_sensor(),
+            Family::Load(_) | Family::Check(_) => false,
+        }
+    }
+
+    /// Progress rests on the printer: the motor holds while the link to it is in doubt
+    /// ([`PrinterLink::in_doubt`]).
+    const fn paced_by_printer(self) -> bool {
+        matches!(self.family(), Family::Load(phase) if phase.paced_by_printer())
+    }
+
+    /// What the drive stopping on `error` means for the phase.
+    fn stopped<const N: usize>(self, error: ErrorCode, unit: &Unit<N>, slot: usize) -> Outcome {
+        match self.family() {
+            Family::Feed(phase) => phase.stopped(error, unit, slot),
+            Family::Unload(phase) => Outcome::Fail(phase.first_cause(error, unit.fsensor_triggered())),
+            Family::Load(phase) => Outcome::Fail(phase.first_cause(error)),
+            Family::Check(_) => Outcome::Fail(error),
+        }
+    }
+}
+
+/// How a motion phase moves: its direction, speed and how far it may go.
+#[derive(Debug, Clone, Copy)]
+struct Bounds {
+    direction: Direction,
+    speed: u16,
+    max_mm: u16,
+    error: ErrorCode,
+    /// Time on top of the nominal duration at `speed`: part of the way goes slower, ms.
+    slower_ms: u32,
+}
+
+impl Bounds {
+    /// A motion `direction` at `speed` mm/s for at most `max_mm`, failing with `error`.
+    const fn new(direction: Direction, speed: u16, max_mm: u16, error: ErrorCode) -> Self {
+        Bounds {
+            direction,
+            speed,
+            max_mm,
+            error,
+            slower_ms: 0,
+        }
+    }
+
+    /// The drive's budget: the distance, and twice the nominal duration plus slack.
+    fn budget(&self, config: &Config) -> Budget {
+        // At most 65 535 × 2000 + 65 535.
+        let max_ms = u32::from(self.max_mm) * 2000 / u32::from(self.speed.max(1))
+            + self.slower_ms
+            + u32::from(config.phase_slack_ms);
+        Budget {
+            max_mm: self.max_mm,
+            max_ms,
+            max_still_ms: max_ms,
+            error: self.error,
+        }
+    }
+}
+
+/// What a motion phase sees this step, for its goal.
+struct Sight<'a, const N: usize> {
+    slot: usize,
+    /// The hub sensor sees filament.
+    hub: bool,
+    /// The slot sensor sees filament.
+    slot_sees: bool,
+    odometry: i32,
+    /// Whole millimetres moved towards the goal from where it counts.
+    toward_goal_mm: i32,
+    bounds: Bounds,
+    unit: &'a Unit<N>,
+    notes: &'a Notes,
+    now: Instant,
+    config: &'a Config,
+}
+
+/// Where a motion phase stands against its goal.
+enum Goal {
+    Reached,
+    Drive,
+    /// Drive at this speed instead of the phase's own.
+    DriveAt(u16),
+    /// Brake and wait (the lease ends: waiting counts against no bound).
+    Hold,
+    /// Let the motor turn freely and wait: something else moves the filament (the lease ends).
+    Yield,
+}
+
+/// A phase's goal decision: where it stands, and what it learned that the unit must know.
+struct Decision {
+    goal: Goal,
+    learned: Option<Milestone>,
+}
+
+impl From<Goal> for Decision {
+    fn from(goal: Goal) -> Self {
+        Decision { goal, learned: None }
+    }
+}
+
+impl Goal {
+    /// This goal, having learned `milestone`.
+    fn learning(self, milestone: Milestone) -> Decision {
+        Decision {
+            goal: self,
+            learned: Some(milestone),
+        }
+    }
+}
+
+/// What a phase learned about its slot's filament, for [`learn`] to write down.
+#[derive(Debug, Clone, Copy)]
+enum Milestone {
+    /// The slot sensor sees the tip on its way to the hub: the slot holds the hub path, this
+    /// unit fed it there, and it is back in the merge. Known (and persisted) before the tip
+    /// leaves the park position, so a restart mid-way knows whose filament may be in the path.
+    LeavingPark,
+    /// The hub sensor saw the tip leave at this odometry; parking that follows measures from
+    /// here. `unsure`: the hub was already clear when the phase started, so where it cleared
+    /// nobody saw.
+    HubCleared { at_centi: i32, unsure: bool },
+    /// The hub cleared at this odometry pulling this slot: its claim on the hub path is proven.
+    OwnerProven { at_centi: i32 },
+    /// Pulled back out of the merge.
+    MergeCleared,
+    /// The slot's filament is now here.
+    Arrived(Lane),
+}
+
+/// Write what the phase on `slot` learned into the unit and the command's notes: the one place
+/// where phases change what the unit knows (besides the sensor check's lanes).
+// Inlined: each caller passes only some milestones, and its copy keeps only those (out of
+// line it took 150 B more flash, measured with scripts/firmware-size.sh).
+#[inline(always)]
+fn learn<const N: usize>(milestone: Milestone, slot: usize, notes: &mut Notes, unit: &mut Unit<N>) {
+    match milestone {
+        Milestone::LeavingPark => {
+            unit.set_lane(slot, Lane::InHub);
+            unit.proven_owner = Some(slot);
+            if let Some(clear) = unit.clear_of_merge.get_mut(slot) {
+                *clear = false;
+            }
+        }
+        Milestone::HubCleared { at_centi, unsure } => {
+            notes.hub_cleared = Some((slot, at_centi));
+            notes.park_unsure |= unsure;
+        }
+        Milestone::OwnerProven { at_centi } => {
+            notes.hub_cleared = Some((slot, at_centi));
+            unit.proven_owner = Some(slot);
+        }
+        Milestone::MergeCleared => {
+            if let Some(clear) = unit.clear_of_merge.get_mut(slot) {
+                *clear = true;
+            }
+        }
+        // Parked from where the hub cleared unseen: behind the park position, nobody knows where.
+        Milestone::Arrived(Lane::Parked) if notes.park_unsure => unit.set_lane(slot, Lane::Unknown),
+        Milestone::Arrived(lane) => unit.set_lane(slot, lane),
+    }
+}
+
+/// The error a faulty sensor raises: the hub's sensors show INSPECT FINDA, a slot's sensors
+/// show PULLEY CANNOT MOVE (the slot's drive needs a look).
+// Out of line: smaller in flash (measured with scripts/firmware-size.sh).
+#[inline(never)]
+pub const fn sensor_fault_error(sensor: SensorId) -> ErrorCode {
+    match sensor {
+        SensorId::HubFilament | SensorId::HubTension | SensorId::HubCutter => ErrorCode::FINDA_FLICKERS,
+        SensorId::SlotFilament(_) | SensorId::MotorHall(_) => ErrorCode::MOVE_PULLEY_FAILED,
+    }
+}
+
+/// What phases of one command learn and pass on to the later ones.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Notes {
+    /// Set by Retry: the user has looked, trust what the sensors say now over the known lanes.
+    pub trust_sensors: bool,
+    /// Odometry of a slot when the hub sensor last saw its tip leave, so parking that follows an
+    /// unload measures from the hub and not from where the unload stopped.
+    pub hub_cleared: Option<(usize, i32)>,
+    /// The park position was measured from a point the hub sensor did not confirm.
+    pub park_unsure: bool,
+    /// What the unit knows of the link to the printer.
+    pub printer: PrinterLink,
+}
+
+/// What the unit knows of the link to the printer, for the phases that depend on it.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct PrinterLink {
+    /// When a byte from the printer last arrived.
+    pub heard: Instant,
+    /// When the printer's `Q0` was last answered with the progress of a running phase.
+    pub polled: Instant,
+    /// False from a broken frame or the start of a handshake (`S0`) until the printer reports its
+    /// sensor again (`f`) or polls (`Q0`): a frame was lost, and the printer's `f` with it, perhaps;
+    /// it sends `f` again at the end of its handshake, before its next `Q0`
+    /// (`protocol_logic.cpp` `StartSeqStep`, printer-truth §8).
+    pub in_sync: bool,
+}
+
+impl PrinterLink {
+    /// True when the printer may have a sensor change the unit has not heard: silent for longer
+    /// than [`PRINTER_SILENT_MS`], or out of sync.
+    pub fn in_doubt(&self, now: Instant) -> bool {
+        !self.in_sync || now.millis_since(self.heard) > PRINTER_SILENT_MS
+    }
+}
+
+/// What a phase did in one step.
+pub enum Outcome {
+    /// Still on its way.
+    Continue,
+    /// Done: the next phase may start in the same step.
+    Done,
+    /// Stopped on an error.
+    Fail(ErrorCode),
+    /// The feed stalled where the slot paths join and these other slots, whose tips nobody
+    /// knows, may be what blocks it: clear them out of the merge, then feed again.
+    Blocked(SlotSet),
+}
+
+/// A set of slots.
+pub type SlotSet = u8;
+
+/// Advance `phase` by one step. `run` is its bookkeeping (`None` when it starts, or starts again
+/// after Retry with its distance goal counting from `resume_goal_from`).
+pub fn step<const N: usize>(
+    phase: Phase,
+    run: &mut Option<PhaseRun>,
+    resume_goal_from: Option<i32>,
+    notes: &mut Notes,
+    unit: &mut Unit<N>,
+    now: Instant,
+    config: &Config,
+) -> Outcome {
+    match (phase.family(), phase.slot()) {
+        (Family::Check(check), _) => {
+            let (outcome, lanes) = check.step(run, notes, unit, now);
+            // The check's verdict on the lanes holds whatever its outcome.
+            unit.lanes = lanes;
+            outcome
+        }
+        (_, Some(slot)) => step_motion(phase, slot, run, resume_goal_from, notes, unit, now, config),
+        (_, None) => Outcome::Fail(ErrorCode::INTERNAL),
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn step_motion<const N: usize>(
+    phase: Phase,
+    slot: usize,
+    run: &mut Option<PhaseRun>,
+    resume_goal_from: Option<i32>,
+    notes: &mut Notes,
+    unit: &mut Unit<N>,
+    now: Instant,
+    config: &Config,
+) -> Outcome {
+    let Some(bounds) = phase.bounds(config) else {
+        return Outcome::Fail(ErrorCode::INTERNAL);
+    };
+    let (Some(feeder), Some(drive)) = (unit.feeders.get(slot), unit.drives.get_mut(slot)) else {
+        return Outcome::Fail(ErrorCode::INVALID_TOOL);
+    };
+    let odometry = feeder.odometry_centi();
+    let run = match run {
+        Some(run) => run,
+        None => {
+            drive.begin(bounds.budget(config), feeder, now);
+            let run = run.insert(PhaseRun::new(now, resume_goal_from.unwrap_or(odometry), odometry));
+            run.retried = resume_goal_from.is_some();
+            run
+        }
+    };
+    let toward_goal_mm = match bounds.direction {
+        Direction::Forward => (odometry - run.goal_from_centi) / 100,
+        Direction::Reverse => (run.goal_from_centi - odometry) / 100,
+    };
+    if let Some(fault) = [
+        SensorId::MotorHall(slot),
+        SensorId::HubFilament,
+        SensorId::SlotFilament(slot),
+    ]
+    .into_iter()
+    .find(|&id| unit.sensor(id).is_some_and(|s| s.fault().is_some()))
+    {
+        return Outcome::Fail(sensor_fault_error(fault));
+    }
+    let Some(hub) = unit.hub_present() else {
+        return Outcome::Continue;
+    };
+    let Some(slot_sees) = unit.feeders.get(slot).and_then(|f| f.filament.present()) else {
+        return Outcome::Continue;
+    };
+
+    let sight = Sight {
+        slot,
+        hub,
+        slot_sees,
+        odometry,
+        toward_goal_mm,
+        bounds,
+        unit,
+        notes,
+        now,
+        config,
+    };
+    let goal = match phase.goal(run, &sight) {
+        Ok(Decision { goal, learned }) => {
+            if let Some(milestone) = learned {
+                learn(milestone, slot, notes, unit);
+            }
+            goal
+        }
+        Err(error) => return Outcome::Fail(error),
+    };
+
+    let tension = unit.hub.tension.reading();
+    let (Some(feeder), Some(drive)) = (unit.feeders.get(slot), unit.drives.get_mut(slot)) else {
+        return Outcome::Fail(ErrorCode::INTERNAL);
+    };
+    let motion = match goal {
+        Goal::Reached => {
+            drive.brake(now);
+            if let Some(lane) = phase.arrival() {
+                learn(Milestone::Arrived(lane), slot, notes, unit);
+            }
+            return Outcome::Done;
+        }
+        Goal::Drive | Goal::DriveAt(_)
+            if bounds.direction == Direction::Reverse && !slot_sees && !phase.past_slot_sensor() =>
+        {
+            drive.brake(now);
+            if let Some(lane) = phase.stopped_at_gear(hub) {
+                learn(Milestone::Arrived(lane), slot, notes, unit);
+                return Outcome::Done;
+            }
+            // Still filament in the hub with this tip at its gear: the hub sensor is wrong, or
+            // another filament is there. Not parked.
+            return Outcome::Fail(bounds.error);
+        }
+        Goal::Drive if !(phase.paced_by_printer() && notes.printer.in_doubt(now)) => Motion::Run {
+            direction: bounds.direction,
+            speed: bounds.speed,
+        },
+        Goal::DriveAt(speed) => Motion::Run {
+            direction: bounds.direction,
+            speed,
+        },
+        Goal::Yield => {
+            // Let the motor turn freely while the phase waits.
+            run.pause(now, odometry);
+            drive.release(now);
+            return Outcome::Continue;
+        }
+        Goal::Drive | Goal::Hold => {
+            // Hold: the phase waits, or the printer's `f` may be lost and its co-feed has
+            // stopped.
+            run.pause(now, odometry);
+            drive.brake(now);
+            return Outcome::Continue;
+        }
+    };
+    if run.held {
+        run.held = false;
+        drive.begin(
+            run.budget_use.resume(bounds.budget(config), now, odometry),
+            feeder,
+            now,
+        );
+    }
+    match drive.run(motion, feeder, tension, now, config) {
+        Ok(()) => Outcome::Continue,
+        Err(error) => phase.stopped(error, unit, slot),
+    }
+}

@@ -1,0 +1,115 @@
+//! The bookkeeping of one phase attempt: when and where it began, what it has seen on the way,
+//! and how much of its budget the drive's leases have used. Kept apart from the phases so their
+//! goals read as decisions, and the budget arithmetic sits in one place.
+
+use crate::drive::{Budget, millis_u32};
+use crate::time::Instant;
+
+/// Bookkeeping of the running phase.
+#[derive(Debug, Clone, Copy)]
+pub struct PhaseRun {
+    pub(super) started: Instant,
+    /// Odometry when the phase first started, kept across Retry: distance goals count from here.
+    pub(super) goal_from_centi: i32,
+    /// Odometry at a milestone inside the phase (the hub cleared, the printer's sensor cleared).
+    pub(super) mark_centi: Option<i32>,
+    /// Since when the Bowden tube reads compressed.
+    pub(super) compressed_since: Option<Instant>,
+    /// Since when the Bowden tube reads taut.
+    pub(super) taut_since: Option<Instant>,
+    /// The push into the extruder is over: the tip met something, or went its distance.
+    pub(super) pushed: bool,
+    /// The budget of the motion in progress: when and where the drive's lease began, and what
+    /// earlier leases of this attempt used (a hold ends a lease; the silence is not counted).
+    pub(super) budget_use: PhaseBudgetUse,
+    /// The motor is held while the printer is silent.
+    pub(super) held: bool,
+    /// When the printer's `Q0` first saw this phase (it acts on the progress it sees).
+    pub(super) printer_saw: Option<Instant>,
+    /// An attempt after a Retry: its distance goal counts from the first attempt.
+    pub(super) retried: bool,
+}
+
+/// What the drive's leases of one phase attempt used of the phase's budget: a hold or a yield
+/// ends a lease, and the next one gets only what is left.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct PhaseBudgetUse {
+    started: Instant,
+    from_centi: i32,
+    used_mm: u16,
+    used_ms: u32,
+}
+
+impl PhaseBudgetUse {
+    fn new(now: Instant, odometry_centi: i32) -> Self {
+        PhaseBudgetUse {
+            started: now,
+            from_centi: odometry_centi,
+            used_mm: 0,
+            used_ms: 0,
+        }
+    }
+
+    /// End the lease in progress at `now`, counting what it used.
+    pub(super) fn end(&mut self, now: Instant, odometry_centi: i32) {
+        let mm = odometry_centi.abs_diff(self.from_centi) / 100;
+        self.used_mm = self.used_mm.saturating_add(u16::try_from(mm).unwrap_or(u16::MAX));
+        self.used_ms = self
+            .used_ms
+            .saturating_add(millis_u32(now.millis_since(self.started)));
+    }
+
+    /// Begin a new lease at `now`: what is left of `full`.
+    pub(super) fn resume(&mut self, full: Budget, now: Instant, odometry_centi: i32) -> Budget {
+        self.started = now;
+        self.from_centi = odometry_centi;
+        let max_ms = full.max_ms.saturating_sub(self.used_ms);
+        Budget {
+            max_mm: full.max_mm.saturating_sub(self.used_mm),
+            max_ms,
+            max_still_ms: full.max_still_ms.min(max_ms),
+            error: full.error,
+        }
+    }
+}
+
+impl PhaseRun {
+    /// A phase attempt starting at `now`, its distance goal counting from `goal_from_centi`, with
+    /// the filament at `odometry_centi`.
+    // Out of line: two callers in the step (measured smaller).
+    #[inline(never)]
+    pub(super) fn new(now: Instant, goal_from_centi: i32, odometry_centi: i32) -> Self {
+        PhaseRun {
+            started: now,
+            goal_from_centi,
+            mark_centi: None,
+            compressed_since: None,
+            taut_since: None,
+            pushed: false,
+            budget_use: PhaseBudgetUse::new(now, odometry_centi),
+            held: false,
+            printer_saw: None,
+            retried: false,
+        }
+    }
+
+    /// Where the distance goal of this phase counts from (kept for the attempt after Retry).
+    pub fn goal_from_centi(&self) -> i32 {
+        self.goal_from_centi
+    }
+
+    /// How far the filament moved from the goal start to `odometry_centi`, forward positive
+    /// (1/100 mm).
+    pub fn fed_centi(&self, odometry_centi: i32) -> i32 {
+        odometry_centi.saturating_sub(self.goal_from_centi)
+    }
+
+    /// End the drive's lease, once, as the motor stops for a wait: the wait counts against no
+    /// bound; what the phase used so far stays counted.
+    pub(super) fn pause(&mut self, now: Instant, odometry_centi: i32) {
+        if !self.held {
+            self.budget_use.end(now, odometry_centi);
+            self.held = true;
+        }
+    }
+}

@@ -1,0 +1,245 @@
+//! The pulls back: the unload from the printer to the hub (`P3`) with its wait for the printer to
+//! release the filament, the proof of a stored owner (`P3`), the retract to the park position
+//! (`P19`) and the eject out of the slot (`P18`). MMU 3.0.4 keeps the unload's contract with the
+//! printer in `unload_to_finda.cpp`; here it is [`still_gripped`] and [`pull_out_of_printer`].
+
+use mmu_hal_port::Direction;
+use mmu_protocol::{ErrorCode, ProgressCode};
+
+use super::{Bounds, Decision, Goal, Milestone, Notes, PhaseRun, Sight};
+use crate::config::{Config, Contract};
+use crate::time::Instant;
+use crate::unit::Lane;
+
+/// How long an unload waits for the printer to release the filament (its sensor off), ms, before
+/// it fails with `8004` having pulled nothing: MMU 3.0.4's limit (`unload_to_finda.cpp`, 4000 ms
+/// from the command's acceptance).
+const RELEASE_WAIT_MS: u64 = 4000;
+/// How far an unload pulls at the slow speed (register 0x14) once the printer has released the
+/// filament, mm, in 3.0.4 mode: MMU 3.0.4's `fsensorToNozzleAvoidGrindUnload`, which helps the
+/// printer relieve the filament.
+const RELEASE_SLOW_MM: u16 = 20;
+
+/// How long a printer that accepted 3.0.3 or older retracts when it helps an unload, ms, from its
+/// first `Q0` that saw `P3`: 20 mm at 20 mm/s (Buddy `mmu2_config.h`
+/// `MMU2_RETRY_UNLOAD_TO_FINDA_LENGTH`, `_FEED_RATE`; `mmu2_mk4.cpp` `HelpUnloadToFinda`), and
+/// half a second for its planner to start the move.
+const PRINTER_HELP_MS: u64 = 1500;
+
+/// The phases that pull back.
+#[derive(Debug, Clone, Copy)]
+pub(super) enum Unload {
+    /// [`super::Phase::UnloadToHub`].
+    ToHub { await_release: bool },
+    /// [`super::Phase::ProveOwner`].
+    ProveOwner,
+    /// [`super::Phase::RetractToPark`].
+    ToPark,
+    /// [`super::Phase::EjectFromSlot`].
+    FromSlot,
+}
+
+impl Unload {
+    pub(super) const fn progress(self) -> ProgressCode {
+        match self {
+            Unload::ToHub { .. } | Unload::ProveOwner => ProgressCode::UNLOADING_TO_FINDA,
+            Unload::ToPark => ProgressCode::RETRACTING_FROM_FINDA,
+            Unload::FromSlot => ProgressCode::EJECTING_FILAMENT,
+        }
+    }
+
+    pub(super) fn bounds(self, config: &Config) -> Bounds {
+        let reverse = |speed, max_mm, error| Bounds::new(Direction::Reverse, speed, max_mm, error);
+        match self {
+            Unload::ToHub { .. } => Bounds {
+                // The slow start, twice its nominal duration as every bound.
+                slower_ms: u32::from(RELEASE_SLOW_MM) * 2000 / u32::from(config.slow_speed.max(1)),
+                ..reverse(
+                    config.unload_speed,
+                    config
+                        .bowden_mm
+                        .saturating_add(config.fsensor_search_mm)
+                        .saturating_add(config.hub_search_mm),
+                    ErrorCode::FINDA_DIDNT_SWITCH_OFF,
+                )
+            },
+            Unload::ProveOwner => reverse(
+                config.load_speed,
+                config.hub_search_mm,
+                ErrorCode::FINDA_VS_EEPROM_DISREPANCY,
+            ),
+            Unload::ToPark => reverse(
+                config.load_speed,
+                config.hub_search_mm.saturating_add(config.park_mm),
+                ErrorCode::FINDA_DIDNT_SWITCH_OFF,
+            ),
+            Unload::FromSlot => reverse(
+                config.load_speed,
+                config.eject_max_mm,
+                ErrorCode::MOVE_PULLEY_FAILED,
+            ),
+        }
+    }
+
+    /// Only the eject means to pull the tip out of its drive gear.
+    pub(super) const fn past_slot_sensor(self) -> bool {
+        matches!(self, Unload::FromSlot)
+    }
+
+    pub(super) fn goal<const N: usize>(
+        self,
+        run: &mut PhaseRun,
+        at: &Sight<'_, N>,
+    ) -> Result<Decision, ErrorCode> {
+        let fsensor = at.unit.fsensor_triggered();
+        Ok(match self {
+            Unload::ToHub { await_release } => return unload_to_hub(await_release, run, at),
+            Unload::ProveOwner if !at.hub && !fsensor => Goal::Reached.learning(Milestone::OwnerProven {
+                at_centi: at.odometry,
+            }),
+            Unload::ProveOwner if fsensor || at.toward_goal_mm >= i32::from(at.bounds.max_mm) => {
+                // Filament in the printer, or pulled as far as is safe (Retry adds nothing).
+                return Err(ErrorCode::FINDA_VS_EEPROM_DISREPANCY);
+            }
+            Unload::ProveOwner => Goal::Drive.into(),
+            Unload::ToPark => match (at.hub, run.mark_centi.or(hub_mark(at.notes, at.slot))) {
+                (true, _) => Goal::Drive.into(),
+                (false, None) => {
+                    // Where the hub cleared: the park distance counts from here, also after a
+                    // Retry. A retract that starts with the hub already clear (after a Retry) did
+                    // not see where: the tip ends somewhere behind its park position.
+                    run.mark_centi = Some(at.odometry);
+                    Goal::Drive.learning(Milestone::HubCleared {
+                        at_centi: at.odometry,
+                        unsure: run.started == at.now,
+                    })
+                }
+                (false, Some(mark)) if (mark - at.odometry) / 100 >= i32::from(at.config.park_mm) => {
+                    Goal::Reached.into()
+                }
+                (false, Some(_)) => Goal::Drive.into(),
+            },
+            Unload::FromSlot if at.slot_sees => Goal::Drive.into(),
+            Unload::FromSlot => Goal::Reached.into(),
+        })
+    }
+
+    pub(super) const fn arrival(self) -> Option<Lane> {
+        Some(match self {
+            Unload::ToHub { .. } | Unload::ProveOwner => Lane::InHub,
+            Unload::ToPark => Lane::Parked,
+            Unload::FromSlot => Lane::Empty,
+        })
+    }
+
+    /// A retract to the park position that reaches the drive gear with the hub clear is done,
+    /// behind its park position: where exactly, nobody knows.
+    pub(super) const fn stopped_at_gear(self, hub: bool) -> Option<Lane> {
+        match (self, hub) {
+            (Unload::ToPark, false) => Some(Lane::Unknown),
+            _ => None,
+        }
+    }
+
+    /// The error that names what the user must look at. An unload stopped while the printer's
+    /// sensor still reads filament stopped against the printer's gears: FSENSOR DIDNT CLEAR
+    /// (`8004`), as MMU 3.0.3 reports it after the check distance, and whose Retry makes the
+    /// printer help with its own extruder (Buddy `mmu2_mk4.cpp` `CheckUserInput`:
+    /// `HelpUnloadToFinda` on `FSENSOR_DIDNT_SWITCH_OFF`).
+    pub(super) const fn first_cause(self, error: ErrorCode, fsensor: bool) -> ErrorCode {
+        match (self, error) {
+            (Unload::ToHub { .. }, ErrorCode::STALLED_PULLEY) if fsensor => {
+                ErrorCode::FSENSOR_DIDNT_SWITCH_OFF
+            }
+            _ => error,
+        }
+    }
+}
+
+/// `P3`: wait for the printer to release the filament (with `await_release`), then pull it out of
+/// the printer back to the hub.
+fn unload_to_hub<const N: usize>(
+    await_release: bool,
+    run: &mut PhaseRun,
+    at: &Sight<'_, N>,
+) -> Result<Decision, ErrorCode> {
+    let waiting = await_release && run.mark_centi.is_none();
+    if waiting && at.unit.fsensor_triggered() && still_gripped(run, at.notes, at.now, at.config)? {
+        return Ok(Goal::Yield.into());
+    }
+    if waiting {
+        // Released: the pull starts here, and so does its check distance, unless an earlier
+        // attempt pulled already (a Retry does not start the count again: a stuck sensor must
+        // not let every Retry pull the check distance anew).
+        run.mark_centi = Some(at.odometry);
+        if !run.retried {
+            run.goal_from_centi = at.odometry;
+        }
+    }
+    Ok(match pull_out_of_printer(run, at)? {
+        Goal::Reached => Goal::Reached.learning(Milestone::HubCleared {
+            at_centi: at.odometry,
+            unsure: false,
+        }),
+        goal => goal.into(),
+    })
+}
+
+/// While an unload waits for the printer to release the filament and its sensor still reads it:
+/// whether its gears may still grip it (keep waiting), or `8004`.
+///
+/// A printer that accepted 3.0.4 reports its sensor off once it has released the filament: after
+/// [`RELEASE_WAIT_MS`] without that, `8004`, nothing pulled (MMU 3.0.4). A printer that accepted
+/// 3.0.3 or older helps an unload it did not send as `U0`/`T` when its `Q0` sees `P3`, and after
+/// the Retry of `8004`: once its help has had its time ([`PRINTER_HELP_MS`] from that `Q0`), or
+/// at the latest after [`RELEASE_WAIT_MS`], the unit pulls, as MMU 3.0.3 does.
+fn still_gripped(
+    run: &mut PhaseRun,
+    notes: &Notes,
+    now: Instant,
+    config: &Config,
+) -> Result<bool, ErrorCode> {
+    if notes.printer.polled > run.started && run.printer_saw.is_none() {
+        run.printer_saw = Some(notes.printer.polled);
+    }
+    let waited_out = now.millis_since(run.started) >= RELEASE_WAIT_MS;
+    match config.version.contract() {
+        Contract::AwaitRelease if waited_out => Err(ErrorCode::FSENSOR_DIDNT_SWITCH_OFF),
+        Contract::AwaitRelease => Ok(true),
+        Contract::PullAtOnce => {
+            let helped = run
+                .printer_saw
+                .is_some_and(|saw| now.millis_since(saw) >= PRINTER_HELP_MS);
+            Ok(!(helped || waited_out))
+        }
+    }
+}
+
+/// `P3` once the pull has begun: on until the printer's sensor and then the hub sensor clear. The
+/// printer's sensor must clear within the check distance of where the pull began (Retry does not
+/// start the count again unless it waited for the printer), and never after the tip has left
+/// the hub: pulling on would drag the filament out of its drive gear (MMU 3.0.3 checks too). A
+/// printer that accepted 3.0.4 gets the first [`RELEASE_SLOW_MM`] at the slow speed.
+fn pull_out_of_printer<const N: usize>(run: &PhaseRun, at: &Sight<'_, N>) -> Result<Goal, ErrorCode> {
+    let config = at.config;
+    let pulled_mm = (run.goal_from_centi - at.odometry) / 100;
+    let stuck = pulled_mm >= i32::from(config.unload_check_mm) || !at.hub;
+    Ok(match (at.unit.fsensor_triggered(), at.hub) {
+        (true, _) if stuck => return Err(ErrorCode::FSENSOR_DIDNT_SWITCH_OFF),
+        (false, false) => Goal::Reached,
+        _ if config.version.contract() == Contract::AwaitRelease
+            && pulled_mm < i32::from(RELEASE_SLOW_MM) =>
+        {
+            Goal::DriveAt(config.slow_speed)
+        }
+        _ => Goal::Drive,
+    })
+}
+
+/// Where `slot`'s tip left the hub, when an earlier phase of the command saw it.
+fn hub_mark(notes: &Notes, slot: usize) -> Option<i32> {
+    notes
+        .hub_cleared
+        .filter(|&(cleared, _)| cleared == slot)
+        .map(|(_, odometry)| odometry)
+}
