@@ -64,18 +64,24 @@ fn extruder_moves(link: &mut SimLink) -> Vec<(u64, &'static str, f32)> {
         .collect()
 }
 
-#[test]
-fn buddy_6_5_polls_every_100_ms_and_gives_up_on_an_answer_after_200_ms() {
-    let (mut printer, mut op) = connected(Personality::Buddy65);
+/// The printer prints for `ms`: when it sent each `Q0`, and the gaps between them, ms.
+fn polls_while_printing(printer: &mut Printer<SimLink>, op: &mut Watcher, ms: u64) -> (Vec<u64>, Vec<u64>) {
     let start = printer.link().now_ms();
-    printer.print(&mut op, 2000).unwrap();
+    printer.print(op, ms).unwrap();
     let queries: Vec<u64> = op
         .sent()
         .into_iter()
         .filter(|(t, r)| *t >= start && r.code == RequestCode::Query)
         .map(|(t, _)| t)
         .collect();
-    let gaps: Vec<u64> = queries.windows(2).map(|w| w[1] - w[0]).collect();
+    let gaps = queries.windows(2).map(|w| w[1] - w[0]).collect();
+    (queries, gaps)
+}
+
+#[test]
+fn buddy_6_5_polls_every_100_ms_and_gives_up_on_an_answer_after_200_ms() {
+    let (mut printer, mut op) = connected(Personality::Buddy65);
+    let (queries, gaps) = polls_while_printing(&mut printer, &mut op, 2000);
     // 100 ms after the last exchange of the poll (Q0 and six register reads of a few ms).
     assert!(queries.len() >= 15, "{gaps:?}");
     assert!(gaps.iter().all(|gap| (100..=130).contains(gap)), "{gaps:?}");
@@ -104,15 +110,7 @@ fn buddy_6_5_polls_every_100_ms_and_gives_up_on_an_answer_after_200_ms() {
 #[test]
 fn buddy_6_4_polls_every_second_with_a_2_s_timeout() {
     let (mut printer, mut op) = connected(Personality::Buddy64);
-    let start = printer.link().now_ms();
-    printer.print(&mut op, 5000).unwrap();
-    let queries: Vec<u64> = op
-        .sent()
-        .into_iter()
-        .filter(|(t, r)| *t >= start && r.code == RequestCode::Query)
-        .map(|(t, _)| t)
-        .collect();
-    let gaps: Vec<u64> = queries.windows(2).map(|w| w[1] - w[0]).collect();
+    let (_, gaps) = polls_while_printing(&mut printer, &mut op, 5000);
     assert!(gaps.iter().all(|gap| (1000..=1030).contains(gap)), "{gaps:?}");
 }
 
