@@ -3,9 +3,10 @@
 //! Each [`App::step`] takes the current time, a round of raw sensor samples and the bytes the
 //! printer sent since the last step. It answers every complete request in the same step (queries
 //! also while a command runs), advances the running command, and returns what the motors must do,
-//! the bytes to send and any board action. Requests are handled exactly as MMU 3.0.3 does
-//! (`prusa-mmu-protocol.md` §3.3): commands are answered `A` or `R`, `Q0` reports the current
-//! command's progress, error or result, bad frames and `F` get silence, `X` resets the board.
+//! the bytes to send and any board action. Requests are handled as MMU 3.0.3 and 3.0.4 do
+//! (`prusa-mmu-protocol.md` §3.3; `M` only for a printer that accepted 3.0.4): commands are
+//! answered `A` or `R`, `Q0` reports the current command's progress, error or result, bad frames
+//! and `F` get silence, `X` resets the board; `S0`..`S3` negotiate the revision (`Negotiation`).
 
 use heapless::Vec;
 use mmu_hal_port::{MotorCommand, Samples};
@@ -259,7 +260,7 @@ impl<const N: usize> App<N> {
         let asks_revision = request.code == RequestCode::Version && request.value == 2;
         if request.code == RequestCode::Version
             && request.value == 3
-            && let Some(accepted) = self.negotiation.accepted()
+            && let Some(accepted) = self.negotiation.offered
             && accepted != self.config.version.revision
         {
             // The printer asks for the build only once the revision matched: keep it.
@@ -545,7 +546,8 @@ fn add_centi(mm: u32, centi: u8, more: u32) -> (u32, u8) {
 struct Negotiation {
     /// `S2` requests answered in a row (in different steps), none other between.
     repeats: u8,
-    /// The revision the last `S2` was answered with, while nothing but `S2` and `S3` followed.
+    /// The revision the last `S2` was answered with, while nothing but `S2` and `S3` followed:
+    /// an `S3` now means the printer accepted it.
     offered: Option<u8>,
     /// The revision an `S2` of this step was answered with: that answer has not gone out yet, so
     /// an `S2` in the same step was queued before the printer heard it, and gets the same answer
@@ -567,11 +569,6 @@ impl Negotiation {
         self.offered = Some(revision);
         self.answered_this_step = Some(revision);
         revision
-    }
-
-    /// The revision the printer accepted, when it asks for the build (`S3`) right after an `S2`.
-    fn accepted(&self) -> Option<u8> {
-        self.offered
     }
 
     /// Any request but `S2` ends a run of them; any but `S3` forgets the last offer.

@@ -20,9 +20,9 @@ use std::path::PathBuf;
 
 use clap::Subcommand;
 use mmu_protocol::{ErrorCode, ParamCode, Request, RequestCode, Response};
-use mmu_sim::printer::POLLED_REGISTERS;
 use mmu_sim::{
-    FAULT_HELP, Outcome, Printer, PrinterError, PrinterOptions, ScheduledFault, Sim, SimLink, SimOptions,
+    FAULT_HELP, Outcome, Personality, Printer, PrinterError, PrinterOptions, ScheduledFault, Sim, SimLink,
+    SimOptions,
 };
 use serde_json::{Map, Value, json};
 
@@ -69,8 +69,16 @@ pub struct PrinterArgs {
     pub fsensor: Option<u8>,
     /// The unit firmware version the printer supports; S0..S2 must answer it exactly
     /// (Buddy 6.5.3 and later: 3.0.4; Buddy 6.4 and MK3S 3.14.1: 3.0.3; MK3S 3.13.3/3.14.0: 3.0.2).
-    #[arg(long, value_name = "X.Y.Z", default_value = "3.0.3", value_parser = parse_version)]
-    pub expect_version: (u8, u8, u8),
+    /// Default: the --printer's (3.0.3 without --printer).
+    #[arg(long, value_name = "X.Y.Z", value_parser = parse_version)]
+    pub expect_version: Option<(u8, u8, u8)>,
+    /// The printer firmware played, in its protocol (version, Q0 period, answer timeout,
+    /// registers polled, premature finish) and, with --sim, its extruder: buddy-6.5 (Buddy 6.5.3
+    /// and later: 3.0.4, Q0 every 100 ms, 200 ms timeout, T before its own retract),
+    /// buddy-6.4 (3.0.3, 1 s, 2 s, T after its retract), mk3s (3.0.2, 1 s, 2 s, no R22).
+    /// Default: buddy-6.4.
+    #[arg(long, value_name = "PRINTER", global = true, value_parser = parse_personality)]
+    pub printer: Option<Personality>,
     /// One JSON object per line per event, and a final `result` object.
     #[arg(long, global = true)]
     pub json: bool,
@@ -357,7 +365,7 @@ impl<L: Target> Session<L> {
         details.insert("finda".into(), finda.into());
         self.console.say("polled registers:");
         let mut registers = Vec::new();
-        for address in POLLED_REGISTERS {
+        for &address in self.printer.polled_registers() {
             let Some(value) = self.printer.polled(address) else {
                 self.console.say(&format!("  register 0x{address:02x}: not read"));
                 continue;
@@ -451,7 +459,7 @@ pub fn run(args: &PrinterArgs) -> Result<(), Box<dyn Error>> {
             run_session(Session::new(link, options, console), &args.action)
         }
         (None, true) => {
-            let link = sim_link(&args.sim_options)?;
+            let link = sim_link(&args.sim_options, personality(args))?;
             run_session(Session::new(link, options, console), &args.action)
         }
         _ => Err(usage(CHOOSE_THE_UNIT)),
@@ -491,17 +499,29 @@ fn perform<L: Target>(session: &mut Session<L>, action: &Action) -> Result<Detai
     }
 }
 
-/// The printer's set-up: its supported unit version, the rest as Prusa's firmware has it.
+/// The printer's set-up: its personality and supported unit version, the rest as Prusa's
+/// firmware has it.
 fn printer_options(args: &PrinterArgs) -> PrinterOptions {
+    let defaults = PrinterOptions::of(personality(args));
     PrinterOptions {
-        version: args.expect_version,
-        ..PrinterOptions::default()
+        version: args.expect_version.unwrap_or(defaults.version),
+        ..defaults
     }
+}
+
+/// The printer played (`--printer`, else the default).
+fn personality(args: &PrinterArgs) -> Personality {
+    args.printer.unwrap_or_default()
+}
+
+/// `buddy-6.5`, `buddy-6.4` or `mk3s` (also for `mmu sim --printer`).
+pub(crate) fn parse_personality(text: &str) -> Result<Personality, String> {
+    text.parse::<Personality>().map_err(|error| error.to_string())
 }
 
 /// The simulator of `--sim`, with its faults scheduled and its pace set. A fault naming a slot
 /// the unit lacks is a usage mistake.
-pub fn sim_link(args: &SimTargetArgs) -> Result<SimLink, Box<dyn Error>> {
+pub fn sim_link(args: &SimTargetArgs, printer: Personality) -> Result<SimLink, Box<dyn Error>> {
     for fault in &args.faults {
         fault
             .fault
@@ -511,6 +531,7 @@ pub fn sim_link(args: &SimTargetArgs) -> Result<SimLink, Box<dyn Error>> {
     let mut sim = Sim::new(SimOptions {
         slots: args.slots,
         seed: args.seed,
+        printer,
         ..SimOptions::default()
     })?;
     for fault in &args.faults {

@@ -24,7 +24,7 @@ use mmu_firmware::registers::{
     FILTERED, RAW, SENSOR_FAULTS as STUCK, SLOT_COUNT, THRESHOLD_OFF, THRESHOLD_ON,
 };
 use mmu_protocol::{ErrorCode, ParamCode, Request, RequestCode};
-use mmu_sim::{Decision, Link, Operator, Printer, PrinterEvent, PrinterOptions};
+use mmu_sim::{Decision, Link, Operator, Personality, Printer, PrinterEvent, PrinterOptions};
 
 use crate::printer_cli::serial::{FsensorSource, SerialLink};
 use crate::printer_cli::{CHOOSE_THE_UNIT, SimTargetArgs, ctrl_c_flag, parse_version, sim_link};
@@ -313,7 +313,10 @@ pub fn run(args: &SensorsArgs) -> Result<(), Box<dyn Error>> {
             if sim.time_scale.is_none() && (args.seconds.is_none() || !(args.csv || args.plot.is_some())) {
                 sim.time_scale = Some(1.0);
             }
-            watch(Sampler::connect(sim_link(&sim)?, args.expect_version)?, args)
+            watch(
+                Sampler::connect(sim_link(&sim, Personality::default())?, args.expect_version)?,
+                args,
+            )
         }
         _ => Err(usage(CHOOSE_THE_UNIT)),
     }

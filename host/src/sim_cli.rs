@@ -34,7 +34,7 @@ use mmu_protocol::{
     DecodeError, Request, RequestCode, RequestDecoder, Response, ResponseDecoder, SILENCE_MS,
 };
 use mmu_sim::event::FaultAction;
-use mmu_sim::{Event, EventKind, FAULT_HELP, ScheduledFault, Sim, SimOptions};
+use mmu_sim::{Event, EventKind, FAULT_HELP, Personality, ScheduledFault, Sim, SimOptions};
 
 use crate::explain::{request_meaning, response_meaning};
 use crate::usage::usage;
@@ -97,6 +97,11 @@ pub struct SimArgs {
         value_parser = parse_print_rate
     )]
     pub print_rate: f32,
+    /// The printer whose extruder the simulator plays around a tool change: buddy-6.5 (Buddy
+    /// 6.5.3 and later: T before its own 80 mm retract, co-feed from P1c, premature finish),
+    /// buddy-6.4, mk3s (T once the filament is out of the gears).
+    #[arg(long, value_name = "PRINTER", default_value = "buddy-6.4", value_parser = crate::printer_cli::parse_personality)]
+    pub printer: Personality,
     /// Print nothing on stderr but errors (no log of requests, answers and events).
     #[arg(long, short, conflicts_with = "verbose")]
     pub quiet: bool,
@@ -117,6 +122,7 @@ pub fn run(args: &SimArgs) -> Result<(), Box<dyn Error>> {
         slots: args.slots,
         seed: args.seed,
         print_mm_s: args.print_rate,
+        printer: args.printer,
         ..SimOptions::default()
     })?;
     for fault in &args.faults {
@@ -596,15 +602,21 @@ fn ignored_reason(error: &DecodeError<Request>) -> String {
     }
 }
 
-/// What the simulator is set up with, as one line.
+/// What the simulator is set up with, as one line (the printer played only when it is not the
+/// default).
 fn start_line(args: &SimArgs) -> String {
+    let printer = if args.printer == Personality::default() {
+        String::new()
+    } else {
+        format!(", printer {}", args.printer)
+    };
     let faults = if args.faults.is_empty() {
         String::from("none")
     } else {
         args.faults.iter().map(fault_spec).collect::<Vec<_>>().join(", ")
     };
     format!(
-        "{} slots, seed {}, time scale {}x, print rate {} mm/s, faults: {faults}",
+        "{} slots, seed {}, time scale {}x, print rate {} mm/s, faults: {faults}{printer}",
         args.slots, args.seed, args.time_scale, args.print_rate
     )
 }

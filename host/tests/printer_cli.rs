@@ -196,6 +196,57 @@ fn a_printer_expecting_another_version_stops() {
 }
 
 #[test]
+fn each_printer_is_played_with_its_version_and_its_poll() {
+    for (printer, version, polls_bowden) in [
+        ("buddy-6.5", "3.0.4", true),
+        ("buddy-6.4", "3.0.3", true),
+        ("mk3s", "3.0.2", false),
+    ] {
+        let out = printer_ok(&["--printer", printer, "status"]);
+        assert!(
+            out.contains(&format!("unit firmware: {version}")),
+            "{printer}: {out}"
+        );
+        assert_eq!(out.contains("register 0x22"), polls_bowden, "{printer}: {out}");
+    }
+    let text = printer_fails(&["--printer", "mk4", "status"]);
+    assert!(text.contains("buddy-6.5, buddy-6.4, mk3s"), "{text}");
+}
+
+#[test]
+fn buddy_6_5_leaves_a_tool_change_early_and_says_so() {
+    let (lines, ok) = printer_json(&["--printer", "buddy-6.5", "tool", "1"]);
+    assert!(ok, "{lines:?}");
+    let early = events(&lines, "premature_finish");
+    assert_eq!(early.len(), 1, "{lines:?}");
+    assert_eq!(early[0]["request"], "T1");
+    let (lines, ok) = printer_json(&["--printer", "buddy-6.4", "tool", "1"]);
+    assert!(ok && events(&lines, "premature_finish").is_empty(), "{lines:?}");
+}
+
+#[test]
+fn soak_runs_each_printer() {
+    for printer in ["buddy-6.4", "mk3s"] {
+        let out = printer_ok(&["--printer", printer, "soak", "--changes", "3"]);
+        assert!(out.starts_with("soak: 3 tool changes"), "{printer}: {out}");
+    }
+}
+
+#[test]
+fn soak_runs_buddy_6_5() {
+    let out = printer_ok(&[
+        "--printer",
+        "buddy-6.5",
+        "soak",
+        "--changes",
+        "20",
+        "--faults",
+        "random",
+    ]);
+    assert!(out.starts_with("soak: 20 tool changes"), "{out}");
+}
+
+#[test]
 fn the_unit_must_be_chosen() {
     let output = mmu(&["printer", "status"]);
     assert!(!output.status.success());

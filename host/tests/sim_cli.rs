@@ -567,3 +567,54 @@ fn scheduled_faults_are_reported() {
     assert!(stderr.contains("fault injected: jam:1"), "{stderr}");
     assert!(stderr.contains("fault cleared: jam:1"), "{stderr}");
 }
+
+/// The MK4's bootloader probe (`S`, then no answer for 500 ms, BFW `src/mmu2/mmu2_bootloader.cpp`)
+/// reaches the unit as it is sent, pauses and all, so the first `S0` after it is answered: the
+/// simulator passes the printer's bytes as they arrive instead of gathering them to a newline.
+#[test]
+fn the_bootloader_probe_costs_the_printer_no_s0() {
+    let scale = TIME_SCALE.to_string();
+    let mut sim = SimProcess::spawn(&[
+        "--stdio",
+        "--time-scale",
+        &scale,
+        "--quiet",
+        "--printer",
+        "buddy-6.5",
+    ]);
+    let stdin = sim.child.stdin.take().expect("stdin is piped");
+    let stdout = sim.child.stdout.take().expect("stdout is piped");
+    let mut printer = Printer::new(Box::new(stdin), FromUnit::Pipe(spawn_reader(stdout)), None);
+    thread::sleep(Duration::from_millis(200));
+    for _ in 0..2 {
+        printer.send_bytes(b"S");
+        // 500 virtual ms without an answer.
+        thread::sleep(Duration::from_millis(500 / TIME_SCALE));
+    }
+    let version = Request::new(RequestCode::Version, 0);
+    assert_eq!(printer.ask(version), Response::read(&version, 3));
+    drop(printer);
+    let (status, stderr) = sim.wait_for_exit();
+    assert!(status.success(), "exit {status}: {stderr}");
+}
+
+/// `--printer` names the printer whose extruder is played; the start line says which.
+#[test]
+fn the_printer_played_is_chosen_and_named() {
+    let output = Command::new(env!("CARGO_BIN_EXE_mmu"))
+        .args(["sim", "--stdio", "--printer", "buddy-6.5"])
+        .stdin(Stdio::null())
+        .output()
+        .expect("the mmu binary runs");
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "{stderr}");
+    assert!(stderr.contains("printer buddy-6.5"), "{stderr}");
+    let output = Command::new(env!("CARGO_BIN_EXE_mmu"))
+        .args(["sim", "--stdio", "--printer", "mk4"])
+        .stdin(Stdio::null())
+        .output()
+        .expect("the mmu binary runs");
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("buddy-6.5, buddy-6.4, mk3s"), "{stderr}");
+}

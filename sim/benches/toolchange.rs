@@ -9,7 +9,7 @@
 use std::process::ExitCode;
 
 use mmu_sim::soak::{self, SoakOptions};
-use mmu_sim::{PrinterOptions, SimOptions};
+use mmu_sim::{Personality, PrinterOptions, SimOptions};
 
 /// The mean tool change may exceed the physical minimum by this factor.
 const TARGET_RATIO: f64 = 1.10;
@@ -26,6 +26,7 @@ fn main() -> ExitCode {
         seed: 1,
         sim: SimOptions::default(),
         printer: PrinterOptions::default(),
+        personality: Personality::default(),
     };
     let report = soak::run(&options, &mut |_| {});
     println!("{report}");

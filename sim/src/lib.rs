@@ -5,6 +5,9 @@
 //!   Bytes in, bytes out, one millisecond per step: `mmu sim` serves it on stdio or a pty.
 //! - [`printer`]: the printer's side of the protocol over any [`Link`]; [`SimLink`] is the
 //!   in-process one (`mmu printer --sim`).
+//! - [`Personality`]: which printer firmware both play (Buddy 6.5.3, Buddy 6.4, MK3S), and
+//!   [`mechanics`]: the printer's extruder as the simulator moves it around a tool change;
+//!   [`scenario`]: Prusa's expected Buddy 6.5.3 exchange, replayed against the unit.
 //! - [`soak`]: long runs of tool changes with random faults, and the figures they give;
 //!   [`timing`]: the physical minimum a tool change is measured against.
 
@@ -14,7 +17,10 @@ pub mod fault;
 pub mod flash;
 pub mod link;
 pub mod logic;
+pub mod mechanics;
+pub mod personality;
 pub mod printer;
+pub mod scenario;
 pub mod sim;
 pub mod soak;
 pub mod timing;
@@ -22,6 +28,7 @@ pub mod timing;
 pub use event::{Event, EventKind};
 pub use fault::{FAULT_HELP, ScheduledFault, SimFault, SimFaultKind};
 pub use link::SimLink;
+pub use personality::Personality;
 pub use printer::{
     Decision, Link, LinkFault, Operator, Outcome, Printer, PrinterError, PrinterEvent, PrinterOptions,
 };

@@ -3,7 +3,7 @@
 //! [`App`] takes its slot count as a const generic, as the firmware must; the simulator's
 //! `--slots` is a run-time value. [`UnitLogic`] is the object-safe face of an `App<N>` with its
 //! [`Store`] that [`new_logic`] builds for any supported count. The flash outlives the logic: a
-//! restart takes it back with [`UnitLogic::into_flash`] and boots a new logic on it.
+//! restart takes it back with [`UnitLogic::take_flash`] and boots a new logic on it.
 //!
 //! Received bytes reach the App as they reach it on the board: they wait in a receive ring of
 //! [`RX_RING`] bytes (what finds it full is lost, as in a UART overrun) and each step

@@ -4,39 +4,25 @@
 //! A [`Sim`] takes the bytes a printer sends and returns the bytes the unit answers, one
 //! millisecond of virtual time per [`Sim::step`]. The printer's *mechanics* (its extruder and
 //! filament sensor) live here too, because no printer-side program can move them over the wire:
-//! they react to the traffic the way a Prusa printer's firmware does (spec §5.7), by watching
-//! the frames go by. The printer's *protocol logic* (handshake, polling, retries) is the
-//! client's business; see [`crate::printer`].
-
-use std::collections::VecDeque;
+//! they react to the traffic the way the firmware of the printer played does (spec §5.7), by
+//! watching the frames go by ([`crate::mechanics`], [`SimOptions::printer`]). The printer's
+//! *protocol logic* (handshake, polling, retries) is the client's business; see
+//! [`crate::printer`].
 
 use mmu_firmware::runner::Status;
 use mmu_firmware::{Config, Direction, Instant, MotorCommand};
 use mmu_model::{Model, ModelConfig, Rng};
-use mmu_protocol::{
-    ParamCode, ProgressCode, Request, RequestCode, RequestDecoder, Response, ResponseDecoder, SILENCE_MS,
-};
+use mmu_protocol::RequestCode;
 
 use crate::event::{Event, EventKind, FaultAction};
 use crate::fault::{ScheduledFault, SimFault, SimFaultKind};
 use crate::logic::{UnitLogic, blank_flash, new_logic};
+use crate::mechanics::Mechanics;
+pub use crate::mechanics::{
+    COFEED_MM, LOAD_TO_NOZZLE_MM, LOAD_TO_NOZZLE_MM_S, PRINTER_UNLOAD_MM, PRINTER_UNLOAD_MM_S, UNLOAD_HELP_MM,
+};
+use crate::personality::Personality;
 
-/// How far the printer pushes its extruder on its own while the unit reports `P1c`, mm
-/// (Prusa-Firmware-Buddy's value, spec §5.7).
-pub const COFEED_MM: f32 = 189.9;
-/// The printer's unload before it asks for another tool or an unload: ramming, then pulling the
-/// filament out of its gears, mm.
-pub const PRINTER_UNLOAD_MM: f32 = 80.0;
-/// Speed of the printer's unload, mm/s.
-pub const PRINTER_UNLOAD_MM_S: f32 = 80.0;
-/// After a tool change the printer loads the new filament from its gears into the nozzle, mm.
-pub const LOAD_TO_NOZZLE_MM: f32 = 60.0;
-/// Speed of the printer's load to the nozzle, mm/s.
-pub const LOAD_TO_NOZZLE_MM_S: f32 = 15.0;
-/// The printer's help during `P3` of an error recovery (MK4 values, spec §5.7): 20 mm at 20 mm/s.
-pub const UNLOAD_HELP_MM: f32 = 20.0;
-/// A frame longer than this without a newline is passed on as it is (garbage).
-const MAX_FRAME: usize = 32;
 /// Slot motion is reported at most this often, ms.
 const SLOT_REPORT_MS: u64 = 100;
 
@@ -66,6 +52,10 @@ pub struct SimOptions {
     pub print_mm_s: f32,
     /// How long the unit takes to boot after a reset or power-up, ms.
     pub boot_ms: u32,
+    /// The printer whose mechanics (its extruder around a tool change) are played. On Buddy
+    /// 6.5.3 the extruder gears sit before the filament sensor
+    /// ([`Personality::gears_before_sensor_mm`]), whatever [`SimOptions::model`] says.
+    pub printer: Personality,
 }
 
 impl Default for SimOptions {
@@ -77,6 +67,7 @@ impl Default for SimOptions {
             model: ModelConfig::default(),
             print_mm_s: 1.0,
             boot_ms: 50,
+            printer: Personality::default(),
         }
     }
 }
@@ -108,40 +99,6 @@ pub struct CommandRecord {
     pub had_error: bool,
 }
 
-/// Milliseconds one direction of the line has been quiet.
-#[derive(Debug, Default)]
-struct QuietMs(u32);
-
-impl QuietMs {
-    /// One millisecond in which `bytes` crossed; true once the line has been silent for
-    /// [`SILENCE_MS`].
-    fn step(&mut self, bytes: usize) -> bool {
-        self.0 = if bytes == 0 { self.0.saturating_add(1) } else { 0 };
-        self.0 >= SILENCE_MS
-    }
-}
-
-/// The printer's mechanics, driven by the frames on the wire.
-#[derive(Debug)]
-struct PrinterMechanics {
-    requests: RequestDecoder,
-    responses: ResponseDecoder,
-    /// How long each direction has been quiet: its decoder learns of a silence (after a broken
-    /// frame it accepts nothing before one).
-    requests_quiet: QuietMs,
-    responses_quiet: QuietMs,
-    /// The printer's copies of registers 0x0b and 0x14, as it wrote them.
-    extra_load_mm: f32,
-    slow_mm_s: f32,
-    /// The command in progress, as the printer sees it.
-    command: Option<(RequestCode, u8)>,
-    /// The progress the printer last saw (`None` after an error or a finish).
-    seen_progress: Option<ProgressCode>,
-    /// The printer's `loadFilamentStarted`: set when it sees `P1c` begin, cleared by its push.
-    load_started: bool,
-    print_mm_s: f32,
-}
-
 /// The simulated unit. See the [module documentation](self).
 pub struct Sim {
     options: SimOptions,
@@ -156,13 +113,7 @@ pub struct Sim {
     corrupt: f32,
     drop: f32,
     schedule: Vec<ScheduledFault>,
-    printer: PrinterMechanics,
-    /// The printer's frame being received, passed on at its newline.
-    frame: Vec<u8>,
-    /// Frames held back while the printer unloads its extruder before sending them.
-    held: VecDeque<u8>,
-    /// The printer is ramming and pulling its filament out before a command: its frames wait.
-    ramming: bool,
+    printer: Mechanics,
     events: Vec<Event>,
     last_fsensor: u8,
     last_slot_report: Vec<(Option<f32>, u64)>,
@@ -183,19 +134,17 @@ impl Sim {
                 options.slots
             ))
         })?;
-        let model = Model::new(options.model.clone(), options.slots, options.seed);
-        let printer = PrinterMechanics {
-            requests: RequestDecoder::new(),
-            responses: ResponseDecoder::new(),
-            extra_load_mm: f32::from(options.unit.extra_load_mm),
-            slow_mm_s: f32::from(options.unit.slow_speed),
-            command: None,
-            seen_progress: None,
-            load_started: false,
-            print_mm_s: options.print_mm_s,
-            requests_quiet: QuietMs::default(),
-            responses_quiet: QuietMs::default(),
-        };
+        let mut geometry = options.model.clone();
+        if let Some(before) = options.printer.gears_before_sensor_mm() {
+            geometry.extruder_gears_mm = geometry.bowden_length_mm - before;
+        }
+        let model = Model::new(geometry, options.slots, options.seed);
+        let printer = Mechanics::new(
+            options.printer,
+            f32::from(options.unit.extra_load_mm),
+            f32::from(options.unit.slow_speed),
+            options.print_mm_s,
+        );
         let last_command = logic.command();
         Ok(Sim {
             rng: Rng::new(options.seed ^ 0x5541_5254), // "UART": independent of the model's noise
@@ -211,9 +160,6 @@ impl Sim {
             drop: 0.0,
             schedule: Vec::new(),
             printer,
-            frame: Vec::new(),
-            held: VecDeque::new(),
-            ramming: false,
             events: Vec::new(),
             last_fsensor: 0,
             last_command,
@@ -396,14 +342,14 @@ impl Sim {
             }
         }
         self.uart_faults(&mut from_unit);
-        if self.printer.responses_quiet.step(from_unit.len()) {
-            let _ = self.printer.responses.line_silent();
-        }
-        for &byte in &from_unit {
-            self.printer_hears(byte);
-        }
+        let mut happened = Vec::new();
+        self.printer
+            .unit_bytes(&from_unit, &mut self.model, &mut happened);
         tx.extend_from_slice(&from_unit);
-        self.printer_mechanics();
+        self.printer.step(&mut self.model, &mut happened);
+        for what in happened {
+            self.event(what);
+        }
         self.now_ms += 1;
         self.watch();
     }
@@ -451,25 +397,15 @@ impl Sim {
         self.event(EventKind::Power { on: true });
     }
 
-    /// The printer's bytes: whole frames pass at their newline, unless the printer must first
-    /// unload its extruder (then they wait for it); then the UART faults strike.
+    /// The printer's bytes, as the printer's mechanics let them through
+    /// ([`Mechanics::pass_printer_bytes`]); then the UART faults strike.
     fn pass_printer_bytes(&mut self, rx: &[u8]) -> Vec<u8> {
-        let mut out = Vec::new();
-        if self.printer.requests_quiet.step(rx.len()) {
-            let _ = self.printer.requests.line_silent();
-        }
-        for &byte in rx {
-            self.frame.push(byte);
-            if let Some(Ok(request)) = self.printer.requests.feed(byte) {
-                self.printer_sends(&request);
-            }
-            if byte == b'\n' || self.frame.len() >= MAX_FRAME {
-                self.held.extend(self.frame.drain(..));
-            }
-        }
-        self.ramming &= self.model.extruder_busy();
-        if !self.ramming {
-            out.extend(self.held.drain(..));
+        let mut happened = Vec::new();
+        let mut out = self
+            .printer
+            .pass_printer_bytes(self.now_ms, rx, &mut self.model, &mut happened);
+        for what in happened {
+            self.event(what);
         }
         self.uart_faults(&mut out);
         if self.off_until_ms.is_some() {
@@ -490,138 +426,6 @@ impl Sim {
             }
             rng.uniform() >= drop
         });
-    }
-
-    /// The printer sent `request`: stop printing for a command, and unload the extruder first
-    /// when the command needs the filament out of it (spec §5.6: ramming, then `U0`/`T`).
-    fn printer_sends(&mut self, request: &Request) {
-        let p = &mut self.printer;
-        match request.code {
-            RequestCode::Write if request.value == 0x0b => {
-                p.extra_load_mm = f32::from(request.value2);
-            }
-            RequestCode::Write if request.value == 0x14 => {
-                p.slow_mm_s = f32::from(request.value2);
-            }
-            code if code.is_command() => {
-                // The printer matches the answers against the command it sent (`ReqMsg()`),
-                // whether or not it heard the unit accept it: after a lost `A` it takes the unit
-                // reporting that command as running.
-                p.command = Some((code, request.value));
-                p.seen_progress = None;
-                self.model.set_printing(None);
-                let same_tool =
-                    code == RequestCode::Tool && self.model.loaded_slot() == Some(usize::from(request.value));
-                let needs_unload = matches!(
-                    code,
-                    RequestCode::Unload | RequestCode::Tool | RequestCode::Eject | RequestCode::Cut
-                ) && !same_tool;
-                // A command ends whatever the extruder was doing (its load into the nozzle):
-                // the printer's own moves come before it sends the next command.
-                self.model.extruder_move(0.0, PRINTER_UNLOAD_MM_S);
-                if needs_unload && !self.ramming && self.filament_in_extruder_gears() {
-                    self.model.extruder_move(-PRINTER_UNLOAD_MM, PRINTER_UNLOAD_MM_S);
-                    self.ramming = true;
-                    self.event(EventKind::Extruder {
-                        action: "ramming",
-                        mm: -PRINTER_UNLOAD_MM,
-                    });
-                }
-            }
-            _ => {}
-        }
-    }
-
-    fn filament_in_extruder_gears(&self) -> bool {
-        let gears = self.model.config().extruder_gears_mm;
-        self.model
-            .loaded_slot()
-            .and_then(|slot| self.model.tip_mm(slot))
-            .is_some_and(|tip| tip >= gears)
-    }
-
-    /// A byte of the unit's answer reached the printer.
-    fn printer_hears(&mut self, byte: u8) {
-        let Some(Ok(response)) = self.printer.responses.feed(byte) else {
-            return;
-        };
-        self.printer_reacts(&response);
-    }
-
-    fn printer_reacts(&mut self, response: &Response) {
-        let p = &mut self.printer;
-        let echo = (response.code, response.value);
-        if response.code.is_command() && response.param == ParamCode::Accepted {
-            p.command = Some(echo);
-            return;
-        }
-        if p.command != Some(echo) {
-            return;
-        }
-        match response.param {
-            ParamCode::Processing => {
-                let progress = ProgressCode(response.param_value.unwrap_or(0) as u8);
-                if p.seen_progress != Some(progress) {
-                    // `OnMMUProgressMsgChanged`: `P1c` begins the load.
-                    p.load_started |= progress == ProgressCode::FEEDING_TO_FSENSOR;
-                    p.seen_progress = Some(progress);
-                }
-                let helps_unload = progress == ProgressCode::UNLOADING_TO_FINDA
-                    && !matches!(response.code, RequestCode::Unload | RequestCode::Tool);
-                if helps_unload && self.model.fsensor_state() != 0 && !self.model.extruder_busy() {
-                    self.model.extruder_move(-UNLOAD_HELP_MM, UNLOAD_HELP_MM);
-                    self.event(EventKind::Extruder {
-                        action: "unload-help",
-                        mm: -UNLOAD_HELP_MM,
-                    });
-                }
-            }
-            ParamCode::Finished => {
-                p.command = None;
-                p.seen_progress = None;
-                if response.code == RequestCode::Tool {
-                    let rate = p.print_mm_s;
-                    self.model.set_printing((rate > 0.0).then_some(rate));
-                    if self.model.fsensor_state() != 2 {
-                        self.model.extruder_move(LOAD_TO_NOZZLE_MM, LOAD_TO_NOZZLE_MM_S);
-                        self.event(EventKind::Extruder {
-                            action: "load-to-nozzle",
-                            mm: LOAD_TO_NOZZLE_MM,
-                        });
-                    }
-                }
-            }
-            // `ERRWaitingForUser`: the next `P1c` is seen anew.
-            _ => p.seen_progress = None,
-        }
-    }
-
-    /// Co-feeding during `P1c` (spec §5.7), as Prusa's printers do it
-    /// (`OnMMUProgressMsgSame`, printer-truth §8): while the printer last saw `P1c` and the load
-    /// it began is on, with its sensor clear it keeps a co-feed move going; once its sensor
-    /// triggers it aborts that and pushes the extra load distance + 2 mm, once.
-    fn printer_mechanics(&mut self) {
-        let state = self.model.fsensor_state();
-        let p = &mut self.printer;
-        if !p.load_started || p.seen_progress != Some(ProgressCode::FEEDING_TO_FSENSOR) {
-            return;
-        }
-        if state != 0 {
-            p.load_started = false;
-            let (mm, speed) = (p.extra_load_mm + 2.0, p.slow_mm_s);
-            self.model.extruder_move(mm, speed);
-            self.event(EventKind::Extruder {
-                action: "extra-load",
-                mm,
-            });
-        } else if !self.model.extruder_busy() {
-            let speed = p.slow_mm_s;
-            self.model.extruder_move(COFEED_MM, speed);
-            self.event(EventKind::Extruder {
-                action: "co-feed",
-                mm: COFEED_MM,
-            });
-        }
     }
 
     /// Report what changed: the printer's sensor, slot motion, the unit's command.

@@ -1,7 +1,8 @@
 //! Soak runs: many tool changes across all slots with random faults injected and later cleared,
 //! recovered as the printer and its user would, and the figures that come out.
 //!
-//! [`run`] plays a printer ([`Printer`] over [`SimLink`]) against a fresh [`Sim`] and asks for
+//! [`run`] plays a printer ([`Printer`] over [`SimLink`], the firmware of
+//! [`SoakOptions::personality`] in its protocol and its mechanics) against a fresh [`Sim`] and asks for
 //! tool changes, each to a random slot other than the loaded one. With random faults, some changes
 //! ([`FAULT_PROBABILITY`]) get a fault from a mix that matters to the unit (a jam of the target
 //! slot or of the Bowden tube, a slipping or dead drive, sensor noise, a disconnected sensor, a
@@ -40,7 +41,10 @@ use mmu_protocol::{ButtonCode, ErrorCode, Request, RequestCode, ResultCode};
 use crate::fault::SimFault;
 use crate::flash::FlashWear;
 use crate::link::SimLink;
-use crate::printer::{Decision, Link, Operator, Outcome, Printer, PrinterEvent, PrinterOptions};
+use crate::personality::Personality;
+use crate::printer::{
+    Decision, Link, Operator, Outcome, Printer, PrinterError, PrinterEvent, PrinterOptions,
+};
 use crate::sim::{CommandRecord, PRINTER_UNLOAD_MM, PRINTER_UNLOAD_MM_S, Sim, SimOptions, status_text};
 use crate::timing::tool_change_minimum;
 
@@ -64,6 +68,9 @@ const GRIP_TOLERANCE_MM: f32 = 0.01;
 /// Keeps the soak's random draws independent of the model's and the UART's ("SOAK").
 const SOAK_STREAM: u64 = 0x534f_414b;
 
+/// Times the printer connects again behind a lost link's screen during one command.
+const RECONNECTS: u8 = 3;
+
 /// Erase cycles a page of the STM32G071's flash is specified for (datasheet: 10 kcycles).
 pub const ENDURANCE_CYCLES: u64 = 10_000;
 
@@ -80,6 +87,10 @@ pub struct SoakOptions {
     pub sim: SimOptions,
     /// The printer.
     pub printer: PrinterOptions,
+    /// The printer played, by its protocol logic and by its mechanics in the simulator (it
+    /// overrides [`PrinterOptions::personality`] and [`SimOptions::printer`]; the version the
+    /// printer wants is [`PrinterOptions::version`]).
+    pub personality: Personality,
 }
 
 /// How one kind of fault fared.
@@ -587,10 +598,15 @@ impl Rig {
             .wrapping_add(generation.wrapping_mul(0x9e37_79b9_7f4a_7c15));
         let sim = Sim::new(SimOptions {
             seed,
+            printer: options.personality,
             ..options.sim.clone()
         })
         .map_err(|error| error.to_string())?;
-        let mut printer = Printer::new(StrikingLink::new(sim), options.printer);
+        let printer_options = PrinterOptions {
+            personality: options.personality,
+            ..options.printer
+        };
+        let mut printer = Printer::new(StrikingLink::new(sim), printer_options);
         printer
             .connect(&mut SoakUser::default())
             .map_err(|error| format!("the printer could not connect: {error}"))?;
@@ -639,13 +655,13 @@ fn describe(sim: &Sim) -> String {
 /// slot).
 fn tool_change(rig: &mut Rig, user: &mut SoakUser, target: u8) -> ChangeEnd {
     if rig.loaded == Some(target) {
-        match rig.printer.command(user, Request::new(RequestCode::Unload, 0)) {
+        match command(rig, user, Request::new(RequestCode::Unload, 0)) {
             Ok(Outcome::Finished(ResultCode::OK)) => rig.loaded = None,
             Ok(outcome) => return ChangeEnd::Failed(format!("the unload before it ended {outcome:?}")),
             Err(error) => return ChangeEnd::Stuck(error.to_string()),
         }
     }
-    let end = match rig.printer.command(user, Request::new(RequestCode::Tool, target)) {
+    let end = match command(rig, user, Request::new(RequestCode::Tool, target)) {
         Ok(Outcome::Finished(ResultCode::OK)) => {
             let model = rig.sim().model();
             let gears_mm = model.config().extruder_gears_mm;
@@ -672,6 +688,27 @@ fn tool_change(rig: &mut Rig, user: &mut SoakUser, target: u8) -> ChangeEnd {
     end
 }
 
+/// Run `request` as the printer does, riding out a lost link: behind its MMU_NOT_RESPONDING or
+/// COMMUNICATION_ERROR screen a Buddy printer goes on connecting (`MMU2::LogicStep` sets
+/// `xState::Connecting`, BFW v6.5.3 `mmu2_mk4.cpp`) and takes the command up again once the
+/// unit answers. On Buddy 6.5.3 ten 200 ms timeouts, a power cut of 2 s, are enough for the
+/// screen. A unit that stays silent through [`RECONNECTS`] tries is stuck.
+fn command(rig: &mut Rig, user: &mut SoakUser, request: Request) -> Result<Outcome, PrinterError> {
+    let mut tries = 0;
+    loop {
+        match rig.printer.command(user, request) {
+            Err(PrinterError::NotResponding | PrinterError::ProtocolError) if tries < RECONNECTS => {
+                tries += 1;
+                match rig.printer.connect(user) {
+                    Ok(_) | Err(PrinterError::NotResponding | PrinterError::ProtocolError) => {}
+                    Err(error) => return Err(error),
+                }
+            }
+            other => return other,
+        }
+    }
+}
+
 /// Print after a finished change to `target` (when a fault is planned for the print): the change
 /// counts as done if the printer still prints with `target` loaded when the print ends.
 fn print(rig: &mut Rig, user: &mut SoakUser, target: u8) -> ChangeEnd {
@@ -679,7 +716,23 @@ fn print(rig: &mut Rig, user: &mut SoakUser, target: u8) -> ChangeEnd {
     if print_ms == 0 {
         return ChangeEnd::Done;
     }
-    match rig.printer.print(user, print_ms) {
+    let until = rig.printer.link().now_ms() + print_ms;
+    let mut tries = 0;
+    let printed = loop {
+        let left = until.saturating_sub(rig.printer.link().now_ms());
+        match rig.printer.print(user, left) {
+            // As during a command: the printer connects again behind the screen.
+            Err(PrinterError::NotResponding | PrinterError::ProtocolError) if tries < RECONNECTS => {
+                tries += 1;
+                match rig.printer.connect(user) {
+                    Ok(_) | Err(PrinterError::NotResponding | PrinterError::ProtocolError) => {}
+                    Err(error) => break Err(error),
+                }
+            }
+            other => break other,
+        }
+    };
+    match printed {
         Ok(Some(Outcome::GaveUp(error))) => ChangeEnd::Failed(format!("while printing, gave up on {error}")),
         Ok(_) => {
             let model = rig.sim().model();

@@ -3,13 +3,15 @@
 //!
 //! `soak_from_environment` is a developer's tool, ignored by default: in release,
 //! `SOAK_CHANGES=300 SOAK_SEED=7 cargo test --release -p mmu-sim --test soak -- --ignored --nocapture`
-//! runs a random-fault soak and prints its report and notes.
+//! runs a random-fault soak and prints its report and notes (`SOAK_PRINTER=buddy-6.5` plays
+//! another printer).
 
 use mmu_sim::soak::{self, SoakOptions, SoakReport};
-use mmu_sim::{PrinterOptions, SimOptions};
+use mmu_sim::{Personality, PrinterOptions, SimOptions};
 
 fn options(changes: u32, random_faults: bool, seed: u64) -> SoakOptions {
     SoakOptions {
+        personality: Personality::default(),
         changes,
         random_faults,
         seed,
@@ -161,6 +163,43 @@ fn a_single_slot_unit_unloads_before_each_change() {
     assert_eq!(report.tool_change_times.changes, 3, "{report}");
 }
 
+/// A soak playing `personality`, its protocol and its mechanics, wanting its own version.
+fn soak_of(
+    personality: Personality,
+    changes: u32,
+    random_faults: bool,
+    seed: u64,
+    slots: usize,
+) -> SoakReport {
+    let mut options = options(changes, random_faults, seed);
+    options.personality = personality;
+    options.printer.version = personality.version();
+    options.sim.slots = slots;
+    soak::run(&options, &mut |_| {})
+}
+
+#[test]
+fn buddy_6_4_and_the_mk3s_soak_clean_with_1_3_and_5_slots() {
+    for personality in [Personality::Buddy64, Personality::Mk3s] {
+        for slots in [1, 3, 5] {
+            let report = soak_of(personality, 6, true, 7, slots);
+            assert!(
+                report.passed(),
+                "{personality}, {slots} slots:\n{report}\n{:#?}",
+                report.notes
+            );
+        }
+    }
+}
+
+#[test]
+fn buddy_6_5_soaks_clean_with_1_3_and_5_slots() {
+    for slots in [1, 3, 5] {
+        let report = soak_of(Personality::Buddy65, 6, true, 7, slots);
+        assert!(report.passed(), "{slots} slots:\n{report}\n{:#?}", report.notes);
+    }
+}
+
 #[test]
 #[ignore = "a developer's tool: long in debug builds, run it in release"]
 fn soak_from_environment() {
@@ -176,6 +215,10 @@ fn soak_from_environment() {
         number("SOAK_SEED", 1),
     );
     options.printer.command_timeout_ms = number("SOAK_TIMEOUT_MS", 600_000);
+    if let Ok(name) = std::env::var("SOAK_PRINTER") {
+        options.personality = name.parse().expect("SOAK_PRINTER names a printer");
+        options.printer.version = options.personality.version();
+    }
     let report = soak::run(&options, &mut |_| {});
     println!("seed {}:\n{report}", options.seed);
     println!("notes (unrecovered, stuck, panicked):");

@@ -28,7 +28,7 @@ use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
 
 use mmu_protocol::{ButtonCode, ErrorCode, Family, ParamCode, Request, RequestCode, Response, ResultCode};
-use mmu_sim::{Link, Outcome, Printer, PrinterOptions};
+use mmu_sim::{Link, Outcome, Personality, Printer, PrinterOptions};
 
 use crate::explain::{error_meaning, request_label, request_meaning, response_meaning};
 use crate::printer_cli::console::{Console, state_text};
@@ -170,7 +170,7 @@ impl Bench {
                 };
                 Wire::Serial(SerialLink::open(port, fsensor)?)
             }
-            (None, true) => Wire::Sim(Box::new(sim_link(&target.sim_options)?)),
+            (None, true) => Wire::Sim(Box::new(sim_link(&target.sim_options, Personality::default())?)),
             _ => return Err(crate::usage::usage(crate::printer_cli::CHOOSE_THE_UNIT)),
         };
         let options = PrinterOptions {

@@ -201,6 +201,14 @@ pub enum JsonLine {
         /// The command.
         request: String,
     },
+    /// The printer left a tool change before the unit finished it (Buddy 6.5.3) and loads on to
+    /// the nozzle while it keeps polling.
+    PrematureFinish {
+        /// The printer's clock, ms.
+        t_ms: u64,
+        /// The command.
+        request: String,
+    },
     /// Something happened inside the simulator (a fault, a power loss).
     Sim {
         /// The printer's clock, ms.
@@ -572,6 +580,16 @@ impl<L: Target> Operator<L> for Console {
                 let label = request_label(request);
                 let text = format!("{label}: the unit restarted under it; the printer repeats it");
                 self.show(t_ms, &text, || JsonLine::Interrupted {
+                    t_ms,
+                    request: label.clone(),
+                });
+            }
+            PrinterEvent::PrematureFinish(request) => {
+                let label = request_label(request);
+                let text = format!(
+                    "{label}: the printer leaves the tool change early (premature finish) and loads on to the nozzle while the unit finishes"
+                );
+                self.show(t_ms, &text, || JsonLine::PrematureFinish {
                     t_ms,
                     request: label.clone(),
                 });

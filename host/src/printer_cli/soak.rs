@@ -10,7 +10,7 @@ use mmu_sim::SimOptions;
 use mmu_sim::soak::{SoakOptions, SoakReport};
 
 use super::console::{Console, JsonLine};
-use super::{Details, PrinterArgs, printer_options};
+use super::{Details, PrinterArgs, personality, printer_options};
 use crate::usage::{Interrupted, usage};
 
 /// `mmu printer soak` options.
@@ -61,6 +61,7 @@ pub(super) fn run_soak(
             ..SimOptions::default()
         },
         printer: printer_options(args),
+        personality: personality(args),
     };
     let bar = console.progress_bar(u64::from(soak.changes), "tool changes");
     let stop = ctrl_c_flag()?;

@@ -1,8 +1,10 @@
 //! The printer's side of the protocol, as Prusa's firmware plays it (spec §5): the handshake with
-//! its exact version check, `Q0` about every second after the last activity, `f` reports the
+//! its exact version check, `Q0` one heartbeat after the last activity, `f` reports the
 //! moment the printer's filament sensor changes, the register poll, automatic Retry (`B1`) up to
-//! three times per command, a 2 s link timeout followed by a new handshake, and the mmu2 layer's
-//! "unload, then again" when the unit restarted under a command.
+//! three times per command, a link timeout followed by a new handshake, and the mmu2 layer's
+//! "unload, then again" when the unit restarted under a command. The heartbeat, the timeout, the
+//! version, the registers polled and the 6.5.3 "premature finish" of a tool change depend on the
+//! printer played, its [`Personality`](crate::Personality).
 //!
 //! It talks through a [`Link`] (the in-process simulator, or a serial port in `mmu`), and a
 //! person at the printer (an [`Operator`]) sees what happens and decides on errors.
@@ -14,10 +16,6 @@ use mmu_protocol::{
     ResultCode,
 };
 
-/// Max silence while waiting for an answer, ms (`linkLayerTimeout`).
-pub const LINK_TIMEOUT_MS: u64 = 2000;
-/// `Q0` comes this long after the last activity, ms (`heartBeatPeriod`).
-pub const HEARTBEAT_MS: u64 = 1000;
 /// Consecutive link faults before the printer reports MMU_NOT_RESPONDING or PROTOCOL_ERROR,
 /// whichever came first (`DropOutFilter`: one count for both, reset by every version answer
 /// the printer accepts, `ProcessVersionResponse` calls `ResetCommunicationTimeoutAttempts`).
@@ -28,9 +26,6 @@ const BOOT_WAIT_MS: u64 = 100;
 pub const VERSION_RETRIES: u8 = 6;
 /// Automatic Retry presses per command (`MAX_RETRIES`).
 pub const AUTO_RETRIES: u8 = 3;
-/// The registers the printer reads after every `Q0` (FINDA, pulley position, selector slot,
-/// error count, idler slot).
-pub const POLLED_REGISTERS: [u8; 5] = [0x08, 0x1b, 0x1c, 0x04, 0x1a];
 /// How long the printer keeps sending a rejected command again (a unit still starting up rejects
 /// commands for a moment) before this tool gives up, ms; the printer itself never gives up.
 const REJECTS_FOR_MS: u64 = 2000;
@@ -44,181 +39,11 @@ const MAX_REQUEST_ATTEMPTS: u8 = 5;
 /// The mmu2 layer repeats a command interrupted by a unit restart this many times.
 const MAX_INTERRUPTS: u8 = 3;
 
-/// The wire to the unit, with the printer's clock and filament sensor.
-pub trait Link {
-    /// Send bytes to the unit.
-    fn send(&mut self, bytes: &[u8]) -> io::Result<()>;
-    /// Wait up to `max_ms` for bytes from the unit, append them to `into`, and return as soon as
-    /// some arrived.
-    fn receive(&mut self, max_ms: u64, into: &mut Vec<u8>) -> io::Result<()>;
-    /// The printer's clock, ms (virtual for the simulator, wall time for a serial port).
-    fn now_ms(&self) -> u64;
-    /// The printer's filament sensor as `f` reports it: 0 none, 1 at the sensor, 2 in the nozzle.
-    fn fsensor(&mut self) -> u8;
-}
+mod vocabulary;
 
-/// What the printer's firmware is set up with.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct PrinterOptions {
-    /// The unit version it supports: S0..S2 must answer exactly this (3.0.4 on Buddy 6.5.3 and
-    /// later, 3.0.3 on Buddy 6.4 and MK3S 3.14.1, 3.0.2 on MK3S 3.13.3/3.14.0).
-    pub version: (u8, u8, u8),
-    /// Written to register 0x0b at every start (Buddy firmware writes 5).
-    pub extra_load_mm: u16,
-    /// Written to register 0x14 at every start.
-    pub slow_feed_mm_s: u16,
-    /// A command still running after this long counts as stuck, ms.
-    pub command_timeout_ms: u64,
-    /// Only look: the handshake writes no register (no `W0b`, no `W14`) and no `f` report ever
-    /// goes out, so a bench tool reading a unit's settings or sensors changes nothing in it.
-    pub read_only: bool,
-}
-
-impl Default for PrinterOptions {
-    fn default() -> Self {
-        PrinterOptions {
-            version: (3, 0, 3),
-            extra_load_mm: 5,
-            slow_feed_mm_s: 20,
-            command_timeout_ms: 10 * 60 * 1000,
-            read_only: false,
-        }
-    }
-}
-
-/// Something the person at the printer could see.
-#[derive(Debug, Clone, PartialEq)]
-pub enum PrinterEvent {
-    /// A request went out.
-    Sent(Request),
-    /// An answer came in.
-    Received(Response),
-    /// The handshake passed.
-    Connected {
-        /// S0..S2.
-        version: (u8, u8, u8),
-        /// S3.
-        build: u16,
-    },
-    /// The command in progress reached a new phase.
-    Progress(Request, ProgressCode),
-    /// The command stopped on an error.
-    Error(Request, ErrorCode),
-    /// The printer pressed Retry itself; `left` automatic presses remain.
-    AutoRetry(ErrorCode, u8),
-    /// A button went to the unit.
-    Button(ButtonCode),
-    /// The command finished.
-    Finished(Request, ResultCode),
-    /// No valid answer; the printer re-handshakes.
-    LinkLost(LinkFault),
-    /// The unit restarted under the command; the printer repeats it.
-    Interrupted(Request),
-    /// One `Q0` cycle of a command passed.
-    Heartbeat(Request),
-}
-
-/// Why the printer lost the link.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum LinkFault {
-    /// No complete answer within [`LINK_TIMEOUT_MS`] (the printer's `CommunicationTimeout`).
-    Timeout,
-    /// An answer that does not decode or does not fit (`ProtocolError`).
-    Garbled,
-}
-
-impl LinkFault {
-    /// `timeout` or `garbled`.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            LinkFault::Timeout => "timeout",
-            LinkFault::Garbled => "garbled",
-        }
-    }
-}
-
-/// What the person at the printer does about an error the printer did not retry away.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Decision {
-    /// Press this button on the error screen.
-    Press(ButtonCode),
-    /// Look again at the next heartbeat.
-    Wait,
-    /// Stop: the command ends unrecovered.
-    GiveUp,
-}
-
-/// The person at the printer. The link is passed in so that a simulated person can act on the
-/// simulated unit (pull out filament, clear a fault).
-pub trait Operator<L> {
-    /// Something happened.
-    fn event(&mut self, link: &mut L, event: &PrinterEvent);
-    /// The unit is stopped on `error` for `request` and the printer will not retry by itself.
-    fn decide(&mut self, link: &mut L, request: Request, error: ErrorCode) -> Decision;
-}
-
-/// How a command ended.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Outcome {
-    /// `F` with this result.
-    Finished(ResultCode),
-    /// The unit answered `R` every time.
-    Rejected,
-    /// The operator gave up on this error.
-    GaveUp(ErrorCode),
-}
-
-/// Why the printer could not go on.
-#[derive(Debug)]
-pub enum PrinterError {
-    /// The link itself failed (a serial port error).
-    Io(io::Error),
-    /// The unit's version is not the one the printer supports (screen 04504).
-    VersionMismatch {
-        /// The version request that failed, 0..=2.
-        part: u8,
-        /// What the unit answered.
-        got: Option<u16>,
-    },
-    /// Ten timeouts in a row (screen 04401).
-    NotResponding,
-    /// Ten garbled answers in a row (screen 04402).
-    ProtocolError,
-    /// A command did not end in time.
-    Stuck(Request),
-}
-
-impl std::fmt::Display for PrinterError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            PrinterError::Io(error) => write!(f, "link error: {error}"),
-            PrinterError::VersionMismatch { part, got } => write!(
-                f,
-                "MMU FW UPDATE NEEDED (printer screen 04504): S{part} answered {got:?}"
-            ),
-            PrinterError::NotResponding => {
-                f.write_str("MMU_NOT_RESPONDING (printer screen 04401): no answer 10 times in a row")
-            }
-            PrinterError::ProtocolError => {
-                f.write_str("PROTOCOL_ERROR (printer screen 04402): a garbled answer 10 times in a row")
-            }
-            PrinterError::Stuck(request) => write!(
-                f,
-                "{}{:x} did not finish in time: the unit is stuck",
-                request.code.as_char(),
-                request.value
-            ),
-        }
-    }
-}
-
-impl std::error::Error for PrinterError {}
-
-impl From<io::Error> for PrinterError {
-    fn from(error: io::Error) -> Self {
-        PrinterError::Io(error)
-    }
-}
+pub use vocabulary::{
+    Decision, Link, LinkFault, Operator, Outcome, PrinterError, PrinterEvent, PrinterOptions, has_retry,
+};
 
 /// Why one step of the dialogue failed.
 #[derive(Debug)]
@@ -235,26 +60,6 @@ impl From<io::Error> for Fault {
     }
 }
 
-/// Whether the error screen of `error` has a Retry button (the printer presses it by itself).
-pub fn has_retry(error: ErrorCode) -> bool {
-    matches!(
-        error,
-        ErrorCode::FINDA_DIDNT_SWITCH_ON
-            | ErrorCode::FINDA_DIDNT_SWITCH_OFF
-            | ErrorCode::FSENSOR_DIDNT_SWITCH_ON
-            | ErrorCode::FSENSOR_DIDNT_SWITCH_OFF
-            | ErrorCode::FINDA_VS_EEPROM_DISREPANCY
-            | ErrorCode::FSENSOR_TOO_EARLY
-            | ErrorCode::FINDA_FLICKERS
-            | ErrorCode::STALLED_PULLEY
-            | ErrorCode::MOVE_PULLEY_FAILED
-            | ErrorCode::HOMING_SELECTOR_FAILED
-            | ErrorCode::HOMING_IDLER_FAILED
-            | ErrorCode::MOVE_SELECTOR_FAILED
-            | ErrorCode::MOVE_IDLER_FAILED
-    )
-}
-
 /// The printer's protocol logic over `L`.
 pub struct Printer<L> {
     link: L,
@@ -267,8 +72,8 @@ pub struct Printer<L> {
     /// (the printer's `DropOutFilter` and its initial cause).
     dropouts: u8,
     dropout_cause: Option<LinkFault>,
-    /// The last values of [`POLLED_REGISTERS`].
-    registers: [Option<u16>; POLLED_REGISTERS.len()],
+    /// The last values of the polled registers ([`Personality::polled_registers`]).
+    registers: Vec<Option<u16>>,
 }
 
 impl<L: Link> Printer<L> {
@@ -284,7 +89,7 @@ impl<L: Link> Printer<L> {
             reported_fsensor: None,
             dropouts: 0,
             dropout_cause: None,
-            registers: [None; POLLED_REGISTERS.len()],
+            registers: vec![None; options.personality.polled_registers().len()],
         }
     }
 
@@ -298,9 +103,14 @@ impl<L: Link> Printer<L> {
         &mut self.link
     }
 
-    /// The last polled value of register `address`, if it is one of [`POLLED_REGISTERS`].
+    /// The registers the printer reads after every `Q0`, in order.
+    pub fn polled_registers(&self) -> &'static [u8] {
+        self.options.personality.polled_registers()
+    }
+
+    /// The last polled value of register `address`, if it is one of the polled registers.
     pub fn polled(&self, address: u8) -> Option<u16> {
-        POLLED_REGISTERS
+        self.polled_registers()
             .iter()
             .position(|&a| a == address)
             .and_then(|i| self.registers[i])
@@ -371,7 +181,7 @@ impl<L: Link> Printer<L> {
     /// again, as the printer does. Returns the first `Q0` answer after the restart.
     pub fn reset(&mut self, op: &mut impl Operator<L>, value: u8) -> Result<Response, PrinterError> {
         self.send(op, Request::new(RequestCode::Reset, value))?;
-        self.wait_silence(LINK_TIMEOUT_MS)?;
+        self.wait_silence(self.options.personality.link_timeout_ms())?;
         op.event(&mut self.link, &PrinterEvent::LinkLost(LinkFault::Timeout));
         self.flush();
         self.connect(op)
@@ -487,6 +297,13 @@ impl<L: Link> Printer<L> {
     ) -> Result<Option<Outcome>, PrinterError> {
         let mut retries_left = AUTO_RETRIES;
         let mut shown: Option<Response> = None;
+        // Buddy 6.5.3's premature finish of a tool change (`MMU2::OnMMUProgressMsgChanged` and
+        // `OnMMUProgressMsgSame` in `mmu2_mk4.cpp`): armed on the change to `P1c`
+        // (`loadFilamentStarted`), taken once.
+        let may_finish_early =
+            request.code == RequestCode::Tool && self.options.personality.premature_finish();
+        let mut load_started = false;
+        let mut left_early = false;
         loop {
             if self.link.now_ms().saturating_sub(started) > self.options.command_timeout_ms {
                 return Err(PrinterError::Stuck(request));
@@ -510,11 +327,25 @@ impl<L: Link> Printer<L> {
             shown = Some(answer);
             let value = answer.param_value.unwrap_or(0);
             match answer.param {
-                ParamCode::Processing if new => {
+                ParamCode::Processing => {
                     let progress = ProgressCode(value as u8);
-                    op.event(&mut self.link, &PrinterEvent::Progress(request, progress));
+                    if new {
+                        op.event(&mut self.link, &PrinterEvent::Progress(request, progress));
+                    }
+                    if may_finish_early && !left_early {
+                        if progress == ProgressCode::FEEDING_TO_FSENSOR && new {
+                            load_started = true;
+                        }
+                        // Prusa's layer looks at its sensor between polls too, so the unit may
+                        // have moved on from `P1c` by the answer that shows it here.
+                        let sensor = load_started && self.link.fsensor() != 0;
+                        let disengaging = load_started && progress == ProgressCode::DISENGAGING_IDLER;
+                        if sensor || disengaging {
+                            left_early = true;
+                            op.event(&mut self.link, &PrinterEvent::PrematureFinish(request));
+                        }
+                    }
                 }
-                ParamCode::Processing => {}
                 ParamCode::Error => {
                     let error = ErrorCode(value);
                     if new {
@@ -567,7 +398,8 @@ impl<L: Link> Printer<L> {
     /// `f` (after every `P`/`E` answer while a command runs, else on a change) and the register
     /// poll.
     fn poll(&mut self, op: &mut impl Operator<L>, in_command: bool) -> Result<Response, Fault> {
-        while self.link.now_ms() < self.last_activity_ms + HEARTBEAT_MS {
+        let heartbeat_ms = self.options.personality.heartbeat_ms();
+        while self.link.now_ms() < self.last_activity_ms + heartbeat_ms {
             self.report_fsensor(op)?;
             // Nothing is expected between exchanges; the printer drops it.
             self.link.receive(POLL_STEP_MS, &mut Vec::new())?;
@@ -594,7 +426,7 @@ impl<L: Link> Printer<L> {
     }
 
     fn poll_registers(&mut self, op: &mut impl Operator<L>) -> Result<(), Fault> {
-        for (i, &address) in POLLED_REGISTERS.iter().enumerate() {
+        for (i, &address) in self.polled_registers().iter().enumerate() {
             let answer = self.exchange(op, Request::new(RequestCode::Read, address))?;
             self.registers[i] = (answer.param == ParamCode::Accepted)
                 .then_some(answer.param_value)
@@ -673,13 +505,18 @@ impl<L: Link> Printer<L> {
         self.dropouts += 1;
         let cause = *self.dropout_cause.get_or_insert(why);
         if self.dropouts >= MAX_DROPOUTS {
+            // Prusa's `SuppressShortDropOuts` starts a new count once it reported the screen
+            // (`ResetCommunicationTimeoutAttempts`): a printer that connects again behind it
+            // gets ten more tries.
+            self.dropouts = 0;
+            self.dropout_cause = None;
             return Err(match cause {
                 LinkFault::Timeout => PrinterError::NotResponding,
                 LinkFault::Garbled => PrinterError::ProtocolError,
             });
         }
         if why == LinkFault::Garbled {
-            self.wait_silence(HEARTBEAT_MS)?;
+            self.wait_silence(self.options.personality.heartbeat_ms())?;
         }
         self.flush();
         Ok(())
@@ -712,7 +549,8 @@ impl<L: Link> Printer<L> {
         self.flush();
         self.send(op, request)?;
         // Bytes keep the link alive, but a stream that never makes a frame is garbage.
-        let give_up = self.last_activity_ms + 2 * LINK_TIMEOUT_MS;
+        let timeout_ms = self.options.personality.link_timeout_ms();
+        let give_up = self.last_activity_ms + 2 * timeout_ms;
         loop {
             for byte in std::mem::take(&mut self.inbox).into_iter() {
                 match self.decoder.feed(byte) {
@@ -725,13 +563,13 @@ impl<L: Link> Printer<L> {
                 }
             }
             let now = self.link.now_ms();
-            if now >= self.last_activity_ms + LINK_TIMEOUT_MS {
+            if now >= self.last_activity_ms + timeout_ms {
                 return Err(Fault::Link(LinkFault::Timeout));
             }
             if now >= give_up {
                 return Err(Fault::Link(LinkFault::Garbled));
             }
-            let wait = (self.last_activity_ms + LINK_TIMEOUT_MS - now).min(POLL_STEP_MS);
+            let wait = (self.last_activity_ms + timeout_ms - now).min(POLL_STEP_MS);
             let before = self.inbox.len();
             self.link.receive(wait, &mut self.inbox)?;
             if self.inbox.len() > before {
