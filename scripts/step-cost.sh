@@ -17,10 +17,10 @@
 #
 # The design bar is 25 % of 1 ms (7 272 instructions at 64 MHz; 14 204 on the Pico at 125 MHz,
 # the same cycle model). Measured 2026-11-27 on the Embassy firmware (after merging main):
-#   NUCLEO-G071RB: idle median 4 724 (16.2 %), worst millisecond 9 689 (33.3 %: a 12-byte burst
+#   NUCLEO-G071RB: idle median 4 724 (16.2 %), worst millisecond 9 691 (33.3 %: a 12-byte burst
 #     of requests answered in an error), worst millisecond with a flash write 7 652 (26.3 %);
 #   Pico (its multiplexed scan: nine settling timers, 36 blocking conversions): idle median
-#     12 351 (21.7 % at 125 MHz), worst millisecond 17 309 (30.5 %), with a flash write 15 279.
+#     12 351 (21.7 % at 125 MHz), worst millisecond 17 311 (30.5 %), with a flash write 15 279.
 # Both worst milliseconds are OVER the bar: the executor, the tasks and their glue (the link's
 # pipes, the Ticker's and the scan's timers, the wakers) cost about 1 900 instructions a
 # millisecond over the logic's own step (the old loop's idle step was 2 839), compiler-builtins'
