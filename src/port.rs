@@ -172,46 +172,11 @@ mod tests {
     use crate::control::{ControlLoop, MAX_SAMPLE_AGE_US, Tick};
     use crate::{App, Instant, Samples};
     use core::sync::atomic::{AtomicU32, Ordering};
-    use embedded_storage::nor_flash::NorFlashErrorKind;
 
     extern crate std;
     use std::vec::Vec;
 
-    const PAGE: usize = 2048;
-
-    struct Flash(Vec<u8>, u32);
-
-    impl ErrorType for Flash {
-        type Error = NorFlashErrorKind;
-    }
-
-    impl ReadNorFlash for Flash {
-        const READ_SIZE: usize = 1;
-        fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
-            let from = self.0.get(offset as usize..offset as usize + bytes.len());
-            bytes.copy_from_slice(from.ok_or(NorFlashErrorKind::OutOfBounds)?);
-            Ok(())
-        }
-        fn capacity(&self) -> usize {
-            self.0.len()
-        }
-    }
-
-    impl NorFlash for Flash {
-        const WRITE_SIZE: usize = 8;
-        const ERASE_SIZE: usize = PAGE;
-        fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
-            self.1 += (to - from) / PAGE as u32;
-            let page = self.0.get_mut(from as usize..to as usize);
-            page.ok_or(NorFlashErrorKind::OutOfBounds)?.fill(0xff);
-            Ok(())
-        }
-        fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
-            let to = self.0.get_mut(offset as usize..offset as usize + bytes.len());
-            to.ok_or(NorFlashErrorKind::OutOfBounds)?.copy_from_slice(bytes);
-            Ok(())
-        }
-    }
+    use crate::persist::ram_flash::{PAGE, RamFlash};
 
     static FEEDS: AtomicU32 = AtomicU32::new(0);
     fn feed() {
@@ -220,7 +185,7 @@ mod tests {
 
     #[test]
     fn the_flash_feeds_the_watchdog_only_as_often_as_allowed() {
-        let mut flash = WatchedFlash::new(Flash(std::vec![0; 16 * PAGE], 0), feed);
+        let mut flash = WatchedFlash::new(RamFlash::<PAGE, 8>::new(std::vec![0; 16 * PAGE]), feed);
         let before = FEEDS.load(Ordering::SeqCst);
         // Ordinary pieces: writes and a page erase never feed.
         flash.write(0, &[1; 8]).unwrap();
@@ -238,7 +203,7 @@ mod tests {
         flash.allow_feeds(2);
         flash.erase(0, 8 * PAGE as u32).unwrap();
         assert_eq!(FEEDS.load(Ordering::SeqCst), before + 6);
-        assert_eq!(flash.inner().1, 1 + 10 + 8);
+        assert_eq!(flash.inner().erases, 1 + 10 + 8);
     }
 
     /// A CRC unit set up wrong: it forgets to reverse its output.
@@ -308,46 +273,9 @@ mod tests {
 
     /// The Pico's flash as the store sees it through embassy-rp's driver: 4 KiB sectors, byte
     /// writes and reads (`embassy_rp::flash`: ERASE_SIZE 4096, WRITE_SIZE 1, READ_SIZE 1).
-    struct QspiFlash(Vec<u8>, u32);
+    type QspiFlash = RamFlash<SECTOR, 1>;
 
     const SECTOR: usize = 4096;
-
-    impl ErrorType for QspiFlash {
-        type Error = NorFlashErrorKind;
-    }
-
-    impl ReadNorFlash for QspiFlash {
-        const READ_SIZE: usize = 1;
-        fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
-            let from = self.0.get(offset as usize..offset as usize + bytes.len());
-            bytes.copy_from_slice(from.ok_or(NorFlashErrorKind::OutOfBounds)?);
-            Ok(())
-        }
-        fn capacity(&self) -> usize {
-            self.0.len()
-        }
-    }
-
-    impl NorFlash for QspiFlash {
-        const WRITE_SIZE: usize = 1;
-        const ERASE_SIZE: usize = SECTOR;
-        fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
-            if !(from as usize).is_multiple_of(SECTOR) || !(to as usize).is_multiple_of(SECTOR) {
-                return Err(NorFlashErrorKind::NotAligned);
-            }
-            self.1 += (to - from) / SECTOR as u32;
-            let sectors = self.0.get_mut(from as usize..to as usize);
-            sectors.ok_or(NorFlashErrorKind::OutOfBounds)?.fill(0xff);
-            Ok(())
-        }
-        fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
-            let to = self.0.get_mut(offset as usize..offset as usize + bytes.len());
-            for (to, byte) in to.ok_or(NorFlashErrorKind::OutOfBounds)?.iter_mut().zip(bytes) {
-                *to &= byte;
-            }
-            Ok(())
-        }
-    }
 
     #[test]
     fn the_store_keeps_the_state_in_the_picos_4_kib_sectors() {
@@ -355,7 +283,7 @@ mod tests {
         use crate::unit::Lane;
         // The Pico's store: its last 16 sectors, here at offset 0 of a 64 KiB flash.
         let range = 0..16 * SECTOR as u32;
-        let flash = WatchedFlash::new(QspiFlash(std::vec![0xff; 16 * SECTOR], 0), feed);
+        let flash = WatchedFlash::new(QspiFlash::erased(16), feed);
         let (crc, _) = CheckedCrc::check(SoftwareCrc::default());
         let mut app = App::<3>::default();
         let store =
@@ -386,7 +314,7 @@ mod tests {
             }
         }
         let last = lanes[(rounds - 1) % lanes.len()];
-        let erased = keeper.store().flash().inner().1;
+        let erased = keeper.store().flash().inner().erases;
         // The 16 sectors start blank; an erase means the log came round to a used sector.
         assert!(erased > 0, "the saves never came round to a used sector");
         // A restart restores the last state from the sectors.

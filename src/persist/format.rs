@@ -28,13 +28,13 @@ fn store(flash: RamFlash) -> Store<RamFlash, 3> {
 
 /// The flash image of `testdata/store-format-1.txt`.
 fn written_by_format_1() -> RamFlash {
-    let mut flash = RamFlash(std::vec![0xff; PAGES * PAGE]);
+    let mut flash = RamFlash::erased(PAGES);
     let text = include_str!("testdata/store-format-1.txt");
     for line in text.lines().filter(|line| !line.starts_with('#')) {
         let mut fields = line.split_whitespace();
         let offset = usize::from_str_radix(fields.next().unwrap(), 16).unwrap();
         for (at, byte) in fields.enumerate() {
-            flash.0[offset + at] = u8::from_str_radix(byte, 16).unwrap();
+            flash.bytes[offset + at] = u8::from_str_radix(byte, 16).unwrap();
         }
     }
     flash
@@ -83,7 +83,7 @@ fn save_the_sequence(store: &mut Store<RamFlash, 3>) -> Snapshot<3> {
 fn listing(flash: &RamFlash) -> String {
     use core::fmt::Write as _;
     let mut out = String::new();
-    for (index, word) in flash.0.chunks(8).enumerate() {
+    for (index, word) in flash.bytes.chunks(8).enumerate() {
         if word != [0xff; 8] {
             write!(out, "{:05x}", index * 8).unwrap();
             for byte in word {
@@ -106,7 +106,7 @@ fn a_store_written_by_the_previous_firmware_loads_whole() {
 
 #[test]
 fn the_store_writes_the_bytes_the_previous_firmware_wrote() {
-    let mut store = store(RamFlash(std::vec![0xff; PAGES * PAGE]));
+    let mut store = store(RamFlash::erased(PAGES));
     save_the_sequence(&mut store);
     let expected = listing(&written_by_format_1());
     let written = listing(store.flash());

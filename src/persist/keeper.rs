@@ -347,7 +347,7 @@ mod tests {
 
     impl Unit {
         fn boot() -> Self {
-            let flash = RamFlash(std::vec![0xff; 3 * PAGE]);
+            let flash = RamFlash::erased(3);
             let mut app = App::new(Config::default());
             let store = Store::new(flash, 0..3 * PAGE as u32).unwrap();
             let (keeper, _) = Keeper::boot(store, &mut app);
@@ -452,8 +452,8 @@ mod tests {
             unit.steps_until_stored(false, |s| s.lanes == lanes);
         }
         let mut flash = unit.keeper.store().flash().clone();
-        let trailer = flash.0.iter().rposition(|&b| b != 0xff).unwrap() / 8 * 8;
-        flash.0[trailer..trailer + 8].fill(0xff);
+        let trailer = flash.bytes.iter().rposition(|&b| b != 0xff).unwrap() / 8 * 8;
+        flash.bytes[trailer..trailer + 8].fill(0xff);
         let mut store = Store::<_, 3>::new(flash, 0..3 * PAGE as u32).unwrap();
         assert_eq!(store.load().lanes, first);
         assert_eq!(
@@ -524,7 +524,7 @@ mod tests {
     fn a_flash_of_pages_over_64_kib_is_refused() {
         let store = Store::<_, 3>::new(LargePages, 0..3 << 17);
         assert!(matches!(store, Err(StoreError::Layout)));
-        let store = Store::<_, 3>::new(RamFlash(Vec::new()), 0..3 * PAGE as u32);
+        let store = Store::<_, 3>::new(<RamFlash>::new(Vec::new()), 0..3 * PAGE as u32);
         assert!(store.is_ok(), "pages of 2 KiB");
     }
 

@@ -15,7 +15,7 @@ mod entry;
 mod format;
 mod keeper;
 #[cfg(test)]
-mod ram_flash;
+pub(crate) mod ram_flash;
 mod records;
 mod settings;
 mod store;
