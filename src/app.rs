@@ -510,13 +510,18 @@ impl<const N: usize> App<N> {
     }
 
     /// The running phase drives its slot; a loaded slot follows the extruder through the tension
-    /// sensor ([`follower`]); every other motor coasts.
+    /// sensor ([`follower`]); every other motor coasts. A slot that could not follow stops the
+    /// running command too, braked at once ([`Runner::interrupt`]), and its failure is counted
+    /// on that slot, not on the command's.
     fn drive_motors(&mut self, now: Instant, out: &mut Outputs<N>) {
         let allowed = !matches!(self.operation.status(), Status::Failed(_));
         let driving = self.operation.driving_slot();
-        if let Some(error) = follower::follow(&mut self.unit, driving, allowed, now, &self.config) {
-            self.operation.interrupt(error);
+        if let Some((slot, error)) = follower::follow(&mut self.unit, driving, allowed, now, &self.config) {
+            self.operation.interrupt(error, &mut self.unit, now);
             self.counters.drive_errors = self.counters.drive_errors.saturating_add(1);
+            if let Some(count) = self.counters.failures.get_mut(slot) {
+                *count = count.saturating_add(1);
+            }
         }
         for (motor, drive) in out.motors.iter_mut().zip(self.unit.drives.iter()) {
             *motor = drive.command();

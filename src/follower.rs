@@ -33,15 +33,15 @@ const BUDGET: Budget = Budget {
 };
 
 /// Drive every loaded slot that no command drives (`driving`), as the tension says; every other
-/// idle motor is released. `allowed` is false while the unit holds an error. Returns the error
-/// of a slot whose motor could not follow (it is stopped).
+/// idle motor is released. `allowed` is false while the unit holds an error. Returns a slot whose
+/// motor could not follow (it is stopped) and its error.
 pub fn follow<const N: usize>(
     unit: &mut Unit<N>,
     driving: Option<usize>,
     allowed: bool,
     now: Instant,
     config: &Config,
-) -> Option<ErrorCode> {
+) -> Option<(usize, ErrorCode)> {
     let tension = unit.hub.tension.reading();
     let assist = follow_duty(0, tension, config).permille() > 0;
     let mut failed = None;
@@ -60,7 +60,7 @@ pub fn follow<const N: usize>(
             drive.begin(BUDGET, feeder, now);
         }
         if let Err(error) = drive.run(Motion::Follow { speed: 0 }, feeder, tension, now, config) {
-            failed = Some(error);
+            failed = Some((slot, error));
         }
     }
     failed

@@ -244,13 +244,31 @@ impl Runner {
     /// Something went wrong outside the plan (the follower could not follow while printing): the
     /// command reports `error` until a button the recovery table names for it. An error already
     /// shown stays.
-    pub fn interrupt(&mut self, error: ErrorCode) {
-        if !matches!(self.status, Status::Failed(_)) {
-            self.failed_after_finish = self.status == Status::Finished;
-            self.index = self.plan.len();
-            self.run = None;
-            self.status = Status::Failed(error);
+    ///
+    /// A command still running is stopped at once, its motor braked in this very step as when a
+    /// phase of its own fails (otherwise it would be driven once more, then coast). The error is
+    /// reported on this command, the one the printer follows: Prusa's printer shows whatever
+    /// error a `Q0` answer carries, but waits for its own command's `F0` to go on (another
+    /// command's finish means to it that its command was lost). So the printer shows PULLEY
+    /// CANNOT MOVE and presses Retry (every command's table retries `804b`: [`JAM_ERROR`]);
+    /// Retry lets the follower try again and, the interrupted plan being cut short, plans this
+    /// command again from the sensors, so that the printer still gets its command carried out
+    /// and its `F0`. A command that had finished is finished again by Retry instead.
+    ///
+    /// [`JAM_ERROR`]: crate::follower::JAM_ERROR
+    pub fn interrupt<const N: usize>(&mut self, error: ErrorCode, unit: &mut Unit<N>, now: Instant) {
+        if matches!(self.status, Status::Failed(_)) {
+            return;
         }
+        if let Some(slot) = self.driving_slot() {
+            unit.brake(slot, now);
+        }
+        self.failed_after_finish = self.status == Status::Finished;
+        self.index = self.plan.len();
+        self.run = None;
+        self.resume_goal_from = None;
+        self.failed_fed_centi = None;
+        self.status = Status::Failed(error);
     }
 
     /// Run [`Phase::ClearMerge`] for each suspect slot, then the blocked phase again.
