@@ -424,15 +424,46 @@ impl<const N: usize> App<N> {
     /// Write `value` to register `address`; false (answered `R`) when the register is unknown or
     /// read-only or the value is out of range.
     pub fn write_register(&mut self, address: u8, value: u16) -> bool {
+        let filament_readings = self.filament_readings();
         let mut target = registers::Target {
             config: &mut self.config,
             fsensor: &mut self.unit.fsensor,
+            filament_readings,
         };
         let accepted = registers::write(&mut target, N, address, value);
         if accepted && address != registers::FSENSOR {
             self.settings_revision = self.settings_revision.wrapping_add(1);
         }
         accepted
+    }
+
+    /// The reading of each presence sensor that sees filament where the lanes say filament is
+    /// (the hub's while a slot owns the hub path, a slot's while its tip is at least parked),
+    /// for the threshold guard ([`registers::FilamentReadings`]). A reading counts only at or
+    /// above the "on" threshold in force: a sensor stuck "present" below it (an "off" threshold
+    /// no reading goes under) holds no write back.
+    fn filament_readings(&self) -> registers::FilamentReadings {
+        let mut readings = registers::NO_FILAMENT_READINGS;
+        let filament = |reading: Option<u16>, on: u16| reading.filter(|&value| value >= on);
+        if let Some(hub) = readings.first_mut()
+            && self.unit.active().is_some()
+        {
+            *hub = filament(
+                self.unit.hub.filament.analog.reading(),
+                self.config.hub_thresholds.on,
+            );
+        }
+        for (slot, feeder) in self.unit.feeders.iter().enumerate() {
+            let parked_or_further = !matches!(self.unit.lane(slot), Lane::Unknown | Lane::Empty);
+            if let (true, Some(seen), Some(thresholds)) = (
+                parked_or_further,
+                readings.get_mut(1 + slot),
+                self.config.slot_thresholds.get(slot),
+            ) {
+                *seen = filament(feeder.filament.analog.reading(), thresholds.on);
+            }
+        }
+        readings
     }
 
     /// Every writable setting that differs from its default, and its value (only what differs:

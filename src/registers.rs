@@ -78,7 +78,18 @@ pub struct Target<'a> {
     pub config: &'a mut Config,
     /// The printer's filament sensor state (register 0x09, as `f`).
     pub fsensor: &'a mut u8,
+    /// What the presence sensors show now, for the threshold guard ([`FilamentReadings`]).
+    pub filament_readings: FilamentReadings,
 }
+
+/// The filtered reading of each presence sensor that sees filament the unit knows is there
+/// (index 0: the hub sensor, `1 + k`: slot *k*'s), `None` for the others. A threshold write
+/// under which such a reading would no longer be filament is refused: see [`set_threshold`].
+pub type FilamentReadings = [Option<u16>; 1 + crate::MAX_SLOTS];
+
+/// No presence sensor known to see filament (before the first step, in a settings check): the
+/// threshold guard has nothing to hold a write to.
+pub const NO_FILAMENT_READINGS: FilamentReadings = [None; 1 + crate::MAX_SLOTS];
 
 /// Whether the printer may write a register.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -558,7 +569,7 @@ registers! {
         "threshold_on",
         0..=4095,
         |v, _, i| Some(thresholds(v.config, SensorId::from_index(i))?.on),
-        |t, _, i, value| set_threshold(t.config, SensorId::from_index(i), |th| th.on = value)
+        |t, _, i, value| set_threshold(t, SensorId::from_index(i), |th| th.on = value)
     ),
     ThresholdOff: writable(
         THRESHOLD_OFF,
@@ -566,7 +577,7 @@ registers! {
         "threshold_off",
         0..=4095,
         |v, _, i| Some(thresholds(v.config, SensorId::from_index(i))?.off),
-        |t, _, i, value| set_threshold(t.config, SensorId::from_index(i), |th| th.off = value)
+        |t, _, i, value| set_threshold(t, SensorId::from_index(i), |th| th.off = value)
     ),
     SlotOdometry: block(ODOMETRY, Slots, "odometry", |v, _, k| Some(
         v.feeders.get(k)?.odometry_mm() as i16 as u16
@@ -595,8 +606,25 @@ fn thresholds(config: &Config, sensor: SensorId) -> Option<Thresholds> {
     }
 }
 
-/// Change one threshold of a sensor; refused when the pair would not be valid (on > off).
-fn set_threshold(config: &mut Config, sensor: SensorId, change: impl FnOnce(&mut Thresholds)) -> bool {
+/// Change one threshold of a sensor; refused when the pair would not be valid (on > off), or
+/// when it would blind a presence sensor to the filament it sees now.
+///
+/// The guard: a presence sensor whose reading is filament under the thresholds in force, where
+/// the unit knows filament is ([`FilamentReadings`]), keeps an "on" threshold at or below that
+/// reading. An "on" above it could never see that filament again once it has left, nor at the
+/// next start, whose check would then pass with filament in the hub (hub "on" written to
+/// 3,072..3,902 while the sensor reads about 3,000 with filament). Only this direction is
+/// refused: a sensor that sees filament where none is stops the next command with an error,
+/// whereas one blind to filament lets a motor push into an occupied path. A calibration is
+/// never refused: it puts "on" 60 % of the way from the empty to the full level, below the
+/// reading with filament.
+fn set_threshold(target: &mut Target, sensor: SensorId, change: impl FnOnce(&mut Thresholds)) -> bool {
+    let seen = match sensor {
+        SensorId::HubFilament => target.filament_readings.first().copied().flatten(),
+        SensorId::SlotFilament(slot) => target.filament_readings.get(1 + slot).copied().flatten(),
+        SensorId::MotorHall(_) | SensorId::HubTension | SensorId::HubCutter => None,
+    };
+    let config = &mut *target.config;
     let thresholds = match sensor {
         SensorId::HubFilament => Some(&mut config.hub_thresholds),
         SensorId::SlotFilament(slot) => config.slot_thresholds.get_mut(slot),
@@ -608,7 +636,7 @@ fn set_threshold(config: &mut Config, sensor: SensorId, change: impl FnOnce(&mut
     };
     let mut updated = *thresholds;
     change(&mut updated);
-    if !updated.is_valid() {
+    if !updated.is_valid() || seen.is_some_and(|reading| updated.on > reading) {
         return false;
     }
     *thresholds = updated;
@@ -856,6 +884,7 @@ mod tests {
         let mut target = Target {
             config: &mut config,
             fsensor: &mut fsensor,
+            filament_readings: NO_FILAMENT_READINGS,
         };
         assert!(write(&mut target, 3, 0x4c, 1234));
         assert!(write(&mut target, 3, 0x0d, 77));
@@ -874,6 +903,7 @@ mod tests {
         let mut target = Target {
             config: &mut config,
             fsensor: &mut fsensor,
+            filament_readings: NO_FILAMENT_READINGS,
         };
         let mut read_only = 0;
         for register in all(3).filter(|r| r.row.access() == Access::Read) {
@@ -898,6 +928,7 @@ mod tests {
         let mut target = Target {
             config: &mut config,
             fsensor: &mut fsensor,
+            filament_readings: NO_FILAMENT_READINGS,
         };
         assert!(write(&mut target, 3, 0x22, 410));
         assert!(!write(&mut target, 3, 0x22, 49));
@@ -908,5 +939,33 @@ mod tests {
         assert!(write(&mut target, 3, 0x09, 1));
         assert_eq!(config.bowden_mm, 410);
         assert_eq!(fsensor, 1);
+    }
+
+    #[test]
+    fn a_threshold_that_would_not_see_the_filament_seen_now_is_refused() {
+        let mut config = Config::default();
+        let mut fsensor = 0;
+        let mut filament_readings = NO_FILAMENT_READINGS;
+        // The hub sensor reads 3,000 with filament; slot 1's (index 2) 2,800.
+        filament_readings[0] = Some(3000);
+        filament_readings[2] = Some(2800);
+        let mut target = Target {
+            config: &mut config,
+            fsensor: &mut fsensor,
+            filament_readings,
+        };
+        for on in [3001, 3072, 3902] {
+            assert!(!write(&mut target, 3, THRESHOLD_ON, on), "{on}");
+        }
+        assert!(!write(&mut target, 3, THRESHOLD_ON + 5, 2801));
+        // At the reading, or what a calibration writes: taken.
+        assert!(write(&mut target, 3, THRESHOLD_ON, 3000));
+        assert!(write(&mut target, 3, THRESHOLD_ON, 2619));
+        assert!(write(&mut target, 3, THRESHOLD_ON + 5, 2500));
+        // Slot 0 (index 1) sees no filament the unit knows of: nothing to hold a write to.
+        assert!(write(&mut target, 3, THRESHOLD_ON + 3, 3500));
+        // "off" only ever lowers what is seen as filament: the pair stays valid, so taken.
+        assert!(write(&mut target, 3, THRESHOLD_OFF, 100));
+        assert_eq!((config.hub_thresholds.on, config.hub_thresholds.off), (2619, 100));
     }
 }

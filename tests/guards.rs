@@ -89,3 +89,56 @@ fn a_follower_jam_during_another_slots_command_brakes_that_command_at_once() {
     assert_eq!(rig.query().param, ParamCode::Finished);
     assert_eq!(rig.model.loaded_slot(), Some(0), "slot 0 still loaded");
 }
+
+/// The hub sensor reads about 3,000 with slot 0's filament in the hub: an "on" threshold above
+/// that reading (the review's 3,072..3,902) would never see this filament again, and the next
+/// start-up check would pass with filament in the hub. Such a write is refused (`R`); one a
+/// calibration writes (60 % of the way from the empty to the full level) is taken. Slot sensors
+/// are guarded alike.
+#[test]
+fn a_threshold_that_would_blind_a_sensor_to_the_filament_it_sees_is_refused() {
+    let mut rig = Rig::<3>::new();
+    rig.boot();
+    // Slot 1 preloaded (its lane known parked), slot 0 loaded.
+    let preload = Request::new(RequestCode::Load, 1);
+    assert_eq!(rig.command(preload).last, common::finished(preload));
+    rig.command(t(0));
+    let hub_on = 0x90;
+    let reading = rig.read(0x70).expect("the hub sensor's filtered value");
+    assert!(
+        (2900..3100).contains(&reading),
+        "the hub sees filament: {reading}"
+    );
+    for on in [3072, 3500, 3902, reading + 1] {
+        let answer = rig.send(Request::write(hub_on, on)).map(|a| a.param);
+        assert_eq!(
+            answer,
+            Some(ParamCode::Rejected),
+            "hub on = {on} over a reading of {reading}"
+        );
+    }
+    assert_eq!(rig.read(hub_on), Some(2600), "unchanged");
+    // A restart now still sees the filament in the hub.
+    let snapshot = rig.app.snapshot();
+    let mut restarted = Rig::<3>::new();
+    restarted.model = rig.model.clone();
+    restarted.app.restore(&snapshot);
+    restarted.idle(200);
+    assert_eq!(restarted.app.unit().hub_present(), Some(true));
+
+    // What a calibration writes with filament at 3,000 and none at 2,048.
+    rig.write(hub_on, 2619);
+    rig.write(0xa0, 2429);
+    // Slot 1's tip is parked past its slot sensor.
+    assert_eq!(rig.app.lanes()[1], mmu_firmware::unit::Lane::Parked);
+    let slot_1_on = 0x90 + 3 + 2;
+    let reading = rig.read(0x70 + 3 + 2).expect("slot 1's filtered value");
+    assert!(reading > 2900, "slot 1's sensor sees filament: {reading}");
+    let answer = rig.send(Request::write(slot_1_on, 3300)).map(|a| a.param);
+    assert_eq!(
+        answer,
+        Some(ParamCode::Rejected),
+        "slot 1 on over a reading of {reading}"
+    );
+    rig.write(slot_1_on, 2619);
+}
