@@ -4,8 +4,9 @@
 //! after they change (compared a register per call), counters as the store allows, everything
 //! before a reset. A flash that fails is retried with a growing pause, and the page erases of
 //! any hour stay under [`ERASE_BURST`] + [`ERASES_PER_HOUR`] whatever happens (each erase stalls
-//! the CPU up to 40 ms on the STM32G0). Each call of [`Keeper::update`] does one bounded piece
-//! of a save (at most 8 double words programmed or one page erased). [`Keeper::update_after`]
+//! the CPU up to 40 ms on the STM32G0); a unit starts with only [`ERASES_AT_BOOT`] of them, so
+//! that a reset loop cannot renew the budget at every boot. Each call of [`Keeper::update`] does
+//! one bounded piece of a save (at most 8 double words programmed or one page erased). [`Keeper::update_after`]
 //! runs none after a step that was busy with the printer, so that a step and the piece after it
 //! fit a quarter of the 1 ms period together; after [`MAX_DEFERRED_STEPS`] busy steps in a row
 //! it runs one anyway (a save must end): only a printer that sends without a pause for 8 ms
@@ -25,7 +26,7 @@ use crate::unit::Lane;
 pub const FULL_CHECK_MS: u64 = 1000;
 /// Page erases a running unit may do per hour, on top of [`ERASE_BURST`].
 pub const ERASES_PER_HOUR: u32 = 60;
-/// Page erases a unit may do at once (its budget when it starts, and the most it saves up).
+/// Page erases a unit may do at once: the most it saves up (it starts with [`ERASES_AT_BOOT`]).
 pub const ERASE_BURST: u32 = 24;
 /// The first pause after a failed save, ms; it doubles up to [`RETRY_MAX_MS`].
 const RETRY_MIN_MS: u32 = 1000;
@@ -33,6 +34,13 @@ const RETRY_MIN_MS: u32 = 1000;
 pub const RETRY_MAX_MS: u64 = 600_000;
 /// A reset (`X0`, `X42`) may always erase this many pages (one save's page moves).
 const ERASES_BEFORE_RESET: u32 = 2;
+/// Page erases a unit may do right after it starts (one save's page moves); it earns the rest
+/// at [`ERASES_PER_HOUR`], up to [`ERASE_BURST`]. Not a full burst: nothing in the flash tells
+/// how long ago the last boot spent its erases, and a reset loop on a store found damaged at
+/// every boot would have a full budget to spend at every boot (24 erases a boot). So each boot
+/// erases at most this many pages plus one per minute it runs, whatever the loop (and two more
+/// when it ends on the printer's `X0` or `X42`: a reset's save may always move its pages).
+pub const ERASES_AT_BOOT: u32 = 2;
 /// Busy steps in a row after which [`Keeper::update_after`] does its piece anyway: a printer
 /// that never pauses delays a save by at most this many steps, ms, per piece.
 pub const MAX_DEFERRED_STEPS: u8 = 8;
@@ -110,7 +118,8 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Keeper<F, N, C> {
             scan: None,
             deferred: 0,
             checked_at: None,
-            erase_credit: ERASE_BURST,
+            // Not a full burst: see ERASES_AT_BOOT.
+            erase_credit: ERASES_AT_BOOT,
             refilled_at: None,
             retry_at: None,
             retry_pause_ms: RETRY_MIN_MS,
@@ -484,6 +493,97 @@ mod tests {
         let mut store = Store::<_, 3>::new(unit.keeper.store().flash().clone(), 0..3 * PAGE as u32).unwrap();
         assert_eq!(store.load().lanes, second);
         assert!(store.damage().is_none(), "{:?}", store.damage());
+    }
+
+    /// A worn flash: every erase leaves a stuck double word in its page, so every page a save
+    /// opens is damaged and every load finds damage.
+    #[derive(Clone)]
+    struct Worn(RamFlash);
+
+    impl ErrorType for Worn {
+        type Error = NorFlashErrorKind;
+    }
+
+    impl ReadNorFlash for Worn {
+        const READ_SIZE: usize = 1;
+
+        fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
+            self.0.read(offset, bytes)
+        }
+
+        fn capacity(&self) -> usize {
+            self.0.capacity()
+        }
+    }
+
+    impl NorFlash for Worn {
+        const WRITE_SIZE: usize = 8;
+        const ERASE_SIZE: usize = PAGE;
+
+        fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
+            self.0.erase(from, to)?;
+            for page in (from..to).step_by(PAGE) {
+                self.0.write(page + 64, &[0; 8])?;
+            }
+            Ok(())
+        }
+
+        fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), Self::Error> {
+            self.0.write(offset, bytes)
+        }
+    }
+
+    /// Boots in a reset loop (a power cut every 50 s, tearing a program) on a worn store, found
+    /// damaged at every boot: the
+    /// budget must not start full at every boot. Each boot starts with [`ERASES_AT_BOOT`] (one
+    /// save's page moves) and earns one more a minute, so boots shorter than a minute erase at
+    /// most `BOOTS × ERASES_AT_BOOT` pages in total: 2 a boot instead of up to [`ERASE_BURST`].
+    #[test]
+    fn a_reset_loop_on_a_store_damaged_at_every_boot_erases_at_most_two_pages_a_boot() {
+        const BOOTS: u32 = 40;
+        let mut flash = Worn(RamFlash::erased(3));
+        for boot in 0..BOOTS {
+            if boot > 0 {
+                // The power cut tore a program: a double word after the last one programmed
+                // reads neither erased nor as an entry.
+                let last = flash.0.bytes.iter().rposition(|&b| b != 0xff).unwrap_or(0) / 8 * 8;
+                if let Some(torn) = flash.0.bytes.get_mut(last + 8..last + 16) {
+                    torn.copy_from_slice(&[0x5a, 0, 0x5a, 0, 0x5a, 0, 0x5a, 0]);
+                }
+            }
+            let mut app = App::new(Config::default());
+            let store = Store::<_, 3>::new(flash, 0..3 * PAGE as u32).unwrap();
+            let (mut keeper, found) = Keeper::boot(store, &mut app);
+            if boot > 0 {
+                assert!(
+                    matches!(found, Boot::Damaged(_)),
+                    "boot {boot} found the store damaged"
+                );
+            }
+            for ms in (0..50_000).step_by(5) {
+                if ms % 1000 == 0 {
+                    // A lane changes every second: something to save.
+                    let lanes = [
+                        Lane::ALL[(ms / 1000 + boot as u64) as usize % 6],
+                        Lane::Empty,
+                        Lane::Empty,
+                    ];
+                    let snapshot = Snapshot {
+                        lanes,
+                        ..app.snapshot()
+                    };
+                    app.restore(&snapshot);
+                }
+                let _ = keeper.update(&app, Instant::from_millis(ms));
+            }
+            flash = keeper.into_store().into_flash();
+        }
+        let erases = flash.0.erases;
+        assert!(erases > 0, "the worn store was tried");
+        assert!(
+            erases <= BOOTS * ERASES_AT_BOOT,
+            "{erases} erases in {BOOTS} boots"
+        );
     }
 
     /// A flash that erases 128 KiB at once (as some NOR flashes do): a store keeps where its

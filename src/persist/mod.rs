@@ -7,7 +7,8 @@
 //! from the settings, so that `X42` and a damaged store keep it. [`Store`] keeps them in a log
 //! built for the STM32G0's flash, where a power cut can tear any program or erase; [`Keeper`] is
 //! the policy the firmware and the simulator share: restore at boot, save as the App changes,
-//! recover from a flash that fails, and never erase more than [`ERASES_PER_HOUR`] (plus a burst).
+//! recover from a flash that fails, and never erase more than [`ERASES_PER_HOUR`] (plus a burst,
+//! earned while running: a boot starts with [`ERASES_AT_BOOT`]).
 
 mod crc;
 mod entry;
@@ -26,7 +27,8 @@ use crate::unit::Lane;
 
 pub use crc::{EntryCrc, SoftwareCrc, iso_hdlc};
 pub use keeper::{
-    Boot, ERASE_BURST, ERASES_PER_HOUR, FULL_CHECK_MS, Health, Keeper, MAX_DEFERRED_STEPS, RETRY_MAX_MS,
+    Boot, ERASE_BURST, ERASES_AT_BOOT, ERASES_PER_HOUR, FULL_CHECK_MS, Health, Keeper, MAX_DEFERRED_STEPS,
+    RETRY_MAX_MS,
 };
 pub use store::{Damage, Progress, SLOW_RECORD_PERIOD_MS, Store};
 
