@@ -84,7 +84,8 @@ pub struct Target<'a> {
 
 /// The filtered reading of each presence sensor that sees filament the unit knows is there
 /// (index 0: the hub sensor, `1 + k`: slot *k*'s), `None` for the others. A threshold write
-/// under which such a reading would no longer be filament is refused: see [`set_threshold`].
+/// under which such a reading would no longer be filament (an "on" above it) is refused (`R`);
+/// the rule is in the book's register map (`book/src/registers.md`).
 pub type FilamentReadings = [Option<u16>; 1 + crate::MAX_SLOTS];
 
 /// No presence sensor known to see filament (before the first step, in a settings check): the
