@@ -510,7 +510,8 @@ registers! {
     Odometry: read_only(0x1a, "odometry", |v, _, _| Some(
         v.path_slot
             .and_then(|slot| v.feeders.get(slot))
-            .map_or(0, |f| f.odometry_mm().clamp(0, i32::from(u16::MAX)) as u16)
+            // Two's complement, wrapping as the odometry does (it stuck at 0 and 65 535 mm).
+            .map_or(0, |f| f.odometry_mm() as u16)
     )),
     SelectorSlot: read_only(0x1b, "selector_slot", |v, _, _| Some(
         v.path_slot.map_or(5, |slot| slot as u16)

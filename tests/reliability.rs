@@ -94,3 +94,61 @@ fn a_stored_duty_pair_below_the_defaults_is_restored() {
     app.restore(&snapshot);
     assert_eq!((app.config().max_duty, app.config().stall_min_duty), (200, 150));
 }
+
+/// Odometry 5 mm short of where an `i32` of hundredths ends (21.47 km): the next moves cross it.
+const NEAR_THE_END: i32 = i32::MAX - 500;
+
+/// Finding 1: the odometry saturated at 21.47 km fed per power-on, after which distances stopped
+/// counting: feeds to a distance never got there, parking went wrong. Odometry wraps and every
+/// distance is the difference of two readings: slots past it change tools as fresh ones do,
+/// crossing the end both ways.
+#[test]
+fn a_slot_that_has_fed_past_21_km_changes_tools_as_a_fresh_one() {
+    let mut rig = Rig::<3>::new();
+    rig.boot();
+    rig.app.set_odometry_centi(0, NEAR_THE_END);
+    rig.app.set_odometry_centi(1, NEAR_THE_END);
+    let run = rig.command(t(0));
+    assert_eq!(run.last.param, ParamCode::Finished, "{run:?}");
+    assert_eq!(rig.model.loaded_slot(), Some(0));
+    // Slot 0's unload crosses the other end (pulled back past `i32::MIN`).
+    rig.app.set_odometry_centi(0, i32::MIN + 500);
+    let run = rig.command(t(1));
+    assert_eq!(run.last.param, ParamCode::Finished, "{run:?}");
+    assert_eq!(rig.model.loaded_slot(), Some(1));
+    common::assert_parked(&rig, 0);
+    let run = rig.command(t(0));
+    assert_eq!(run.last.param, ParamCode::Finished, "{run:?}");
+    common::assert_parked(&rig, 1);
+}
+
+/// How far `T0` feeds slot 0 with the hub sensor's threshold set above anything it reads (it
+/// never sees the tip), slot 0's odometry starting from `odometry_centi`: the feeds to the hub
+/// go their distance bounds and the command fails.
+fn fed_with_a_blind_hub_sensor(odometry_centi: i32) -> f32 {
+    let mut rig = Rig::<3>::new();
+    rig.boot();
+    for (address, value) in [(0x90, 4000), (0xa0, 3900)] {
+        let answer = rig.send(Request::write(address, value));
+        assert_eq!(answer.map(|a| a.param), Some(ParamCode::Accepted));
+    }
+    rig.app.set_odometry_centi(0, odometry_centi);
+    let tip = rig.model.tip_mm(0).unwrap();
+    let request = t(0);
+    rig.issue(request);
+    let run = rig.follow(request, 120_000);
+    assert_eq!(run.last.param, ParamCode::Error, "{run:?}");
+    rig.model.tip_mm(0).unwrap() - tip
+}
+
+/// Finding 1: bounded feeds crossing the end of the odometry still stop at their bounds, where
+/// they stop on a fresh slot (before the fix they ran out their time bounds instead).
+#[test]
+fn a_bounded_feed_across_the_end_of_the_odometry_stops_at_its_bound() {
+    let fresh = fed_with_a_blind_hub_sensor(0);
+    let worn = fed_with_a_blind_hub_sensor(NEAR_THE_END);
+    assert!(
+        (worn - fresh).abs() <= 1.0,
+        "fed {worn} mm across the end of the odometry, {fresh} mm fresh"
+    );
+}

@@ -25,6 +25,7 @@ use mmu_protocol::{ErrorCode, ProgressCode};
 
 use crate::config::Config;
 use crate::drive::{Budget, Motion};
+use crate::feeder::distance_centi;
 use crate::time::Instant;
 use crate::unit::{Lane, SensorId, Unit};
 
@@ -532,8 +533,8 @@ fn step_motion<const N: usize>(
         }
     };
     let toward_goal_mm = match bounds.direction {
-        Direction::Forward => (odometry - run.goal_from_centi) / 100,
-        Direction::Reverse => (run.goal_from_centi - odometry) / 100,
+        Direction::Forward => distance_centi(run.goal_from_centi, odometry) / 100,
+        Direction::Reverse => distance_centi(odometry, run.goal_from_centi) / 100,
     };
     if let Some(fault) = [
         SensorId::MotorHall(slot),
