@@ -1,5 +1,6 @@
 //! Reliability findings of an outside review (issue 24, item 5), each a test that failed on the
-//! code before its fix: a driven motor that never shows a revolution, the stall rule switched off.
+//! code before its fix: a driven motor that never shows a revolution, the stall rule switched
+//! off, and a slot whose odometry has passed the end of its 32 bits (21.47 km).
 
 mod common;
 
