@@ -17,6 +17,7 @@ use mmu_protocol::{
 
 use crate::config::{Config, Contract, offered_revision};
 use crate::drive;
+use crate::feeder::distance_centi;
 use crate::follower;
 use crate::persist::{Counters, MAX_SETTINGS, Snapshot};
 use crate::phases::PrinterLink;
@@ -145,6 +146,17 @@ impl<const N: usize> App<N> {
     /// What the unit knows about its hardware.
     pub fn unit(&self) -> &Unit<N> {
         &self.unit
+    }
+
+    /// Start slot `slot`'s odometry from `centi` ([`crate::feeder::Feeder::set_odometry_centi`]): for tests (a
+    /// slot that has fed kilometres) and a restart that keeps it. Counted as no motion.
+    pub fn set_odometry_centi(&mut self, slot: usize, centi: i32) {
+        if let (Some(feeder), Some(seen)) =
+            (self.unit.feeders.get_mut(slot), self.odometry_seen.get_mut(slot))
+        {
+            feeder.set_odometry_centi(centi);
+            *seen = centi;
+        }
     }
 
     /// False until the start-up check after power-up has ended: until then the unit hears and
@@ -385,7 +397,7 @@ impl<const N: usize> App<N> {
                 (self.counters.fed_mm[slot], self.fed_centi_beyond_mm[slot]) = add_centi(
                     self.counters.fed_mm[slot],
                     self.fed_centi_beyond_mm[slot],
-                    odometry.abs_diff(seen),
+                    distance_centi(seen, odometry).unsigned_abs(),
                 );
             }
         }

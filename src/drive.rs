@@ -10,7 +10,7 @@ use mmu_hal_port::{Direction, Duty, MotorCommand};
 use mmu_protocol::ErrorCode;
 
 use crate::config::Config;
-use crate::feeder::Feeder;
+use crate::feeder::{Feeder, distance_centi};
 use crate::time::Instant;
 
 /// How long a braked motor stays braked before it may coast, ms: long enough to stop it, so a
@@ -143,8 +143,8 @@ impl SlotDrive {
         let still_too_long = self.command.is_driving()
             && millis_u32(now.millis_since(still_since)) > lease.budget.max_still_ms;
         // More than `max_mm` whole millimetres, without a division (`centi / 100 > max_mm`).
-        let too_far =
-            feeder.odometry_centi().abs_diff(lease.from_centi) > u32::from(lease.budget.max_mm) * 100 + 99;
+        let too_far = distance_centi(lease.from_centi, feeder.odometry_centi()).unsigned_abs()
+            > u32::from(lease.budget.max_mm) * 100 + 99;
         let too_long = millis_u32(now.millis_since(lease.started)) > lease.budget.max_ms;
         let verdict = if self.stalled(feeder, now, config) {
             Err(ErrorCode::STALLED_PULLEY)
@@ -233,8 +233,8 @@ impl SlotDrive {
         }
         self.schedule = Some(schedule);
         let moved_centi = match direction {
-            Direction::Forward => odometry.saturating_sub(schedule.from_centi),
-            Direction::Reverse => schedule.from_centi.saturating_sub(odometry),
+            Direction::Forward => distance_centi(schedule.from_centi, odometry),
+            Direction::Reverse => distance_centi(odometry, schedule.from_centi),
         };
         let lag_mm = schedule_lag_mm(speed, now.millis_since(schedule.since), moved_centi);
         let duty =

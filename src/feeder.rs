@@ -21,7 +21,9 @@ pub struct Feeder {
     pub hall: RevolutionCounter,
     /// The slot filament sensor.
     pub filament: PresenceSensor,
-    /// Where the motor moved the filament, in 1/100 mm, forward positive.
+    /// Where the motor moved the filament, in 1/100 mm, forward positive. It wraps (at ±21.47 km):
+    /// a distance is only ever the `wrapping_sub` of two readings, exact while the filament moved
+    /// less than 21.47 km between them, so a slot past the end behaves as a fresh one.
     odometry_centi: i32,
 }
 
@@ -56,13 +58,14 @@ impl Feeder {
         if revolution {
             let step = i32::from(config.mm_per_rev_centi);
             self.odometry_centi = match counting {
-                Direction::Forward => self.odometry_centi.saturating_add(step),
-                Direction::Reverse => self.odometry_centi.saturating_sub(step),
+                Direction::Forward => self.odometry_centi.wrapping_add(step),
+                Direction::Reverse => self.odometry_centi.wrapping_sub(step),
             };
         }
     }
 
-    /// Where the motor has moved the filament since start, mm (forward positive).
+    /// Where the motor has moved the filament since start, mm (forward positive; wraps with the
+    /// odometry, see [`Feeder::odometry_centi`]).
     pub fn odometry_mm(&self) -> i32 {
         self.odometry_centi / 100
     }
@@ -73,8 +76,35 @@ impl Feeder {
         speed.min(u64::from(u16::MAX)) as u16
     }
 
-    /// The odometry in 1/100 mm.
+    /// The odometry in 1/100 mm. It wraps: a distance is the `wrapping_sub` of two readings
+    /// (see [`distance_centi`]).
     pub fn odometry_centi(&self) -> i32 {
         self.odometry_centi
+    }
+
+    /// Start the odometry from `centi` instead of 0: for tests (a slot that has fed kilometres)
+    /// and a restart that keeps it. Only differences of two readings are distances, so any
+    /// start behaves as 0 does.
+    pub fn set_odometry_centi(&mut self, centi: i32) {
+        self.odometry_centi = centi;
+    }
+}
+
+/// The filament moved from odometry reading `from` to reading `to`, 1/100 mm (forward positive):
+/// their wrapping difference, exact for any move shorter than 21.47 km, wherever the odometry is.
+pub const fn distance_centi(from: i32, to: i32) -> i32 {
+    to.wrapping_sub(from)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn distances_are_wrapping_differences_across_the_end_of_the_odometry() {
+        assert_eq!(distance_centi(100, 350), 250);
+        assert_eq!(distance_centi(350, 100), -250);
+        assert_eq!(distance_centi(i32::MAX - 50, i32::MIN + 50), 101);
+        assert_eq!(distance_centi(i32::MIN + 50, i32::MAX - 50), -101);
     }
 }

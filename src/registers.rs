@@ -262,7 +262,19 @@ fn read_setting(v: &View, address: u8, _: usize) -> Option<u16> {
     setting_field(v.config, address).copied()
 }
 
+/// Write a plain setting; refused when it would break a pair: `stall_min_duty` (0x44) may not
+/// exceed `max_duty` (0x43), or no duty the logic commands reaches it and the stall rule is off
+/// (as a sensor's "on" threshold must stay above its "off" one). A restore writes its settings
+/// twice, so a stored pair goes in whichever of the two it meets first.
 fn write_setting(t: &mut Target, address: u8, _: usize, value: u16) -> bool {
+    let (max_duty, stall_min_duty) = match address {
+        0x43 => (value, t.config.stall_min_duty),
+        0x44 => (t.config.max_duty, value),
+        _ => (0, 0),
+    };
+    if stall_min_duty > max_duty {
+        return false;
+    }
     match setting_field_mut(t.config, address) {
         Some(field) => {
             *field = value;
@@ -510,7 +522,8 @@ registers! {
     Odometry: read_only(0x1a, "odometry", |v, _, _| Some(
         v.path_slot
             .and_then(|slot| v.feeders.get(slot))
-            .map_or(0, |f| f.odometry_mm().clamp(0, i32::from(u16::MAX)) as u16)
+            // Two's complement, wrapping as the odometry does (it stuck at 0 and 65 535 mm).
+            .map_or(0, |f| f.odometry_mm() as u16)
     )),
     SelectorSlot: read_only(0x1b, "selector_slot", |v, _, _| Some(
         v.path_slot.map_or(5, |slot| slot as u16)
@@ -937,6 +950,12 @@ mod tests {
         assert!(!write(&mut target, 3, THRESHOLD_ON + 9, 3000));
         // The "on" threshold must stay above the "off" one.
         assert!(!write(&mut target, 3, THRESHOLD_ON, 2000));
+        // `stall_min_duty` must stay at or below `max_duty` (the stall rule stays on).
+        assert!(!write(&mut target, 3, 0x43, 249));
+        assert!(write(&mut target, 3, 0x43, 250));
+        assert!(!write(&mut target, 3, 0x44, 251));
+        assert!(write(&mut target, 3, 0x44, 250));
+        assert!(write(&mut target, 3, 0x43, 1000));
         assert!(write(&mut target, 3, 0x09, 1));
         assert_eq!(config.bowden_mm, 410);
         assert_eq!(fsensor, 1);

@@ -25,6 +25,7 @@ use mmu_protocol::{ErrorCode, ProgressCode};
 
 use crate::config::Config;
 use crate::drive::{Budget, Motion};
+use crate::feeder::distance_centi;
 use crate::time::Instant;
 use crate::unit::{Lane, SensorId, Unit};
 
@@ -45,6 +46,16 @@ use unload::Unload;
 /// printer's last word, inside what the printer's own co-feed and extra push take up before the
 /// slot motor could count as stalled.
 pub const PRINTER_SILENT_MS: u64 = 1100;
+
+/// The longest a phase may drive its motor without a revolution, ms (at the speeds where a
+/// revolution takes less than a third of it; see [`Bounds::budget`]). A motor that turns shows a
+/// revolution every `mm_per_rev_centi` (2 mm: 21 ms at the load speed, 100 ms at the slow one),
+/// and starts from rest well within a second; one that shows none for 3 s is not turning. The
+/// stall rule alone does not catch it when it is weak (a long `stall_timeout_ms`, up to 10 s; a
+/// duty held below `stall_min_duty`), and a phase's time budget is up to about 42 s: a seized
+/// motor whose Hall sensor is stuck between its thresholds (no edge, and no rail to report as a
+/// fault) would be driven that long. The same as the tension follower's [`crate::follower::STILL_MS`].
+pub const STILL_MS: u32 = 3000;
 
 /// One bounded step of a command. Its slot is a `u8` (a unit has at most [`crate::MAX_SLOTS`]):
 /// a phase takes 4 bytes, and every plan, copied whole when a command starts, half the room.
@@ -284,16 +295,22 @@ impl Bounds {
         }
     }
 
-    /// The drive's budget: the distance, and twice the nominal duration plus slack.
+    /// The drive's budget: the distance, twice the nominal duration plus slack, and the still
+    /// limit: [`STILL_MS`], or three revolutions at the slower of `speed` and the slow speed when
+    /// they take longer (slow speeds or a long `mm_per_rev_centi` set by the user), never more
+    /// than the time bound.
     fn budget(&self, config: &Config) -> Budget {
+        let speed = u32::from(self.speed.max(1));
         // At most 65 535 × 2000 + 65 535.
-        let max_ms = u32::from(self.max_mm) * 2000 / u32::from(self.speed.max(1))
-            + self.slower_ms
-            + u32::from(config.phase_slack_ms);
+        let max_ms =
+            u32::from(self.max_mm) * 2000 / speed + self.slower_ms + u32::from(config.phase_slack_ms);
+        // Part of a phase may go at the slow speed (`Goal::DriveAt`). At most 3 × 65 535 × 10.
+        let slowest = u32::from(self.speed.min(config.slow_speed).max(1));
+        let three_revolutions_ms = 3 * u32::from(config.mm_per_rev_centi) * 10 / slowest;
         Budget {
             max_mm: self.max_mm,
             max_ms,
-            max_still_ms: max_ms,
+            max_still_ms: STILL_MS.max(three_revolutions_ms).min(max_ms),
             error: self.error,
         }
     }
@@ -516,8 +533,8 @@ fn step_motion<const N: usize>(
         }
     };
     let toward_goal_mm = match bounds.direction {
-        Direction::Forward => (odometry - run.goal_from_centi) / 100,
-        Direction::Reverse => (run.goal_from_centi - odometry) / 100,
+        Direction::Forward => distance_centi(run.goal_from_centi, odometry) / 100,
+        Direction::Reverse => distance_centi(odometry, run.goal_from_centi) / 100,
     };
     if let Some(fault) = [
         SensorId::MotorHall(slot),

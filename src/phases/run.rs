@@ -3,6 +3,7 @@
 //! goals read as decisions, and the budget arithmetic sits in one place.
 
 use crate::drive::{Budget, millis_u32};
+use crate::feeder::distance_centi;
 use crate::time::Instant;
 
 /// Bookkeeping of the running phase.
@@ -52,7 +53,7 @@ impl PhaseBudgetUse {
 
     /// End the lease in progress at `now`, counting what it used.
     pub(super) fn end(&mut self, now: Instant, odometry_centi: i32) {
-        let mm = odometry_centi.abs_diff(self.from_centi) / 100;
+        let mm = distance_centi(self.from_centi, odometry_centi).unsigned_abs() / 100;
         self.used_mm = self.used_mm.saturating_add(u16::try_from(mm).unwrap_or(u16::MAX));
         self.used_ms = self
             .used_ms
@@ -101,7 +102,7 @@ impl PhaseRun {
     /// How far the filament moved from the goal start to `odometry_centi`, forward positive
     /// (1/100 mm).
     pub fn fed_centi(&self, odometry_centi: i32) -> i32 {
-        odometry_centi.saturating_sub(self.goal_from_centi)
+        distance_centi(self.goal_from_centi, odometry_centi)
     }
 
     /// End the drive's lease, once, as the motor stops for a wait: the wait counts against no

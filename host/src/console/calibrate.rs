@@ -226,9 +226,15 @@ fn park(bench: &mut Bench, slot: u8) -> Result<(), String> {
     Ok(())
 }
 
-/// The slot's odometry, mm (signed).
+/// The slot's odometry, mm (signed; it wraps: see [`odometry_moved`]).
 fn odometry(bench: &mut Bench, slot: u8) -> Result<i32, String> {
     Ok(i32::from(bench.read(0xb0 + slot)? as i16))
+}
+
+/// The filament moved from odometry reading `from` to `to`, mm: their difference wrapped to 16
+/// bits as the register is (a plain difference was off by 65 536 mm across its end).
+fn odometry_moved(from: i32, to: i32) -> i32 {
+    i32::from((to as i16).wrapping_sub(from as i16))
 }
 
 /// How far the unit's odometry runs past the hub sensor clearing when it parks, mm: the park
@@ -282,7 +288,7 @@ fn eject_run(bench: &mut Bench, slot: u8) -> Result<SlotRun, String> {
     put_back(bench, slot)?;
     Ok(SlotRun {
         slot,
-        path_mm: f64::from(parked_at - cleared_at) + park_mm,
+        path_mm: f64::from(odometry_moved(cleared_at, parked_at)) + park_mm,
         present,
         absent,
     })
@@ -435,7 +441,7 @@ fn feed_to_fsensor(
     }
     unloaded?;
     Ok((
-        (f64::from(triggered_at - started_at) - park_mm).round() as i32,
+        (f64::from(odometry_moved(started_at, triggered_at)) - park_mm).round() as i32,
         Some(hub),
     ))
 }
@@ -577,6 +583,15 @@ mod tests {
     use super::super::input::Input;
     use super::super::link::Wire;
     use super::*;
+
+    /// The odometry register wraps at 16 bits: a move across its end is the short way round.
+    #[test]
+    fn odometry_moved_wraps_with_the_register() {
+        assert_eq!(odometry_moved(10, 250), 240);
+        assert_eq!(odometry_moved(250, 10), -240);
+        assert_eq!(odometry_moved(32_700, -32_700), 136);
+        assert_eq!(odometry_moved(-32_700, 32_700), -136);
+    }
 
     /// A connected bench on a simulated unit built as `model`, its settings at their defaults.
     fn bench(model: ModelConfig) -> Bench {

@@ -159,8 +159,12 @@ pub fn run(bench: &mut Bench, slot: u8) -> Result<MotorReport, String> {
     }
     let hall = 4 + 2 * slot;
     let thresholds = (bench.read(0x90 + hall)?, bench.read(0xa0 + hall)?);
-    let odometry =
-        |bench: &mut Bench| -> Result<i32, String> { Ok(i32::from(bench.read(0xb0 + slot)? as i16)) };
+    // Odometry from where the test starts, mm: the register wraps at 16 bits (and the unit's
+    // odometry at 32), so positions are wrapping differences from the first reading.
+    let start_raw = bench.read(0xb0 + slot)?;
+    let odometry = |bench: &mut Bench| -> Result<i32, String> {
+        Ok(i32::from(bench.read(0xb0 + slot)?.wrapping_sub(start_raw) as i16))
+    };
 
     bench.say(&format!(
         "motor test of slot {slot}: a preload (L{slot}) feeds its filament to the hub sensor and back to park"
