@@ -354,13 +354,7 @@ impl Mechanics {
                     let rate = self.print_mm_s;
                     model.set_printing((rate > 0.0).then_some(rate));
                     if !std::mem::take(&mut self.finished_early) && model.fsensor_state() != 2 {
-                        self.plan(
-                            model,
-                            events,
-                            "load-to-nozzle",
-                            LOAD_TO_NOZZLE_MM,
-                            LOAD_TO_NOZZLE_MM_S,
-                        );
+                        self.load_to_nozzle(model, events);
                     }
                 }
             }
@@ -377,14 +371,19 @@ impl Mechanics {
     fn finish_early(&mut self, model: &mut Model, events: &mut Vec<EventKind>) {
         self.finished_early = true;
         if model.fsensor_state() != 0 {
-            self.plan(
-                model,
-                events,
-                "load-to-nozzle",
-                LOAD_TO_NOZZLE_MM,
-                LOAD_TO_NOZZLE_MM_S,
-            );
+            self.load_to_nozzle(model, events);
         }
+    }
+
+    /// After a tool change the printer loads the filament from its gears on into the nozzle.
+    fn load_to_nozzle(&mut self, model: &mut Model, events: &mut Vec<EventKind>) {
+        self.plan(
+            model,
+            events,
+            "load-to-nozzle",
+            LOAD_TO_NOZZLE_MM,
+            LOAD_TO_NOZZLE_MM_S,
+        );
     }
 
     /// Co-feeding during `P1c` (spec §5.7), as Prusa's printers do it (`OnMMUProgressMsgSame`,
