@@ -11,7 +11,8 @@
 //!   `mmu calibrate`: measure and save its distances and sensor thresholds ([`console`]);
 //! - `mmu motor`: a slot's motor test, and `mmu slots`: the slot map (material, colour, where
 //!   each filament is) ([`console::motor`], [`console::pc_files`]);
-//! - `mmu demo`: a scripted session against the simulator ([`demo`]).
+//! - `mmu demo`: a scripted session against the simulator ([`demo`]);
+//! - `mmu fil`: the firmware-in-the-loop scenarios on a board's firmware image ([`fil_cli`]).
 //!
 //! Exit status: 0 success, 1 a failure (the unit stopped on an error, a port cannot be opened),
 //! 2 a usage mistake (as clap's own), 130 stopped by Ctrl-C.
@@ -20,6 +21,7 @@ mod codec_cli;
 mod console;
 mod demo;
 mod explain;
+mod fil_cli;
 mod printer_cli;
 mod sensors_cli;
 mod sim_cli;
@@ -76,6 +78,9 @@ enum Command {
     /// The slot map: each slot's material and colour (kept on this PC) and where its filament is
     /// ("unknown" apart from "empty"); `set SLOT MATERIAL COLOUR`, `clear SLOT`.
     Slots(console::SlotsArgs),
+    /// Run the firmware image of a board, unchanged, on its emulated chip (fil/) against the
+    /// simulated unit and printer: the firmware-in-the-loop scenarios, one line each.
+    Fil(fil_cli::FilArgs),
 }
 
 fn main() -> ExitCode {
@@ -91,6 +96,7 @@ fn main() -> ExitCode {
         Command::Calibrate(args) => console::run_calibrate(args),
         Command::Motor(args) => console::run_motor(args),
         Command::Slots(args) => console::run_slots(args),
+        Command::Fil(args) => fil_cli::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

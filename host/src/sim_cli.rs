@@ -34,6 +34,7 @@ use mmu_protocol::{
     DecodeError, Request, RequestCode, RequestDecoder, Response, ResponseDecoder, SILENCE_MS,
 };
 use mmu_sim::event::FaultAction;
+use mmu_sim::firmware::{FirmwareUnit, default_fil_dir};
 use mmu_sim::{Event, EventKind, FAULT_HELP, Personality, ScheduledFault, Sim, SimOptions};
 
 use crate::explain::{request_meaning, response_meaning};
@@ -102,6 +103,13 @@ pub struct SimArgs {
     /// buddy-6.4, mk3s (T once the filament is out of the gears).
     #[arg(long, value_name = "PRINTER", default_value = "buddy-6.4", value_parser = crate::printer_cli::parse_personality)]
     pub printer: Personality,
+    /// Run this firmware image (ELF) on its board's emulated chip (the bench of `fil/`) instead
+    /// of the host-built logic: the binary you are about to flash, on the same wire.
+    #[arg(long, value_name = "ELF", requires = "board")]
+    pub firmware: Option<PathBuf>,
+    /// The board of --firmware: g071 (NUCLEO-G071RB) or pico (Raspberry Pi Pico).
+    #[arg(long, value_name = "BOARD", value_parser = crate::fil_cli::parse_board, requires = "firmware")]
+    pub board: Option<mmu_sim::firmware::Board>,
     /// Print nothing on stderr but errors (no log of requests, answers and events).
     #[arg(long, short, conflicts_with = "verbose")]
     pub quiet: bool,
@@ -118,13 +126,28 @@ pub fn run(args: &SimArgs) -> Result<(), Box<dyn Error>> {
             .check_slots(args.slots)
             .map_err(|error| usage(error.to_string()))?;
     }
-    let mut sim = Sim::new(SimOptions {
+    let options = SimOptions {
         slots: args.slots,
         seed: args.seed,
         print_mm_s: args.print_rate,
         printer: args.printer,
         ..SimOptions::default()
-    })?;
+    };
+    let mut sim = match (&args.firmware, args.board) {
+        (Some(image), Some(board)) => {
+            let unit = FirmwareUnit::start(board, image, &default_fil_dir(), options.unit.clone())?;
+            if unit.slots() != args.slots {
+                return Err(usage(format!(
+                    "the image has {} slots, not {}: --slots {}",
+                    unit.slots(),
+                    args.slots,
+                    unit.slots()
+                )));
+            }
+            Sim::with_unit(options, Box::new(unit))
+        }
+        _ => Sim::new(options)?,
+    };
     for fault in &args.faults {
         sim.schedule(*fault);
     }
@@ -615,8 +638,14 @@ fn start_line(args: &SimArgs) -> String {
     } else {
         args.faults.iter().map(fault_spec).collect::<Vec<_>>().join(", ")
     };
+    let unit = match (&args.firmware, args.board) {
+        (Some(image), Some(board)) => {
+            format!(", firmware {} on an emulated {}", image.display(), board.name())
+        }
+        _ => String::new(),
+    };
     format!(
-        "{} slots, seed {}, time scale {}x, print rate {} mm/s, faults: {faults}{printer}",
+        "{} slots, seed {}, time scale {}x, print rate {} mm/s, faults: {faults}{printer}{unit}",
         args.slots, args.seed, args.time_scale, args.print_rate
     )
 }

@@ -14,6 +14,7 @@
 pub mod cut;
 pub mod event;
 pub mod fault;
+pub mod firmware;
 pub mod flash;
 pub mod link;
 pub mod logic;
@@ -21,6 +22,7 @@ pub mod mechanics;
 pub mod personality;
 pub mod printer;
 pub mod scenario;
+pub mod scenarios;
 pub mod sim;
 pub mod soak;
 pub mod timing;

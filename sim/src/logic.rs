@@ -52,8 +52,22 @@ pub trait UnitLogic: Send {
     /// The configuration the logic runs with.
     fn config(&self) -> &Config;
 
-    /// Take the flash out for the next boot (this logic is done: its store is left blank).
-    fn take_flash(&mut self) -> UnitFlash;
+    /// The power goes: nothing runs until [`UnitLogic::power_on`].
+    fn power_off(&mut self) {}
+
+    /// The power comes back: the unit boots again from its flash, as it was left, with `config`
+    /// until the flash says otherwise.
+    fn power_on(&mut self, config: &Config);
+
+    /// From now on the unit's control loop never yields again, as a task stuck in a loop would:
+    /// its motors keep what they were last told until the board's watchdog resets the unit
+    /// ([`WATCHDOG_MS`] after the last step it fed), which then boots from its flash.
+    fn hang(&mut self);
+
+    /// Why the unit can no longer be stepped (a firmware bench that stopped), if it cannot.
+    fn failure(&self) -> Option<String> {
+        None
+    }
 
     /// How much the flash has been worn so far.
     fn flash_wear(&mut self) -> FlashWear;
@@ -62,12 +76,20 @@ pub trait UnitLogic: Send {
     fn motors(&self) -> Vec<MotorCommand>;
 }
 
+/// How long a hung control loop goes unnoticed before the board's watchdog resets the unit, ms:
+/// the NUCLEO-G071RB's `WATCHDOG_TIMEOUT_US` (the Pico's is the same).
+pub const WATCHDOG_MS: u32 = 100;
+
 /// An App with its store, kept by the firmware's own policy ([`Keeper`]).
 struct PersistentApp<const N: usize> {
     app: App<N>,
     keeper: Keeper<UnitFlash, N>,
     motors: [MotorCommand; N],
     received: RxQueue<RX_RING>,
+    /// Since the loop hung, ms; `None` while it runs.
+    hung_ms: Option<u32>,
+    /// What it booted with: a watchdog reset boots with it again.
+    boot_config: Config,
 }
 
 impl<const N: usize> PersistentApp<N> {
@@ -75,14 +97,22 @@ impl<const N: usize> PersistentApp<N> {
     fn boot(config: Config, flash: UnitFlash) -> Self {
         let range = 0..(STORE_PAGES * G0_PAGE) as u32;
         let store = Store::new(flash, range).unwrap_or_else(|_| unreachable!("a valid region"));
-        let mut app = App::new(config);
+        let mut app = App::new(config.clone());
         let (keeper, _) = Keeper::boot(store, &mut app);
         PersistentApp {
             app,
             keeper,
             motors: mmu_firmware::drive::stopped(),
             received: RxQueue::new(),
+            hung_ms: None,
+            boot_config: config,
         }
+    }
+
+    /// The flash goes to a fresh App booted on it; this one is left with a blank store.
+    fn reboot(&mut self, config: Config) {
+        let flash = std::mem::replace(self.keeper.store().flash(), blank_flash());
+        *self = PersistentApp::boot(config, flash);
     }
 }
 
@@ -95,6 +125,15 @@ impl<const N: usize> UnitLogic for PersistentApp<N> {
         rx: &[u8],
         tx: &mut Vec<u8>,
     ) -> Option<BoardAction> {
+        if let Some(hung) = &mut self.hung_ms {
+            // Nothing runs and the bridges hold their last inputs until the watchdog bites.
+            model.step(dt_ms, &self.motors);
+            *hung += dt_ms;
+            if *hung >= WATCHDOG_MS {
+                self.reboot(self.boot_config.clone());
+            }
+            return None;
+        }
         let samples = model.samples::<N>();
         self.received.receive(rx);
         let taken = self.received.take_step();
@@ -131,8 +170,12 @@ impl<const N: usize> UnitLogic for PersistentApp<N> {
         self.app.config()
     }
 
-    fn take_flash(&mut self) -> UnitFlash {
-        std::mem::replace(self.keeper.store().flash(), blank_flash())
+    fn power_on(&mut self, config: &Config) {
+        self.reboot(config.clone());
+    }
+
+    fn hang(&mut self) {
+        self.hung_ms.get_or_insert(0);
     }
 
     fn flash_wear(&mut self) -> FlashWear {
@@ -176,5 +219,31 @@ mod tests {
         }
         assert!(new_logic(0, Config::default(), blank_flash()).is_none());
         assert!(new_logic(MAX_SLOTS + 1, Config::default(), blank_flash()).is_none());
+    }
+
+    #[test]
+    fn a_hung_loop_keeps_its_motors_until_the_watchdog_boots_the_unit_again() {
+        let mut logic = new_logic(3, Config::default(), blank_flash()).expect("3 slots");
+        let mut model = Model::new(ModelConfig::default(), 3, 1);
+        let mut tx = Vec::new();
+        let tool_0 = mmu_protocol::Request::new(RequestCode::Tool, 0).encode();
+        for ms in 0..400 {
+            let rx = if ms == 300 { tool_0.as_bytes() } else { &[] };
+            logic.step(Instant::from_millis(ms), 1, &mut model, rx, &mut tx);
+        }
+        assert_eq!(logic.command().0, (RequestCode::Tool, 0));
+        let driven = logic.motors();
+        assert_ne!(driven[0], MotorCommand::Coast);
+        logic.hang();
+        for ms in 400..400 + u64::from(WATCHDOG_MS) - 1 {
+            logic.step(Instant::from_millis(ms), 1, &mut model, &[], &mut tx);
+        }
+        assert_eq!(
+            (logic.command().0, logic.motors()),
+            ((RequestCode::Tool, 0), driven)
+        );
+        logic.step(Instant::from_millis(499), 1, &mut model, &[], &mut tx);
+        // Booted again: its start-up check runs under `X0`.
+        assert_eq!(logic.command().0, (RequestCode::Reset, 0));
     }
 }

@@ -117,6 +117,9 @@ pub struct Sim {
     events: Vec<Event>,
     last_fsensor: u8,
     last_slot_report: Vec<(Option<f32>, u64)>,
+    /// A power cut armed for the first step that writes the flash: its off time, and the bytes
+    /// written before it was armed.
+    cut_at_write: Option<(u32, u64)>,
     /// Each slot's motor command as last reported.
     last_motors: Vec<MotorCommand>,
     last_command: ((RequestCode, u8), Status),
@@ -134,6 +137,12 @@ impl Sim {
                 options.slots
             ))
         })?;
+        Ok(Sim::with_unit(options, logic))
+    }
+
+    /// The unit `logic` (the host-built logic of [`Sim::new`], or a firmware image on an emulated
+    /// chip: [`crate::firmware::FirmwareUnit`]) just powered on, with `options.slots` slots.
+    pub fn with_unit(options: SimOptions, logic: Box<dyn UnitLogic>) -> Sim {
         let mut geometry = options.model.clone();
         if let Some(before) = options.printer.gears_before_sensor_mm() {
             geometry.extruder_gears_mm = geometry.bowden_length_mm - before;
@@ -146,7 +155,7 @@ impl Sim {
             options.print_mm_s,
         );
         let last_command = logic.command();
-        Ok(Sim {
+        Sim {
             rng: Rng::new(options.seed ^ 0x5541_5254), // "UART": independent of the model's noise
             last_slot_report: (0..options.slots).map(|slot| (model.tip_mm(slot), 0)).collect(),
             last_motors: vec![MotorCommand::Coast; options.slots],
@@ -165,7 +174,8 @@ impl Sim {
             last_command,
             running: None,
             finished: Vec::new(),
-        })
+            cut_at_write: None,
+        }
     }
 
     /// Virtual time, ms since start.
@@ -215,6 +225,30 @@ impl Sim {
     /// How much the unit's flash has been worn by its persisted state.
     pub fn flash_wear(&mut self) -> crate::flash::FlashWear {
         self.logic.flash_wear()
+    }
+
+    /// The unit's control loop hangs from now on, until its watchdog resets it
+    /// ([`UnitLogic::hang`]).
+    pub fn hang(&mut self) {
+        if self.is_powered() {
+            self.event(EventKind::Fault {
+                action: FaultAction::Inject,
+                fault: String::from("control loop hangs"),
+            });
+            self.logic.hang();
+        }
+    }
+
+    /// Cut the power for `off_ms` at the end of the next step that writes to the unit's flash:
+    /// in the middle of a save that takes more than one step.
+    pub fn cut_power_at_next_flash_write(&mut self, off_ms: u32) {
+        let written = self.logic.flash_wear().bytes_written;
+        self.cut_at_write = Some((off_ms, written));
+    }
+
+    /// Why the unit can no longer be stepped (a firmware bench that stopped), if it cannot.
+    pub fn unit_failure(&self) -> Option<String> {
+        self.logic.failure()
     }
 
     /// The unit is powered and booted.
@@ -350,6 +384,13 @@ impl Sim {
         for what in happened {
             self.event(what);
         }
+        if let Some((off_ms, written)) = self.cut_at_write
+            && self.is_powered()
+            && self.logic.flash_wear().bytes_written > written
+        {
+            self.cut_at_write = None;
+            self.inject(SimFault::PowerLoss { off_ms });
+        }
         self.now_ms += 1;
         self.watch();
     }
@@ -382,6 +423,7 @@ impl Sim {
 
     fn power_off(&mut self, off_ms: u32) {
         if self.off_until_ms.is_none() {
+            self.logic.power_off();
             self.event(EventKind::Power { on: false });
         }
         self.off_until_ms = Some(self.now_ms + u64::from(off_ms.max(1)));
@@ -390,9 +432,7 @@ impl Sim {
     fn boot(&mut self) {
         self.off_until_ms = None;
         self.boot_epoch_ms = self.now_ms + 1;
-        let flash = self.logic.take_flash();
-        self.logic = new_logic(self.options.slots, self.options.unit.clone(), flash)
-            .unwrap_or_else(|| unreachable!("the slot count was checked in Sim::new"));
+        self.logic.power_on(&self.options.unit);
         self.running = None;
         self.event(EventKind::Power { on: true });
     }

@@ -1,0 +1,463 @@
+//! A firmware image on an emulated chip, as the simulator's unit: the binary a user flashes, in
+//! the loop.
+//!
+//! A [`FirmwareUnit`] starts a bench (`fil/`: rp2040js for the Pico, Unicorn with register
+//! models for the NUCLEO-G071RB) on the image and steps it in lockstep with the physical model
+//! over the bench line protocol (`fil/PROTOCOL.md`): each millisecond the model's sensor levels
+//! and the printer's bytes go in, the bridges' input pins and the UART's bytes come out. Nothing
+//! of the unit logic runs on the host: what the unit is doing ([`UnitLogic::command`]) is read
+//! off its answers on the wire, as the printer reads it.
+
+use std::fmt::Write as _;
+use std::io::{BufRead, BufReader, Write};
+use std::path::{Path, PathBuf};
+use std::process::{Child, ChildStdin, ChildStdout, Command, Stdio};
+
+use mmu_firmware::runner::Status;
+use mmu_firmware::{BoardAction, Config, Direction, Duty, Instant, MotorCommand};
+use mmu_model::Model;
+use mmu_protocol::{ButtonCode, ErrorCode, ParamCode, ProgressCode, RequestCode, ResponseDecoder};
+
+use crate::flash::FlashWear;
+use crate::logic::UnitLogic;
+
+/// A board whose firmware image a bench can run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Board {
+    /// The reference board, NUCLEO-G071RB: `python3 fil/g071/bench.py`.
+    G071,
+    /// The Raspberry Pi Pico: `node fil/pico/bench.mjs`.
+    Pico,
+}
+
+impl Board {
+    /// Every board.
+    pub const ALL: [Board; 2] = [Board::G071, Board::Pico];
+
+    /// The name `cargo fw` / `cargo fw-pico` and the bench use: `g071` or `pico`.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Board::G071 => "g071",
+            Board::Pico => "pico",
+        }
+    }
+
+    /// The board named `name`.
+    pub fn from_name(name: &str) -> Option<Board> {
+        Board::ALL.into_iter().find(|board| board.name() == name)
+    }
+
+    /// Bytes one flash program operation of the board writes (a G0 double word, an RP2040 page).
+    const fn program_bytes(self) -> u64 {
+        match self {
+            Board::G071 => 8,
+            Board::Pico => 256,
+        }
+    }
+
+    /// The command that runs this board's bench on `image`, from the benches in `fil_dir`.
+    fn bench_command(self, fil_dir: &Path, image: &Path) -> Command {
+        let mut command = match self {
+            Board::G071 => {
+                let mut c = Command::new("python3");
+                c.arg(fil_dir.join("g071/bench.py"));
+                c
+            }
+            Board::Pico => {
+                let mut c = Command::new("node");
+                c.arg(fil_dir.join("pico/bench.mjs"));
+                c
+            }
+        };
+        command.arg(image);
+        command
+    }
+}
+
+/// Where the benches are: `fil/` of the source tree this crate was built from.
+pub fn default_fil_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../fil")
+}
+
+/// The firmware image on its bench, stepped as the simulator's unit. See the
+/// [module documentation](self).
+pub struct FirmwareUnit {
+    board: Board,
+    child: Child,
+    to_bench: ChildStdin,
+    from_bench: BufReader<ChildStdout>,
+    slots: usize,
+    config: Config,
+    motors: Vec<MotorCommand>,
+    wire: WireWatch,
+    resets: u64,
+    erases: u64,
+    programs: u64,
+    failure: Option<String>,
+    line: String,
+}
+
+impl FirmwareUnit {
+    /// Start `board`'s bench (from `fil_dir`) on `image` and wait for it to be ready. `config`
+    /// is what the image was built with (the defaults, unless the build changed them).
+    pub fn start(board: Board, image: &Path, fil_dir: &Path, config: Config) -> Result<FirmwareUnit, String> {
+        let mut child = board
+            .bench_command(fil_dir, image)
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .map_err(|e| format!("cannot start the {} bench: {e}", board.name()))?;
+        let (Some(to_bench), Some(from_bench)) = (child.stdin.take(), child.stdout.take()) else {
+            return Err(String::from("the bench has no stdin or stdout"));
+        };
+        let mut unit = FirmwareUnit {
+            board,
+            child,
+            to_bench,
+            from_bench: BufReader::new(from_bench),
+            slots: 0,
+            config,
+            motors: Vec::new(),
+            wire: WireWatch::default(),
+            resets: 0,
+            erases: 0,
+            programs: 0,
+            failure: None,
+            line: String::new(),
+        };
+        let ready = unit.read_line()?;
+        match ready.split_whitespace().collect::<Vec<_>>()[..] {
+            ["ready", name, slots] if name == board.name() => {
+                unit.slots = slots.parse().map_err(|_| format!("bench says {ready:?}"))?;
+            }
+            _ => return Err(format!("the {} bench says {ready:?}, not `ready`", board.name())),
+        }
+        unit.motors = vec![MotorCommand::Coast; unit.slots];
+        Ok(unit)
+    }
+
+    /// Slots of the board the image runs on.
+    pub fn slots(&self) -> usize {
+        self.slots
+    }
+
+    /// Chip resets since the bench started (watchdog, reset requests, power-ons).
+    pub fn resets(&self) -> u64 {
+        self.resets
+    }
+
+    fn read_line(&mut self) -> Result<String, String> {
+        self.line.clear();
+        match self.from_bench.read_line(&mut self.line) {
+            Ok(0) => Err(format!("the {} bench exited", self.board.name())),
+            Ok(_) if self.line.starts_with("error") => {
+                Err(format!("the {} bench: {}", self.board.name(), self.line.trim()))
+            }
+            Ok(_) => Ok(self.line.trim_end().to_owned()),
+            Err(e) => Err(format!("reading the {} bench: {e}", self.board.name())),
+        }
+    }
+
+    /// Send one request and read its answer; the first failure stops the unit for good.
+    fn request(&mut self, request: &str) -> Option<String> {
+        if self.failure.is_some() {
+            return None;
+        }
+        let answer = writeln!(self.to_bench, "{request}")
+            .and_then(|()| self.to_bench.flush())
+            .map_err(|e| format!("writing to the {} bench: {e}", self.board.name()))
+            .and_then(|()| self.read_line());
+        match answer {
+            Ok(answer) => Some(answer),
+            Err(why) => {
+                self.failure = Some(why);
+                None
+            }
+        }
+    }
+
+    /// Carry out one `ok` answer to a `step`; the error says what was wrong with it.
+    fn take_step_answer(&mut self, answer: &str, tx: &mut Vec<u8>) -> Result<(), String> {
+        let fields: Vec<&str> = answer.split_whitespace().collect();
+        let [ok, rest @ ..] = &fields[..] else {
+            return Err(String::from("an empty answer"));
+        };
+        if *ok != "ok" || rest.len() != self.slots + 4 {
+            return Err(format!("{answer:?} is not a step answer"));
+        }
+        let (motors, counts) = rest.split_at(self.slots);
+        for (slot, pins) in motors.iter().enumerate() {
+            self.motors[slot] = bridge_command(pins).ok_or_else(|| format!("bad bridge inputs {pins:?}"))?;
+        }
+        let sent = from_hex(counts[0]).ok_or_else(|| format!("bad tx {:?}", counts[0]))?;
+        let number = |text: &str| text.parse::<u64>().map_err(|_| format!("bad count {text:?}"));
+        let resets = number(counts[1])?;
+        if resets != self.resets {
+            self.wire = WireWatch::default();
+        }
+        self.resets = resets;
+        self.erases = number(counts[2])?;
+        self.programs = number(counts[3])?;
+        self.wire.watch(&sent);
+        tx.extend_from_slice(&sent);
+        Ok(())
+    }
+}
+
+impl Drop for FirmwareUnit {
+    fn drop(&mut self) {
+        let _ = writeln!(self.to_bench, "quit").and_then(|()| self.to_bench.flush());
+        if self.child.wait().is_err() {
+            let _ = self.child.kill();
+        }
+    }
+}
+
+impl UnitLogic for FirmwareUnit {
+    fn step(
+        &mut self,
+        _now: Instant,
+        dt_ms: u32,
+        model: &mut Model,
+        rx: &[u8],
+        tx: &mut Vec<u8>,
+    ) -> Option<BoardAction> {
+        let mut request = format!("step {}", dt_ms * 1000);
+        for level in sensor_levels(model, self.slots) {
+            let _ = write!(request, " {level}");
+        }
+        let _ = write!(request, " {}", to_hex(rx));
+        if let Some(answer) = self.request(&request)
+            && let Err(why) = self.take_step_answer(&answer, tx)
+        {
+            self.failure = Some(format!("the {} bench: {why}", self.board.name()));
+        }
+        if self.failure.is_some() {
+            self.motors.fill(MotorCommand::Coast);
+        }
+        model.step(dt_ms, &self.motors);
+        // The image resets itself (`X42`, its watchdog): no action is left to the simulator.
+        None
+    }
+
+    fn command(&self) -> ((RequestCode, u8), Status) {
+        self.wire.command
+    }
+
+    fn press_button(&mut self, _button: ButtonCode) {
+        // The bench protocol has no button yet: see `fil/PROTOCOL.md`.
+        self.failure
+            .get_or_insert_with(|| String::from("the firmware bench cannot press the unit's buttons"));
+    }
+
+    fn config(&self) -> &Config {
+        &self.config
+    }
+
+    fn power_off(&mut self) {
+        self.request("power off");
+        self.motors.fill(MotorCommand::Coast);
+    }
+
+    fn power_on(&mut self, _config: &Config) {
+        self.request("power on");
+        self.wire = WireWatch::default();
+    }
+
+    fn hang(&mut self) {
+        self.request("hang");
+    }
+
+    fn failure(&self) -> Option<String> {
+        self.failure.clone()
+    }
+
+    fn flash_wear(&mut self) -> FlashWear {
+        // The bench counts operations, not pages: every erase counts against the most worn page.
+        FlashWear {
+            bytes_written: self.programs * self.board.program_bytes(),
+            erases: self.erases,
+            max_page_erases: self.erases,
+        }
+    }
+
+    fn motors(&self) -> Vec<MotorCommand> {
+        self.motors.clone()
+    }
+}
+
+/// The nine sensor levels of a step in the protocol's order (`mmu_hal_port::Samples`: each
+/// slot's motor Hall and filament sensor, then the hub's filament, tension and cutter sensor).
+fn sensor_levels(model: &mut Model, slots: usize) -> Vec<u16> {
+    let mut levels = Vec::with_capacity(2 * slots + 3);
+    for slot in 0..slots {
+        let s = model.sample_slot(slot).unwrap_or_default();
+        levels.extend([s.motor_hall, s.filament]);
+    }
+    let hub = model.sample_hub();
+    levels.extend([hub.filament, hub.tension, hub.cutter]);
+    levels
+}
+
+/// A TB6612FNG bridge's inputs `<STBY><IN1><IN2>:<duty per mille>` as the command they carry
+/// out, by the datasheet's truth table (see `mmu_hal_port::tb6612`): standby or IN1 = IN2 = L
+/// leaves the outputs open, IN1 = IN2 = H short-brakes, and a driven direction with the PWM
+/// input low short-brakes too.
+fn bridge_command(pins: &str) -> Option<MotorCommand> {
+    let (levels, duty) = pins.split_once(':')?;
+    let duty: u16 = duty.parse().ok().filter(|&d| d <= 1000)?;
+    let level = |i: usize| match levels.as_bytes().get(i) {
+        Some(b'0') => Some(false),
+        Some(b'1') => Some(true),
+        _ => None,
+    };
+    if levels.len() != 3 {
+        return None;
+    }
+    let (standby_off, in1, in2) = (level(0)?, level(1)?, level(2)?);
+    Some(match (standby_off, in1, in2) {
+        (false, _, _) | (true, false, false) => MotorCommand::Coast,
+        (true, true, true) => MotorCommand::Brake,
+        _ if duty == 0 => MotorCommand::Brake,
+        (true, in1, _) => MotorCommand::Drive {
+            direction: if in1 {
+                Direction::Forward
+            } else {
+                Direction::Reverse
+            },
+            duty: Duty::from_permille(duty),
+        },
+    })
+}
+
+/// What the unit says it is doing, read off its answers the way the printer reads them: the
+/// command it last accepted, and the progress, error or finish its `Q0` answers report.
+#[derive(Debug, Clone)]
+struct WireWatch {
+    decoder: ResponseDecoder,
+    command: ((RequestCode, u8), Status),
+}
+
+impl Default for WireWatch {
+    /// A unit just booted: its reset "command" finished, as the host logic reports it.
+    fn default() -> Self {
+        WireWatch {
+            decoder: ResponseDecoder::new(),
+            command: ((RequestCode::Reset, 0), Status::Finished),
+        }
+    }
+}
+
+impl WireWatch {
+    fn watch(&mut self, bytes: &[u8]) {
+        for &byte in bytes {
+            let Some(Ok(answer)) = self.decoder.feed(byte) else {
+                continue;
+            };
+            let request = (answer.code, answer.value);
+            let value = answer.param_value.unwrap_or(0);
+            self.command = match answer.param {
+                ParamCode::Accepted if answer.code.is_command() => {
+                    (request, Status::Running(ProgressCode::OK))
+                }
+                ParamCode::Processing => (request, Status::Running(ProgressCode(value as u8))),
+                ParamCode::Error => (request, Status::Failed(ErrorCode(value))),
+                ParamCode::Finished => (request, Status::Finished),
+                _ => continue,
+            };
+        }
+    }
+}
+
+fn to_hex(bytes: &[u8]) -> String {
+    if bytes.is_empty() {
+        return String::from("-");
+    }
+    bytes
+        .iter()
+        .fold(String::with_capacity(2 * bytes.len()), |mut out, b| {
+            let _ = write!(out, "{b:02x}");
+            out
+        })
+}
+
+fn from_hex(text: &str) -> Option<Vec<u8>> {
+    if text == "-" {
+        return Some(Vec::new());
+    }
+    if !text.len().is_multiple_of(2) {
+        return None;
+    }
+    (0..text.len())
+        .step_by(2)
+        .map(|i| u8::from_str_radix(text.get(i..i + 2)?, 16).ok())
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bridge_inputs_read_as_the_tb6612_truth_table() {
+        let forward = |d| MotorCommand::forward(Duty::from_permille(d));
+        assert_eq!(bridge_command("110:750"), Some(forward(750)));
+        assert_eq!(
+            bridge_command("101:1000"),
+            Some(MotorCommand::Drive {
+                direction: Direction::Reverse,
+                duty: Duty::MAX
+            })
+        );
+        assert_eq!(bridge_command("111:1000"), Some(MotorCommand::Brake));
+        assert_eq!(bridge_command("110:0"), Some(MotorCommand::Brake));
+        assert_eq!(bridge_command("100:500"), Some(MotorCommand::Coast));
+        assert_eq!(bridge_command("011:1000"), Some(MotorCommand::Coast), "standby");
+        for bad in ["11:5", "1101:5", "110", "110:1001", "1x0:5", "110:-1"] {
+            assert_eq!(bridge_command(bad), None, "{bad}");
+        }
+    }
+
+    #[test]
+    fn hex_goes_both_ways_and_refuses_what_is_not_hex() {
+        assert_eq!(to_hex(b"S0*c6\n"), "53302a63360a");
+        assert_eq!(from_hex("53302a63360a").as_deref(), Some(&b"S0*c6\n"[..]));
+        assert_eq!(from_hex("-"), Some(Vec::new()));
+        assert_eq!(to_hex(&[]), "-");
+        for bad in ["5", "zz", "5é"] {
+            assert_eq!(from_hex(bad), None, "{bad}");
+        }
+    }
+
+    #[test]
+    fn the_wire_tells_what_the_unit_is_doing() {
+        let mut wire = WireWatch::default();
+        let tool = |param, value| mmu_protocol::Response::with_value(RequestCode::Tool, 1, param, value);
+        let answer = |response: mmu_protocol::Response| response.encode().as_bytes().to_vec();
+        assert_eq!(wire.command, ((RequestCode::Reset, 0), Status::Finished));
+        wire.watch(&answer(mmu_protocol::Response::bare(
+            RequestCode::Tool,
+            1,
+            ParamCode::Accepted,
+        )));
+        assert_eq!(
+            wire.command,
+            ((RequestCode::Tool, 1), Status::Running(ProgressCode::OK))
+        );
+        wire.watch(&answer(tool(ParamCode::Processing, 0x1c)));
+        assert_eq!(wire.command.1, Status::Running(ProgressCode(0x1c)));
+        wire.watch(&answer(tool(ParamCode::Error, 0x8008)));
+        assert_eq!(wire.command.1, Status::Failed(ErrorCode(0x8008)));
+        // Register reads and the version answers say nothing of the command.
+        wire.watch(&answer(mmu_protocol::Response::with_value(
+            RequestCode::Read,
+            8,
+            ParamCode::Accepted,
+            1,
+        )));
+        assert_eq!(wire.command.1, Status::Failed(ErrorCode(0x8008)));
+        wire.watch(&answer(tool(ParamCode::Finished, 0)));
+        assert_eq!(wire.command, ((RequestCode::Tool, 1), Status::Finished));
+    }
+}
