@@ -3,11 +3,12 @@
 //! The image built by `cargo fw` / `cargo fw-pico` runs unchanged on its board's emulated chip
 //! (the benches in `fil/`), wired to the simulated unit and driven by the simulated printer; the
 //! scenarios are the ones the host-built logic passes in `cargo test`
-//! ([`mmu_sim::scenarios`]). One line per scenario, then a summary line; exit status 1 when one
-//! failed.
+//! ([`mmu_sim::scenarios`]). Boards run side by side, one thread each. One line per scenario,
+//! then a summary line per board; exit status 1 when one failed.
 
 use std::error::Error;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
+use std::thread;
 use std::time::Instant;
 
 use clap::Args;
@@ -16,15 +17,17 @@ use mmu_sim::Sim;
 use mmu_sim::firmware::{Board, FirmwareUnit, default_fil_dir};
 use mmu_sim::scenarios::{SCENARIOS, run_all};
 
+use crate::usage::usage;
+
 /// `mmu fil` options.
 #[derive(Debug, Args)]
 pub struct FilArgs {
     /// The board whose image runs: g071 (NUCLEO-G071RB, Unicorn with register models) or pico
-    /// (Raspberry Pi Pico, rp2040js).
-    #[arg(long, value_name = "BOARD", value_parser = parse_board)]
-    pub board: Board,
-    /// The firmware image (ELF); by default `dist/mmu-firmware-<BOARD>.elf`, where
-    /// `scripts/build-firmware.sh <BOARD> dist` puts it.
+    /// (Raspberry Pi Pico, rp2040js); may be repeated. Both by default, side by side.
+    #[arg(long = "board", value_name = "BOARD", value_parser = parse_board)]
+    pub boards: Vec<Board>,
+    /// The firmware image (ELF), with one --board; by default `dist/mmu-firmware-<BOARD>.elf`,
+    /// where `scripts/build-firmware.sh <BOARD> dist` puts it.
     #[arg(long, value_name = "ELF")]
     pub image: Option<PathBuf>,
     /// Run only the scenarios whose name contains this text.
@@ -58,19 +61,57 @@ pub fn run(args: &FilArgs) -> Result<(), Box<dyn Error>> {
         }
         return Ok(());
     }
-    let image = image_path(args.board, args.image.as_ref());
-    if !image.is_file() {
-        return Err(format!(
-            "no firmware image at {} (build it: scripts/build-firmware.sh {} dist)",
-            image.display(),
-            args.board.name()
-        )
-        .into());
+    let mut boards = if args.boards.is_empty() {
+        Board::ALL.to_vec()
+    } else {
+        args.boards.clone()
+    };
+    boards.dedup();
+    if args.image.is_some() && boards.len() != 1 {
+        return Err(usage("--image needs exactly one --board"));
+    }
+    let mut images = Vec::new();
+    for &board in &boards {
+        let image = image_path(board, args.image.as_ref());
+        if !image.is_file() {
+            return Err(format!(
+                "no firmware image at {} (build it: scripts/build-firmware.sh {} dist)",
+                image.display(),
+                board.name()
+            )
+            .into());
+        }
+        images.push((board, image));
     }
     let fil_dir = args.fil_dir.clone().unwrap_or_else(default_fil_dir);
-    let board = args.board;
+    let only = args.only.as_deref();
+    let summaries: Vec<(String, bool)> = thread::scope(|scope| {
+        let runs: Vec<_> = images
+            .iter()
+            .map(|(board, image)| scope.spawn(|| run_board(*board, image, &fil_dir, only)))
+            .collect();
+        runs.into_iter()
+            .map(|run| {
+                run.join()
+                    .unwrap_or_else(|_| (String::from("a board's run panicked"), false))
+            })
+            .collect()
+    });
+    for (summary, _) in &summaries {
+        println!("{summary}");
+    }
+    let failed = summaries.iter().filter(|(_, passed)| !passed).count();
+    if failed == 0 {
+        Ok(())
+    } else {
+        Err(format!("scenarios failed on {failed} of {} boards", summaries.len()).into())
+    }
+}
+
+/// Every scenario on `board`'s `image`: its summary line, and whether all passed.
+fn run_board(board: Board, image: &Path, fil_dir: &Path, only: Option<&str>) -> (String, bool) {
     let mut new_unit = |options: mmu_sim::SimOptions| {
-        let unit = FirmwareUnit::start(board, &image, &fil_dir, Config::default())?;
+        let unit = FirmwareUnit::start(board, image, fil_dir, Config::default())?;
         if unit.slots() != options.slots {
             return Err(format!(
                 "the image has {} slots, the scenario {}",
@@ -81,28 +122,19 @@ pub fn run(args: &FilArgs) -> Result<(), Box<dyn Error>> {
         Ok(Sim::with_unit(options, Box::new(unit)))
     };
     let started = Instant::now();
-    let verdicts = run_all(&mut new_unit, args.only.as_deref(), &mut |verdict| {
+    let name = board.name();
+    let verdicts = run_all(&mut new_unit, only, &mut |verdict| {
         let took = verdict.took.as_secs_f64();
         match &verdict.result {
-            Ok(()) => println!("  ok    {} ({took:.1} s)", verdict.name),
-            Err(why) => println!("  FAIL  {} ({took:.1} s): {why}", verdict.name),
+            Ok(()) => println!("  ok    {name}: {} ({took:.1} s)", verdict.name),
+            Err(why) => println!("  FAIL  {name}: {} ({took:.1} s): {why}", verdict.name),
         }
     });
     let passed = verdicts.iter().filter(|v| v.result.is_ok()).count();
-    println!(
-        "firmware-in-the-loop ({}): {passed}/{} scenarios passed in {:.0} s",
-        board.name(),
+    let summary = format!(
+        "firmware-in-the-loop ({name}): {passed}/{} scenarios passed in {:.0} s",
         verdicts.len(),
         started.elapsed().as_secs_f64()
     );
-    if passed == verdicts.len() {
-        Ok(())
-    } else {
-        Err(format!(
-            "{} of {} scenarios failed",
-            verdicts.len() - passed,
-            verdicts.len()
-        )
-        .into())
-    }
+    (summary, passed == verdicts.len())
 }

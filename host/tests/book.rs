@@ -346,8 +346,7 @@ const COMMANDS: &[(&str, Check)] = &[
     ("bash scripts/step-cost.sh", Check::InCi),
     ("npm ci --prefix fil/pico", Check::InCi),
     ("python3 -m pip install -r fil/g071/requirements.txt", Check::InCi),
-    ("mmu fil --board g071", Check::InCi),
-    ("mmu fil --board pico", Check::InCi),
+    ("mmu fil", Check::InCi),
     (
         "mmu sim --pty --firmware dist/mmu-firmware-pico.elf --board pico",
         Check::NotRun("serves until killed; host/tests/fil.rs serves both images with --stdio in CI"),
