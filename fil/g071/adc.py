@@ -117,7 +117,36 @@ class Adc(Block):
             self._convert(self.next_at)
 
     def next_event(self):
-        return self.next_at
+        """The next conversion that can raise an interrupt: any, with an ADC interrupt enabled;
+        else the one that brings the DMA channel to its half/complete point when that channel
+        has the matching interrupt enabled. Conversions in between are carried out lazily
+        (`advance` runs before any access to the ADC or the DMA), which gives the same result
+        since nothing else can observe them."""
+        if self.next_at is None:
+            return None
+        if self.regs.get(IER, 0) & 0x3FFF:
+            return self.next_at
+        if not self.regs.get(CFGR1, 0) & 1 or self.dma_done:
+            return None
+        ch = self.chip.dma.channel_for(REQ_ADC) if self.chip else None
+        if ch is None or not ch.ccr & 0x6:
+            return None
+        points = []
+        if ch.ccr & 4 and ch.remaining > ch.cndtr // 2:
+            points.append(ch.remaining - ch.cndtr // 2)
+        if ch.ccr & 2:
+            points.append(ch.remaining)
+        n = min(points) if points else 1
+        at, seq = self.next_at, list(self.sequence)
+        cont = self.regs.get(CFGR1, 0) >> 13 & 1
+        for _ in range(min(n, 256) - 1):
+            seq.pop(0)
+            if not seq:
+                if not cont:
+                    return at
+                seq = self._channels()
+            at += self.conversion_cycles(seq[0])
+        return at
 
     def irqs(self):
         return (IRQ,) if self.isr & self.regs.get(IER, 0) & 0x3FFF else ()

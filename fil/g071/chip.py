@@ -73,6 +73,7 @@ class Chip:
             self.uc.mmio_map(base, size, self._mmio_read, base, self._mmio_write, base)
         self.time = 0
         self.in_slice = False
+        self.slice_end = 0
         self.resets = 0
         self.erases_before = 0     # counts of flash models replaced by resets
         self.programs_before = 0
@@ -129,14 +130,24 @@ class Chip:
                 block = self.others[base] = Block(self)
         return block, address - base
 
+    def _bring(self, block):
+        """Brings the accessed block to the current time; for the DMA also the peripherals that
+        feed it (its counters and the memory it wrote must be current)."""
+        now = self.now()
+        if block is self.dma or block is self.dmamux:
+            self.usart1.advance(now)
+            self.adc.advance(now)
+        else:
+            block.advance(now)
+
     def _mmio_read(self, uc, offset, size, base):
         block, off = self._block_at(base + offset)
-        block.advance(self.now())
+        self._bring(block)
         return block.read(off, size)
 
     def _mmio_write(self, uc, offset, size, value, base):
         block, off = self._block_at(base + offset)
-        block.advance(self.now())
+        self._bring(block)
         block.write(off, size, value)
 
     # ---- time --------------------------------------------------------------------------------
@@ -146,18 +157,28 @@ class Chip:
         return self.time
 
     def reschedule(self):
-        """Called by a model whose state changed the interrupts or the next event: ends the
-        slice so the scheduler looks again."""
-        if self.in_slice:
+        """Called by a model whose state may have changed the interrupts or the next event:
+        ends the slice (at the next block) if an interrupt is now ready to be taken or the next
+        event comes before the slice's end."""
+        if not self.in_slice:
+            return
+        self.update_irqs()
+        if self.cpu.ready_interrupt() is not None:
+            self.cpu.stop_soon()
+            return
+        nxt = self.next_event()
+        if nxt is not None and nxt < self.slice_end:
             self.cpu.stop_soon()
 
     def stall(self, until):
         self.stall_until = until
-        self.reschedule()
+        if self.in_slice:
+            self.cpu.stop_soon()
 
     def request_reset(self, cause):
         self.reset_request = cause
-        self.reschedule()
+        if self.in_slice:
+            self.cpu.stop_soon()
 
     def next_event(self):
         times = [t for t in (m.next_event() for m in self.timed) if t is not None]
@@ -233,6 +254,7 @@ class Chip:
             if irq is not None:
                 cpu.take_interrupt(irq)
             limit = min(limit, self.time + clock.us(SLICE_US))
+            self.slice_end = limit
             self.in_slice = True
             try:
                 executed = cpu.run(clock.cycles_to_instructions(limit - self.time))

@@ -37,6 +37,8 @@ class Timer(Block):
         self.start_time = 0   # cycle the count started from (a tick boundary)
         self.synced = 0       # ticks since start_time already scanned for flags
         self.now = 0
+        self._due = None      # cached: tick of the next flag to set (None: none / stopped)
+        self._dirty = True
 
     # ---- counting ----------------------------------------------------------------------------
     def running(self):
@@ -45,18 +47,17 @@ class Timer(Block):
     def period(self):
         return (self.regs[ARR] & self.top) + 1
 
-    def ticks_at(self, now):
-        return (now - self.start_time) // (self.psc + 1)
-
     def counter(self):
-        if not self.running():
+        if not self.regs.get(CR1, 0) & 1:
             return self.start_cnt
-        return (self.start_cnt + self.ticks_at(self.now)) % self.period()
+        ticks = (self.now - self.start_time) // (self.psc + 1)
+        return (self.start_cnt + ticks) % ((self.regs[ARR] & self.top) + 1)
 
     def rebase(self, cnt):
         self.start_cnt = cnt
         self.start_time = self.now
         self.synced = 0
+        self._dirty = True
 
     def _first_match(self, after, value):
         """The first tick k > after at which the counter equals `value`."""
@@ -65,18 +66,35 @@ class Timer(Block):
 
     def _sources(self):
         """(flag bit, counter value that sets it) of the update and compare events."""
-        yield 0, 0
+        out = [(0, 0)]
+        p = self.period()
         for ch in range(4):
             ccr = self.regs.get(CCR[ch], 0)
-            if ccr < self.period():
-                yield ch + 1, ccr
+            if ccr < p:
+                out.append((ch + 1, ccr))
+        return out
 
-    def advance(self, now):
-        self.now = now
+    def _plan(self):
+        """Recomputes the tick of the next flag to set."""
+        self._dirty = False
+        self._due = None
         if not self.running():
             return
-        t = self.ticks_at(now)
-        if t <= self.synced:
+        sr = self.regs.get(SR, 0)
+        for flag, value in self._sources():
+            if not (sr >> flag) & 1:
+                k = self._first_match(self.synced, value)
+                if self._due is None or k < self._due:
+                    self._due = k
+
+    def _scan(self):
+        """Sets the flags of the events between the last scan and now."""
+        if self._dirty:
+            self._plan()
+        if self._due is None:
+            return
+        t = (self.now - self.start_time) // (self.psc + 1)
+        if t < self._due:
             return
         sr = self.regs.get(SR, 0)
         for flag, value in self._sources():
@@ -84,9 +102,19 @@ class Timer(Block):
                 sr |= 1 << flag
         self.regs[SR] = sr
         self.synced = t
+        self._plan()
+
+    def advance(self, now):
+        self.now = now
+        if self.regs.get(DIER, 0) & 0x1F:
+            self._scan()
 
     def next_event(self):
-        if not self.running() or self.irq is None:
+        if self.irq is None or not self.regs.get(DIER, 0) & 0x1F:
+            return None
+        if self._dirty:
+            self._plan()
+        if self._due is None:
             return None
         dier = self.regs.get(DIER, 0)
         sr = self.regs.get(SR, 0)
@@ -94,9 +122,9 @@ class Timer(Block):
         for flag, value in self._sources():
             if (dier >> flag) & 1 and not (sr >> flag) & 1:
                 k = self._first_match(self.synced, value)
-                at = self.start_time + k * (self.psc + 1)
-                best = at if best is None else min(best, at)
-        return best
+                if best is None or k < best:
+                    best = k
+        return None if best is None else self.start_time + best * (self.psc + 1)
 
     def irqs(self):
         if self.irq is not None and self.regs.get(SR, 0) & self.regs.get(DIER, 0) & 0x1F:
@@ -107,9 +135,12 @@ class Timer(Block):
     def read_reg(self, offset):
         if offset == CNT:
             return self.counter()
+        if offset == SR:
+            self._scan()
         return super().read_reg(offset)
 
     def write_reg(self, offset, value, mask):
+        self._scan()
         if offset == CR1:
             was = self.running()
             cnt = self.counter()
@@ -134,7 +165,8 @@ class Timer(Block):
             self.rebase(cnt % self.period())
         else:
             super().write_reg(offset, value, mask)
-        if self.chip and offset in (CR1, DIER, SR, EGR, CNT, ARR) + CCR:
+        self._dirty = True
+        if self.chip and self.irq is not None and offset in (CR1, DIER, SR, EGR, CNT, ARR) + CCR:
             self.chip.reschedule()
 
     # ---- PWM ---------------------------------------------------------------------------------

@@ -153,11 +153,16 @@ class Usart(Block):
         return value
 
     def irqs(self):
-        isr, cr1, cr3 = self.isr(), self.cr1(), self.regs.get(CR3, 0)
+        cr1 = self.regs.get(CR1, 0)
         if not cr1 & 1:
             return ()
-        hit = ((isr & cr1 & ((1 << 4) | (1 << 5) | (1 << 6) | (1 << 7)))
-               or (isr & 0xE and cr3 & 1) or (isr & 1 and cr1 >> 8 & 1))
+        tx_on = cr1 >> 3 & 1
+        hit = ((cr1 >> 4 & 1 and self.flags >> 4 & 1)                          # IDLE
+               or (cr1 >> 5 & 1 and self.rx_fifo)                               # RXNE
+               or (cr1 >> 6 & 1 and (not tx_on or not self.tx_queue))           # TC
+               or (cr1 >> 7 & 1 and (not tx_on or len(self.tx_queue) < self.tx_capacity()))
+               or (self.regs.get(CR3, 0) & 1 and self.flags & 0xE)              # ORE, FE, NE
+               or (cr1 >> 8 & 1 and self.flags & 1))                            # PE
         return (IRQ,) if hit else ()
 
     def read_reg(self, offset):
