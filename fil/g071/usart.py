@@ -122,7 +122,9 @@ class Usart(Block):
                 self._serve_tx_dma()
             else:
                 self.idle_at = None
-                self.flags |= 1 << 4
+                # Not idle if the next character's start bit began before this instant.
+                if not (self.incoming and self.incoming[0][0] - clock.char_time(1) < t):
+                    self.flags |= 1 << 4
         self.now = now
         self._serve_rx_dma()
         self._serve_tx_dma()
