@@ -125,3 +125,40 @@ class ProtocolTest(unittest.TestCase):
 
 if __name__ == "__main__":
     unittest.main()
+
+
+@unittest.skipUnless(os.path.exists(IMAGE), f"no firmware image at {IMAGE} (set FIL_G071_IMAGE)")
+class EraseDuringRequestTest(unittest.TestCase):
+    """A page erase while the printer sends a request loses no byte, on the real image: a
+    damaged store (the persisted region filled with junk) makes the firmware erase a page at
+    boot; the printer's `S0` arrives while the erase stalls the CPU; the firmware answers it once
+    the erase is over."""
+
+    def test_request_during_erase_is_answered(self):
+        import bench as bench_module
+        from support import request as encode
+        bench = bench_module.Bench(IMAGE)
+        chip = bench.chip
+        chip.memory.write(0x0801_8000, b"\x5a" * 0x8000)
+        levels = [2000] * 9
+        for _ in range(200):
+            bench.step(1000, levels, b"")
+            if chip.erases() and chip.stall_until is not None:
+                break
+        self.assertIsNotNone(chip.stall_until, "the image did not erase a page")
+        stall_end = chip.stall_until
+        self.assertGreater(stall_end - chip.time, 2 * 64_000)  # room for the request's 6 bytes
+        answer = bench.step(1000, levels, encode("S", 0)).split()
+        self.assertEqual(answer[4], "-")
+        self.assertEqual(chip.usart1.received, 6)   # all six in the DMA ring during the stall
+        self.assertEqual(chip.usart1.lost, 0)
+        self.assertIsNotNone(chip.stall_until)       # still erasing
+        tx = b""
+        for _ in range(100):
+            words = bench.step(1000, levels, b"").split()
+            if words[4] != "-":
+                tx += bytes.fromhex(words[4])
+            if tx.endswith(b"\n"):
+                break
+        self.assertTrue(tx.startswith(b"S0 A"), tx)
+        self.assertGreaterEqual(chip.time, stall_end)
