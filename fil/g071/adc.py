@@ -184,4 +184,4 @@ class Adc(Block):
         else:
             super().write_reg(offset, value, mask)
         if self.chip:
-            self.chip.reschedule()
+            self.chip.reschedule(self)

@@ -156,19 +156,27 @@ class Chip:
             return self.time + clock.instructions_to_cycles(self.cpu.executed())
         return self.time
 
-    def reschedule(self):
+    def reschedule(self, model=None):
         """Called by a model whose state may have changed the interrupts or the next event:
-        ends the slice (at the next block) if an interrupt is now ready to be taken or the next
-        event comes before the slice's end."""
+        ends the slice (at the next block) if an interrupt is now ready to be taken or the
+        model's next event (for the DMA: its producers') comes before the slice's end."""
         if not self.in_slice:
             return
-        self.update_irqs()
-        if self.cpu.ready_interrupt() is not None:
+        models = (self.usart1, self.adc) if model is self.dma else (model,) if model else self.irq_sources
+        active = self.cpu.active
+        scs = self.scs
+        for m in models:
+            for irq in m.irqs():
+                if 16 + irq not in active:
+                    scs.pending |= 1 << irq
+        if scs.pending & scs.enabled and self.cpu.ready_interrupt() is not None:
             self.cpu.stop_soon()
             return
-        nxt = self.next_event()
-        if nxt is not None and nxt < self.slice_end:
-            self.cpu.stop_soon()
+        for m in models if model else self.timed:
+            nxt = m.next_event()
+            if nxt is not None and nxt < self.slice_end:
+                self.cpu.stop_soon()
+                return
 
     def stall(self, until):
         self.stall_until = until

@@ -90,7 +90,7 @@ class Dma(Block):
                 c.cmar = value
         self._update_gif()
         if self.chip:
-            self.chip.reschedule()
+            self.chip.reschedule(self)
 
     def _update_gif(self):
         for n in range(1, 8):

@@ -85,7 +85,7 @@ class Flash(Block):
         else:
             super().write_reg(offset, value, mask)
         if self.chip:
-            self.chip.reschedule()
+            self.chip.reschedule(self)
 
     # ---- operations --------------------------------------------------------------------------
     def _begin(self, cycles, op):

@@ -46,7 +46,7 @@ class Iwdg(Block):
                     self.feeds += 1
                     self.expires_at = now + self.timeout_cycles()
             if self.chip:
-                self.chip.reschedule()
+                self.chip.reschedule(self)
         elif offset == SR:
             pass
         else:

@@ -38,6 +38,7 @@ class Timer(Block):
         self.synced = 0       # ticks since start_time already scanned for flags
         self.now = 0
         self._due = None      # cached: tick of the next flag to set (None: none / stopped)
+        self._next = None     # cached: cycle of the next flag with its interrupt enabled
         self._dirty = True
 
     # ---- counting ----------------------------------------------------------------------------
@@ -75,17 +76,24 @@ class Timer(Block):
         return out
 
     def _plan(self):
-        """Recomputes the tick of the next flag to set."""
+        """Recomputes the tick of the next flag to set, and the cycle of the next one that can
+        raise the interrupt."""
         self._dirty = False
-        self._due = None
+        self._due = self._next = None
         if not self.running():
             return
         sr = self.regs.get(SR, 0)
+        dier = self.regs.get(DIER, 0)
+        irq_tick = None
         for flag, value in self._sources():
             if not (sr >> flag) & 1:
                 k = self._first_match(self.synced, value)
                 if self._due is None or k < self._due:
                     self._due = k
+                if (dier >> flag) & 1 and (irq_tick is None or k < irq_tick):
+                    irq_tick = k
+        if irq_tick is not None:
+            self._next = self.start_time + irq_tick * (self.psc + 1)
 
     def _scan(self):
         """Sets the flags of the events between the last scan and now."""
@@ -114,17 +122,7 @@ class Timer(Block):
             return None
         if self._dirty:
             self._plan()
-        if self._due is None:
-            return None
-        dier = self.regs.get(DIER, 0)
-        sr = self.regs.get(SR, 0)
-        best = None
-        for flag, value in self._sources():
-            if (dier >> flag) & 1 and not (sr >> flag) & 1:
-                k = self._first_match(self.synced, value)
-                if best is None or k < best:
-                    best = k
-        return None if best is None else self.start_time + best * (self.psc + 1)
+        return self._next
 
     def irqs(self):
         if self.irq is not None and self.regs.get(SR, 0) & self.regs.get(DIER, 0) & 0x1F:
@@ -167,7 +165,7 @@ class Timer(Block):
             super().write_reg(offset, value, mask)
         self._dirty = True
         if self.chip and self.irq is not None and offset in (CR1, DIER, SR, EGR, CNT, ARR) + CCR:
-            self.chip.reschedule()
+            self.chip.reschedule(self)
 
     # ---- PWM ---------------------------------------------------------------------------------
     def duty_permille(self, ch):

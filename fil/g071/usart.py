@@ -198,4 +198,4 @@ class Usart(Block):
         self._serve_rx_dma()
         self._serve_tx_dma()
         if self.chip:
-            self.chip.reschedule()
+            self.chip.reschedule(self)

@@ -43,7 +43,7 @@ class FakeChip:
     def now(self):
         return self.time
 
-    def reschedule(self):
+    def reschedule(self, model=None):
         self.reschedules += 1
 
     def stall(self, until):
