@@ -114,6 +114,7 @@ class Chip:
         self.timed = [self.tim2, self.tim3, self.usart1, self.adc, self.iwdg, self.flash]
         self.irq_sources = [self.tim2, self.tim3, self.usart1, self.adc, self.dma, self.flash]
         self.others = {}  # plain storage for every other register block touched
+        self.routes = {}
         self.stall_until = None
         self.reset_request = None
 
@@ -130,24 +131,38 @@ class Chip:
                 block = self.others[base] = Block(self)
         return block, address - base
 
-    def _bring(self, block):
-        """Brings the accessed block to the current time; for the DMA also the peripherals that
-        feed it (its counters and the memory it wrote must be current)."""
-        now = self.now()
-        if block is self.dma or block is self.dmamux:
-            self.usart1.advance(now)
-            self.adc.advance(now)
-        else:
-            block.advance(now)
+    def _route(self, address):
+        """(block, offset, what to bring up to date) for an MMIO address, cached per address.
+        For the DMA that is the peripherals that feed it (its counters and the memory it wrote
+        must be current), for the others the block itself."""
+        route = self.routes.get(address)
+        if route is None:
+            block, off = self._block_at(address)
+            if block is self.dma or block is self.dmamux:
+                bring = (self.usart1.advance, self.adc.advance)
+            elif type(block).advance is Block.advance:
+                bring = ()
+            else:
+                bring = (block.advance,)
+            route = self.routes[address] = (block, off, bring)
+        return route
 
     def _mmio_read(self, uc, offset, size, base):
-        block, off = self._block_at(base + offset)
-        self._bring(block)
+        block, off, bring = self.routes.get(base + offset) or self._route(base + offset)
+        if bring:
+            now = self.time + (self.cpu.native.count() - self.cpu.count_base) * clock.CPI_NUM // clock.CPI_DEN
+            for advance in bring:
+                advance(now)
+        if size == 4:
+            return block.read_reg(off)
         return block.read(off, size)
 
     def _mmio_write(self, uc, offset, size, value, base):
-        block, off = self._block_at(base + offset)
-        self._bring(block)
+        block, off, bring = self.routes.get(base + offset) or self._route(base + offset)
+        if bring:
+            now = self.time + (self.cpu.native.count() - self.cpu.count_base) * clock.CPI_NUM // clock.CPI_DEN
+            for advance in bring:
+                advance(now)
         block.write(off, size, value)
 
     # ---- time --------------------------------------------------------------------------------

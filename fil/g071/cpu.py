@@ -118,9 +118,9 @@ class Cpu:
         scs = self.chip.scs
         scs.pending &= ~(1 << irq)
         vector = 16 + irq
-        sp = uc.reg_read(arm.UC_ARM_REG_SP)
-        xpsr = (uc.reg_read(arm.UC_ARM_REG_XPSR) & 0xFF00_FC00) | self.active_vector()
-        frame = [uc.reg_read(r) for r in FRAME_REGS]
+        values = uc.reg_read_batch(FRAME_REGS + (arm.UC_ARM_REG_SP, arm.UC_ARM_REG_XPSR))
+        frame, sp = list(values[:7]), values[7]
+        xpsr = (values[8] & 0xFF00_FC00) | self.active_vector()
         sp -= 32
         if sp & 4:
             sp -= 4
@@ -130,11 +130,11 @@ class Cpu:
             uc.mem_write(sp, data)
         except unicorn.UcError as e:
             raise EmulationError(f"exception entry: stack at 0x{sp:08x} not writable ({e})")
-        uc.reg_write(arm.UC_ARM_REG_SP, sp)
-        uc.reg_write(arm.UC_ARM_REG_LR, 0xFFFFFFF1 if self.active else 0xFFFFFFF9)
         vtor = scs.regs.get(0xD08, 0) or FLASH_BASE
         handler = int.from_bytes(uc.mem_read(vtor + 4 * vector, 4), "little")
-        uc.reg_write(arm.UC_ARM_REG_PC, handler & ~1)
+        uc.reg_write_batch(((arm.UC_ARM_REG_SP, sp),
+                            (arm.UC_ARM_REG_LR, 0xFFFFFFF1 if self.active else 0xFFFFFFF9),
+                            (arm.UC_ARM_REG_PC, handler & ~1)))
         self.active.append(vector)
         self.sleeping = False
 
@@ -145,13 +145,12 @@ class Cpu:
         sp = uc.reg_read(arm.UC_ARM_REG_SP)
         words = uc.mem_read(sp, 32)
         values = [int.from_bytes(words[4 * i:4 * i + 4], "little") for i in range(8)]
-        for r, v in zip(FRAME_REGS, values[:7]):
-            uc.reg_write(r, v)
-        uc.reg_write(arm.UC_ARM_REG_PC, values[6] & ~1)
         xpsr = values[7]
         sp += 32 + (4 if xpsr & (1 << 9) else 0)
-        uc.reg_write(arm.UC_ARM_REG_SP, sp)
-        uc.reg_write(arm.UC_ARM_REG_XPSR, (xpsr & 0xF000_0000) | (1 << 24))
+        values[6] &= ~1
+        uc.reg_write_batch(tuple(zip(FRAME_REGS, values[:7])) +
+                           ((arm.UC_ARM_REG_SP, sp),
+                            (arm.UC_ARM_REG_XPSR, (xpsr & 0xF000_0000) | (1 << 24))))
         self.active.pop()
         # The line is a level: still asserted, it is pending again (chip.update_irqs).
         self.chip.update_irqs()

@@ -57,13 +57,13 @@ class Crc(Block):
                 crc ^= poly
         self.crc = crc
 
-    def read(self, offset, size):
-        if offset & ~3 == DR:
+    def read_reg(self, offset):
+        if offset == DR:
             value = self.crc
             if self.regs[CR] >> 7 & 1:
                 value = reverse(value, self.width())
-            return (value >> (8 * (offset & 3))) & ((1 << (8 * size)) - 1)
-        return super().read(offset, size)
+            return value
+        return super().read_reg(offset)
 
     def write(self, offset, size, value):
         if offset & ~3 == DR:
