@@ -114,10 +114,12 @@ class Cpu:
         return None
 
     def take_interrupt(self, irq):
+        self.chip.scs.pending &= ~(1 << irq)
+        self.take_exception(16 + irq)
+
+    def take_exception(self, vector):
         uc = self.uc
         scs = self.chip.scs
-        scs.pending &= ~(1 << irq)
-        vector = 16 + irq
         values = uc.reg_read_batch(FRAME_REGS + (arm.UC_ARM_REG_SP, arm.UC_ARM_REG_XPSR))
         frame, sp = list(values[:7]), values[7]
         xpsr = (values[8] & 0xFF00_FC00) | self.active_vector()
@@ -175,6 +177,12 @@ class Cpu:
                 self._apply_flash_writes()
                 self.exception_return()
                 return self.executed()
+            if e.errno == unicorn.UC_ERR_INSN_INVALID and self._is_udf(pc):
+                # UDF: the chip takes a HardFault (ARMv6-M ARM A6.7.72, B1.5.6); the image's
+                # handler runs (a panic in the firmware ends here and resets).
+                self._apply_flash_writes()
+                self.take_exception(3)
+                return self.executed()
             raise EmulationError(f"{e} at pc 0x{pc:08x}")
         self._apply_flash_writes()
         stop = nat.stopped_by()
@@ -191,6 +199,12 @@ class Cpu:
             uc.reg_write(arm.UC_ARM_REG_PRIMASK, 0)
             uc.reg_write(arm.UC_ARM_REG_PC, pc + 2)
         return self.executed()
+
+    def _is_udf(self, pc):
+        try:
+            return self.uc.mem_read(pc, 2)[1] == 0xDE
+        except unicorn.UcError:
+            return False
 
     def wakes(self):
         """Whether a sleeping core wakes now: an interrupt that would preempt if PRIMASK were

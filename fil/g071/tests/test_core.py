@@ -86,6 +86,23 @@ class InterruptTest(unittest.TestCase):
         self.assertEqual(chip.cpu.sleeping, "wfe")
 
 
+class FaultTest(unittest.TestCase):
+    def test_udf_enters_the_hardfault_handler(self):
+        def main(a):
+            a.h(0xDE00)  # UDF #0
+            a.b_self()
+
+        def hardfault(a):
+            a.poke(MARK, 0x4646)
+            a.b_self()
+
+        # HardFault is vector 3: handlers[-13] lands on 16 - 13.
+        chip = Chip(image(main, {-13: hardfault}))
+        chip.run_until(ms(1))
+        self.assertEqual(word(chip, MARK), 0x4646)
+        self.assertEqual(chip.cpu.active, [3])
+
+
 class ResetTest(unittest.TestCase):
     def test_sysresetreq_resets_and_keeps_ram(self):
         def main(a):
