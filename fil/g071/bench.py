@@ -172,6 +172,9 @@ def main():
         except ValueError as e:
             print(f"error {e}", file=out, flush=True)
             return 1
+        except Exception as e:  # a fault of the bench itself: say so rather than hang the simulator
+            print(f"error internal: {type(e).__name__}: {e}", file=out, flush=True)
+            raise
         print(answer, file=out, flush=True)
     virtual_ms = bench.chip.time / (clock.CYCLES_PER_US * 1000)
     if bench.wall:
