@@ -183,5 +183,7 @@ class Adc(Block):
             self.regs[CR] = cr
         else:
             super().write_reg(offset, value, mask)
-        if self.chip:
+        # Only a start (CR) or an interrupt enable (IER) can bring an earlier event or a line;
+        # clearing flags and stopping cannot.
+        if self.chip and offset in (CR, IER) and (offset == IER or self.next_at is not None):
             self.chip.reschedule(self)

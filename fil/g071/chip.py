@@ -174,20 +174,30 @@ class Chip:
     def reschedule(self, model=None):
         """Called by a model whose state may have changed the interrupts or the next event:
         ends the slice (at the next block) if an interrupt is now ready to be taken or the
-        model's next event (for the DMA: its producers') comes before the slice's end."""
+        model's next event (for the DMA: its producers') comes before the slice's end. A line
+        that became pending while PRIMASK masks it arms the CPSIE hook instead."""
         if not self.in_slice:
             return
-        models = (self.usart1, self.adc) if model is self.dma else (model,) if model else self.irq_sources
+        if model is self.dma:
+            models, lines = (self.usart1, self.adc), (self.dma, self.usart1, self.adc)
+        elif model is not None:
+            models = lines = (model,)
+        else:
+            models, lines = self.timed, self.irq_sources
         active = self.cpu.active
         scs = self.scs
-        for m in models:
+        before = scs.pending
+        for m in lines:
             for irq in m.irqs():
                 if 16 + irq not in active:
                     scs.pending |= 1 << irq
-        if scs.pending & scs.enabled and self.cpu.ready_interrupt() is not None:
-            self.cpu.stop_soon()
-            return
-        for m in models if model else self.timed:
+        if model is None or (scs.pending & ~before & scs.enabled):
+            if self.cpu.ready_interrupt() is not None:
+                self.cpu.stop_soon()
+                return
+            if self.cpu.ready_interrupt(ignore_primask=True) is not None:
+                self.cpu.native.set_irq_ready(1)
+        for m in models:
             nxt = m.next_event()
             if nxt is not None and nxt < self.slice_end:
                 self.cpu.stop_soon()

@@ -89,7 +89,7 @@ class Dma(Block):
             elif r == 12:
                 c.cmar = value
         self._update_gif()
-        if self.chip:
+        if self.chip and offset != 0x04 and (offset - 0x08) % 20 == 0:  # a CCR
             self.chip.reschedule(self)
 
     def _update_gif(self):

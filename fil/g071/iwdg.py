@@ -45,7 +45,7 @@ class Iwdg(Block):
                 if self.running:
                     self.feeds += 1
                     self.expires_at = now + self.timeout_cycles()
-            if self.chip:
+            if self.chip and key == 0xCCCC:
                 self.chip.reschedule(self)
         elif offset == SR:
             pass

@@ -62,7 +62,7 @@ class Scs(Block):
                 self.chip.request_reset("software")
         else:
             super().write_reg(offset, value, mask)
-        if self.chip:
+        if self.chip and offset not in (0x180, 0x280):
             self.chip.reschedule()
 
     def exception_priority(self, vector):

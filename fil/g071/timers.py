@@ -164,7 +164,7 @@ class Timer(Block):
         else:
             super().write_reg(offset, value, mask)
         self._dirty = True
-        if self.chip and self.irq is not None and offset in (CR1, DIER, SR, EGR, CNT, ARR) + CCR:
+        if self.chip and self.irq is not None and offset in (CR1, DIER, EGR, CNT, ARR) + CCR:
             self.chip.reschedule(self)
 
     # ---- PWM ---------------------------------------------------------------------------------
