@@ -116,8 +116,10 @@ class ResetTest(unittest.TestCase):
             a.b_self()
 
         chip = Chip(image(main))
+        chip.memory.write(0x0801_F800, b"kept")
         chip.run_until(ms(1))
         self.assertEqual(word(chip, COUNT), 3)
+        self.assertEqual(chip.memory.read(0x0801_F800, 4), b"kept")
         self.assertEqual(chip.resets, 2)
         self.assertTrue(chip.rcc.regs[0x60] >> 28 & 1)  # SFTRSTF
 
@@ -148,10 +150,12 @@ class ResetTest(unittest.TestCase):
 
         chip = Chip(image(main))
         chip.run_until(ms(1))
+        chip.memory.write(0x0801_F800, b"kept")  # what a program left in the last page
         chip.power_off()
         chip.run_until(ms(2))
         chip.power_on()
         self.assertEqual(word(chip, COUNT), 0)
+        self.assertEqual(chip.memory.read(0x0801_F800, 4), b"kept")
         self.assertEqual(chip.rcc.regs[0x60] >> 24 & 0b1110, 0b1100)  # PWRRSTF | PINRSTF only
         chip.run_until(ms(3))
         self.assertEqual(word(chip, COUNT), 1)
