@@ -54,23 +54,26 @@ def run(path, steps, command):
     b = bench_module.Bench(path)
     plant = Plant()
     motor_ms = 0
+    motor_cpu = 0.0
     t0 = time.perf_counter()
     c0 = time.process_time()
     answers = []
     for ms in range(steps):
         rx = b""
-        if command and ms == 200:
-            rx = request(command[0], int(command[1:]))
-        elif command and ms > 200 and ms % 200 == 0:
+        if command and ms >= 200 and ms % 400 == 0:
+            rx = request(command[0], int(command[1:]))  # again as soon as the last one is done
+        elif command and ms > 200 and ms % 400 == 200:
             rx = request("Q", 0)
+        c1 = time.process_time()
         words = b.step(1000, plant.levels(), rx).split()
         if plant.move(words[1:4]):
             motor_ms += 1
+            motor_cpu += time.process_time() - c1
         if words[4] != "-":
             answers.append(bytes.fromhex(words[4]))
     wall = time.perf_counter() - t0
     cpu = time.process_time() - c0
-    return wall, cpu, motor_ms, b"".join(answers)
+    return wall, cpu, motor_ms, motor_cpu, b"".join(answers)
 
 
 def main():
@@ -80,12 +83,13 @@ def main():
     parser.add_argument("--command", default="L0")
     args = parser.parse_args()
     for label, command in (("idle", None), (f"{args.command} with the crude plant", args.command)):
-        wall, cpu, motor_ms, tx = run(args.image, args.ms, command)
+        wall, cpu, motor_ms, motor_cpu, tx = run(args.image, args.ms, command)
         print(f"{label}: {args.ms} virtual ms in {wall:.2f} s wall ({cpu:.2f} s CPU): "
               f"{args.ms / wall:.0f} virtual ms per wall second ({args.ms / cpu:.0f} per CPU "
-              f"second); a motor ran {motor_ms} ms")
+              f"second); a motor ran {motor_ms} ms"
+              + (f", at {motor_ms / motor_cpu:.0f} virtual ms per CPU second" if motor_cpu else ""))
         if command:
-            print(f"  the unit sent: {tx[-200:]!r}")
+            print(f"  the unit sent (end): {tx[-120:]!r}")
 
 
 if __name__ == "__main__":
