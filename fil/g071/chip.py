@@ -232,7 +232,9 @@ class Chip:
     # ---- resets ------------------------------------------------------------------------------
     def system_reset(self, cause):
         flags = self.rcc.reset_flags() | (1 << CSR_FLAGS[cause]) | (1 << CSR_FLAGS["pin"])
+        sent = self.usart1.sent  # what left the pin before the reset is still the step's TX
         self._build(flags)
+        self.usart1.sent = sent
         self.resets += 1
         self.hung = False
         self.cpu.reset()
