@@ -1,6 +1,7 @@
 """The ADC's scan by DMA as embassy-stm32 drives it on the G0 (RM0444 §15), and the GPIO output
 levels the bench reports for the bridges' STBY and IN pins (RM0444 §7.4)."""
 
+import support  # noqa: F401  (first: puts fil/g071 on the import path)
 import unittest
 
 from adc import Adc

@@ -2,6 +2,7 @@
 resets (SYSRESETREQ, watchdog with `hang`, power on) and the flash erase that stalls the CPU while
 the DMA keeps receiving the UART's bytes (RM0444 §3.3.2; ARMv6-M ARM B1.5)."""
 
+import support  # noqa: F401  (first: puts fil/g071 on the import path)
 import unittest
 
 import clock

@@ -3,6 +3,7 @@ boots, answers the printer's `S0`, is reset by its watchdog after `hang` and boo
 `power off`/`power on`. Skipped when the image is missing (FIL_G071_IMAGE, default
 dist/mmu-firmware-g071.elf at the repository's root)."""
 
+import support  # noqa: F401  (first: puts fil/g071 on the import path)
 import os
 import subprocess
 import sys

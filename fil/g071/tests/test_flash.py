@@ -1,6 +1,7 @@
 """The FLASH controller: unlock, double-word program, page erase, busy flags and the CPU stall
 (RM0444 §3.3.5-3.3.8, §3.7)."""
 
+import support  # noqa: F401  (first: puts fil/g071 on the import path)
 import unittest
 
 from flash import ERASE_CYCLES, PROGRAM_CYCLES, Flash

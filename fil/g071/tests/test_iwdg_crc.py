@@ -1,5 +1,6 @@
 """The independent watchdog (RM0444 §26) and the CRC unit (RM0444 §16)."""
 
+import support  # noqa: F401  (first: puts fil/g071 on the import path)
 import binascii
 import unittest
 

@@ -1,5 +1,6 @@
 """RCC/PWR/FLASH ACR: the ready bits embassy_stm32::init waits for (RM0444 §5.4, §4.4, §3.7.1)."""
 
+import support  # noqa: F401  (first: puts fil/g071 on the import path)
 import unittest
 
 from support import FakeChip, r32, w32

@@ -1,5 +1,6 @@
 """TIM2 as embassy-time's driver uses it and TIM3's PWM duty (RM0444 §22.3-22.4)."""
 
+import support  # noqa: F401  (first: puts fil/g071 on the import path)
 import unittest
 
 from support import FakeChip, r32, w32

@@ -1,6 +1,7 @@
 """USART1 received by DMA into a circular ring and sent by DMA (RM0444 §33.5, §10.4, §11.3:
 DMAMUX request 50 = USART1_RX, 51 = USART1_TX)."""
 
+import support  # noqa: F401  (first: puts fil/g071 on the import path)
 import unittest
 
 import clock
