@@ -129,6 +129,25 @@ if __name__ == "__main__":
 
 
 @unittest.skipUnless(os.path.exists(IMAGE), f"no firmware image at {IMAGE} (set FIL_G071_IMAGE)")
+class DeterminismTest(unittest.TestCase):
+    def test_same_inputs_same_answers(self):
+        import bench as bench_module
+        from support import request as encode
+
+        def run():
+            bench = bench_module.Bench(IMAGE)
+            answers = []
+            for ms in range(120):
+                rx = encode("S", 0) if ms in (30, 60) else encode("Q", 0) if ms == 90 else b""
+                answers.append(bench.step(1000, [1000 + 10 * ms] * 9, rx))
+            return answers, bench.chip.cpu.native.count()
+
+        first, second = run(), run()
+        self.assertEqual(first, second)
+        self.assertTrue(any("53302041" in a for a in first[0]))
+
+
+@unittest.skipUnless(os.path.exists(IMAGE), f"no firmware image at {IMAGE} (set FIL_G071_IMAGE)")
 class EraseDuringRequestTest(unittest.TestCase):
     """A page erase while the printer sends a request loses no byte, on the real image: a
     damaged store (the persisted region filled with junk) makes the firmware erase a page at
