@@ -21,6 +21,7 @@ accesses and between slices.
 """
 
 import ctypes
+import functools
 import hashlib
 import os
 import shutil
@@ -29,45 +30,62 @@ import tempfile
 
 SOURCE = r"""
 #include <stdint.h>
+#include <stdlib.h>
 typedef int (*stop_fn)(void *);
 static stop_fn uc_stop;
-static const uint8_t *image; static uint64_t base, length;
-static uint64_t count, limit;
-static int event, irq_ready, stopped_by;   /* stopped_by: 0 none, 1 limit, 2 WFE, 3 WFI, 4 CPSIE */
-void nat_init(stop_fn f, const uint8_t *img, uint64_t b, uint64_t len) {
-    uc_stop = f; image = img; base = b; length = len; count = 0; limit = ~0ULL; event = 0;
+/* One per Unicorn instance (the hooks' user data), so that several benches share the library. */
+struct nat {
+    const uint8_t *image; uint64_t base, length;
+    uint64_t count, limit;
+    int event, irq_ready, stopped_by;   /* stopped_by: 0 none, 1 limit, 2 WFE, 3 WFI, 4 CPSIE, 5 WFE consumed */
+};
+void nat_set_stop(stop_fn f) { uc_stop = f; }
+struct nat *nat_new(const uint8_t *img, uint64_t b, uint64_t len) {
+    struct nat *n = calloc(1, sizeof *n);
+    if (n) { n->image = img; n->base = b; n->length = len; n->limit = ~0ULL; }
+    return n;
 }
-uint64_t nat_count(void) { return count; }
-void nat_set_limit(uint64_t l) { limit = l; stopped_by = 0; }
-int nat_stopped_by(void) { return stopped_by; }
-void nat_set_event(int e) { event = e; }
-int nat_event(void) { return event; }
-void nat_set_irq_ready(int r) { irq_ready = r; }
+void nat_free(struct nat *n) { free(n); }
+uint64_t nat_count(struct nat *n) { return n->count; }
+void nat_set_limit(struct nat *n, uint64_t l) { n->limit = l; n->stopped_by = 0; }
+int nat_stopped_by(struct nat *n) { return n->stopped_by; }
+void nat_set_event(struct nat *n, int e) { n->event = e; }
+int nat_event(struct nat *n) { return n->event; }
+void nat_set_irq_ready(struct nat *n, int r) { n->irq_ready = r; }
 void nat_block(void *uc, uint64_t address, uint32_t size, void *user) {
-    (void)user;
-    uint64_t offset = address - base;
-    if (address >= base && offset + size <= length) {
+    struct nat *n = user;
+    uint64_t offset = address - n->base;
+    if (address >= n->base && offset + size <= n->length) {
         uint32_t i = 0;
         while (i < size) {
-            uint16_t top = (uint16_t)(image[offset + i] | (image[offset + i + 1] << 8)) >> 11;
+            uint16_t top = (uint16_t)(n->image[offset + i] | (n->image[offset + i + 1] << 8)) >> 11;
             i += (top == 0x1d || top == 0x1e || top == 0x1f) ? 4 : 2;
-            count++;
+            n->count++;
         }
     } else {
-        count += size / 2;
+        n->count += size / 2;
     }
-    if (count >= limit && !stopped_by) { stopped_by = 1; uc_stop(uc); }
+    if (n->count >= n->limit && !n->stopped_by) { n->stopped_by = 1; uc_stop(uc); }
 }
-void nat_special(void *uc, uint64_t address, uint32_t size, void *user) {
+void nat_sev(void *uc, uint64_t address, uint32_t size, void *user) {
+    (void)uc; (void)address; (void)size;
+    ((struct nat *)user)->event = 1;
+}
+void nat_wfe(void *uc, uint64_t address, uint32_t size, void *user) {
+    struct nat *n = user;
     (void)address; (void)size;
-    uintptr_t kind = (uintptr_t)user;
-    if (kind == 0xBF40) { event = 1; }
-    else if (kind == 0xBF20) {
-        if (event) { event = 0; stopped_by = 5; /* consumed: the bench skips the WFE */ uc_stop(uc); }
-        else { stopped_by = 2; uc_stop(uc); }
-    }
-    else if (kind == 0xBF30) { stopped_by = 3; uc_stop(uc); }
-    else if (kind == 0xB662) { if (irq_ready) { stopped_by = 4; uc_stop(uc); } }
+    if (n->event) { n->event = 0; n->stopped_by = 5; } else { n->stopped_by = 2; }
+    uc_stop(uc);
+}
+void nat_wfi(void *uc, uint64_t address, uint32_t size, void *user) {
+    (void)address; (void)size;
+    ((struct nat *)user)->stopped_by = 3;
+    uc_stop(uc);
+}
+void nat_cpsie(void *uc, uint64_t address, uint32_t size, void *user) {
+    struct nat *n = user;
+    (void)address; (void)size;
+    if (n->irq_ready) { n->stopped_by = 4; uc_stop(uc); }
 }
 """
 
@@ -87,9 +105,18 @@ def _library():
         os.replace(tmp, path)
         os.unlink(source)
     lib = ctypes.CDLL(path)
+    p = ctypes.c_void_p
+    lib.nat_new.restype = p
+    lib.nat_new.argtypes = [p, ctypes.c_uint64, ctypes.c_uint64]
+    lib.nat_set_stop.argtypes = [p]
+    lib.nat_free.argtypes = [p]
     lib.nat_count.restype = ctypes.c_uint64
-    lib.nat_set_limit.argtypes = [ctypes.c_uint64]
-    lib.nat_init.argtypes = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_uint64, ctypes.c_uint64]
+    lib.nat_count.argtypes = [p]
+    lib.nat_set_limit.argtypes = [p, ctypes.c_uint64]
+    for name in ("nat_stopped_by", "nat_event"):
+        getattr(lib, name).argtypes = [p]
+    for name in ("nat_set_event", "nat_set_irq_ready"):
+        getattr(lib, name).argtypes = [p, ctypes.c_int]
     return lib
 
 
@@ -105,29 +132,37 @@ class Native:
         import unicorn
         self.lib = lib = _library()
         self._image = (ctypes.c_uint8 * len(image)).from_buffer_copy(image)
-        stop = ctypes.cast(uclib.uc_emu_stop, ctypes.c_void_p)
-        lib.nat_init(stop, ctypes.addressof(self._image), base, len(image))
+        lib.nat_set_stop(ctypes.cast(uclib.uc_emu_stop, ctypes.c_void_p))
+        self._state = state = lib.nat_new(ctypes.addressof(self._image), base, len(image))
+        if not state:
+            raise MemoryError("nat_new")
         self._handles = []
-        h = uc_hook_h()
-        cb = ctypes.cast(lib.nat_block, ctypes.c_void_p)
-        if uclib.uc_hook_add(uc._uch, ctypes.byref(h), unicorn.UC_HOOK_BLOCK, cb, None,
-                             ctypes.c_uint64(1), ctypes.c_uint64(0)) != 0:
-            raise RuntimeError("uc_hook_add (block) failed")
-        self._handles.append(h)
-        special = ctypes.cast(lib.nat_special, ctypes.c_void_p)
-        for address, kind in special_addresses:
+
+        def add(kind, callback, begin, end):
             h = uc_hook_h()
-            if uclib.uc_hook_add(uc._uch, ctypes.byref(h), unicorn.UC_HOOK_CODE, special,
-                                 ctypes.c_void_p(kind), ctypes.c_uint64(address),
-                                 ctypes.c_uint64(address)) != 0:
-                raise RuntimeError("uc_hook_add (code) failed")
+            cb = ctypes.cast(callback, ctypes.c_void_p)
+            if uclib.uc_hook_add(uc._uch, ctypes.byref(h), kind, cb, ctypes.c_void_p(state),
+                                 ctypes.c_uint64(begin), ctypes.c_uint64(end)) != 0:
+                raise RuntimeError("uc_hook_add failed")
             self._handles.append(h)
-        self.count = lib.nat_count
-        self.set_limit = lib.nat_set_limit
-        self.stopped_by = lib.nat_stopped_by
-        self.set_event = lib.nat_set_event
-        self.event = lib.nat_event
-        self.set_irq_ready = lib.nat_set_irq_ready
+
+        add(unicorn.UC_HOOK_BLOCK, lib.nat_block, 1, 0)
+        callbacks = {SEV: lib.nat_sev, WFE: lib.nat_wfe, WFI: lib.nat_wfi, CPSIE: lib.nat_cpsie}
+        for address, kind in special_addresses:
+            add(unicorn.UC_HOOK_CODE, callbacks[kind], address, address)
+        bind = functools.partial
+        self.count = bind(lib.nat_count, state)
+        self.set_limit = bind(lib.nat_set_limit, state)
+        self.stopped_by = bind(lib.nat_stopped_by, state)
+        self.set_event = bind(lib.nat_set_event, state)
+        self.event = bind(lib.nat_event, state)
+        self.set_irq_ready = bind(lib.nat_set_irq_ready, state)
+
+    def __del__(self):
+        # The hooks go with the Unicorn instance; the state is freed with it.
+        if getattr(self, "_state", None):
+            self.lib.nat_free(self._state)
+            self._state = None
 
 
 def special_instructions(segments, base, size):
