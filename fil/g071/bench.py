@@ -1,0 +1,188 @@
+#!/usr/bin/env python3
+"""NUCLEO-G071RB firmware-in-the-loop bench: runs the unchanged STM32G071RB firmware image in
+Unicorn with register models (chip.py) and speaks the line protocol of fil/PROTOCOL.md on
+stdin/stdout.
+
+    python3 fil/g071/bench.py <image.elf> [--rtt FILE]
+
+Diagnostics go to stderr. See fil/g071/README.md.
+"""
+
+import argparse
+import os
+import sys
+import time
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+
+import clock  # noqa: E402
+import elf  # noqa: E402
+from chip import Chip  # noqa: E402
+from cpu import EmulationError  # noqa: E402
+
+# The protocol's sensor order (mmu_hal_port::Samples) -> the ADC channel the pin map
+# (src/board/g071/mod.rs) wires each to: slot0 hall PA0 IN0, slot0 filament PA1 IN1, slot1 hall
+# PA4 IN4, slot1 filament PB1 IN9, slot2 hall PB11 IN15, slot2 filament PB12 IN16, hub filament
+# PA6 IN6, hub tension PA7 IN7, hub cutter PB0 IN8.
+SENSOR_CHANNELS = (0, 1, 4, 9, 15, 16, 6, 7, 8)
+
+PORT = {c: i for i, c in enumerate("ABCDEF")}
+# Each slot's TB6612FNG inputs: (STBY pin, IN1 pin, IN2 pin, TIM3 channel and its pin).
+SLOTS = (
+    (("C", 2), ("B", 3), ("B", 5), (0, ("C", 6))),
+    (("C", 2), ("B", 4), ("B", 14), (1, ("C", 7))),
+    (("C", 3), ("C", 0), ("C", 1), (2, ("C", 8))),
+)
+TIM3_AF = 1  # PC6/PC7/PC8 AF1 = TIM3_CH1/2/3 (STM32G071 datasheet, alternate function table)
+BOARD, SLOT_COUNT = "g071", 3
+
+
+class Bench:
+    def __init__(self, image, rtt=None):
+        segments, self.symbols = elf.load(image)
+        self.chip = Chip(segments)
+        self.rtt = open(rtt, "ab") if rtt else None
+        self.rtt_block = self.symbols.get("_SEGGER_RTT")
+        self.line_origin = 0    # cycle the current run of back-to-back characters started
+        self.line_count = 0     # characters in that run so far
+        self.wall = 0.0
+        self.cpu = 0.0
+
+    # ---- outputs -----------------------------------------------------------------------------
+    def level(self, pin):
+        port, n = pin
+        return self.chip.gpio[PORT[port]].output_level(n)
+
+    def pwm(self, channel, pin):
+        port, n = pin
+        g = self.chip.gpio[PORT[port]]
+        mode = g.mode(n)
+        if mode == 1:
+            return 1000 * ((g.odr() >> n) & 1)
+        if mode == 2:
+            afr = g.regs.get(0x20 if n < 8 else 0x24, 0) >> (4 * (n % 8)) & 0xF
+            if afr == TIM3_AF:
+                return self.chip.tim3.duty_permille(channel)
+        return 0
+
+    def motors(self):
+        out = []
+        for stby, in1, in2, (channel, pin) in SLOTS:
+            if not self.chip.powered:
+                out.append("000:0")
+                continue
+            out.append(f"{self.level(stby)}{self.level(in1)}{self.level(in2)}:"
+                       f"{self.pwm(channel, pin)}")
+        return out
+
+    def pump_rtt(self):
+        """Copies RTT up channel 0's new bytes to the --rtt file (SEGGER RTT control block:
+        id[16], max_up, max_down, then per up buffer: name, buffer, size, write, read, flags)."""
+        if not self.rtt or self.rtt_block is None or not self.chip.powered:
+            return
+        mem = self.chip.memory
+        try:
+            desc = mem.read(self.rtt_block + 24, 24)
+        except MemoryError:
+            return
+        buf, size, wr, rd = (int.from_bytes(desc[4 * i:4 * i + 4], "little") for i in (1, 2, 3, 4))
+        if not size or wr == rd or wr >= size or rd >= size:
+            return
+        try:
+            if wr > rd:
+                data = mem.read(buf + rd, wr - rd)
+            else:
+                data = mem.read(buf + rd, size - rd) + mem.read(buf, wr)
+        except MemoryError:
+            return
+        self.rtt.write(data)
+        self.rtt.flush()
+        mem.write(self.rtt_block + 24 + 16, wr.to_bytes(4, "little"))
+
+    # ---- requests ----------------------------------------------------------------------------
+    def step(self, us, levels, rx):
+        chip = self.chip
+        start = chip.time
+        end = start + clock.us(us)
+        for level, channel in zip(levels, SENSOR_CHANNELS):
+            chip.sensor[channel] = level
+        if chip.powered:
+            if self.line_origin + clock.char_time(self.line_count) <= start:
+                self.line_origin, self.line_count = start, 0
+            for byte in rx:
+                self.line_count += 1
+                chip.usart1.deliver(self.line_origin + clock.char_time(self.line_count), byte)
+        t0, c0 = time.perf_counter(), time.process_time()
+        chip.run_until(end)
+        self.wall += time.perf_counter() - t0
+        self.cpu += time.process_time() - c0
+        sent = bytes(b for _, b in chip.usart1.take_sent()) if chip.powered else b""
+        self.pump_rtt()
+        tx = sent.hex() if sent else "-"
+        return f"ok {' '.join(self.motors())} {tx} {chip.resets} {chip.erases()} {chip.programs()}"
+
+    def handle(self, line):
+        words = line.split()
+        if not words:
+            raise ValueError("empty request")
+        if words[0] == "step":
+            if len(words) != 12:
+                raise ValueError(f"step takes 11 arguments, got {len(words) - 1}")
+            us = int(words[1])
+            levels = [int(w) for w in words[2:11]]
+            if us < 0 or any(not 0 <= v <= 4095 for v in levels):
+                raise ValueError("step: a value out of range")
+            rx = b"" if words[11] == "-" else bytes.fromhex(words[11])
+            return self.step(us, levels, rx)
+        if words == ["power", "off"]:
+            self.chip.power_off()
+            self.line_origin, self.line_count = self.chip.time, 0
+            self.chip.usart1.incoming.clear()
+            return "ok"
+        if words == ["power", "on"]:
+            if not self.chip.powered:
+                self.chip.power_on()
+            return "ok"
+        if words == ["hang"]:
+            self.chip.hung = True
+            return "ok"
+        raise ValueError(f"unknown request: {line.strip()}")
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("image")
+    parser.add_argument("--rtt", metavar="FILE")
+    args = parser.parse_args()
+    out = sys.stdout
+    try:
+        bench = Bench(args.image, args.rtt)
+    except (OSError, ValueError, EmulationError) as e:
+        print(f"error {e}", flush=True)
+        return 1
+    print(f"ready {BOARD} {SLOT_COUNT}", file=out, flush=True)
+    for line in sys.stdin:
+        if line.strip() == "quit":
+            break
+        try:
+            answer = bench.handle(line)
+        except EmulationError as e:
+            print(f"error {e}", file=out, flush=True)
+            return 1
+        except ValueError as e:
+            print(f"error {e}", file=out, flush=True)
+            return 1
+        except Exception as e:  # a fault of the bench itself: say so rather than hang the simulator
+            print(f"error internal: {type(e).__name__}: {e}", file=out, flush=True)
+            raise
+        print(answer, file=out, flush=True)
+    virtual_ms = bench.chip.time / (clock.CYCLES_PER_US * 1000)
+    if bench.wall:
+        print(f"bench: {virtual_ms:.0f} virtual ms in {bench.wall:.1f} s wall, {bench.cpu:.1f} s CPU "
+              f"of emulation: {virtual_ms / bench.wall:.0f} virtual ms per wall second, "
+              f"{virtual_ms / max(bench.cpu, 1e-9):.0f} per CPU second", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

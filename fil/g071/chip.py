@@ -1,0 +1,298 @@
+"""The STM32G071RB: the core (cpu.py), its memories and the register models, wired at their
+addresses (RM0444 §2.2.2, memory map), and the scheduler that runs them in virtual time.
+
+Running: the CPU executes in slices that end at the next peripheral event (a timer compare, a
+UART character, an ADC conversion, the watchdog, a flash operation's end), at the end of the
+request's time, or after at most SLICE_US; an MMIO write that can change the interrupts or the
+next event stops the slice early (`reschedule`). Between slices the models are brought to the
+current time, the interrupt lines are sampled into the NVIC, and a pending interrupt is taken.
+A sleeping core (WFE/WFI), a stalled one (flash busy) or a hung one (`hang`) executes nothing:
+time jumps to the next event.
+
+Resets (RM0444 §5.1): a system reset (watchdog, SYSRESETREQ) restarts the core and every
+peripheral, keeps the SRAM and the flash, and sets the reset flags in RCC_CSR (plus PINRSTF, the
+internal reset drives NRST); a power-on reset also clears the SRAM (here: to zero) and sets
+PWRRSTF.
+"""
+
+import unicorn
+
+import clock
+from adc import Adc
+from cpu import Cpu, EmulationError, FLASH_BASE, FLASH_SIZE, RAM_BASE, RAM_SIZE
+from crc import Crc
+from dma import Dma, DmaMux
+from flash import Flash
+from gpio import Gpio
+from iwdg import Iwdg
+from nvic import Scs
+from rcc import CSR_FLAGS, Pwr, Rcc
+from regs import Block
+from timers import Timer
+from usart import Usart
+
+SLICE_US = 200
+
+# (base, size) of the MMIO windows Unicorn maps to the models.
+WINDOWS = ((0x4000_0000, 0x1_6000), (0x4002_0000, 0x6400), (0x5000_0000, 0x1800),
+           (0xE000_E000, 0x1000))
+
+
+class Memory:
+    """Flash and SRAM as the DMA and the flash controller see them (not through the MMIO)."""
+
+    def __init__(self, uc):
+        self.uc = uc
+
+    def _check(self, address, n):
+        ok = (RAM_BASE <= address and address + n <= RAM_BASE + RAM_SIZE) or \
+             (FLASH_BASE <= address and address + n <= FLASH_BASE + FLASH_SIZE)
+        if not ok:
+            raise MemoryError(hex(address))
+
+    def read(self, address, n):
+        self._check(address, n)
+        return bytes(self.uc.mem_read(address, n))
+
+    def write(self, address, data):
+        self._check(address, len(data))
+        self.uc.mem_write(address, bytes(data))
+
+
+class Chip:
+    def __init__(self, segments):
+        image = bytearray(b"\xff" * FLASH_SIZE)
+        for address, data in segments:
+            if FLASH_BASE <= address < FLASH_BASE + FLASH_SIZE:
+                image[address - FLASH_BASE:address - FLASH_BASE + len(data)] = data
+        self.cpu = Cpu(self, bytes(image), segments)
+        self.uc = self.cpu.uc
+        self.uc.mem_write(FLASH_BASE, bytes(image))
+        self.memory = Memory(self.uc)
+        for base, size in WINDOWS:
+            self.uc.mmio_map(base, size, self._mmio_read, base, self._mmio_write, base)
+        self.time = 0
+        self.in_slice = False
+        self.slice_end = 0
+        self.resets = 0
+        self.erases_before = 0     # counts of flash models replaced by resets
+        self.programs_before = 0
+        self.powered = True
+        self.hung = False
+        self.sensor = {}           # ADC channel -> level, kept across resets
+        self.flash = None
+        self._build(csr_flags=(1 << CSR_FLAGS["power"]) | (1 << CSR_FLAGS["pin"]))
+        self.cpu.reset()
+
+    # ---- the peripherals ---------------------------------------------------------------------
+    def _build(self, csr_flags):
+        if self.flash is not None:
+            self.erases_before += self.flash.erases
+            self.programs_before += self.flash.programs
+        self.scs = Scs(self)
+        self.rcc = Rcc(self, csr_flags)
+        self.pwr = Pwr(self)
+        self.flash = Flash(self)
+        self.dma = Dma(self)
+        self.dmamux = DmaMux(self, self.dma)
+        self.tim2 = Timer(self, irq=15, bits=32)
+        self.tim3 = Timer(self, irq=16)
+        self.usart1 = Usart(self)
+        self.adc = Adc(self)
+        self.adc.levels = self.sensor
+        self.iwdg = Iwdg(self)
+        self.crc = Crc(self)
+        self.gpio = [Gpio(self, port) for port in range(6)]
+        self.blocks = {
+            0x4000_0000: self.tim2, 0x4000_0400: self.tim3, 0x4000_3000: self.iwdg,
+            0x4000_7000: self.pwr, 0x4001_2400: self.adc, 0x4001_3800: self.usart1,
+            0x4002_0000: self.dma, 0x4002_0800: self.dmamux, 0x4002_1000: self.rcc,
+            0x4002_2000: self.flash, 0x4002_3000: self.crc,
+        }
+        for port, g in enumerate(self.gpio):
+            self.blocks[0x5000_0000 + 0x400 * port] = g
+        self.timed = [self.tim2, self.tim3, self.usart1, self.adc, self.iwdg, self.flash]
+        self.irq_sources = [self.tim2, self.tim3, self.usart1, self.adc, self.dma, self.flash]
+        self.others = {}  # plain storage for every other register block touched
+        self.routes = {}
+        self.stall_until = None
+        self.reset_request = None
+
+    def _block_at(self, address):
+        if address >= 0xE000_E000:
+            return self.scs, address - 0xE000_E000
+        if 0x4001_2400 <= address < 0x4001_2800:  # the ADC's common registers at +0x300
+            return self.adc, address - 0x4001_2400
+        base = address & ~0x3FF
+        block = self.blocks.get(base)
+        if block is None:
+            block = self.others.get(base)
+            if block is None:
+                block = self.others[base] = Block(self)
+        return block, address - base
+
+    def _route(self, address):
+        """(block, offset, what to bring up to date) for an MMIO address, cached per address.
+        For the DMA that is the peripherals that feed it (its counters and the memory it wrote
+        must be current), for the others the block itself."""
+        route = self.routes.get(address)
+        if route is None:
+            block, off = self._block_at(address)
+            if block is self.dma or block is self.dmamux:
+                bring = (self.usart1.advance, self.adc.advance)
+            elif type(block).advance is Block.advance:
+                bring = ()
+            else:
+                bring = (block.advance,)
+            route = self.routes[address] = (block, off, bring)
+        return route
+
+    def _mmio_read(self, uc, offset, size, base):
+        block, off, bring = self.routes.get(base + offset) or self._route(base + offset)
+        if bring:
+            now = self.time + (self.cpu.native.count() - self.cpu.count_base) * clock.CPI_NUM // clock.CPI_DEN
+            for advance in bring:
+                advance(now)
+        if size == 4:
+            return block.read_reg(off)
+        return block.read(off, size)
+
+    def _mmio_write(self, uc, offset, size, value, base):
+        block, off, bring = self.routes.get(base + offset) or self._route(base + offset)
+        if bring:
+            now = self.time + (self.cpu.native.count() - self.cpu.count_base) * clock.CPI_NUM // clock.CPI_DEN
+            for advance in bring:
+                advance(now)
+        block.write(off, size, value)
+
+    # ---- time --------------------------------------------------------------------------------
+    def now(self):
+        if self.in_slice:
+            return self.time + clock.instructions_to_cycles(self.cpu.executed())
+        return self.time
+
+    def reschedule(self, model=None):
+        """Called by a model whose state may have changed the interrupts or the next event:
+        ends the slice (at the next block) if an interrupt is now ready to be taken or the
+        model's next event (for the DMA: its producers') comes before the slice's end. A line
+        that became pending while PRIMASK masks it arms the CPSIE hook instead."""
+        if not self.in_slice:
+            return
+        if model is self.dma:
+            models, lines = (self.usart1, self.adc), (self.dma, self.usart1, self.adc)
+        elif model is not None:
+            models = lines = (model,)
+        else:
+            models, lines = self.timed, self.irq_sources
+        active = self.cpu.active
+        scs = self.scs
+        before = scs.pending
+        for m in lines:
+            for irq in m.irqs():
+                if 16 + irq not in active:
+                    scs.pending |= 1 << irq
+        if model is None or (scs.pending & ~before & scs.enabled):
+            if self.cpu.ready_interrupt() is not None:
+                self.cpu.stop_soon()
+                return
+            if self.cpu.ready_interrupt(ignore_primask=True) is not None:
+                self.cpu.native.set_irq_ready(1)
+        for m in models:
+            nxt = m.next_event()
+            if nxt is not None and nxt < self.slice_end:
+                self.cpu.stop_soon()
+                return
+
+    def stall(self, until):
+        self.stall_until = until
+        if self.in_slice:
+            self.cpu.stop_soon()
+
+    def request_reset(self, cause):
+        self.reset_request = cause
+        if self.in_slice:
+            self.cpu.stop_soon()
+
+    def next_event(self):
+        times = [t for t in (m.next_event() for m in self.timed) if t is not None]
+        return min(times) if times else None
+
+    def advance_models(self, now):
+        for m in self.timed:
+            m.advance(now)
+
+    def update_irqs(self):
+        scs = self.scs
+        active = set(v - 16 for v in self.cpu.active)
+        for m in self.irq_sources:
+            for irq in m.irqs():
+                if irq not in active:
+                    scs.pending |= 1 << irq
+
+    # ---- resets ------------------------------------------------------------------------------
+    def system_reset(self, cause):
+        flags = self.rcc.reset_flags() | (1 << CSR_FLAGS[cause]) | (1 << CSR_FLAGS["pin"])
+        sent = self.usart1.sent  # what left the pin before the reset is still the step's TX
+        self._build(flags)
+        self.usart1.sent = sent
+        self.resets += 1
+        self.hung = False
+        self.cpu.reset()
+
+    def power_off(self):
+        self.flash.power_loss()
+        self.powered = False
+
+    def power_on(self):
+        self.uc.mem_write(RAM_BASE, bytes(RAM_SIZE))
+        self._build((1 << CSR_FLAGS["power"]) | (1 << CSR_FLAGS["pin"]))
+        self.resets += 1
+        self.powered = True
+        self.hung = False
+        self.cpu.reset()
+
+    def erases(self):
+        return self.erases_before + self.flash.erases
+
+    def programs(self):
+        return self.programs_before + self.flash.programs
+
+    # ---- running -----------------------------------------------------------------------------
+    def run_until(self, end):
+        cpu = self.cpu
+        while self.time < end:
+            self.advance_models(self.time)
+            if self.reset_request:
+                cause, self.reset_request = self.reset_request, None
+                self.system_reset(cause)
+                continue
+            if not self.powered:
+                self.time = end
+                break
+            self.update_irqs()
+            nxt = self.next_event()
+            limit = end if nxt is None else min(end, max(nxt, self.time + 1))
+            if self.stall_until is not None:
+                if self.stall_until > self.time:
+                    self.time = min(limit, self.stall_until)
+                    continue
+                self.stall_until = None
+            if self.hung:
+                self.time = limit
+                continue
+            if cpu.sleeping:
+                if not cpu.wakes():
+                    self.time = limit
+                    continue
+                cpu.sleeping = False
+            irq = cpu.ready_interrupt()
+            if irq is not None:
+                cpu.take_interrupt(irq)
+            limit = min(limit, self.time + clock.us(SLICE_US))
+            self.slice_end = limit
+            self.in_slice = True
+            try:
+                executed = cpu.run(clock.cycles_to_instructions(limit - self.time))
+            finally:
+                self.in_slice = False
+            self.time += clock.instructions_to_cycles(executed)
