@@ -7,6 +7,7 @@
 //! then a summary line per board; exit status 1 when one failed.
 
 use std::error::Error;
+use std::fs::File;
 use std::path::{Path, PathBuf};
 use std::thread;
 use std::time::Instant;
@@ -36,6 +37,10 @@ pub struct FilArgs {
     /// Where the benches are (`fil/` of the source tree by default).
     #[arg(long, value_name = "DIR")]
     pub fil_dir: Option<PathBuf>,
+    /// Where each board's bench log goes (`<DIR>/<BOARD>.log`, started afresh); the temporary
+    /// directory's `mmu-fil/` by default. A failed scenario shows the end of it.
+    #[arg(long, value_name = "DIR")]
+    pub log_dir: Option<PathBuf>,
     /// List the scenarios and exit.
     #[arg(long)]
     pub list: bool,
@@ -85,10 +90,20 @@ pub fn run(args: &FilArgs) -> Result<(), Box<dyn Error>> {
     }
     let fil_dir = args.fil_dir.clone().unwrap_or_else(default_fil_dir);
     let only = args.only.as_deref();
+    let log_dir = args
+        .log_dir
+        .clone()
+        .unwrap_or_else(|| std::env::temp_dir().join("mmu-fil"));
+    std::fs::create_dir_all(&log_dir).map_err(|e| format!("cannot create {}: {e}", log_dir.display()))?;
+    println!("bench logs: {}", log_dir.display());
     let summaries: Vec<(String, bool)> = thread::scope(|scope| {
         let runs: Vec<_> = images
             .iter()
-            .map(|(board, image)| scope.spawn(|| run_board(*board, image, &fil_dir, only)))
+            .map(|(board, image)| {
+                let log = log_dir.join(format!("{}.log", board.name()));
+                let fil_dir = &fil_dir;
+                scope.spawn(move || run_board(*board, image, fil_dir, &log, only))
+            })
             .collect();
         runs.into_iter()
             .map(|run| {
@@ -109,9 +124,25 @@ pub fn run(args: &FilArgs) -> Result<(), Box<dyn Error>> {
 }
 
 /// Every scenario on `board`'s `image`: its summary line, and whether all passed.
-fn run_board(board: Board, image: &Path, fil_dir: &Path, only: Option<&str>) -> (String, bool) {
+fn run_board(board: Board, image: &Path, fil_dir: &Path, log: &Path, only: Option<&str>) -> (String, bool) {
+    let log_file = match File::create(log) {
+        Ok(file) => file,
+        Err(e) => {
+            return (
+                format!(
+                    "firmware-in-the-loop ({}): cannot create {}: {e}",
+                    board.name(),
+                    log.display()
+                ),
+                false,
+            );
+        }
+    };
     let mut new_unit = |options: mmu_sim::SimOptions| {
-        let unit = FirmwareUnit::start(board, image, fil_dir, Config::default())?;
+        let bench_log = log_file
+            .try_clone()
+            .map_err(|e| format!("{}: {e}", log.display()))?;
+        let unit = FirmwareUnit::start(board, image, fil_dir, Config::default(), bench_log.into())?;
         if unit.slots() != options.slots {
             return Err(format!(
                 "the image has {} slots, the scenario {}",
@@ -127,7 +158,12 @@ fn run_board(board: Board, image: &Path, fil_dir: &Path, only: Option<&str>) -> 
         let took = verdict.took.as_secs_f64();
         match &verdict.result {
             Ok(()) => println!("  ok    {name}: {} ({took:.1} s)", verdict.name),
-            Err(why) => println!("  FAIL  {name}: {} ({took:.1} s): {why}", verdict.name),
+            Err(why) => {
+                println!("  FAIL  {name}: {} ({took:.1} s): {why}", verdict.name);
+                for line in last_lines(log, 15) {
+                    println!("        | {line}");
+                }
+            }
         }
     });
     let passed = verdicts.iter().filter(|v| v.result.is_ok()).count();
@@ -137,4 +173,14 @@ fn run_board(board: Board, image: &Path, fil_dir: &Path, only: Option<&str>) -> 
         started.elapsed().as_secs_f64()
     );
     (summary, passed == verdicts.len())
+}
+
+/// The last `n` lines of the file at `path` (none when it cannot be read).
+fn last_lines(path: &Path, n: usize) -> Vec<String> {
+    let text = std::fs::read_to_string(path).unwrap_or_default();
+    let lines: Vec<&str> = text.lines().collect();
+    lines[lines.len().saturating_sub(n)..]
+        .iter()
+        .map(|l| l.to_string())
+        .collect()
 }

@@ -25,6 +25,7 @@ use std::error::Error;
 use std::fs::File;
 use std::io::{self, Read, Write};
 use std::path::{Path, PathBuf};
+use std::process::Stdio;
 use std::sync::mpsc::{self, Receiver, RecvTimeoutError, TryRecvError};
 use std::thread;
 use std::time::{Duration, Instant};
@@ -135,7 +136,13 @@ pub fn run(args: &SimArgs) -> Result<(), Box<dyn Error>> {
     };
     let mut sim = match (&args.firmware, args.board) {
         (Some(image), Some(board)) => {
-            let unit = FirmwareUnit::start(board, image, &default_fil_dir(), options.unit.clone())?;
+            let unit = FirmwareUnit::start(
+                board,
+                image,
+                &default_fil_dir(),
+                options.unit.clone(),
+                Stdio::inherit(),
+            )?;
             if unit.slots() != args.slots {
                 return Err(usage(format!(
                     "the image has {} slots, not {}: --slots {}",

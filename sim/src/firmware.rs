@@ -98,14 +98,21 @@ pub struct FirmwareUnit {
 }
 
 impl FirmwareUnit {
-    /// Start `board`'s bench (from `fil_dir`) on `image` and wait for it to be ready. `config`
-    /// is what the image was built with (the defaults, unless the build changed them).
-    pub fn start(board: Board, image: &Path, fil_dir: &Path, config: Config) -> Result<FirmwareUnit, String> {
+    /// Start `board`'s bench (from `fil_dir`) on `image` and wait for it to be ready; what the
+    /// bench logs goes to `log`. `config` is what the image was built with (the defaults, unless
+    /// the build changed them).
+    pub fn start(
+        board: Board,
+        image: &Path,
+        fil_dir: &Path,
+        config: Config,
+        log: Stdio,
+    ) -> Result<FirmwareUnit, String> {
         let mut child = board
             .bench_command(fil_dir, image)
             .stdin(Stdio::piped())
             .stdout(Stdio::piped())
-            .stderr(Stdio::inherit())
+            .stderr(log)
             .spawn()
             .map_err(|e| format!("cannot start the {} bench: {e}", board.name()))?;
         let (Some(to_bench), Some(from_bench)) = (child.stdin.take(), child.stdout.take()) else {
