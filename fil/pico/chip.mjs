@@ -12,7 +12,7 @@
 import { RP2040 } from 'rp2040js';
 import { attachFlash } from './flash-model.mjs';
 import {
-  patchAircr, patchUartRegisters, patchUartRxDma, patchUartTxInterrupt, patchUdfFault,
+  patchAircr, patchUartReceive, patchUartRegisters, patchUartTxInterrupt, patchUdfFault,
   patchXipCtrl, sevSetsEvent,
 } from './patches.mjs';
 
@@ -61,7 +61,7 @@ export class Chip {
     const uart = rp2040.uart[0];
     patchUartRegisters(uart);
     patchUartTxInterrupt(uart);
-    patchUartRxDma(uart);
+    patchUartReceive(uart);
     patchXipCtrl(rp2040);
     patchAircr(rp2040, () => { this.resetRequest ??= 'sysresetreq'; });
     this.takeFault = patchUdfFault(rp2040, (code, pc) => {

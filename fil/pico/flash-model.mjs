@@ -7,9 +7,10 @@
 // completes. The ROM selects the flash by hand: it drives the SS pin low through IO_QSPI
 // GPIO_QSPI_SS_CTRL.OUTOVER = 2 (RP2040 DS 2.19.6.2) and pushes bytes through the SSI in
 // standard SPI mode, one frame per byte, reading one byte back per byte sent (DS 4.10). So:
-// while OUTOVER drives SS low, each DR0 write clocks one byte through the flash model below and
-// queues its answer for DR0 reads; SR reports RFNE while answers wait. Otherwise (boot2, and
-// embassy's re-entry into XIP through its boot2 copy) the SSI keeps rp2040js's behaviour.
+// while OUTOVER forces SS (low or high), each DR0 write clocks one byte (through the flash model
+// below if SS is low; 0xff back if high) and queues the answer for DR0 reads; SR/RXFLR report
+// the answers waiting. Otherwise (OUTOVER 0: boot2, and embassy's re-entry into XIP through its
+// boot2 copy, where the SSI drives SS itself) the SSI keeps rp2040js's behaviour.
 //
 // The flash (W25Q16JV datasheet, section 8): WREN 06h / WRDI 04h, RDSR1 05h / RDSR2 35h (QE
 // set), WRSR 01h / 31h (accepted, nothing changes), JEDEC ID 9Fh (EF 40 15), unique ID 4Bh,
@@ -113,8 +114,12 @@ export class IoQspi extends BasePeripheral {
     this.flash = flash;
     this.registers = new Map();
   }
+  /** GPIO_QSPI_SS_CTRL.OUTOVER: 0 the SSI drives SS, 2 forced low, 3 forced high. */
+  get ssOverride() {
+    return ((this.registers.get(0x0c) ?? 0) >> 8) & 3;
+  }
   get csForcedLow() {
-    return ((this.registers.get(0x0c) ?? 0) >> 8 & 3) === 2;
+    return this.ssOverride === 2;
   }
   readUint32(offset) {
     return this.registers.get(offset) ?? 0;
@@ -137,8 +142,10 @@ export function attachFlash(rp2040, counters) {
   const rx = [];
   const read = ssi.readUint32.bind(ssi);
   const write = ssi.writeUint32.bind(ssi);
+  // SS forced either way: the ROM drives the SSI by hand, one answer byte per byte sent.
+  const byHand = () => ioQspi.ssOverride >= 2 || rx.length > 0;
   ssi.readUint32 = (offset) => {
-    if (!ioQspi.csForcedLow && rx.length === 0) return read(offset);
+    if (!byHand()) return read(offset);
     switch (offset) {
       case SSI_SR: return SR_TFNF | SR_TFE | (rx.length ? SR_RFNE : 0);
       case SSI_RXFLR: return rx.length;
@@ -148,8 +155,9 @@ export function attachFlash(rp2040, counters) {
     }
   };
   ssi.writeUint32 = (offset, value) => {
-    if (offset === SSI_DR0 && ioQspi.csForcedLow) rx.push(flash.transfer(value & 0xff));
-    else write(offset, value);
+    if (offset !== SSI_DR0 || !byHand()) write(offset, value);
+    else if (ioQspi.csForcedLow) rx.push(flash.transfer(value & 0xff));
+    else rx.push(0xff); // SS high: the flash is not selected, nothing drives SO
   };
   return flash;
 }

@@ -16,8 +16,8 @@ const UART_RXDMAE = 1 << 0;
  * PL011 registers rp2040js does not model: UARTRSR/ECR (0x04), UARTILPR (0x20), UARTIFLS (0x34)
  * and UARTDMACR (0x48) fall through to BasePeripheral and read 0xffffffff, so embassy-rp's
  * UART interrupt handler believes RX DMA is on and every error bit is set. RP2040 DS 4.2.8:
- * they are plain read/write registers (RSR's error bits clear on any write to ECR; the bench
- * never raises them, so they read 0).
+ * they are plain read/write registers (RSR's error bits clear on any write to ECR; only the
+ * overrun bit is ever raised, by patchUartReceive).
  */
 export function patchUartRegisters(uart) {
   const stored = new Map([[0x04, 0], [0x20, 0], [0x34, 0x12], [0x48, 0]]);
@@ -30,6 +30,7 @@ export function patchUartRegisters(uart) {
     else write(offset, value);
   };
   uart.dmaControl = () => stored.get(0x48);
+  uart.setOverrun = () => stored.set(0x04, stored.get(0x04) | 0x8);
 }
 
 /**
@@ -56,15 +57,28 @@ export function patchUartTxInterrupt(uart) {
 }
 
 /**
- * The RX DMA request: rp2040js never raises UART RX DREQ, so a DMA channel paced by it never
- * moves a byte. RP2040 DS 4.2.5 (DMA interface): with UARTDMACR.RXDMAE set the UART requests
- * a transfer while its receive FIFO holds data. Raised when a byte arrives, dropped when a DR
- * read empties the FIFO. Needs patchUartRegisters first (it owns UARTDMACR).
+ * The receive side. rp2040js's feedByte puts a byte into the FIFO whatever the UART's state and
+ * drops it silently when the FIFO is full, and it never raises UART RX DREQ, so a DMA channel
+ * paced by it never moves a byte. RP2040 DS 4.2: the UART receives only while UARTCR.UARTEN and
+ * RXE are set (bytes on the line before are lost); a byte arriving at a full FIFO is lost and
+ * sets the overrun flag (UARTRSR.OE, bit 3; UARTDR.OE); with UARTDMACR.RXDMAE set the UART
+ * requests a DMA transfer while its receive FIFO holds data (4.2.5): raised when a byte
+ * arrives, dropped when a DR read empties the FIFO. Needs patchUartRegisters first.
  */
-export function patchUartRxDma(uart) {
+export function patchUartReceive(uart) {
   const dma = uart.rp2040.dma;
   const feed = uart.feedByte.bind(uart);
+  uart.lostBytes = 0;
   uart.feedByte = (value) => {
+    if (!uart.enabled || !uart.rxEnabled) {
+      uart.lostBytes++;
+      return;
+    }
+    if (uart.rxFIFO.full) {
+      uart.lostBytes++;
+      uart.setOverrun();
+      return;
+    }
     feed(value);
     if (uart.dmaControl() & UART_RXDMAE) dma.setDREQ(uart.dreq.rx);
   };
