@@ -13,7 +13,7 @@ import { RP2040 } from 'rp2040js';
 import { attachFlash } from './flash-model.mjs';
 import {
   patchAircr, patchUartReceive, patchUartRegisters, patchUartTxInterrupt, patchUdfFault,
-  patchXipCtrl, sevSetsEvent,
+  disabled, patchXipCtrl, sevSetsEvent,
 } from './patches.mjs';
 
 export const FLASH_BYTES = 2 * 1024 * 1024;
@@ -73,7 +73,7 @@ export class Chip {
       wd.reason = watchdog.reason;
       wd.scratchData.set(watchdog.scratch);
     }
-    wd.onWatchdogTrigger = () => {
+    if (!disabled('watchdog')) wd.onWatchdogTrigger = () => {
       // rp2040js set REASON (TIMER, or FORCE for CTRL.TRIGGER) before calling this.
       wd.timer.enable = false;
       wd.alarm.enable = false;

@@ -20,6 +20,7 @@
 // once: BUSY never reads 1 (no erase or program time).
 
 import { BasePeripheral } from 'rp2040js';
+import { disabled } from './patches.mjs';
 
 const SSI_SR = 0x28;
 const SSI_RXFLR = 0x24;
@@ -136,6 +137,7 @@ export class IoQspi extends BasePeripheral {
 /** Puts the flash behind rp2040's SSI and IO_QSPI; returns the NorFlash (counters inside). */
 export function attachFlash(rp2040, counters) {
   const flash = new NorFlash(rp2040.flash, counters);
+  if (disabled('flash')) return flash;
   const ioQspi = new IoQspi(rp2040, flash);
   rp2040.peripherals[0x40018] = ioQspi;
   const ssi = rp2040.peripherals[0x18000];

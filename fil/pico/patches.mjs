@@ -7,8 +7,18 @@
 
 import { BasePeripheral } from 'rp2040js';
 
+/**
+ * `FIL_PICO_DISABLE=name,name` leaves those patches out (names: the `disabled('...')` calls
+ * below, and `flash` for flash-model.mjs), to watch their tests fail.
+ */
+const DISABLED = new Set((process.env.FIL_PICO_DISABLE ?? '').split(',').filter(Boolean));
+export function disabled(name) {
+  return DISABLED.has(name);
+}
+
 const UART_DR = 0x00;
 const UART_ICR = 0x44;
+const UART_DMACR = 0x48;
 const UART_TXINTR = 1 << 5;
 const UART_RXDMAE = 1 << 0;
 
@@ -20,6 +30,11 @@ const UART_RXDMAE = 1 << 0;
  * overrun bit is ever raised, by patchUartReceive).
  */
 export function patchUartRegisters(uart) {
+  if (disabled('uart-registers')) {
+    uart.dmaControl = () => 0xffffffff; // what rp2040js reads for UARTDMACR
+    uart.setOverrun = () => {};
+    return;
+  }
   const stored = new Map([[0x04, 0], [0x20, 0], [0x34, 0x12], [0x48, 0]]);
   const read = uart.readUint32.bind(uart);
   const write = uart.writeUint32.bind(uart);
@@ -41,6 +56,7 @@ export function patchUartRegisters(uart) {
  * drains at once, so TXRIS is raised by each write of DR; the line is RIS & IMSC.
  */
 export function patchUartTxInterrupt(uart) {
+  if (disabled('uart-tx')) return;
   uart.checkInterrupts = function checkInterrupts() {
     this.rp2040.setInterrupt(this.irq, !!(this.interruptStatus & this.interruptMask));
   };
@@ -66,6 +82,7 @@ export function patchUartTxInterrupt(uart) {
  * arrives, dropped when a DR read empties the FIFO. Needs patchUartRegisters first.
  */
 export function patchUartReceive(uart) {
+  if (disabled('uart-receive')) return;
   const dma = uart.rp2040.dma;
   const feed = uart.feedByte.bind(uart);
   uart.lostBytes = 0;
@@ -87,6 +104,14 @@ export function patchUartReceive(uart) {
     const value = read(offset);
     if (offset === UART_DR && uart.rxFIFO.empty) dma.clearDREQ(uart.dreq.rx);
     return value;
+  };
+  // Setting RXDMAE with bytes waiting requests at once; clearing it withdraws the request.
+  const write = uart.writeUint32.bind(uart);
+  uart.writeUint32 = (offset, value) => {
+    write(offset, value);
+    if (offset !== UART_DMACR) return;
+    if (value & UART_RXDMAE && !uart.rxFIFO.empty) dma.setDREQ(uart.dreq.rx);
+    else if (!(value & UART_RXDMAE)) dma.clearDREQ(uart.dreq.rx);
   };
 }
 
@@ -114,6 +139,7 @@ export class XipCtrl extends BasePeripheral {
   }
 }
 export function patchXipCtrl(rp2040) {
+  if (disabled('xip-ctrl')) return;
   rp2040.peripherals[0x14000] = new XipCtrl(rp2040);
 }
 
@@ -124,6 +150,7 @@ export function patchXipCtrl(rp2040) {
  * SEV, so the bench's logger sets the event register there (no per-instruction cost).
  */
 export function sevSetsEvent(rp2040, component, message) {
+  if (disabled('sev')) return false;
   if (component === 'CortexM0Core' && message === 'SEV') {
     rp2040.core.eventRegistered = true;
     return true;
@@ -138,6 +165,7 @@ export function sevSetsEvent(rp2040, component, message) {
  * 0xFA05 in the top half. `onReset` is called; the bench rebuilds the chip.
  */
 export function patchAircr(rp2040, onReset) {
+  if (disabled('aircr')) return;
   const ppb = rp2040.ppb;
   const read = ppb.readUint32.bind(ppb);
   const write = ppb.writeUint32.bind(ppb);
@@ -155,6 +183,7 @@ export function patchAircr(rp2040, onReset) {
  * the image's handler runs as on the chip. BKPT stays a break: the bench reports an error.
  */
 export function patchUdfFault(rp2040, onBkpt) {
+  if (disabled('udf')) return () => false;
   const core = rp2040.core;
   let pending = false;
   rp2040.onBreak = (code) => {
