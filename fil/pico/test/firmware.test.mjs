@@ -1,0 +1,114 @@
+// End to end: the real Pico firmware image through `node bench.mjs`, as the simulator runs it.
+// The image: $FIL_PICO_IMAGE, else ../../dist/mmu-firmware-pico.elf (scripts/build-firmware.sh
+// pico dist). Skipped, saying so, when there is none.
+
+import assert from 'node:assert/strict';
+import { existsSync } from 'node:fs';
+import { test } from 'node:test';
+import { fileURLToPath } from 'node:url';
+import { Driver } from './driver.mjs';
+import { request } from './frames.mjs';
+
+const IMAGE = process.env.FIL_PICO_IMAGE
+  ?? fileURLToPath(new URL('../../../dist/mmu-firmware-pico.elf', import.meta.url));
+const skip = existsSync(IMAGE) ? false
+  : `no firmware image at ${IMAGE} (set FIL_PICO_IMAGE, or: bash scripts/build-firmware.sh pico dist)`;
+if (skip) console.log(`# SKIP firmware tests: ${skip}`);
+
+/**
+ * As the printer does: sends `frame`, waits up to `retryMs` for an answer containing `prefix`,
+ * sends again; fails after `limitMs`. Returns when the answer arrived (ms from the call).
+ */
+async function exchange(bench, frame, prefix, limitMs, retryMs = 100) {
+  let tx = '';
+  let last;
+  for (let ms = 0; ms < limitMs; ms++) {
+    last = await bench.step(ms % retryMs === 0 ? frame : []);
+    tx += last.tx;
+    if (tx.includes(prefix)) return { ms: ms + 1, tx, last };
+  }
+  assert.fail(`no '${prefix.trim()}' within ${limitMs} ms; received ${JSON.stringify(tx)}`);
+}
+
+/** A bench on the image, killed when the test ends (passed or not). */
+function start(t) {
+  const bench = new Driver(IMAGE);
+  t.after(() => bench.child.kill());
+  return bench;
+}
+
+async function idle(bench, ms) {
+  let last;
+  for (let i = 0; i < ms; i++) last = await bench.step();
+  return last;
+}
+
+test('boots and answers S0*c6 with S0 A... within 200 ms', { skip }, async (t) => {
+  const bench = start(t);
+  assert.equal(await bench.line(), 'ready pico 3');
+  const { ms, tx, last } = await exchange(bench, request('S', 0), '\n', 200);
+  assert.match(tx, /^S0 A[0-9a-f]+\*[0-9a-f]+\n$/, 'the answer and nothing else');
+  assert.equal(last.resets, 0);
+  assert.deepEqual(last.motors, ['000:0', '000:0', '000:0'], 'bridges off when idle');
+  console.log(`# first answer after ${ms} ms of virtual time`);
+  assert.equal(await bench.quit(), 0);
+});
+
+test('hang: the watchdog resets the chip and the firmware answers again', { skip }, async (t) => {
+  const bench = start(t);
+  await bench.line();
+  await exchange(bench, request('S', 0), 'S0 A', 200);
+  assert.equal(await bench.ask('hang'), 'ok');
+  let ms = 0;
+  let r;
+  do {
+    r = await bench.step();
+    ms++;
+    assert.equal(r.tx, '', 'a hung chip sends nothing');
+  } while (r.resets === 0 && ms < 1000);
+  assert.equal(r.resets, 1, 'reset by the watchdog');
+  assert.ok(ms > 400 && ms <= 610, `the watchdog (600 ms) expired ${ms} ms after the hang`);
+  await exchange(bench, request('S', 0), 'S0 A', 200);
+  assert.equal(await bench.quit(), 0);
+});
+
+test('a setting written over the line is saved to flash and survives a power cycle', { skip }, async (t) => {
+  const bench = start(t);
+  await bench.line();
+  const before = await exchange(bench, request('R', 0x22), 'R22 A', 200);
+  assert.ok(!before.tx.includes('R22 A1f4'), 'not already 500');
+  const settled = await idle(bench, 200); // the store's first save of a blank flash is done
+  await exchange(bench, request('W', 0x22, 500), 'W22 A', 100);
+  let r;
+  for (let ms = 0; ms < 3000; ms++) {
+    r = await bench.step();
+    if (r.programs > settled.programs) break;
+  }
+  assert.ok(r.programs > settled.programs, 'the store programmed the flash');
+  await idle(bench, 20); // let the save finish
+  assert.equal(await bench.ask('power off'), 'ok');
+  await idle(bench, 10);
+  assert.equal(await bench.ask('power on'), 'ok');
+  const after = await exchange(bench, request('R', 0x22), 'R22 A', 200);
+  assert.match(after.tx, /R22 A1f4\*/, 'bowden_mm = 500 read back after power on');
+  assert.equal(after.last.resets, 1);
+  assert.equal(await bench.quit(), 0);
+});
+
+test('two runs of the same requests give identical answers', { skip }, async (t) => {
+  const run = async () => {
+    const bench = start(t);
+    await bench.line();
+    const lines = [];
+    for (let ms = 0; ms < 150; ms++) {
+      const rx = ms === 60 ? request('S', 0) : ms === 90 ? request('R', 0x1b) : [];
+      const sensors = Array.from({ length: 9 }, (_, i) => (ms * 37 + i * 400) % 4096);
+      lines.push((await bench.step(rx, { sensors })).line);
+    }
+    await bench.quit();
+    return lines;
+  };
+  const [a, b] = [await run(), await run()];
+  assert.deepEqual(a, b);
+  assert.ok(a.some((l) => / 5330[0-9a-f]* /.test(l)), 'with an answer in them');
+});
