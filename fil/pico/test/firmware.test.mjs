@@ -27,7 +27,7 @@ async function exchange(bench, frame, prefix, limitMs, retryMs = 100) {
     tx += last.tx;
     if (tx.includes(prefix)) return { ms: ms + 1, tx, last };
   }
-  assert.fail(`no '${prefix.trim()}' within ${limitMs} ms; received ${JSON.stringify(tx)}`);
+  assert.fail(`no ${JSON.stringify(prefix)} within ${limitMs} ms; received ${JSON.stringify(tx)}`);
 }
 
 /** A bench on the image, killed when the test ends (passed or not). */
@@ -111,4 +111,20 @@ test('two runs of the same requests give identical answers', { skip }, async (t)
   const [a, b] = [await run(), await run()];
   assert.deepEqual(a, b);
   assert.ok(a.some((l) => / 5330[0-9a-f]* /.test(l)), 'with an answer in them');
+});
+
+test('--rtt FILE receives the image\'s defmt frames (RTT up channel 0)', { skip }, async (t) => {
+  const { mkdtempSync, readFileSync } = await import('node:fs');
+  const { join } = await import('node:path');
+  const { tmpdir } = await import('node:os');
+  const file = join(mkdtempSync(join(tmpdir(), 'fil-pico-rtt-')), 'rtt.bin');
+  const bench = new Driver(IMAGE, ['--rtt', file]);
+  t.after(() => bench.child.kill());
+  assert.equal(await bench.line(), 'ready pico 3');
+  await idle(bench, 5);
+  const bytes = readFileSync(file);
+  // defmt-rtt's frames: rzCOBS-encoded, each ended by a 0 byte; the boot logs two.
+  assert.ok(bytes.length > 10, `${bytes.length} bytes`);
+  assert.equal(bytes.at(-1), 0, 'ends with a whole frame');
+  assert.equal(await bench.quit(), 0);
 });

@@ -64,3 +64,9 @@ test('an instruction at an unmapped address is an error of the bench', async () 
   assert.match(await bench.ask('step 1000 0 0 0 0 0 0 0 0 0 -'), /^error .*invalid memory address/);
   assert.equal(await bench.exit, 1);
 });
+
+test('--rtt on an image without _SEGGER_RTT: error, exit 1', async () => {
+  const bench = new Driver(image, ['--rtt', join(tmpdir(), 'unused-rtt.bin')]);
+  assert.match(await bench.line(), /^error --rtt: the image has no _SEGGER_RTT/);
+  assert.equal(await bench.exit, 1);
+});
