@@ -7,8 +7,6 @@
 
 import { appendFileSync, readFileSync } from 'node:fs';
 import { createInterface } from 'node:readline';
-import { Bench } from './bench-core.mjs';
-import { RttReader } from './rtt.mjs';
 
 const HEX = /^([0-9a-f]{2})*$/;
 
@@ -67,6 +65,11 @@ async function main(argv) {
   let bench;
   let rtt = null;
   try {
+    // Loaded here, so that a missing `npm ci` is answered `error` like any other failure.
+    const { Bench } = await import('./bench-core.mjs').catch((e) => {
+      throw new Error(`rp2040js is not installed (run npm ci in fil/pico): ${e.message}`);
+    });
+    const { RttReader } = await import('./rtt.mjs');
     const elf = readFileSync(args[0]);
     bench = new Bench(elf, { log });
     if (rttFile) rtt = new RttReader(elf, (bytes) => appendFileSync(rttFile, bytes));

@@ -182,7 +182,10 @@ export class Chip {
       } else {
         const cycles = core.executeInstruction();
         this.takeFault();
-        clock.tick(cycles * NANOS_PER_CYCLE);
+        // clock.tick(cycles * 8) without its call when no alarm is due: the same time, the
+        // same alarms at the same instants.
+        clock.nanosCounter += cycles * NANOS_PER_CYCLE;
+        if (clock.nextAlarm && clock.nextAlarm.nanos <= clock.nanosCounter) clock.tick(0);
       }
     }
   }
