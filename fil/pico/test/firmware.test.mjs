@@ -128,3 +128,25 @@ test('--rtt FILE receives the image\'s defmt frames (RTT up channel 0)', { skip 
   assert.equal(bytes.at(-1), 0, 'ends with a whole frame');
   assert.equal(await bench.quit(), 0);
 });
+
+test('each sensor level reaches the firmware as that sensor (raw registers 0x60..0x68)', { skip }, async (t) => {
+  const bench = start(t);
+  await bench.line();
+  // Protocol order: slot0 hall, slot0 filament, slot1 hall, slot1 filament, slot2 hall,
+  // slot2 filament, hub filament, hub tension, hub cutter; all healthy, none the same.
+  const sensors = [2010, 2020, 2030, 2040, 2050, 2060, 2070, 2080, 2090];
+  // The firmware's raw registers (src/registers.rs, SensorId::from_index): 0x60 hub filament,
+  // 0x61 tension, 0x62 cutter, then per slot its filament sensor and its motor Hall.
+  const register = [0x64, 0x63, 0x66, 0x65, 0x68, 0x67, 0x60, 0x61, 0x62];
+  const step = (rx = []) => bench.step(rx, { sensors });
+  for (let ms = 0; ms < 30; ms++) await step();
+  for (let i = 0; i < 9; i++) {
+    const address = register[i];
+    let tx = '';
+    for (let ms = 0; ms < 20 && !tx.includes('\n'); ms++) tx += (await step(ms === 0 ? request('R', address) : [])).tx;
+    const m = /^R([0-9a-f]+) A([0-9a-f]+)\*/.exec(tx);
+    assert.ok(m, `R${address.toString(16)}: ${JSON.stringify(tx)}`);
+    assert.equal(parseInt(m[2], 16), sensors[i], `sensor ${i} read through register 0x${m[1]}`);
+  }
+  assert.equal(await bench.quit(), 0);
+});
