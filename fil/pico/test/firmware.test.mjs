@@ -150,3 +150,29 @@ test('each sensor level reaches the firmware as that sensor (raw registers 0x60.
   }
   assert.equal(await bench.quit(), 0);
 });
+
+for (const slot of [0, 1, 2]) {
+  test(`L${slot} drives slot ${slot}'s bridge forward, and only that one`, { skip }, async (t) => {
+    const bench = start(t);
+    await bench.line();
+    const sensors = new Array(9).fill(2048);
+    sensors[2 * slot + 1] = 3000; // filament at the slot's sensor
+    let phase = 0;
+    let driven = 0;
+    let r;
+    for (let ms = 0; ms < 300; ms++) {
+      r = await bench.step(ms === 30 ? request('S', 0) : ms === 60 ? request('L', slot) : [], { sensors });
+      const m = r.motors[slot];
+      if (m.startsWith('110:') && m !== '110:0') {
+        driven++;
+        phase += 0.3; // the slot's motor Hall turns while it is driven
+        r.motors.forEach((other, k) => {
+          if (k !== slot) assert.match(other, /^[01]00:0$/, `slot ${k} while slot ${slot} drives`);
+        });
+      }
+      sensors[2 * slot] = Math.round(2048 + 700 * Math.sin(phase));
+    }
+    assert.ok(driven > 100, `slot ${slot} driven forward in ${driven} of 240 ms`);
+    assert.equal(await bench.quit(), 0);
+  });
+}
