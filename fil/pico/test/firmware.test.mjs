@@ -176,3 +176,14 @@ for (const slot of [0, 1, 2]) {
     assert.equal(await bench.quit(), 0);
   });
 }
+
+test('X0 resets the chip through AIRCR.SYSRESETREQ and the firmware answers again', { skip }, async (t) => {
+  const bench = start(t);
+  await bench.line();
+  await exchange(bench, request('S', 0), 'S0 A', 200);
+  let r = await bench.step(request('X', 0));
+  for (let ms = 0; ms < 50 && r.resets === 0; ms++) r = await bench.step();
+  assert.equal(r.resets, 1, 'one reset');
+  await exchange(bench, request('S', 0), 'S0 A', 200);
+  assert.equal(await bench.quit(), 0);
+});
