@@ -1,0 +1,70 @@
+// The board around the chip (chip.mjs): the multiplexer in front of ADC0 and the TB6612 inputs
+// read back, driven through the chip's registers as the firmware drives them.
+
+import assert from 'node:assert/strict';
+import { test } from 'node:test';
+import { MUX_CHANNEL } from '../chip.mjs';
+import { bareChip } from './helpers.mjs';
+
+const SIO = 0xd0000000;
+const IO_BANK0 = 0x40014000;
+const ADC = 0x4004c000;
+const PWM = 0x40050000;
+
+function sioOutput(rp2040, pin, high) {
+  rp2040.writeUint32(IO_BANK0 + pin * 8 + 4, 5); // FUNCSEL: SIO
+  rp2040.writeUint32(SIO + 0x24, 1 << pin); // GPIO_OE_SET
+  rp2040.writeUint32(SIO + (high ? 0x14 : 0x18), 1 << pin); // GPIO_OUT_SET / CLR
+}
+
+function convert(rp2040) {
+  rp2040.writeUint32(ADC + 0x00, 1 | (1 << 2)); // CS: EN | START_ONCE, AINSEL 0
+  rp2040.clock.tick(3000);
+  return rp2040.readUint32(ADC + 0x04); // RESULT
+}
+
+test('the sensor MUX_CHANNEL wiring is src/board/pico/mod.rs\'s (Gray code of the index)', async () => {
+  const { readFileSync } = await import('node:fs');
+  const source = readFileSync(new URL('../../../src/board/pico/mod.rs', import.meta.url), 'utf8');
+  assert.match(source, /channels\[i\] = \(i \^ \(i >> 1\)\) as u8;/);
+  assert.deepEqual(MUX_CHANNEL, [0, 1, 3, 2, 6, 7, 5, 4, 12]);
+});
+
+test('ADC0 reads the sensor of the multiplexer channel that GP2..GP5 select', () => {
+  const chip = bareChip();
+  const { rp2040 } = chip;
+  chip.sensors.splice(0, 9, 100, 200, 300, 400, 500, 600, 700, 800, 900);
+  for (let sensor = 0; sensor < 9; sensor++) {
+    const channel = MUX_CHANNEL[sensor];
+    for (let bit = 0; bit < 4; bit++) sioOutput(rp2040, 2 + bit, channel & (1 << bit));
+    assert.equal(convert(rp2040), 100 * (sensor + 1), `sensor ${sensor} on channel ${channel}`);
+  }
+  for (let bit = 0; bit < 4; bit++) sioOutput(rp2040, 2 + bit, 15 & (1 << bit));
+  assert.equal(convert(rp2040), 0, 'channel 15: no sensor');
+});
+
+test('each slot reports STBY, IN1, IN2 and its PWM duty from the slice registers', () => {
+  const chip = bareChip();
+  const { rp2040 } = chip;
+  assert.deepEqual(chip.motors(), ['000:0', '000:0', '000:0'], 'nothing driven');
+  sioOutput(rp2040, 13, true); // STBY #1
+  sioOutput(rp2040, 9, true); // slot 0 IN1
+  sioOutput(rp2040, 12, true); // slot 1 IN2
+  sioOutput(rp2040, 16, false); // STBY #2 low
+  sioOutput(rp2040, 14, true); // slot 2 IN1
+  for (const pin of [6, 7, 8]) rp2040.writeUint32(IO_BANK0 + pin * 8 + 4, 4); // FUNCSEL: PWM
+  rp2040.writeUint32(PWM + 3 * 0x14 + 0x10, 6249); // slice 3 TOP
+  rp2040.writeUint32(PWM + 3 * 0x14 + 0x0c, (1250 << 16) | 4687); // CC: B 1250, A 4687
+  rp2040.writeUint32(PWM + 3 * 0x14 + 0x00, 1); // CSR: EN
+  rp2040.writeUint32(PWM + 4 * 0x14 + 0x10, 6249);
+  rp2040.writeUint32(PWM + 4 * 0x14 + 0x0c, 6249);
+  assert.deepEqual(chip.motors(), ['110:750', '101:200', '010:0'], 'slice 4 not enabled: 0');
+  rp2040.writeUint32(PWM + 4 * 0x14 + 0x00, 1 | (1 << 2)); // EN, A_INV
+  assert.equal(chip.motors()[2], '010:0', 'full compare, inverted: 0');
+  rp2040.writeUint32(PWM + 4 * 0x14 + 0x00, 1);
+  assert.equal(chip.motors()[2], '010:1000');
+  sioOutput(rp2040, 8, true); // the PWM pin back to SIO, driven high: full duty
+  assert.equal(chip.motors()[2], '010:1000');
+  sioOutput(rp2040, 8, false);
+  assert.equal(chip.motors()[2], '010:0');
+});
