@@ -108,7 +108,7 @@ pub fn now_us() -> u64 {
 
 /// The logic's clock: the uptime in ms.
 pub fn now() -> Instant {
-    Instant::from_millis(now_us() / 1000)
+    Instant::from_micros(now_us())
 }
 
 /// The control task: a step every [`PERIOD`] (see the module header), once the store has
@@ -146,7 +146,7 @@ pub async fn run_control<const N: usize, S: SensorScan<N>, M: Motors<N>>(
                 continue;
             };
             let step = control.step(&Tick {
-                now: Instant::from_millis(at_us / 1000),
+                now: Instant::from_micros(at_us),
                 lateness_us,
                 sample_age_us: sample_clock.age_us(at_us),
                 samples: &samples,
