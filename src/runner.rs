@@ -105,6 +105,63 @@ impl Runner {
         }
     }
 
+    /// [`Runner::start`] written over `self` (the command it replaces is gone): no runner (224
+    /// bytes) built aside and copied in, no plan built aside and copied into it, on the
+    /// millisecond a command starts, the costliest one.
+    pub fn start_over<const N: usize>(
+        &mut self,
+        request: (RequestCode, u8),
+        unit: &Unit<N>,
+        config: &Config,
+    ) {
+        self.plan.clear();
+        let planned = match Command::of(request.0) {
+            Some(command) => command.plan(request.1, unit, config, &mut self.plan),
+            None => Err(ErrorCode::INTERNAL),
+        };
+        if planned.is_err() {
+            self.plan.clear();
+        }
+        self.reset(request);
+        if let Err(error) = planned {
+            self.status = Status::Failed(error);
+        }
+    }
+
+    /// `self` as [`Runner::new`]`(request, &plan)` makes it, `plan` being the phases `self`
+    /// already holds.
+    fn reset(&mut self, request: (RequestCode, u8)) {
+        // Every field, named: a field added later must be reset here too.
+        let Runner {
+            request: own_request,
+            command,
+            plan,
+            index,
+            run,
+            status,
+            notes,
+            resume_goal_from,
+            failed_fed_centi,
+            then_plan,
+            inherited,
+            failed_after_finish,
+        } = self;
+        *status = match plan.first() {
+            Some(phase) => Status::Running(phase.progress()),
+            None => Status::Finished,
+        };
+        *own_request = request;
+        *command = Command::of(request.0);
+        *index = 0;
+        *run = None;
+        *notes = Notes::default();
+        *resume_goal_from = None;
+        *failed_fed_centi = None;
+        *then_plan = false;
+        *inherited = None;
+        *failed_after_finish = false;
+    }
+
     /// A command that failed before it moved anything. Retry plans it again.
     pub fn failed(request: (RequestCode, u8), error: ErrorCode) -> Self {
         let mut runner = Self::new(request, &[]);
