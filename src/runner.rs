@@ -451,6 +451,49 @@ mod tests {
     use super::*;
 
     #[test]
+    fn start_over_leaves_the_runner_start_makes() {
+        extern crate std;
+        let unit = Unit::<3>::default();
+        let config = Config::default();
+        let requests = [
+            (RequestCode::Tool, 0),
+            (RequestCode::Tool, 2),
+            (RequestCode::Tool, 7),
+            (RequestCode::Load, 1),
+            (RequestCode::Unload, 0),
+            (RequestCode::Eject, 1),
+            (RequestCode::Cut, 2),
+            (RequestCode::Home, 0),
+            (RequestCode::Mode, 1),
+            (RequestCode::Query, 0),
+        ];
+        let plan = [
+            Phase::CheckSensors,
+            Phase::FeedToHub { slot: 1, max_mm: 100 },
+            Phase::FeedThroughBowden { slot: 1 },
+        ];
+        for request in requests {
+            // A runner in the middle of something, every field away from its start.
+            let mut runner = Runner::new((RequestCode::Load, 1), &plan);
+            runner.advance();
+            runner.clear_merge_first(0b101);
+            runner.status = Status::Failed(ErrorCode::INTERNAL);
+            runner.resume_goal_from = Some(5);
+            runner.failed_fed_centi = Some(7);
+            runner.then_plan = true;
+            runner.inherited = Some(Command::ToolChange);
+            runner.failed_after_finish = true;
+            runner.notes.trust_sensors = true;
+            runner.start_over(request, &unit, &config);
+            assert_eq!(
+                std::format!("{runner:?}"),
+                std::format!("{:?}", Runner::start(request, &unit, &config)),
+                "{request:?}"
+            );
+        }
+    }
+
+    #[test]
     fn merge_clearances_run_in_slot_order_before_the_blocked_phase() {
         let plan = [
             Phase::CheckSensors,
