@@ -309,6 +309,18 @@ pub struct Step<const N: usize> {
     pub report: Option<Stats>,
 }
 
+impl<const N: usize> Step<N> {
+    /// Nothing to do ([`Outputs::none`]), no feed, no press, no report.
+    pub fn none() -> Self {
+        Step {
+            out: Outputs::none(),
+            feed_watchdog: false,
+            button_pressed: false,
+            report: None,
+        }
+    }
+}
+
 /// The App with the control loop's policy around it.
 pub struct ControlLoop<const N: usize> {
     app: App<N>,
@@ -338,12 +350,22 @@ impl<const N: usize> ControlLoop<N> {
 
     /// One control step.
     pub fn step(&mut self, tick: &Tick<N>) -> Step<N> {
+        let mut step = Step::none();
+        self.step_into(tick, &mut step);
+        step
+    }
+
+    /// [`ControlLoop::step`] written into `step` (whatever it held is replaced): the control
+    /// task keeps one, rather than having every step's (120 bytes with three slots) copied out.
+    pub fn step_into(&mut self, tick: &Tick<N>, step: &mut Step<N>) {
         let button_pressed = self.button.pressed(tick.button_down, tick.now);
         if button_pressed {
             self.app.press_button(ButtonCode::MIDDLE);
         }
-        let out = self.app.step(tick.now, tick.samples, tick.rx);
-        let feed_watchdog = out.action.is_none() && feeds_watchdog(tick.lateness_us, tick.sample_age_us);
+        step.button_pressed = button_pressed;
+        self.app.step_into(tick.now, tick.samples, tick.rx, &mut step.out);
+        let feed_watchdog = step.out.action.is_none() && feeds_watchdog(tick.lateness_us, tick.sample_age_us);
+        step.feed_watchdog = feed_watchdog;
 
         let stats = &mut self.stats;
         stats.steps += 1;
@@ -351,14 +373,8 @@ impl<const N: usize> ControlLoop<N> {
         stats.stale += u32::from(tick.sample_age_us > MAX_SAMPLE_AGE_US);
         stats.unfed += u32::from(!feed_watchdog);
         stats.max_lateness_us = stats.max_lateness_us.max(tick.lateness_us);
-        let report = (tick.now.millis_since(stats.since) >= STATS_PERIOD_MS)
+        step.report = (tick.now.millis_since(stats.since) >= STATS_PERIOD_MS)
             .then(|| core::mem::replace(stats, Stats::new(tick.now)));
-        Step {
-            out,
-            feed_watchdog,
-            button_pressed,
-            report,
-        }
     }
 
     /// The board could not queue a step's response bytes: logged, and counted in register 0x51.

@@ -108,7 +108,7 @@ pub fn now_us() -> u64 {
 
 /// The logic's clock: the uptime in ms.
 pub fn now() -> Instant {
-    Instant::from_millis(now_us() / 1000)
+    Instant::from_micros(now_us())
 }
 
 /// The control task: a step every [`PERIOD`] (see the module header), once the store has
@@ -130,6 +130,8 @@ pub async fn run_control<const N: usize, S: SensorScan<N>, M: Motors<N>>(
     let mut rx = [0u8; control::MAX_RX_PER_STEP];
     let mut led = None;
     let mut line_errors = LineErrors::default();
+    // Every step is written here (`ControlLoop::step_into`), not copied out of the step.
+    let mut step = control::Step::<N>::none();
     loop {
         ticker.next().await;
         let lateness_us = schedule.start(now_us());
@@ -145,14 +147,17 @@ pub async fn run_control<const N: usize, S: SensorScan<N>, M: Motors<N>>(
             let Ok(mut control) = logic.try_borrow_mut() else {
                 continue;
             };
-            let step = control.step(&Tick {
-                now: Instant::from_millis(at_us / 1000),
-                lateness_us,
-                sample_age_us: sample_clock.age_us(at_us),
-                samples: &samples,
-                rx: rx.get(..received).unwrap_or_default(),
-                button_down,
-            });
+            control.step_into(
+                &Tick {
+                    now: Instant::from_micros(at_us),
+                    lateness_us,
+                    sample_age_us: sample_clock.age_us(at_us),
+                    samples: &samples,
+                    rx: rx.get(..received).unwrap_or_default(),
+                    button_down,
+                },
+                &mut step,
+            );
             motors.apply(&step.out.motors);
             if led != Some(step.out.status_led) {
                 led = Some(step.out.status_led);

@@ -46,6 +46,26 @@ impl Frame {
 
     /// Lowercase hex without leading zeros (`0` for zero).
     pub(crate) fn push_hex(&mut self, value: u16) {
+        // The digits written from the last, straight into the buffer: a frame's few numbers
+        // are most of its encoding's instructions (a call per digit and a test per nibble
+        // before).
+        let digits = match value {
+            0x1000.. => 4,
+            0x100.. => 3,
+            0x10.. => 2,
+            _ => 1,
+        };
+        let end = self.len + digits;
+        if let Some(out) = self.bytes.get_mut(self.len..end) {
+            let mut rest = value;
+            for slot in out.iter_mut().rev() {
+                *slot = hex::digit((rest & 0xf) as u8);
+                rest >>= 4;
+            }
+            self.len = end;
+            return;
+        }
+        // Not enough room (an encoder's bug): as many digits as fit, as `push` cuts a frame.
         let mut started = false;
         for shift in [12u32, 8, 4, 0] {
             let nibble = ((value >> shift) & 0xf) as u8;
