@@ -345,6 +345,8 @@ const COMMANDS: &[(&str, Check)] = &[
     // Firmware and contributors.
     ("bash scripts/step-cost.sh", Check::InCi),
     ("npm ci --prefix fil/pico", Check::InCi),
+    ("bash scripts/build-firmware.sh g071 dist", Check::InCi),
+    ("bash scripts/build-firmware.sh pico dist", Check::InCi),
     ("python3 -m pip install -r fil/g071/requirements.txt", Check::InCi),
     ("mmu fil", Check::InCi),
     (

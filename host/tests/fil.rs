@@ -43,12 +43,14 @@ fn each_image_served_by_mmu_sim_answers_the_printers_first_request() {
             continue;
         }
         let image = root().join(format!("dist/mmu-firmware-{board}.elf"));
+        let log_path = std::env::temp_dir().join(format!("mmu-fil-test-{board}-{}.log", std::process::id()));
+        let log = std::fs::File::create(&log_path).expect("a log file");
         let mut child = Command::new(env!("CARGO_BIN_EXE_mmu"))
             .args(["sim", "--stdio", "-q", "--board", board, "--firmware"])
             .arg(&image)
             .stdin(Stdio::piped())
             .stdout(Stdio::piped())
-            .stderr(Stdio::inherit())
+            .stderr(log)
             .spawn()
             .expect("mmu runs");
         let mut stdin = child.stdin.take().expect("piped");
@@ -65,16 +67,27 @@ fn each_image_served_by_mmu_sim_answers_the_printers_first_request() {
             }
             let _ = tx.send(seen);
         });
-        // The unit boots in about 100 ms of its own time; ask well after.
-        thread::sleep(Duration::from_millis(1500));
-        stdin.write_all(b"S0*c6\n").expect("the request goes out");
-        stdin.flush().expect("flushed");
-        let seen = rx.recv_timeout(Duration::from_secs(60)).unwrap_or_default();
+        // As a printer does: ask again every half second until the unit answers (one asked while
+        // the image is still starting, before its UART listens, is not answered).
+        let mut seen = Vec::new();
+        for _ in 0..120 {
+            stdin.write_all(b"S0*c6\n").expect("the request goes out");
+            stdin.flush().expect("flushed");
+            if let Ok(answer) = rx.recv_timeout(Duration::from_millis(500)) {
+                seen = answer;
+                break;
+            }
+        }
         drop(stdin);
         let status = child.wait().expect("mmu ends when stdin ends");
         let text = String::from_utf8_lossy(&seen);
-        assert!(text.contains("S0 A3*"), "{board}: the image answered {text:?}");
-        assert!(status.success(), "{board}: {status}");
+        let log = std::fs::read_to_string(&log_path).unwrap_or_default();
+        let _ = std::fs::remove_file(&log_path);
+        assert!(
+            text.contains("S0 A3*"),
+            "{board}: the image answered {text:?}; its log:\n{log}"
+        );
+        assert!(status.success(), "{board}: {status}; its log:\n{log}");
     }
 }
 
