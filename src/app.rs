@@ -19,6 +19,7 @@ use crate::config::{Config, Contract, offered_revision};
 use crate::drive;
 use crate::feeder::distance_centi;
 use crate::follower;
+use crate::lanes::Ledger;
 use crate::persist::{Counters, MAX_SETTINGS, Snapshot};
 use crate::phases::PrinterLink;
 use crate::registers;
@@ -93,6 +94,8 @@ pub struct App<const N: usize> {
     printer: PrinterLink,
     /// Moves (wrapping) whenever a setting may have changed: see [`App::settings_revision`].
     settings_revision: u32,
+    /// Filament left and lane health, as they are counted ([`crate::lanes`]).
+    ledger: Ledger<N>,
 }
 
 impl<const N: usize> App<N> {
@@ -128,6 +131,7 @@ impl<const N: usize> App<N> {
                 in_sync: true,
             },
             settings_revision: 0,
+            ledger: Ledger::default(),
         }
     }
 
@@ -156,6 +160,7 @@ impl<const N: usize> App<N> {
         {
             feeder.set_odometry_centi(centi);
             *seen = centi;
+            self.ledger.set_odometry_seen(slot, centi);
         }
     }
 
@@ -185,6 +190,13 @@ impl<const N: usize> App<N> {
         // The answers of the last step have gone out: an `S2` from now on follows them.
         self.negotiation.answered_this_step = None;
         self.unit.sense(samples, now, &self.config);
+        self.ledger.observe(
+            &self.unit,
+            self.operation.driving_slot(),
+            &mut self.counters.lanes,
+            &self.config,
+            now,
+        );
         if !rx.is_empty() {
             self.printer.heard = now;
         } else if now.millis_since(self.printer.heard) >= u64::from(mmu_protocol::SILENCE_MS) {
@@ -378,6 +390,8 @@ impl<const N: usize> App<N> {
         if names_a_slot && usize::from(request.value) < N {
             self.unit.selected = Some(request.value.into());
         }
+        self.ledger
+            .command_started(request.code, request.value, superseded, &mut self.counters.lanes, self.now);
         self.operation = if superseded {
             Runner::supersede(&self.operation, key)
         } else {
@@ -426,6 +440,9 @@ impl<const N: usize> App<N> {
             fed_mm: &self.counters.fed_mm,
             dropped_responses: self.dropped_responses,
             bowden_learned_mm: self.bowden_learned_mm,
+            lane_figures: &self.counters.lanes,
+            used_centi: self.ledger.used_centi(),
+            lane_warnings: self.ledger.warnings(&self.config),
             // Right after an `S2`, the build of the revision it offered: what `S3` would report.
             build: crate::config::build_of(self.negotiation.offered.unwrap_or(self.config.version.revision)),
             now: self.now,
@@ -441,6 +458,7 @@ impl<const N: usize> App<N> {
             config: &mut self.config,
             fsensor: &mut self.unit.fsensor,
             filament_readings,
+            used_centi: self.ledger.used_centi_mut(),
         };
         let accepted = registers::write(&mut target, N, address, value);
         if accepted && address != registers::FSENSOR {
@@ -509,6 +527,7 @@ impl<const N: usize> App<N> {
             self.unit.set_lane(slot, lane);
         }
         self.counters = snapshot.counters;
+        self.ledger.restore(&snapshot.counters.lanes, &snapshot.lanes);
         self.fed_centi_beyond_mm = [0; N];
         // Twice: a pair of thresholds may only be valid once both are in.
         for _ in 0..2 {
@@ -523,6 +542,9 @@ impl<const N: usize> App<N> {
         if after == before {
             return;
         }
+        let slot = self.operation.phase().and_then(crate::phases::Phase::slot);
+        self.ledger
+            .command_changed(self.operation.request.0, after, slot, &mut self.counters.lanes, self.now);
         if after == Status::Finished {
             // What the printer's extruder moves from now on is evidence for the next command.
             self.unit.moved_by_printer = [0; N];
@@ -561,6 +583,7 @@ impl<const N: usize> App<N> {
         let driving = self.operation.driving_slot();
         if let Some((slot, error)) = follower::follow(&mut self.unit, driving, allowed, now, &self.config) {
             self.operation.interrupt(error, &mut self.unit, now);
+            self.ledger.stalled(slot, error, &mut self.counters.lanes);
             self.counters.drive_errors = self.counters.drive_errors.saturating_add(1);
             if let Some(count) = self.counters.failures.get_mut(slot) {
                 *count = count.saturating_add(1);

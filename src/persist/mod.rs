@@ -23,6 +23,7 @@ mod store;
 
 use heapless::Vec;
 
+use crate::lanes::LaneFigures;
 use crate::unit::Lane;
 
 pub use crc::{EntryCrc, SoftwareCrc, iso_hdlc};
@@ -56,6 +57,8 @@ pub struct Counters<const N: usize> {
     pub failures: [u16; N],
     /// Filament fed or pulled by each slot's completed moves, mm.
     pub fed_mm: [u32; N],
+    /// Each lane's filament used and health figures ([`crate::lanes`]).
+    pub lanes: [LaneFigures; N],
 }
 
 impl<const N: usize> Default for Counters<N> {
@@ -65,6 +68,7 @@ impl<const N: usize> Default for Counters<N> {
             tool_changes: [0; N],
             failures: [0; N],
             fed_mm: [0; N],
+            lanes: [LaneFigures::default(); N],
         }
     }
 }

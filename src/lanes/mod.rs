@@ -1,0 +1,291 @@
+//! Filament left on each spool and each lane's health, counted from what the unit senses.
+//!
+//! - **Filament left.** Every revolution of a slot's motor moves its filament by
+//!   `mm_per_rev_centi`, in whichever direction the motor was last driven, forward while it
+//!   coasts: so the filament the printer's extruder pulls off the spool while printing (the
+//!   motor back-driven or following) counts as well as the unit's own moves. What has left the
+//!   spool, net, is taken from the spool length of the slot (register `0x54 + k`, a 1 kg spool
+//!   of 1.75 mm PLA by default) and counted again from zero when a filament is inserted into
+//!   an empty slot. See [`Ledger`].
+//! - **Lane health.** Rolling figures per lane ([`LaneFigures`]): drag, slip, load time, the
+//!   distance from the hub sensor to the printer's sensor (warned when it drifts), stalls and
+//!   the success rate of tool changes with its denominator.
+//!
+//! The kept part ([`LaneFigures`]) lives in the counters record: it changes at most once a
+//! metre or once a command. The book's "Filament left and lane health" gives the accuracy.
+
+mod figures;
+mod motion;
+
+pub use figures::{LaneFigures, WINDOW, roll, roll_signed};
+
+use mmu_protocol::{ErrorCode, RequestCode};
+
+use crate::config::Config;
+use crate::feeder::distance_centi;
+use crate::runner::Status;
+use crate::time::Instant;
+use crate::unit::{Lane, Unit};
+use motion::MotionTally;
+
+/// A 1 kg spool of 1.75 mm PLA (1.24 g/cm³: 2.405 mm² × 1.24 mg/mm³ = 2.98 g/m), m.
+pub const DEFAULT_SPOOL_M: u16 = 330;
+/// Under this many metres left, a slot's "low" warning bit is set (register 0x5e).
+pub const LOW_LEFT_M: u16 = 10;
+/// A load distance more than this far from its rolling figure is a drift, mm (or
+/// [`DRIFT_PERMILLE`] of it, whichever is more).
+pub const DRIFT_MM: u16 = 15;
+/// A load distance more than this far from its rolling figure is a drift, per mille.
+pub const DRIFT_PERMILLE: u16 = 40;
+/// 1/100 mm in a metre.
+const CENTI_PER_M: i32 = 100_000;
+
+/// A tool change in progress, as the ledger follows it.
+#[derive(Debug, Clone, Copy)]
+struct ToolChange {
+    slot: usize,
+    started: Instant,
+    /// No error was raised since it began.
+    clean: bool,
+    /// The odometry when the hub sensor began to see this slot's filament during it.
+    at_hub_centi: Option<i32>,
+}
+
+/// What the ledger follows between steps (not kept across restarts).
+#[derive(Debug, Clone)]
+pub struct Ledger<const N: usize> {
+    /// Filament taken off each spool since it was inserted, net, 1/100 mm.
+    used_centi: [i32; N],
+    odometry_seen: [i32; N],
+    lanes_seen: [Lane; N],
+    motions: [MotionTally; N],
+    tool_change: Option<ToolChange>,
+    hub_seen: bool,
+    fsensor_seen: bool,
+    /// Per slot: its last load distance drifted from its rolling figure (bit k).
+    drifted: u8,
+    last_step: Instant,
+}
+
+impl<const N: usize> Default for Ledger<N> {
+    fn default() -> Self {
+        Ledger {
+            used_centi: [0; N],
+            odometry_seen: [0; N],
+            lanes_seen: [Lane::Unknown; N],
+            motions: [MotionTally::default(); N],
+            tool_change: None,
+            hub_seen: false,
+            fsensor_seen: false,
+            drifted: 0,
+            last_step: Instant::ZERO,
+        }
+    }
+}
+
+/// Filament left of a spool of `spool_m` metres once `used_centi` left it, mm (never below 0).
+pub fn left_mm(spool_m: u16, used_centi: i32) -> u32 {
+    let left = i64::from(spool_m) * 1000 - i64::from(used_centi) / 100;
+    left.clamp(0, i64::from(u32::MAX)) as u32
+}
+
+impl<const N: usize> Ledger<N> {
+    /// Filament taken off each spool, net, 1/100 mm.
+    pub fn used_centi(&self) -> &[i32; N] {
+        &self.used_centi
+    }
+
+    /// Filament taken off each spool, to write (register `0x59 + k` sets what is left).
+    pub fn used_centi_mut(&mut self) -> &mut [i32; N] {
+        &mut self.used_centi
+    }
+
+    /// Slot `slot`'s odometry was set to `centi` (not a motion: nothing counted).
+    pub fn set_odometry_seen(&mut self, slot: usize, centi: i32) {
+        if let Some(seen) = self.odometry_seen.get_mut(slot) {
+            *seen = centi;
+        }
+    }
+
+    /// Take back what a previous run kept: the metres used (the middle of the metre last kept:
+    /// a power cut loses at most half a metre either way) and the lanes as restored.
+    pub fn restore(&mut self, figures: &[LaneFigures; N], lanes: &[Lane; N]) {
+        for (used, lane) in self.used_centi.iter_mut().zip(figures) {
+            *used = match lane.used_m {
+                0 => 0,
+                m => i32::from(m) * CENTI_PER_M + CENTI_PER_M / 2,
+            };
+        }
+        self.lanes_seen = *lanes;
+    }
+
+    /// The warning bits of register 0x5e: bit k, slot k's last load distance drifted; bit
+    /// 8 + k, slot k has less than [`LOW_LEFT_M`] left.
+    pub fn warnings(&self, config: &Config) -> u16 {
+        let mut bits = u16::from(self.drifted);
+        for (slot, &used) in self.used_centi.iter().enumerate() {
+            let spool = config.spool_m.get(slot).copied().unwrap_or(DEFAULT_SPOOL_M);
+            if left_mm(spool, used) < u32::from(LOW_LEFT_M) * 1000 {
+                bits |= 1 << (8 + slot);
+            }
+        }
+        bits
+    }
+
+    /// Count what happened since the last step: the filament each motor moved, the lanes that
+    /// got a new filament, the unit's own moves (drag, slip), the hub and the printer's sensor
+    /// on a load. Called after the sensors were read, before the command steps.
+    pub fn observe(
+        &mut self,
+        unit: &Unit<N>,
+        driving: Option<usize>,
+        figures: &mut [LaneFigures; N],
+        config: &Config,
+        now: Instant,
+    ) {
+        let dt_ms = now.millis_since(self.last_step).min(1000) as u32;
+        self.last_step = now;
+        for slot in 0..N {
+            let (Some(feeder), Some(drive), Some(lane_figures)) =
+                (unit.feeders.get(slot), unit.drives.get(slot), figures.get_mut(slot))
+            else {
+                continue;
+            };
+            let odometry = feeder.odometry_centi();
+            let moved = distance_centi(self.odometry_seen[slot], odometry);
+            self.odometry_seen[slot] = odometry;
+            let lane = unit.lane(slot);
+            if self.lanes_seen[slot] == Lane::Empty && !matches!(lane, Lane::Empty | Lane::Unknown) {
+                // A new filament in an empty slot: a new spool.
+                self.used_centi[slot] = 0;
+            } else {
+                self.used_centi[slot] = self.used_centi[slot].saturating_add(moved);
+            }
+            self.lanes_seen[slot] = lane;
+            lane_figures.used_m = (self.used_centi[slot].max(0) / CENTI_PER_M).min(i32::from(u16::MAX)) as u16;
+            let tally = &mut self.motions[slot];
+            if driving == Some(slot) {
+                tally.add(drive, feeder, moved, dt_ms, now, config);
+            } else {
+                tally.fold(lane_figures, config);
+            }
+        }
+        self.watch_load(unit, driving, figures);
+    }
+
+    /// On a tool change: the odometry when the hub sensor begins to see the filament, and the
+    /// distance from there when the printer's sensor triggers (the Bowden length as measured).
+    fn watch_load(&mut self, unit: &Unit<N>, driving: Option<usize>, figures: &mut [LaneFigures; N]) {
+        let hub = unit.hub_present().unwrap_or(false);
+        let fsensor = unit.fsensor_triggered();
+        let (hub_rose, fsensor_rose) = (hub && !self.hub_seen, fsensor && !self.fsensor_seen);
+        self.hub_seen = hub;
+        self.fsensor_seen = fsensor;
+        let Some(change) = self.tool_change.as_mut() else {
+            return;
+        };
+        let Some(odometry) = unit.feeders.get(change.slot).map(|f| f.odometry_centi()) else {
+            return;
+        };
+        if hub_rose && driving == Some(change.slot) {
+            change.at_hub_centi = Some(odometry);
+        }
+        if !fsensor_rose {
+            return;
+        }
+        let Some(at_hub) = change.at_hub_centi.take() else {
+            return;
+        };
+        let Ok(mm) = u16::try_from(distance_centi(at_hub, odometry) / 100) else {
+            return;
+        };
+        let Some(lane) = figures.get_mut(change.slot) else {
+            return;
+        };
+        let bit = 1u8 << change.slot;
+        let before = lane.fsensor_mm;
+        let allowed = DRIFT_MM.max((u32::from(before) * u32::from(DRIFT_PERMILLE) / 1000) as u16);
+        if before != 0 && before.abs_diff(mm) > allowed {
+            self.drifted |= bit;
+        } else {
+            self.drifted &= !bit;
+        }
+        lane.fsensor_mm = roll(before, mm);
+    }
+
+    /// A command was accepted: a tool change starts being followed; one that supersedes a
+    /// failed command carries its tool change on (already not clean); any other ends the one
+    /// followed as one that needed help.
+    pub fn command_started(
+        &mut self,
+        code: RequestCode,
+        value: u8,
+        superseded: bool,
+        figures: &mut [LaneFigures; N],
+        now: Instant,
+    ) {
+        let slot = usize::from(value);
+        let same = self
+            .tool_change
+            .is_some_and(|change| code == RequestCode::Tool && change.slot == slot);
+        if superseded && same {
+            return;
+        }
+        if let Some(change) = self.tool_change.take()
+            && let Some(lane) = figures.get_mut(change.slot)
+        {
+            lane.record_outcome(false);
+        }
+        if code == RequestCode::Tool && slot < N {
+            self.tool_change = Some(ToolChange {
+                slot,
+                started: now,
+                clean: true,
+                at_hub_centi: None,
+            });
+        }
+    }
+
+    /// The command's status changed to `after` (its request `code`); `slot`, the slot of its
+    /// phase.
+    pub fn command_changed(
+        &mut self,
+        code: RequestCode,
+        after: Status,
+        slot: Option<usize>,
+        figures: &mut [LaneFigures; N],
+        now: Instant,
+    ) {
+        match after {
+            Status::Failed(error) => {
+                if let Some(change) = self.tool_change.as_mut() {
+                    change.clean = false;
+                }
+                if let Some(slot) = slot {
+                    self.stalled(slot, error, figures);
+                }
+            }
+            Status::Finished if code == RequestCode::Tool => {
+                if let Some(change) = self.tool_change.take()
+                    && let Some(lane) = figures.get_mut(change.slot)
+                {
+                    lane.record_outcome(change.clean);
+                    if change.clean {
+                        let ds = now.millis_since(change.started) / 100;
+                        lane.load_ds = roll(lane.load_ds, ds.min(u64::from(u16::MAX)) as u16);
+                    }
+                }
+            }
+            _ => {}
+        }
+    }
+
+    /// Slot `slot` stopped on `error`: a stall is counted.
+    pub fn stalled(&mut self, slot: usize, error: ErrorCode, figures: &mut [LaneFigures; N]) {
+        if error == ErrorCode::STALLED_PULLEY
+            && let Some(lane) = figures.get_mut(slot)
+        {
+            lane.stalls = lane.stalls.saturating_add(1);
+        }
+    }
+}
