@@ -461,6 +461,7 @@ impl<const N: usize> App<N> {
             used_centi: self.ledger.used_centi_mut(),
         };
         let accepted = registers::write(&mut target, N, address, value);
+        self.ledger.sync_used(&mut self.counters.lanes);
         if accepted && address != registers::FSENSOR {
             self.settings_revision = self.settings_revision.wrapping_add(1);
         }

@@ -625,7 +625,9 @@ registers! {
         "left_m",
         0..=10000,
         |v, _, k| Some(
-            (left_mm(*v.config.spool_m.get(k)?, *v.used_centi.get(k)?) / 1000).min(u32::from(u16::MAX)) as u16
+            // To the nearest metre.
+            (left_mm(*v.config.spool_m.get(k)?, *v.used_centi.get(k)?).saturating_add(500) / 1000)
+                .min(u32::from(u16::MAX)) as u16
         ),
         |t, _, k, value| {
             let (Some(&spool), Some(used)) = (t.config.spool_m.get(k), t.used_centi.get_mut(k)) else {

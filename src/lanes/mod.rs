@@ -57,7 +57,8 @@ pub struct Ledger<const N: usize> {
     /// Filament taken off each spool since it was inserted, net, 1/100 mm.
     used_centi: [i32; N],
     odometry_seen: [i32; N],
-    lanes_seen: [Lane; N],
+    /// Per slot: its lane was found empty, and no filament was parked in it since.
+    emptied: [bool; N],
     motions: [MotionTally; N],
     tool_change: Option<ToolChange>,
     hub_seen: bool,
@@ -72,7 +73,7 @@ impl<const N: usize> Default for Ledger<N> {
         Ledger {
             used_centi: [0; N],
             odometry_seen: [0; N],
-            lanes_seen: [Lane::Unknown; N],
+            emptied: [false; N],
             motions: [MotionTally::default(); N],
             tool_change: None,
             hub_seen: false,
@@ -116,7 +117,7 @@ impl<const N: usize> Ledger<N> {
                 m => i32::from(m) * CENTI_PER_M + CENTI_PER_M / 2,
             };
         }
-        self.lanes_seen = *lanes;
+        self.emptied = lanes.map(|lane| lane == Lane::Empty);
     }
 
     /// The warning bits of register 0x5e: bit k, slot k's last load distance drifted; bit
@@ -154,15 +155,18 @@ impl<const N: usize> Ledger<N> {
             let odometry = feeder.odometry_centi();
             let moved = distance_centi(self.odometry_seen[slot], odometry);
             self.odometry_seen[slot] = odometry;
-            let lane = unit.lane(slot);
-            if self.lanes_seen[slot] == Lane::Empty && !matches!(lane, Lane::Empty | Lane::Unknown) {
-                // A new filament in an empty slot: a new spool.
-                self.used_centi[slot] = 0;
-            } else {
-                self.used_centi[slot] = self.used_centi[slot].saturating_add(moved);
+            match unit.lane(slot) {
+                Lane::Empty => self.emptied[slot] = true,
+                // Not known yet (a start-up check sees a filament in an empty slot): wait.
+                Lane::Unknown => {}
+                _ if self.emptied[slot] => {
+                    // A new filament in an empty slot, now parked or further: a new spool.
+                    self.emptied[slot] = false;
+                    self.used_centi[slot] = 0;
+                }
+                _ => {}
             }
-            self.lanes_seen[slot] = lane;
-            lane_figures.used_m = (self.used_centi[slot].max(0) / CENTI_PER_M).min(i32::from(u16::MAX)) as u16;
+            self.used_centi[slot] = self.used_centi[slot].saturating_add(moved);
             let tally = &mut self.motions[slot];
             if driving == Some(slot) {
                 tally.add(drive, feeder, moved, dt_ms, now, config);
@@ -170,7 +174,15 @@ impl<const N: usize> Ledger<N> {
                 tally.fold(lane_figures, config);
             }
         }
+        self.sync_used(figures);
         self.watch_load(unit, driving, figures);
+    }
+
+    /// Bring the kept whole metres used up to date (after a write of what is left, too).
+    pub fn sync_used(&self, figures: &mut [LaneFigures; N]) {
+        for (lane, &used) in figures.iter_mut().zip(&self.used_centi) {
+            lane.used_m = (used.max(0) / CENTI_PER_M).min(i32::from(u16::MAX)) as u16;
+        }
     }
 
     /// On a tool change: the odometry when the hub sensor begins to see the filament, and the
