@@ -142,15 +142,20 @@ pub(super) fn encode_lanes<const N: usize>(lanes: &[Lane; N], out: &mut Writer) 
     }
 }
 
+/// The counters; the lane figures only once one is not blank (until then, the bytes an earlier
+/// firmware wrote: both decode).
 pub(super) fn encode_counters<const N: usize>(counters: &Counters<N>, out: &mut Writer) {
+    let with_lanes = counters.lanes.iter().any(|lane| *lane != LaneFigures::default());
     out.header(N);
     out.field(u32::from(counters.drive_errors), 2);
     for slot in 0..N {
         out.field(u32::from(counters.tool_changes[slot]), 2);
         out.field(u32::from(counters.failures[slot]), 2);
         out.field(counters.fed_mm[slot], 4);
-        for (value, width) in counters.lanes[slot].fields() {
-            out.field(value, width);
+        if with_lanes {
+            for (value, width) in counters.lanes[slot].fields() {
+                out.field(value, width);
+            }
         }
     }
 }
