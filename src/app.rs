@@ -390,8 +390,13 @@ impl<const N: usize> App<N> {
         if names_a_slot && usize::from(request.value) < N {
             self.unit.selected = Some(request.value.into());
         }
-        self.ledger
-            .command_started(request.code, request.value, superseded, &mut self.counters.lanes, self.now);
+        self.ledger.command_started(
+            request.code,
+            request.value,
+            superseded,
+            &mut self.counters.lanes,
+            self.now,
+        );
         self.operation = if superseded {
             Runner::supersede(&self.operation, key)
         } else {
@@ -544,8 +549,13 @@ impl<const N: usize> App<N> {
             return;
         }
         let slot = self.operation.phase().and_then(crate::phases::Phase::slot);
-        self.ledger
-            .command_changed(self.operation.request.0, after, slot, &mut self.counters.lanes, self.now);
+        self.ledger.command_changed(
+            self.operation.request.0,
+            after,
+            slot,
+            &mut self.counters.lanes,
+            self.now,
+        );
         if after == Status::Finished {
             // What the printer's extruder moves from now on is evidence for the next command.
             self.unit.moved_by_printer = [0; N];

@@ -969,7 +969,14 @@ mod tests {
             assert!(row.is_some_and(|r| r.access() == Access::ReadWrite));
         }
         // Every other writable register is state or has its own read and write.
-        let own = [FSENSOR, REPORTED_REVISION, THRESHOLD_ON, THRESHOLD_OFF, SPOOL, LEFT];
+        let own = [
+            FSENSOR,
+            REPORTED_REVISION,
+            THRESHOLD_ON,
+            THRESHOLD_OFF,
+            SPOOL,
+            LEFT,
+        ];
         let writable = REGISTERS
             .iter()
             .filter(|row| row.access() == Access::ReadWrite && !own.contains(&row.address))

@@ -30,10 +30,7 @@ fn tool_changes_give_each_lane_its_figures() {
     changes(&mut rig, 3);
     for slot in [1, 2] {
         let distance = rig.read(LOAD_DISTANCE + slot).unwrap();
-        assert!(
-            distance.abs_diff(BOWDEN_MM) <= 15,
-            "slot {slot}: {distance} mm"
-        );
+        assert!(distance.abs_diff(BOWDEN_MM) <= 15, "slot {slot}: {distance} mm");
         let load_ds = rig.read(LOAD_TIME + slot).unwrap();
         assert!((10..=600).contains(&load_ds), "slot {slot}: {load_ds} ds");
         let drag = rig.read(DRAG + slot).unwrap();
@@ -56,10 +53,7 @@ fn a_drive_gear_that_slips_makes_the_load_distance_drift_and_is_warned() {
     rig.boot();
     changes(&mut rig, 2);
     let before = rig.read(LOAD_DISTANCE + 1).unwrap();
-    rig.inject(Fault::Slip {
-        slot: 1,
-        ratio: 0.85,
-    });
+    rig.inject(Fault::Slip { slot: 1, ratio: 0.85 });
     rig.tool_change_loads(1);
     assert_eq!(rig.read(LANE_WARNINGS), Some(1 << 1), "slot 1 drifted");
     assert!(rig.read(LOAD_DISTANCE + 1).unwrap() > before);

@@ -30,7 +30,10 @@ pub struct LaneReport {
 }
 
 /// Every slot's figures and the warning bits (register 0x5e), read with `read`.
-pub fn read_lanes<E>(slots: u8, mut read: impl FnMut(u8) -> Result<u16, E>) -> Result<(Vec<LaneReport>, u16), E> {
+pub fn read_lanes<E>(
+    slots: u8,
+    mut read: impl FnMut(u8) -> Result<u16, E>,
+) -> Result<(Vec<LaneReport>, u16), E> {
     let mut lanes = Vec::new();
     for slot in 0..slots {
         lanes.push(LaneReport {
@@ -119,7 +122,9 @@ pub fn warning_lines(warnings: u16, slots: u8) -> Vec<String> {
             ));
         }
         if warnings & (1 << (8 + slot)) != 0 {
-            lines.push(format!("warning: slot {slot} has less than 10 m of filament left"));
+            lines.push(format!(
+                "warning: slot {slot} has less than 10 m of filament left"
+            ));
         }
     }
     lines

@@ -50,7 +50,10 @@ fn filament_left_counts_the_print_and_survives_a_power_cut() {
     let truth = 330.0 - pulled_m(&printer, 0, tail);
     assert!(truth < 319.0, "{truth}");
     let left = read(&mut printer, LEFT);
-    assert!((f32::from(left) - truth).abs() <= 0.5, "left {left} m, truth {truth} m");
+    assert!(
+        (f32::from(left) - truth).abs() <= 0.5,
+        "left {left} m, truth {truth} m"
+    );
     // The power goes; the printer connects again.
     printer
         .link_mut()
@@ -60,7 +63,10 @@ fn filament_left_counts_the_print_and_survives_a_power_cut() {
     let truth = 330.0 - pulled_m(&printer, 0, tail);
     let left = read(&mut printer, LEFT);
     // Kept in whole metres, restored to the middle of the metre: within a metre.
-    assert!((f32::from(left) - truth).abs() <= 1.0, "left {left} m, truth {truth} m");
+    assert!(
+        (f32::from(left) - truth).abs() <= 1.0,
+        "left {left} m, truth {truth} m"
+    );
     // The tool change's health figures too.
     assert_eq!(read(&mut printer, SUCCESS_OF), 1);
     assert_eq!(read(&mut printer, SUCCESS), 100);

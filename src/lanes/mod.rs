@@ -147,9 +147,11 @@ impl<const N: usize> Ledger<N> {
         let dt_ms = now.millis_since(self.last_step).min(1000) as u32;
         self.last_step = now;
         for slot in 0..N {
-            let (Some(feeder), Some(drive), Some(lane_figures)) =
-                (unit.feeders.get(slot), unit.drives.get(slot), figures.get_mut(slot))
-            else {
+            let (Some(feeder), Some(drive), Some(lane_figures)) = (
+                unit.feeders.get(slot),
+                unit.drives.get(slot),
+                figures.get_mut(slot),
+            ) else {
                 continue;
             };
             let odometry = feeder.odometry_centi();

@@ -502,7 +502,9 @@ impl Bench {
                     self.say(&line);
                 }
             }
-            Err(_) => self.say("filament left and lane health: not reported by this unit (an earlier firmware)"),
+            Err(_) => {
+                self.say("filament left and lane health: not reported by this unit (an earlier firmware)")
+            }
         }
     }
 

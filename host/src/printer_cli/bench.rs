@@ -97,7 +97,9 @@ impl<L: Target> Session<L> {
         let writable = mmu_firmware::registers::all(usize::from(slots))
             // Nor what is left on each spool (0x59 + k): state, not a setting.
             .filter(|register| {
-                register.row.access() == Access::ReadWrite && register.address != 0x09 && register.row.address != LEFT
+                register.row.access() == Access::ReadWrite
+                    && register.address != 0x09
+                    && register.row.address != LEFT
             })
             .map(|register| register.address);
         for address in writable {

@@ -22,7 +22,8 @@ impl<L: Target> Session<L> {
                 .say("filament left and lane health: not reported by this unit (an earlier firmware)");
             return details;
         };
-        self.console.say("filament left (registers 0x54+k spool, 0x59+k left):");
+        self.console
+            .say("filament left (registers 0x54+k spool, 0x59+k left):");
         for lane in &lanes {
             self.console.say(&format!("  {}", lane.left_text()));
         }
