@@ -86,8 +86,9 @@ impl<const N: usize> Default for Ledger<N> {
 
 /// Filament left of a spool of `spool_m` metres once `used_centi` left it, mm (never below 0).
 pub fn left_mm(spool_m: u16, used_centi: i32) -> u32 {
-    let left = i64::from(spool_m) * 1000 - i64::from(used_centi) / 100;
-    left.clamp(0, i64::from(u32::MAX)) as u32
+    // At most 65.5 km less 21.5 km or more: no overflow in 32 bits.
+    let left = i32::from(spool_m) * 1000 - used_centi / 100;
+    left.max(0) as u32
 }
 
 impl<const N: usize> Ledger<N> {
