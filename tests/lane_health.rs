@@ -41,6 +41,14 @@ fn tool_changes_give_each_lane_its_figures() {
         assert_eq!(rig.read(SUCCESS + slot), Some(100));
         assert_eq!(rig.read(SUCCESS_OF + slot), Some(3));
     }
+    // A change to the slot already loaded finishes at once: it measures nothing.
+    let load_ds = rig.read(LOAD_TIME + 2);
+    rig.tool_change_loads(2);
+    assert_eq!(rig.read(SUCCESS_OF + 2), Some(3));
+    assert_eq!(rig.read(LOAD_TIME + 2), load_ds);
+    rig.tool_change_loads(1);
+    assert_eq!(rig.read(SUCCESS + 2), Some(100), "nor counts as a failure");
+    assert_eq!(rig.read(SUCCESS_OF + 2), Some(3));
     // Slot 0 never loaded: no figures yet.
     assert_eq!(rig.read(SUCCESS_OF), Some(0));
     assert_eq!(rig.read(LOAD_DISTANCE), Some(0));

@@ -47,6 +47,9 @@ struct ToolChange {
     started: Instant,
     /// No error was raised since it began.
     clean: bool,
+    /// It drove its slot's motor: a change to the slot already loaded, which finishes at once,
+    /// is no measurement of the lane.
+    drove: bool,
     /// The odometry when the hub sensor began to see this slot's filament during it.
     at_hub_centi: Option<i32>,
 }
@@ -199,6 +202,7 @@ impl<const N: usize> Ledger<N> {
         let Some(change) = self.tool_change.as_mut() else {
             return;
         };
+        change.drove |= driving == Some(change.slot);
         let Some(odometry) = unit.feeders.get(change.slot).map(|f| f.odometry_centi()) else {
             return;
         };
@@ -248,6 +252,7 @@ impl<const N: usize> Ledger<N> {
         }
         if let Some(change) = self.tool_change.take()
             && let Some(lane) = figures.get_mut(change.slot)
+            && change.drove
         {
             lane.record_outcome(false);
         }
@@ -256,6 +261,7 @@ impl<const N: usize> Ledger<N> {
                 slot,
                 started: now,
                 clean: true,
+                drove: false,
                 at_hub_centi: None,
             });
         }
@@ -283,6 +289,7 @@ impl<const N: usize> Ledger<N> {
             Status::Finished if code == RequestCode::Tool => {
                 if let Some(change) = self.tool_change.take()
                     && let Some(lane) = figures.get_mut(change.slot)
+                    && change.drove
                 {
                     lane.record_outcome(change.clean);
                     if change.clean {
