@@ -633,7 +633,8 @@ registers! {
             let (Some(&spool), Some(used)) = (t.config.spool_m.get(k), t.used_centi.get_mut(k)) else {
                 return false;
             };
-            *used = (i32::from(spool) - i32::from(value)) * 100_000;
+            // No more than the spool holds: what is kept is the metres used, never below 0.
+            *used = (i32::from(spool) - i32::from(value.min(spool))) * 100_000;
             true
         }
     ),

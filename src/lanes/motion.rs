@@ -21,7 +21,7 @@ pub(super) struct MotionTally {
     commanded_mm_ms: u32,
     /// The distance the odometry counted meanwhile, 1/100 mm.
     counted_centi: u32,
-    /// The duty applied, summed over the drag samples, per mille.
+    /// The duty applied, summed over the drag samples (one a revolution), per mille.
     duty_sum: u32,
     /// The speed measured, summed over the same samples, mm/s.
     speed_sum: u32,
@@ -45,6 +45,11 @@ impl MotionTally {
         };
         self.commanded_mm_ms = self.commanded_mm_ms.saturating_add(u32::from(speed) * dt_ms);
         self.counted_centi = self.counted_centi.saturating_add(moved.unsigned_abs());
+        // Sampled at each revolution (the speed is measured from its period): a 64-bit division
+        // a revolution, not one a step.
+        if moved == 0 {
+            return;
+        }
         let measured = feeder.speed_mm_s(now, config);
         if measured >= MIN_SPEED {
             self.duty_sum = self.duty_sum.saturating_add(u32::from(duty.permille()));
