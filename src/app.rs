@@ -447,7 +447,7 @@ impl<const N: usize> App<N> {
             bowden_learned_mm: self.bowden_learned_mm,
             lane_figures: &self.counters.lanes,
             used_centi: self.ledger.used_centi(),
-            lane_warnings: self.ledger.warnings(&self.config),
+            lanes_drifted: self.ledger.drifted(),
             // Right after an `S2`, the build of the revision it offered: what `S3` would report.
             build: crate::config::build_of(self.negotiation.offered.unwrap_or(self.config.version.revision)),
             now: self.now,
@@ -466,7 +466,9 @@ impl<const N: usize> App<N> {
             used_centi: self.ledger.used_centi_mut(),
         };
         let accepted = registers::write(&mut target, N, address, value);
-        self.ledger.sync_used(&mut self.counters.lanes);
+        if accepted && registers::LEFT <= address && address < registers::LEFT + N as u8 {
+            self.ledger.sync_used(&mut self.counters.lanes);
+        }
         if accepted && address != registers::FSENSOR {
             self.settings_revision = self.settings_revision.wrapping_add(1);
         }

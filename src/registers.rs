@@ -65,8 +65,8 @@ pub struct View<'a> {
     pub lane_figures: &'a [LaneFigures],
     /// Filament taken off each slot's spool, 1/100 mm.
     pub used_centi: &'a [i32],
-    /// The warning bits of register 0x5e ([`crate::lanes::Ledger::warnings`]).
-    pub lane_warnings: u16,
+    /// Per slot, its last load distance drifted (bit k of register 0x5e).
+    pub lanes_drifted: u8,
     /// The time of the current step.
     pub now: Instant,
 }
@@ -638,7 +638,11 @@ registers! {
             true
         }
     ),
-    LaneWarnings: read_only(LANE_WARNINGS, "lane_warnings", |v, _, _| Some(v.lane_warnings)),
+    LaneWarnings: read_only(LANE_WARNINGS, "lane_warnings", |v, _, _| Some(crate::lanes::warnings(
+        v.lanes_drifted,
+        v.used_centi,
+        &v.config.spool_m
+    ))),
     Raw: block(RAW, Sensors, "raw", |v, _, i| Some(
         v.sensor(SensorId::from_index(i))?.raw()
     )),
@@ -788,7 +792,7 @@ pub fn settings_view<'a>(config: &'a Config, hub: &'a Hub) -> View<'a> {
         bowden_learned_mm: 0,
         lane_figures: &[],
         used_centi: &[],
-        lane_warnings: 0,
+        lanes_drifted: 0,
         build: config.version.build(),
         now: Instant::ZERO,
     }

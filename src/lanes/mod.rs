@@ -52,6 +52,10 @@ struct ToolChange {
     drove: bool,
     /// The odometry when the hub sensor began to see this slot's filament during it.
     at_hub_centi: Option<i32>,
+    /// The hub sensor and the printer's sensor at the last step: taken as seeing filament when
+    /// the change starts, so that only a filament arriving during it is measured.
+    hub_seen: bool,
+    fsensor_seen: bool,
 }
 
 /// What the ledger follows between steps (not kept across restarts).
@@ -64,8 +68,6 @@ pub struct Ledger<const N: usize> {
     emptied: [bool; N],
     motions: [MotionTally; N],
     tool_change: Option<ToolChange>,
-    hub_seen: bool,
-    fsensor_seen: bool,
     /// Per slot: its last load distance drifted from its rolling figure (bit k).
     drifted: u8,
     last_step: Instant,
@@ -79,12 +81,28 @@ impl<const N: usize> Default for Ledger<N> {
             emptied: [false; N],
             motions: [MotionTally::default(); N],
             tool_change: None,
-            hub_seen: false,
-            fsensor_seen: false,
             drifted: 0,
             last_step: Instant::ZERO,
         }
     }
+}
+
+/// The whole metres of `used_centi` (none below 0).
+fn used_m(used_centi: i32) -> u16 {
+    (used_centi.max(0) / CENTI_PER_M).min(i32::from(u16::MAX)) as u16
+}
+
+/// The warning bits of register 0x5e: bit k, slot k's last load distance drifted (`drifted`);
+/// bit 8 + k, slot k has less than [`LOW_LEFT_M`] left. Worked out only when the register is
+/// read.
+pub fn warnings(drifted: u8, used_centi: &[i32], spool_m: &[u16]) -> u16 {
+    let mut bits = u16::from(drifted);
+    for (slot, (&used, &spool)) in used_centi.iter().zip(spool_m).enumerate() {
+        if left_mm(spool, used) < u32::from(LOW_LEFT_M) * 1000 {
+            bits |= 1 << (8 + slot);
+        }
+    }
+    bits
 }
 
 /// Filament left of a spool of `spool_m` metres once `used_centi` left it, mm (never below 0).
@@ -124,22 +142,15 @@ impl<const N: usize> Ledger<N> {
         self.emptied = lanes.map(|lane| lane == Lane::Empty);
     }
 
-    /// The warning bits of register 0x5e: bit k, slot k's last load distance drifted; bit
-    /// 8 + k, slot k has less than [`LOW_LEFT_M`] left.
-    pub fn warnings(&self, config: &Config) -> u16 {
-        let mut bits = u16::from(self.drifted);
-        for (slot, &used) in self.used_centi.iter().enumerate() {
-            let spool = config.spool_m.get(slot).copied().unwrap_or(DEFAULT_SPOOL_M);
-            if left_mm(spool, used) < u32::from(LOW_LEFT_M) * 1000 {
-                bits |= 1 << (8 + slot);
-            }
-        }
-        bits
+    /// Per slot: its last load distance drifted from its rolling figure (bit k of register 0x5e).
+    pub fn drifted(&self) -> u8 {
+        self.drifted
     }
 
     /// Count what happened since the last step: the filament each motor moved, the lanes that
     /// got a new filament, the unit's own moves (drag, slip), the hub and the printer's sensor
-    /// on a load. Called after the sensors were read, before the command steps.
+    /// on a load. Called after the sensors were read, before the command steps: cheap in a step
+    /// where nothing moved (it runs every millisecond on the MCU).
     pub fn observe(
         &mut self,
         unit: &Unit<N>,
@@ -148,20 +159,15 @@ impl<const N: usize> Ledger<N> {
         config: &Config,
         now: Instant,
     ) {
-        let dt_ms = now.millis_since(self.last_step).min(1000) as u32;
-        self.last_step = now;
+        let last_step = core::mem::replace(&mut self.last_step, now);
+        // `slot` below N indexes arrays of N: no bounds to fail.
         for slot in 0..N {
-            let (Some(feeder), Some(drive), Some(lane_figures)) = (
-                unit.feeders.get(slot),
-                unit.drives.get(slot),
-                figures.get_mut(slot),
-            ) else {
-                continue;
-            };
+            let feeder = &unit.feeders[slot];
             let odometry = feeder.odometry_centi();
             let moved = distance_centi(self.odometry_seen[slot], odometry);
             self.odometry_seen[slot] = odometry;
-            match unit.lane(slot) {
+            let mut changed = moved != 0;
+            match unit.lanes[slot] {
                 Lane::Empty => self.emptied[slot] = true,
                 // Not known yet (a start-up check sees a filament in an empty slot): wait.
                 Lane::Unknown => {}
@@ -169,39 +175,45 @@ impl<const N: usize> Ledger<N> {
                     // A new filament in an empty slot, now parked or further: a new spool.
                     self.emptied[slot] = false;
                     self.used_centi[slot] = 0;
+                    changed = true;
                 }
                 _ => {}
             }
-            self.used_centi[slot] = self.used_centi[slot].saturating_add(moved);
+            if changed {
+                self.used_centi[slot] = self.used_centi[slot].saturating_add(moved);
+                figures[slot].used_m = used_m(self.used_centi[slot]);
+            }
             let tally = &mut self.motions[slot];
             if driving == Some(slot) {
-                tally.add(drive, feeder, moved, dt_ms, now, config);
-            } else {
-                tally.fold(lane_figures, config);
+                let dt_ms = now.millis_since(last_step).min(1000) as u32;
+                tally.add(&unit.drives[slot], feeder, moved, dt_ms, now, config);
+            } else if tally.is_open() {
+                tally.fold(&mut figures[slot], config);
             }
         }
-        self.sync_used(figures);
-        self.watch_load(unit, driving, figures);
+        if self.tool_change.is_some() {
+            self.watch_load(unit, driving, figures);
+        }
     }
 
-    /// Bring the kept whole metres used up to date (after a write of what is left, too).
+    /// Bring the kept whole metres used up to date after a write of what is left.
     pub fn sync_used(&self, figures: &mut [LaneFigures; N]) {
         for (lane, &used) in figures.iter_mut().zip(&self.used_centi) {
-            lane.used_m = (used.max(0) / CENTI_PER_M).min(i32::from(u16::MAX)) as u16;
+            lane.used_m = used_m(used);
         }
     }
 
     /// On a tool change: the odometry when the hub sensor begins to see the filament, and the
     /// distance from there when the printer's sensor triggers (the Bowden length as measured).
     fn watch_load(&mut self, unit: &Unit<N>, driving: Option<usize>, figures: &mut [LaneFigures; N]) {
-        let hub = unit.hub_present().unwrap_or(false);
-        let fsensor = unit.fsensor_triggered();
-        let (hub_rose, fsensor_rose) = (hub && !self.hub_seen, fsensor && !self.fsensor_seen);
-        self.hub_seen = hub;
-        self.fsensor_seen = fsensor;
         let Some(change) = self.tool_change.as_mut() else {
             return;
         };
+        let hub = unit.hub_present().unwrap_or(false);
+        let fsensor = unit.fsensor_triggered();
+        let (hub_rose, fsensor_rose) = (hub && !change.hub_seen, fsensor && !change.fsensor_seen);
+        change.hub_seen = hub;
+        change.fsensor_seen = fsensor;
         change.drove |= driving == Some(change.slot);
         let Some(odometry) = unit.feeders.get(change.slot).map(|f| f.odometry_centi()) else {
             return;
@@ -263,6 +275,8 @@ impl<const N: usize> Ledger<N> {
                 clean: true,
                 drove: false,
                 at_hub_centi: None,
+                hub_seen: true,
+                fsensor_seen: true,
             });
         }
     }

@@ -57,6 +57,11 @@ impl MotionTally {
         }
     }
 
+    /// Whether a move was tallied since the last fold.
+    pub(super) fn is_open(&self) -> bool {
+        self.commanded_mm_ms != 0 || self.speed_sum != 0
+    }
+
     /// The move ended (or none runs): fold what it did into `lane`, and start again.
     pub(super) fn fold(&mut self, lane: &mut LaneFigures, config: &Config) {
         let tally = core::mem::take(self);
