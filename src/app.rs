@@ -160,7 +160,6 @@ impl<const N: usize> App<N> {
         {
             feeder.set_odometry_centi(centi);
             *seen = centi;
-            self.ledger.set_odometry_seen(slot, centi);
         }
     }
 
@@ -193,6 +192,7 @@ impl<const N: usize> App<N> {
         self.ledger.observe(
             &self.unit,
             self.operation.driving_slot(),
+            matches!(self.operation.status(), Status::Running(_)),
             &mut self.counters.lanes,
             &self.config,
             now,
@@ -406,12 +406,18 @@ impl<const N: usize> App<N> {
     }
 
     /// Add the motion of the slot the running command drives to its fed distance (the extruder
-    /// pulling a loaded slot while printing does not count).
+    /// pulling a loaded slot while printing does not count), and every slot's motion to what
+    /// left its spool ([`Ledger::moved`]).
     fn count_fed(&mut self) {
         let driving = self.operation.driving_slot();
         for (slot, feeder) in self.unit.feeders.iter().enumerate() {
             let odometry = feeder.odometry_centi();
             let seen = core::mem::replace(&mut self.odometry_seen[slot], odometry);
+            if odometry != seen {
+                // Every motion counts off the spool, the printer's pull too.
+                self.ledger
+                    .moved(slot, distance_centi(seen, odometry), &mut self.counters.lanes);
+            }
             if driving == Some(slot) && odometry != seen {
                 (self.counters.fed_mm[slot], self.fed_centi_beyond_mm[slot]) = add_centi(
                     self.counters.fed_mm[slot],
@@ -551,6 +557,7 @@ impl<const N: usize> App<N> {
             return;
         }
         let slot = self.operation.phase().and_then(crate::phases::Phase::slot);
+        self.ledger.lanes_seen(&self.unit.lanes, &mut self.counters.lanes);
         self.ledger.command_changed(
             self.operation.request.0,
             after,

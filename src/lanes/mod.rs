@@ -63,10 +63,11 @@ struct ToolChange {
 pub struct Ledger<const N: usize> {
     /// Filament taken off each spool since it was inserted, net, 1/100 mm.
     used_centi: [i32; N],
-    odometry_seen: [i32; N],
     /// Per slot: its lane was found empty, and no filament was parked in it since.
     emptied: [bool; N],
     motions: [MotionTally; N],
+    /// Per slot: a move is tallied, to fold once the command stops driving it (bit k).
+    open: u8,
     tool_change: Option<ToolChange>,
     /// Per slot: its last load distance drifted from its rolling figure (bit k).
     drifted: u8,
@@ -77,9 +78,9 @@ impl<const N: usize> Default for Ledger<N> {
     fn default() -> Self {
         Ledger {
             used_centi: [0; N],
-            odometry_seen: [0; N],
             emptied: [false; N],
             motions: [MotionTally::default(); N],
+            open: 0,
             tool_change: None,
             drifted: 0,
             last_step: Instant::ZERO,
@@ -123,13 +124,6 @@ impl<const N: usize> Ledger<N> {
         &mut self.used_centi
     }
 
-    /// Slot `slot`'s odometry was set to `centi` (not a motion: nothing counted).
-    pub fn set_odometry_seen(&mut self, slot: usize, centi: i32) {
-        if let Some(seen) = self.odometry_seen.get_mut(slot) {
-            *seen = centi;
-        }
-    }
-
     /// Take back what a previous run kept: the metres used (the middle of the metre last kept:
     /// a power cut loses at most half a metre either way) and the lanes as restored.
     pub fn restore(&mut self, figures: &[LaneFigures; N], lanes: &[Lane; N]) {
@@ -147,49 +141,76 @@ impl<const N: usize> Ledger<N> {
         self.drifted
     }
 
-    /// Count what happened since the last step: the filament each motor moved, the lanes that
-    /// got a new filament, the unit's own moves (drag, slip), the hub and the printer's sensor
-    /// on a load. Called after the sensors were read, before the command steps: cheap in a step
-    /// where nothing moved (it runs every millisecond on the MCU).
+    /// Slot `slot`'s motor moved its filament by `moved` 1/100 mm (forward positive) since the
+    /// last step: driven, or turned by the filament the printer pulls (the App calls it only when
+    /// the odometry moved).
+    pub fn moved(&mut self, slot: usize, moved: i32, figures: &mut [LaneFigures; N]) {
+        if let (Some(used), Some(lane)) = (self.used_centi.get_mut(slot), figures.get_mut(slot)) {
+            *used = used.saturating_add(moved);
+            lane.used_m = used_m(*used);
+        }
+    }
+
+    /// Where each slot's filament is now: a slot found empty, then holding a parked (or
+    /// further) filament, has a new spool. Called while a command runs and when its status
+    /// changes: only commands change the lanes.
+    pub fn lanes_seen(&mut self, lanes: &[Lane; N], figures: &mut [LaneFigures; N]) {
+        for (((&lane, emptied), used), figures) in lanes
+            .iter()
+            .zip(self.emptied.iter_mut())
+            .zip(self.used_centi.iter_mut())
+            .zip(figures.iter_mut())
+        {
+            match lane {
+                Lane::Empty => *emptied = true,
+                // Not known yet (a start-up check sees a filament in an empty slot): wait.
+                Lane::Unknown => {}
+                _ if *emptied => {
+                    *emptied = false;
+                    *used = 0;
+                    figures.used_m = 0;
+                }
+                _ => {}
+            }
+        }
+    }
+
+    /// One step of the unit's own moves (drag, slip) and of a tool change (the hub and the
+    /// printer's sensor on a load); the lanes while a command runs (`running`). Called after
+    /// the sensors were read, before the command steps: a few comparisons in an idle step (it
+    /// runs every millisecond on the MCU).
     pub fn observe(
         &mut self,
         unit: &Unit<N>,
         driving: Option<usize>,
+        running: bool,
         figures: &mut [LaneFigures; N],
         config: &Config,
         now: Instant,
     ) {
         let last_step = core::mem::replace(&mut self.last_step, now);
-        // `slot` below N indexes seven arrays of N: no bounds to fail (a zip of seven is worse).
-        #[allow(clippy::needless_range_loop)]
-        for slot in 0..N {
-            let feeder = &unit.feeders[slot];
-            let odometry = feeder.odometry_centi();
-            let moved = distance_centi(self.odometry_seen[slot], odometry);
-            self.odometry_seen[slot] = odometry;
-            let mut changed = moved != 0;
-            match unit.lanes[slot] {
-                Lane::Empty => self.emptied[slot] = true,
-                // Not known yet (a start-up check sees a filament in an empty slot): wait.
-                Lane::Unknown => {}
-                _ if self.emptied[slot] => {
-                    // A new filament in an empty slot, now parked or further: a new spool.
-                    self.emptied[slot] = false;
-                    self.used_centi[slot] = 0;
-                    changed = true;
+        if running {
+            self.lanes_seen(&unit.lanes, figures);
+        }
+        let driving = driving.filter(|&slot| slot < N);
+        if let (Some(slot), Some(tally), Some(drive), Some(feeder)) = (
+            driving,
+            driving.and_then(|slot| self.motions.get_mut(slot)),
+            driving.and_then(|slot| unit.drives.get(slot)),
+            driving.and_then(|slot| unit.feeders.get(slot)),
+        ) {
+            let dt_ms = now.millis_since(last_step).min(1000) as u32;
+            tally.add(drive, feeder, dt_ms, now, config);
+            self.open |= 1 << slot;
+        }
+        let driving_bit = driving.map_or(0, |slot| 1u8 << slot);
+        if self.open & !driving_bit != 0 {
+            for (slot, (tally, lane)) in self.motions.iter_mut().zip(figures.iter_mut()).enumerate() {
+                let bit = 1u8 << slot;
+                if self.open & bit != 0 && bit != driving_bit {
+                    tally.fold(lane, config);
+                    self.open &= !bit;
                 }
-                _ => {}
-            }
-            if changed {
-                self.used_centi[slot] = self.used_centi[slot].saturating_add(moved);
-                figures[slot].used_m = used_m(self.used_centi[slot]);
-            }
-            let tally = &mut self.motions[slot];
-            if driving == Some(slot) {
-                let dt_ms = now.millis_since(last_step).min(1000) as u32;
-                tally.add(&unit.drives[slot], feeder, moved, dt_ms, now, config);
-            } else if tally.is_open() {
-                tally.fold(&mut figures[slot], config);
             }
         }
         if self.tool_change.is_some() {

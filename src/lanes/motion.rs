@@ -6,7 +6,7 @@ use mmu_hal_port::MotorCommand;
 use super::figures::{LaneFigures, roll, roll_signed};
 use crate::config::Config;
 use crate::drive::SlotDrive;
-use crate::feeder::Feeder;
+use crate::feeder::{Feeder, distance_centi};
 use crate::time::Instant;
 
 /// Moves shorter than this (commanded) give no slip figure, 1/100 mm.
@@ -25,20 +25,25 @@ pub(super) struct MotionTally {
     duty_sum: u32,
     /// The speed measured, summed over the same samples, mm/s.
     speed_sum: u32,
+    /// The odometry at the last step, 1/100 mm (`None` before the move's first step).
+    last_centi: Option<i32>,
 }
 
 impl MotionTally {
-    /// One step of a move the running command drives: `moved` 1/100 mm counted since the last
-    /// step, `dt_ms` after it.
+    /// One step of a move the running command drives, `dt_ms` after the last.
     pub(super) fn add(
         &mut self,
         drive: &SlotDrive,
         feeder: &Feeder,
-        moved: i32,
         dt_ms: u32,
         now: Instant,
         config: &Config,
     ) {
+        let odometry = feeder.odometry_centi();
+        let moved = self
+            .last_centi
+            .replace(odometry)
+            .map_or(0, |last| distance_centi(last, odometry));
         let (MotorCommand::Drive { duty, .. }, Some(speed)) = (drive.command(), drive.scheduled_speed())
         else {
             return;
@@ -59,11 +64,6 @@ impl MotionTally {
             self.duty_sum = self.duty_sum.saturating_add(u32::from(duty.permille()));
             self.speed_sum = self.speed_sum.saturating_add(measured);
         }
-    }
-
-    /// Whether a move was tallied since the last fold.
-    pub(super) fn is_open(&self) -> bool {
-        self.commanded_mm_ms != 0 || self.speed_sum != 0
     }
 
     /// The move ended (or none runs): fold what it did into `lane`, and start again.
@@ -117,6 +117,7 @@ mod tests {
             counted_centi: 38_000,
             duty_sum: 667 * 200,
             speed_sum: 100 * 200,
+            last_centi: None,
         });
         assert_eq!((lane.slip_permille, lane.drag_pct), (50, 100));
         // A 60 m move, counted long, and sums at their limits.
@@ -125,6 +126,7 @@ mod tests {
             counted_centi: u32::MAX,
             duty_sum: u32::MAX,
             speed_sum: u32::MAX / 1000,
+            last_centi: None,
         });
         assert_eq!(lane.slip_permille, -1000);
         assert!(lane.drag_pct > 0);
@@ -134,6 +136,7 @@ mod tests {
             counted_centi: 0,
             duty_sum: 0,
             speed_sum: 0,
+            last_centi: None,
         });
         assert_eq!(lane, LaneFigures::default());
     }
