@@ -298,7 +298,7 @@ fn write_setting(t: &mut Target, address: u8, _: usize, value: u16) -> bool {
     }
 }
 
-/// The register table, one row per entry, in address order:
+/// The register table, one row per entry, in address order (but the lane rows, last):
 ///
 /// - `setting(address, name, min..=max)`: a plain setting, a `u16` field of [`Config`] listed in
 ///   [`settings!`]. Every setting shares one read and one write, which find the field by the
@@ -605,6 +605,45 @@ registers! {
         }
     ),
     LearnedBowdenMm: read_only(0x53, "learned_bowden_mm", |v, _, _| Some(v.bowden_learned_mm)),
+    Raw: block(RAW, Sensors, "raw", |v, _, i| Some(
+        v.sensor(SensorId::from_index(i))?.raw()
+    )),
+    Filtered: block(FILTERED, Sensors, "filtered", |v, _, i| Some(
+        v.sensor(SensorId::from_index(i))?.filtered()
+    )),
+    ThresholdOn: writable(
+        THRESHOLD_ON,
+        Sensors,
+        "threshold_on",
+        0..=4095,
+        |v, _, i| Some(thresholds(v.config, SensorId::from_index(i))?.on),
+        |t, _, i, value| set_threshold(t, SensorId::from_index(i), |th| th.on = value)
+    ),
+    ThresholdOff: writable(
+        THRESHOLD_OFF,
+        Sensors,
+        "threshold_off",
+        0..=4095,
+        |v, _, i| Some(thresholds(v.config, SensorId::from_index(i))?.off),
+        |t, _, i, value| set_threshold(t, SensorId::from_index(i), |th| th.off = value)
+    ),
+    SlotOdometry: block(ODOMETRY, Slots, "odometry", |v, _, k| Some(
+        v.feeders.get(k)?.odometry_mm() as i16 as u16
+    )),
+    Lane: block(LANE, Slots, "lane", |v, _, k| Some(v.lanes.get(k)?.mmu3_state())),
+    ToolChanges: block(TOOL_CHANGES, Slots, "tool_changes", |v, _, k| v
+        .tool_changes
+        .get(k)
+        .copied()),
+    Failures: block(FAILURES, Slots, "failures", |v, _, k| v.failures.get(k).copied()),
+    Speed: block(SPEED, Slots, "speed", |v, _, k| Some(
+        v.feeders.get(k)?.speed_mm_s(v.now, v.config)
+    )),
+    FedMetres: block(FED_METRES, Slots, "fed_metres", |v, _, k| Some(
+        u16::try_from(*v.fed_mm.get(k)? / 1000).unwrap_or(u16::MAX)
+    )),
+    // The lane rows last, out of address order: a read walks the table from the top, and the
+    // registers read most (the printer's polls, the sensors') stay where they were.
     SpoolM: writable(
         SPOOL,
         Lanes,
@@ -643,48 +682,11 @@ registers! {
         v.used_centi,
         &v.config.spool_m
     ))),
-    Raw: block(RAW, Sensors, "raw", |v, _, i| Some(
-        v.sensor(SensorId::from_index(i))?.raw()
-    )),
-    Filtered: block(FILTERED, Sensors, "filtered", |v, _, i| Some(
-        v.sensor(SensorId::from_index(i))?.filtered()
-    )),
     Drag: block(DRAG, Lanes, "drag_pct", |v, _, k| Some(v.lane_figures.get(k)?.drag_pct)),
     Slip: block(SLIP, Lanes, "slip_permille", |v, _, k| Some(
         v.lane_figures.get(k)?.slip_permille as u16
     )),
-    ThresholdOn: writable(
-        THRESHOLD_ON,
-        Sensors,
-        "threshold_on",
-        0..=4095,
-        |v, _, i| Some(thresholds(v.config, SensorId::from_index(i))?.on),
-        |t, _, i, value| set_threshold(t, SensorId::from_index(i), |th| th.on = value)
-    ),
-    ThresholdOff: writable(
-        THRESHOLD_OFF,
-        Sensors,
-        "threshold_off",
-        0..=4095,
-        |v, _, i| Some(thresholds(v.config, SensorId::from_index(i))?.off),
-        |t, _, i, value| set_threshold(t, SensorId::from_index(i), |th| th.off = value)
-    ),
-    SlotOdometry: block(ODOMETRY, Slots, "odometry", |v, _, k| Some(
-        v.feeders.get(k)?.odometry_mm() as i16 as u16
-    )),
-    Lane: block(LANE, Slots, "lane", |v, _, k| Some(v.lanes.get(k)?.mmu3_state())),
-    ToolChanges: block(TOOL_CHANGES, Slots, "tool_changes", |v, _, k| v
-        .tool_changes
-        .get(k)
-        .copied()),
-    Failures: block(FAILURES, Slots, "failures", |v, _, k| v.failures.get(k).copied()),
-    Speed: block(SPEED, Slots, "speed", |v, _, k| Some(
-        v.feeders.get(k)?.speed_mm_s(v.now, v.config)
-    )),
     LoadTime: block(LOAD_TIME, Lanes, "load_ds", |v, _, k| Some(v.lane_figures.get(k)?.load_ds)),
-    FedMetres: block(FED_METRES, Slots, "fed_metres", |v, _, k| Some(
-        u16::try_from(*v.fed_mm.get(k)? / 1000).unwrap_or(u16::MAX)
-    )),
     LoadDistance: block(LOAD_DISTANCE, Lanes, "load_distance_mm", |v, _, k| Some(
         v.lane_figures.get(k)?.fsensor_mm
     )),

@@ -65,6 +65,8 @@ pub struct Ledger<const N: usize> {
     used_centi: [i32; N],
     /// Per slot: its lane was found empty, and no filament was parked in it since.
     emptied: [bool; N],
+    /// The lanes as last looked at.
+    lanes: [Lane; N],
     motions: [MotionTally; N],
     /// Per slot: a move is tallied, to fold once the command stops driving it (bit k).
     open: u8,
@@ -79,6 +81,7 @@ impl<const N: usize> Default for Ledger<N> {
         Ledger {
             used_centi: [0; N],
             emptied: [false; N],
+            lanes: [Lane::Unknown; N],
             motions: [MotionTally::default(); N],
             open: 0,
             tool_change: None,
@@ -134,6 +137,7 @@ impl<const N: usize> Ledger<N> {
             };
         }
         self.emptied = lanes.map(|lane| lane == Lane::Empty);
+        self.lanes = *lanes;
     }
 
     /// Per slot: its last load distance drifted from its rolling figure (bit k of register 0x5e).
@@ -155,6 +159,10 @@ impl<const N: usize> Ledger<N> {
     /// further) filament, has a new spool. Called while a command runs and when its status
     /// changes: only commands change the lanes.
     pub fn lanes_seen(&mut self, lanes: &[Lane; N], figures: &mut [LaneFigures; N]) {
+        if *lanes == self.lanes {
+            return;
+        }
+        self.lanes = *lanes;
         for (((&lane, emptied), used), figures) in lanes
             .iter()
             .zip(self.emptied.iter_mut())
