@@ -19,6 +19,7 @@ use crate::config::{Config, Contract, offered_revision};
 use crate::drive;
 use crate::feeder::distance_centi;
 use crate::follower;
+use crate::lanes::Ledger;
 use crate::persist::{Counters, MAX_SETTINGS, Snapshot};
 use crate::phases::PrinterLink;
 use crate::registers;
@@ -105,6 +106,8 @@ pub struct App<const N: usize> {
     printer: PrinterLink,
     /// Moves (wrapping) whenever a setting may have changed: see [`App::settings_revision`].
     settings_revision: u32,
+    /// Filament left and lane health, as they are counted ([`crate::lanes`]).
+    ledger: Ledger<N>,
 }
 
 impl<const N: usize> App<N> {
@@ -140,6 +143,7 @@ impl<const N: usize> App<N> {
                 in_sync: true,
             },
             settings_revision: 0,
+            ledger: Ledger::default(),
         }
     }
 
@@ -205,6 +209,14 @@ impl<const N: usize> App<N> {
         // The answers of the last step have gone out: an `S2` from now on follows them.
         self.negotiation.answered_this_step = None;
         self.unit.sense(samples, now, &self.config);
+        self.ledger.observe(
+            &self.unit,
+            self.operation.driving_slot(),
+            matches!(self.operation.status(), Status::Running(_)),
+            &mut self.counters.lanes,
+            &self.config,
+            now,
+        );
         if !rx.is_empty() {
             self.printer.heard = now;
         } else if now.millis_since(self.printer.heard) >= u64::from(mmu_protocol::SILENCE_MS) {
@@ -397,6 +409,13 @@ impl<const N: usize> App<N> {
         if names_a_slot && usize::from(request.value) < N {
             self.unit.selected = Some(request.value.into());
         }
+        self.ledger.command_started(
+            request.code,
+            request.value,
+            superseded,
+            &mut self.counters.lanes,
+            self.now,
+        );
         if superseded {
             self.operation = Runner::supersede(&self.operation, key);
         } else {
@@ -406,12 +425,18 @@ impl<const N: usize> App<N> {
     }
 
     /// Add the motion of the slot the running command drives to its fed distance (the extruder
-    /// pulling a loaded slot while printing does not count).
+    /// pulling a loaded slot while printing does not count), and every slot's motion to what
+    /// left its spool ([`Ledger::moved`]).
     fn count_fed(&mut self) {
         let driving = self.operation.driving_slot();
         for (slot, feeder) in self.unit.feeders.iter().enumerate() {
             let odometry = feeder.odometry_centi();
             let seen = core::mem::replace(&mut self.odometry_seen[slot], odometry);
+            if odometry != seen {
+                // Every motion counts off the spool, the printer's pull too.
+                self.ledger
+                    .moved(slot, distance_centi(seen, odometry), &mut self.counters.lanes);
+            }
             if driving == Some(slot) && odometry != seen {
                 (self.counters.fed_mm[slot], self.fed_centi_beyond_mm[slot]) = add_centi(
                     self.counters.fed_mm[slot],
@@ -445,6 +470,9 @@ impl<const N: usize> App<N> {
             fed_mm: &self.counters.fed_mm,
             dropped_responses: self.dropped_responses,
             bowden_learned_mm: self.bowden_learned_mm,
+            lane_figures: &self.counters.lanes,
+            used_centi: self.ledger.used_centi(),
+            lanes_drifted: self.ledger.drifted(),
             // Right after an `S2`, the build of the revision it offered: what `S3` would report.
             build: crate::config::build_of(self.negotiation.offered.unwrap_or(self.config.version.revision)),
             now: self.now,
@@ -460,8 +488,12 @@ impl<const N: usize> App<N> {
             config: &mut self.config,
             fsensor: &mut self.unit.fsensor,
             filament_readings,
+            used_centi: self.ledger.used_centi_mut(),
         };
         let accepted = registers::write(&mut target, N, address, value);
+        if accepted && registers::LEFT <= address && address < registers::LEFT + N as u8 {
+            self.ledger.sync_used(&mut self.counters.lanes);
+        }
         if accepted && address != registers::FSENSOR {
             self.settings_revision = self.settings_revision.wrapping_add(1);
         }
@@ -528,6 +560,7 @@ impl<const N: usize> App<N> {
             self.unit.set_lane(slot, lane);
         }
         self.counters = snapshot.counters;
+        self.ledger.restore(&snapshot.counters.lanes, &snapshot.lanes);
         self.fed_centi_beyond_mm = [0; N];
         // Twice: a pair of thresholds may only be valid once both are in.
         for _ in 0..2 {
@@ -542,6 +575,15 @@ impl<const N: usize> App<N> {
         if after == before {
             return;
         }
+        let slot = self.operation.phase().and_then(crate::phases::Phase::slot);
+        self.ledger.lanes_seen(&self.unit.lanes, &mut self.counters.lanes);
+        self.ledger.command_changed(
+            self.operation.request.0,
+            after,
+            slot,
+            &mut self.counters.lanes,
+            self.now,
+        );
         if after == Status::Finished {
             // What the printer's extruder moves from now on is evidence for the next command.
             self.unit.moved_by_printer = [0; N];
@@ -580,6 +622,7 @@ impl<const N: usize> App<N> {
         let driving = self.operation.driving_slot();
         if let Some((slot, error)) = follower::follow(&mut self.unit, driving, allowed, now, &self.config) {
             self.operation.interrupt(error, &mut self.unit, now);
+            self.ledger.stalled(slot, error, &mut self.counters.lanes);
             self.counters.drive_errors = self.counters.drive_errors.saturating_add(1);
             if let Some(count) = self.counters.failures.get_mut(slot) {
                 *count = count.saturating_add(1);

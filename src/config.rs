@@ -150,6 +150,8 @@ pub struct Config {
     pub slot_thresholds: [Thresholds; MAX_SLOTS],
     /// Edge thresholds of each slot's motor Hall sine.
     pub motor_thresholds: [Thresholds; MAX_SLOTS],
+    /// Length of the filament on each slot's spool when it is inserted, m (register `0x54 + k`).
+    pub spool_m: [u16; MAX_SLOTS],
 }
 
 impl Config {
@@ -186,6 +188,7 @@ impl Config {
         hub_thresholds: Thresholds { on: 2600, off: 2400 },
         slot_thresholds: [Thresholds { on: 2600, off: 2400 }; MAX_SLOTS],
         motor_thresholds: [Thresholds { on: 2300, off: 1800 }; MAX_SLOTS],
+        spool_m: [crate::lanes::DEFAULT_SPOOL_M; MAX_SLOTS],
     };
 }
 

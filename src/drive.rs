@@ -196,6 +196,11 @@ impl SlotDrive {
         self.command
     }
 
+    /// The speed the move in progress is scheduled at, mm/s (`None`: no speed-controlled move).
+    pub fn scheduled_speed(&self) -> Option<u16> {
+        self.schedule.map(|schedule| schedule.speed)
+    }
+
     /// The direction the motor's revolutions move the filament.
     pub fn counting(&self) -> Direction {
         self.counting.unwrap_or(Direction::Forward)

@@ -15,6 +15,7 @@ pub mod control;
 pub mod drive;
 pub mod feeder;
 pub mod follower;
+pub mod lanes;
 pub mod persist;
 pub mod phases;
 pub mod port;

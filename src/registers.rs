@@ -16,6 +16,7 @@ use mmu_protocol::{ErrorCode, ProgressCode};
 
 use crate::config::Config;
 use crate::feeder::Feeder;
+use crate::lanes::{LaneFigures, left_mm};
 use crate::runner::Status;
 use crate::sensor::{AnalogSensor, Thresholds};
 use crate::time::Instant;
@@ -25,6 +26,8 @@ use crate::unit::{Hub, Lane, SensorId};
 const SENSOR_BLOCK: u8 = 16;
 /// Per-slot blocks hold up to 8 slots.
 const SLOT_BLOCK: u8 = 8;
+/// Lane blocks (filament left, lane health) hold 5 slots, packed where 8 do not fit.
+const LANE_BLOCK: u8 = crate::MAX_SLOTS as u8;
 
 /// What a register read sees of the unit: plain borrowed state, the same for every slot count.
 pub struct View<'a> {
@@ -58,6 +61,12 @@ pub struct View<'a> {
     pub bowden_learned_mm: u16,
     /// The build number `S3` reports now (register 0x03).
     pub build: u16,
+    /// Each lane's kept figures ([`crate::lanes`]).
+    pub lane_figures: &'a [LaneFigures],
+    /// Filament taken off each slot's spool, 1/100 mm.
+    pub used_centi: &'a [i32],
+    /// Per slot, its last load distance drifted (bit k of register 0x5e).
+    pub lanes_drifted: u8,
     /// The time of the current step.
     pub now: Instant,
 }
@@ -80,6 +89,8 @@ pub struct Target<'a> {
     pub fsensor: &'a mut u8,
     /// What the presence sensors show now, for the threshold guard ([`FilamentReadings`]).
     pub filament_readings: FilamentReadings,
+    /// Filament taken off each slot's spool, 1/100 mm (register `0x59 + k` sets what is left).
+    pub used_centi: &'a mut [i32],
 }
 
 /// The filtered reading of each presence sensor that sees filament the unit knows is there
@@ -110,6 +121,8 @@ pub enum Span {
     Sensors,
     /// One address per slot.
     Slots,
+    /// One address per slot, in a block of 5 ([`LANE_BLOCK`]).
+    Lanes,
 }
 
 /// What one address of a block register is about.
@@ -172,6 +185,7 @@ impl Row {
             Span::One => 1,
             Span::Sensors => SENSOR_BLOCK,
             Span::Slots => SLOT_BLOCK,
+            Span::Lanes => LANE_BLOCK,
         };
         if offset < size {
             Some(offset as usize)
@@ -290,7 +304,7 @@ fn write_setting(t: &mut Target, address: u8, _: usize, value: u16) -> bool {
     }
 }
 
-/// The register table, one row per entry, in address order:
+/// The register table, one row per entry, in address order (but the lane rows, last):
 ///
 /// - `setting(address, name, min..=max)`: a plain setting, a `u16` field of [`Config`] listed in
 ///   [`settings!`]. Every setting shares one read and one write, which find the field by the
@@ -457,6 +471,26 @@ pub const REPORTED_REVISION: u8 = 0x52;
 /// Extension: the Bowden length (0x22) the last Retry of FSENSOR TOO EARLY learned since start,
 /// mm; 0 when none (read only).
 pub const BOWDEN_LEARNED: u8 = 0x53;
+/// Extension: length of the filament on slot `k`'s spool when inserted, m, at `SPOOL + k`.
+pub const SPOOL: u8 = 0x54;
+/// Extension: filament left on slot `k`'s spool, m, at `LEFT + k` (state: a write sets it).
+pub const LEFT: u8 = 0x59;
+/// Extension: warning bits: bit k, slot k's load distance drifted; bit 8 + k, slot k is low.
+pub const LANE_WARNINGS: u8 = 0x5e;
+/// Extension: rolling drag of slot `k`, % of a free lane's duty, at `DRAG + k` (read only).
+pub const DRAG: u8 = 0x83;
+/// Extension: rolling slip of slot `k`'s moves, per mille, two's complement, at `SLIP + k`.
+pub const SLIP: u8 = 0x88;
+/// Extension: rolling time of a tool change to slot `k` that needed no help, 1/10 s.
+pub const LOAD_TIME: u8 = 0xd8;
+/// Extension: rolling distance from the hub sensor to the printer's sensor on slot `k`'s loads, mm.
+pub const LOAD_DISTANCE: u8 = 0xe8;
+/// Extension: stalls of slot `k`'s motor at `STALLS + k` (read only).
+pub const STALLS: u8 = 0xed;
+/// Extension: tool changes to slot `k` that needed no help, % of the last `SUCCESS_OF + k`.
+pub const SUCCESS: u8 = 0xf2;
+/// Extension: how many tool changes [`SUCCESS`] counts (up to 32).
+pub const SUCCESS_OF: u8 = 0xf7;
 /// Extension: raw sample of sensor `i` at `RAW + i` (read only).
 pub const RAW: u8 = 0x60;
 /// Extension: filtered value of sensor `i` at `FILTERED + i` (read only).
@@ -618,6 +652,59 @@ registers! {
     FedMetres: block(FED_METRES, Slots, "fed_metres", |v, _, k| Some(
         u16::try_from(*v.fed_mm.get(k)? / 1000).unwrap_or(u16::MAX)
     )),
+    // The lane rows last, out of address order: a read walks the table from the top, and the
+    // registers read most (the printer's polls, the sensors') stay where they were.
+    SpoolM: writable(
+        SPOOL,
+        Lanes,
+        "spool_m",
+        1..=10000,
+        |v, _, k| v.config.spool_m.get(k).copied(),
+        |t, _, k, value| match t.config.spool_m.get_mut(k) {
+            Some(spool) => {
+                *spool = value;
+                true
+            }
+            None => false,
+        }
+    ),
+    LeftM: writable(
+        LEFT,
+        Lanes,
+        "left_m",
+        0..=10000,
+        |v, _, k| Some(
+            // To the nearest metre.
+            (left_mm(*v.config.spool_m.get(k)?, *v.used_centi.get(k)?).saturating_add(500) / 1000)
+                .min(u32::from(u16::MAX)) as u16
+        ),
+        |t, _, k, value| {
+            let (Some(&spool), Some(used)) = (t.config.spool_m.get(k), t.used_centi.get_mut(k)) else {
+                return false;
+            };
+            // No more than the spool holds: what is kept is the metres used, never below 0.
+            *used = (i32::from(spool) - i32::from(value.min(spool))) * 100_000;
+            true
+        }
+    ),
+    LaneWarnings: read_only(LANE_WARNINGS, "lane_warnings", |v, _, _| Some(crate::lanes::warnings(
+        v.lanes_drifted,
+        v.used_centi,
+        &v.config.spool_m
+    ))),
+    Drag: block(DRAG, Lanes, "drag_pct", |v, _, k| Some(v.lane_figures.get(k)?.drag_pct)),
+    Slip: block(SLIP, Lanes, "slip_permille", |v, _, k| Some(
+        v.lane_figures.get(k)?.slip_permille as u16
+    )),
+    LoadTime: block(LOAD_TIME, Lanes, "load_ds", |v, _, k| Some(v.lane_figures.get(k)?.load_ds)),
+    LoadDistance: block(LOAD_DISTANCE, Lanes, "load_distance_mm", |v, _, k| Some(
+        v.lane_figures.get(k)?.fsensor_mm
+    )),
+    Stalls: block(STALLS, Lanes, "stalls", |v, _, k| Some(v.lane_figures.get(k)?.stalls)),
+    Success: block(SUCCESS, Lanes, "success_pct", |v, _, k| Some(v.lane_figures.get(k)?.success_pct())),
+    SuccessOf: block(SUCCESS_OF, Lanes, "success_of", |v, _, k| Some(
+        u16::from(v.lane_figures.get(k)?.attempts)
+    )),
 }
 
 /// The thresholds of a sensor, if it has any.
@@ -698,7 +785,7 @@ fn find(address: u8, slots: usize) -> Option<(&'static Row, usize)> {
     let exists = match row.span() {
         Span::One => true,
         Span::Sensors => index < 3 + 2 * slots,
-        Span::Slots => index < slots,
+        Span::Slots | Span::Lanes => index < slots,
     };
     exists.then_some((row, index))
 }
@@ -738,6 +825,9 @@ pub fn settings_view<'a>(config: &'a Config, hub: &'a Hub) -> View<'a> {
         fed_mm: &[],
         dropped_responses: 0,
         bowden_learned_mm: 0,
+        lane_figures: &[],
+        used_centi: &[],
+        lanes_drifted: 0,
         build: config.version.build(),
         now: Instant::ZERO,
     }
@@ -767,12 +857,12 @@ impl Setting {
 pub fn settings(slots: usize) -> impl Iterator<Item = Setting> {
     REGISTERS
         .iter()
-        .filter(|row| row.access() == Access::ReadWrite && row.address != FSENSOR)
+        .filter(|row| row.access() == Access::ReadWrite && !matches!(row.address, FSENSOR | LEFT))
         .flat_map(move |row| {
             let count = match row.span() {
                 Span::One => 1,
                 Span::Sensors => 3 + 2 * slots,
-                Span::Slots => slots,
+                Span::Slots | Span::Lanes => slots,
             };
             (0..count).map(move |index| Setting { row, index })
         })
@@ -828,7 +918,7 @@ pub fn describe(address: u8, slots: usize) -> Option<Register> {
     let subject = match row.span() {
         Span::One => None,
         Span::Sensors => Some(Subject::Sensor(SensorId::from_index(index))),
-        Span::Slots => Some(Subject::Slot(index)),
+        Span::Slots | Span::Lanes => Some(Subject::Slot(index)),
     };
     Some(Register {
         address,
@@ -919,7 +1009,14 @@ mod tests {
             assert!(row.is_some_and(|r| r.access() == Access::ReadWrite));
         }
         // Every other writable register is state or has its own read and write.
-        let own = [FSENSOR, REPORTED_REVISION, THRESHOLD_ON, THRESHOLD_OFF];
+        let own = [
+            FSENSOR,
+            REPORTED_REVISION,
+            THRESHOLD_ON,
+            THRESHOLD_OFF,
+            SPOOL,
+            LEFT,
+        ];
         let writable = REGISTERS
             .iter()
             .filter(|row| row.access() == Access::ReadWrite && !own.contains(&row.address))
@@ -932,6 +1029,7 @@ mod tests {
             config: &mut config,
             fsensor: &mut fsensor,
             filament_readings: NO_FILAMENT_READINGS,
+            used_centi: &mut [],
         };
         assert!(write(&mut target, 3, 0x4c, 1234));
         assert!(write(&mut target, 3, 0x0d, 77));
@@ -951,6 +1049,7 @@ mod tests {
             config: &mut config,
             fsensor: &mut fsensor,
             filament_readings: NO_FILAMENT_READINGS,
+            used_centi: &mut [],
         };
         let mut read_only = 0;
         for register in all(3).filter(|r| r.row.access() == Access::Read) {
@@ -976,6 +1075,7 @@ mod tests {
             config: &mut config,
             fsensor: &mut fsensor,
             filament_readings: NO_FILAMENT_READINGS,
+            used_centi: &mut [],
         };
         assert!(write(&mut target, 3, 0x22, 410));
         assert!(!write(&mut target, 3, 0x22, 49));
@@ -1006,6 +1106,7 @@ mod tests {
             config: &mut config,
             fsensor: &mut fsensor,
             filament_readings,
+            used_centi: &mut [],
         };
         for on in [3001, 3072, 3902] {
             assert!(!write(&mut target, 3, THRESHOLD_ON, on), "{on}");

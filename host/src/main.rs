@@ -22,6 +22,7 @@ mod console;
 mod demo;
 mod explain;
 mod fil_cli;
+mod lanes_text;
 mod printer_cli;
 mod sensors_cli;
 mod sim_cli;

@@ -12,6 +12,7 @@
 mod bench;
 pub mod console;
 mod failure;
+mod lanes;
 pub mod serial;
 mod soak;
 
@@ -379,6 +380,7 @@ impl<L: Target> Session<L> {
             }));
         }
         details.insert("registers".into(), registers.into());
+        details.extend(self.lanes_status());
         details
     }
 

@@ -425,6 +425,7 @@ const COMMANDS: &[(&str, Check)] = &[
     // The tool.
     ("mmu demo", Check::Exits(0)),
     ("mmu demo --fast", Check::Exits(0)),
+    ("mmu printer --sim status", Check::Exits(0)),
     ("cargo printer --sim tool 1", Check::Exits(0)),
     ("cargo printer --sim --fault jam:1 tool 1", Check::Exits(1)),
     ("cargo printer --port /dev/ttyUSB0 status", Check::OnPtyExits(0)),

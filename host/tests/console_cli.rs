@@ -27,6 +27,31 @@ fn a_piped_tool_change_loads_the_slot_and_says_so() {
     );
 }
 
+/// `status` after a tool change and a print: the slot's filament left, with its uncertainty, and
+/// its health; the spool length set by name.
+#[test]
+fn status_shows_filament_left_and_lane_health() {
+    let output = mmu_with_script(
+        &["console", "--sim"],
+        "set spool_m.slot1 500\nt 1\nwait 60\nstatus\nquit\n",
+    );
+    let out = text(&output);
+    assert!(output.status.success(), "{out}");
+    assert!(
+        out.contains("slot 0: 330 m left of a 330 m spool (± 1 m)"),
+        "{out}"
+    );
+    assert!(
+        out.contains("slot 1: 500 m left of a 500 m spool (± 1 m)"),
+        "{out}"
+    );
+    assert!(out.contains("slot 1 health: drag "), "{out}");
+    assert!(
+        out.contains("100 % of the last tool change without help"),
+        "{out}"
+    );
+}
+
 /// A session a maker scripts: a tool change, registers read by name and address and set, then a
 /// jam (injected in the simulator) that stops a tool change on an explained error, is cleared,
 /// and Retry finishes it.

@@ -177,6 +177,28 @@ fn status_shows_version_state_and_registers() {
 }
 
 #[test]
+fn status_shows_each_spool_s_filament_left_and_lane_health() {
+    let out = printer_ok(&["status"]);
+    for expected in [
+        "slot 0: 330 m left of a 330 m spool (± 1 m)",
+        "slot 2: 330 m left of a 330 m spool (± 1 m)",
+        "slot 1 health: no tool change yet, 0 stalls",
+    ] {
+        assert!(out.contains(expected), "{expected:?} missing:\n{out}");
+    }
+    let (lines, ok) = printer_json(&["status"]);
+    assert!(ok);
+    let result = events(&lines, "result");
+    let lanes = result[0]["lanes"].as_array().unwrap();
+    assert_eq!(lanes.len(), 3);
+    assert_eq!(lanes[1]["left_m"], 330);
+    assert_eq!(lanes[1]["spool_m"], 330);
+    assert_eq!(lanes[1]["left_error_m"], 1);
+    assert_eq!(lanes[1]["success_of"], 0);
+    assert_eq!(result[0]["lane_warnings"], 0);
+}
+
+#[test]
 fn reset_reconnects_and_shows_the_first_answer() {
     let out = printer_ok(&["reset"]);
     assert!(out.contains("link lost (timeout)"), "{out}");

@@ -54,6 +54,7 @@ fn snapshot(i: u32) -> Snapshot<3> {
             tool_changes: [i as u16, (i * 300) as u16, 65_535 - i as u16],
             failures: [(i / 3) as u16, 1, 0x1234],
             fed_mm: [i * 1_000_003, 70_000 + i, u32::MAX - i],
+            lanes: [crate::lanes::LaneFigures::default(); 3],
         },
         ..Snapshot::default()
     };

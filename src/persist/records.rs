@@ -6,6 +6,7 @@
 use heapless::vec::VecView;
 
 use super::{Counters, IDENTITY_REGISTERS, MAX_SETTINGS, Settings, Snapshot, is_identity};
+use crate::lanes::LaneFigures;
 use crate::unit::Lane;
 
 /// The layout version of every record: a record with another is ignored.
@@ -141,13 +142,21 @@ pub(super) fn encode_lanes<const N: usize>(lanes: &[Lane; N], out: &mut Writer) 
     }
 }
 
+/// The counters; the lane figures only once one is not blank (until then, the bytes an earlier
+/// firmware wrote: both decode).
 pub(super) fn encode_counters<const N: usize>(counters: &Counters<N>, out: &mut Writer) {
+    let with_lanes = counters.lanes.iter().any(|lane| *lane != LaneFigures::default());
     out.header(N);
     out.field(u32::from(counters.drive_errors), 2);
     for slot in 0..N {
         out.field(u32::from(counters.tool_changes[slot]), 2);
         out.field(u32::from(counters.failures[slot]), 2);
         out.field(counters.fed_mm[slot], 4);
+        if with_lanes {
+            for (value, width) in counters.lanes[slot].fields() {
+                out.field(value, width);
+            }
+        }
     }
 }
 
@@ -169,17 +178,33 @@ pub(super) fn decode_lanes<const N: usize>(bytes: &[u8]) -> Option<[Lane; N]> {
     Some(lanes)
 }
 
+/// Bytes of one slot in the counters record: its counts, then its lane figures. A record of an
+/// earlier firmware, without the lane figures ([`OLD_SLOT_BYTES`] a slot), still decodes.
+const SLOT_BYTES: usize = 8 + LaneFigures::BYTES;
+const OLD_SLOT_BYTES: usize = 8;
+
 pub(super) fn decode_counters<const N: usize>(bytes: &[u8]) -> Option<Counters<N>> {
-    let (fields, _) = body(bytes, Some(N), 2, 8)?;
+    let (fields, entry) = match body(bytes, Some(N), 2, SLOT_BYTES) {
+        Some((fields, _)) => (fields, SLOT_BYTES),
+        None => (body(bytes, Some(N), 2, OLD_SLOT_BYTES)?.0, OLD_SLOT_BYTES),
+    };
     let mut counters = Counters::<N> {
         drive_errors: field(fields, 0, 2) as u16,
         ..Counters::default()
     };
     for slot in 0..N {
-        let at = 2 + 8 * slot;
+        let at = 2 + entry * slot;
         counters.tool_changes[slot] = field(fields, at, 2) as u16;
         counters.failures[slot] = field(fields, at + 2, 2) as u16;
         counters.fed_mm[slot] = field(fields, at + 4, 4);
+        if entry == SLOT_BYTES {
+            let mut next = at + 8;
+            counters.lanes[slot] = LaneFigures::from_fields(|width| {
+                let value = field(fields, next, width);
+                next += width;
+                value
+            });
+        }
     }
     Some(counters)
 }
@@ -350,6 +375,17 @@ mod tests {
             tool_changes: [1, 2, 65535],
             failures: [0, 4, 0],
             fed_mm: [0, 123_456_789, 5],
+            lanes: [
+                LaneFigures::default(),
+                LaneFigures {
+                    used_m: 12,
+                    slip_permille: -3,
+                    outcomes: 5,
+                    attempts: 3,
+                    ..LaneFigures::default()
+                },
+                LaneFigures::default(),
+            ],
         };
         assert_eq!(
             decode_counters::<3>(&encoded(|w| encode_counters(&counters, w))),
@@ -403,6 +439,20 @@ mod tests {
         assert_eq!(decode_settings(&[FORMAT, 2, 0x0b, 30, 0]), None);
     }
 
+    #[test]
+    fn a_counters_record_without_lane_figures_keeps_its_counts() {
+        // An earlier firmware's record: drive errors, then 8 bytes a slot.
+        let mut bytes = Bytes::new();
+        bytes.extend_from_slice(&[FORMAT, 2, 7, 0]).unwrap();
+        bytes.extend_from_slice(&[1, 0, 2, 0, 0x10, 0, 0, 0]).unwrap();
+        bytes.extend_from_slice(&[3, 0, 4, 0, 0x20, 0, 0, 0]).unwrap();
+        let counters = decode_counters::<2>(&bytes).unwrap();
+        assert_eq!(counters.drive_errors, 7);
+        assert_eq!(counters.tool_changes, [1, 3]);
+        assert_eq!(counters.fed_mm, [0x10, 0x20]);
+        assert_eq!(counters.lanes, [LaneFigures::default(); 2]);
+    }
+
     /// Every record decodes only at its exact length: a byte too few or too many, and the unit
     /// starts that record from its defaults (the identity too).
     #[test]
@@ -412,6 +462,7 @@ mod tests {
             tool_changes: [2, 3, 4],
             failures: [5, 6, 7],
             fed_mm: [8, 9, 70_000],
+            lanes: [LaneFigures::default(); 3],
         };
         let settings = [(0x0b, 30), (0x52, 2)];
         let mut records = Records::<3>::blank();

@@ -464,6 +464,7 @@ impl Bench {
             let text = self.slot_text(slot)?;
             self.say(&format!("slot {slot}: {text}"));
         }
+        self.lanes_status();
         let fsensor = self.link().fsensor();
         let is_sim = self.link().sim().is_some();
         let source = match self.link().fsensor {
@@ -484,6 +485,27 @@ impl Bench {
             self.say(&format!("{what}: {value}"));
         }
         Ok(())
+    }
+
+    /// Each slot's filament left (with its uncertainty) and health, and the warnings.
+    fn lanes_status(&mut self) {
+        let slots = self.slots;
+        match crate::lanes_text::read_lanes(slots, |address| self.read(address)) {
+            Ok((lanes, warnings)) => {
+                for lane in &lanes {
+                    self.say(&lane.left_text());
+                }
+                for lane in &lanes {
+                    self.say(&lane.health_text());
+                }
+                for line in crate::lanes_text::warning_lines(warnings, slots) {
+                    self.say(&line);
+                }
+            }
+            Err(_) => {
+                self.say("filament left and lane health: not reported by this unit (an earlier firmware)")
+            }
+        }
     }
 
     /// Where slot `slot`'s filament is, in words. The unit's lane register says 0 both for an

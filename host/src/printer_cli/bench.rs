@@ -22,7 +22,7 @@ use super::{Details, Failure, Session};
 use crate::codec_cli::{parse_u8, parse_u16};
 use crate::explain::{lane_state, register_name};
 
-use mmu_firmware::registers::{Access, FAILURES as ERRORS, FED_METRES, LANE, SLOT_COUNT, TOOL_CHANGES};
+use mmu_firmware::registers::{Access, FAILURES as ERRORS, FED_METRES, LANE, LEFT, SLOT_COUNT, TOOL_CHANGES};
 
 /// Sensors of a unit with `slots` slots: 3 in the hub, 2 per slot.
 pub fn sensor_count(slots: u8) -> u8 {
@@ -95,7 +95,12 @@ impl<L: Target> Session<L> {
         let mut settings = Vec::new();
         // The writable registers but the printer's sensor state (0x09): the unit's settings.
         let writable = mmu_firmware::registers::all(usize::from(slots))
-            .filter(|register| register.row.access() == Access::ReadWrite && register.address != 0x09)
+            // Nor what is left on each spool (0x59 + k): state, not a setting.
+            .filter(|register| {
+                register.row.access() == Access::ReadWrite
+                    && register.address != 0x09
+                    && register.row.address != LEFT
+            })
             .map(|register| register.address);
         for address in writable {
             if let Some(value) = self.read_quietly(address)? {
