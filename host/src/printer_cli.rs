@@ -304,6 +304,9 @@ impl<L: Target> Session<L> {
             Outcome::Rejected => Err(Failure::new(format!(
                 "{label} rejected: the unit answered R every time"
             ))),
+            Outcome::FilamentChange(slot) => Err(Failure::new(format!(
+                "{label}: the print stopped on the filament-change screen after slot {slot} ran out"
+            ))),
             Outcome::GaveUp(error @ ErrorCode::INVALID_TOOL) => Err(Failure::unit(
                 format!(
                     "{label} rejected by the unit: it has no slot {}: {}",

@@ -681,6 +681,9 @@ fn tool_change(rig: &mut Rig, user: &mut SoakUser, target: u8) -> ChangeEnd {
         }
         Ok(Outcome::Finished(result)) => ChangeEnd::Failed(format!("finished with result {}", result.0)),
         Ok(Outcome::Rejected) => ChangeEnd::Failed("the unit rejected it".into()),
+        Ok(Outcome::FilamentChange(slot)) => {
+            ChangeEnd::Failed(format!("stopped on the filament-change screen for slot {slot}"))
+        }
         Ok(Outcome::GaveUp(error)) => ChangeEnd::Failed(format!("gave up on {error}")),
         Err(error) => ChangeEnd::Stuck(error.to_string()),
     };
