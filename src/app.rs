@@ -23,6 +23,7 @@ use crate::persist::{Counters, MAX_SETTINGS, Snapshot};
 use crate::phases::PrinterLink;
 use crate::registers;
 use crate::runner::{Learned, Runner, Status};
+use crate::spool_end::SpoolEnd;
 use crate::time::Instant;
 use crate::unit::{Lane, Unit};
 
@@ -93,6 +94,8 @@ pub struct App<const N: usize> {
     printer: PrinterLink,
     /// Moves (wrapping) whenever a setting may have changed: see [`App::settings_revision`].
     settings_revision: u32,
+    /// The loaded slot's spool end while printing, as FINDA reports it ([`SpoolEnd`]).
+    spool_end: SpoolEnd,
 }
 
 impl<const N: usize> App<N> {
@@ -128,6 +131,7 @@ impl<const N: usize> App<N> {
                 in_sync: true,
             },
             settings_revision: 0,
+            spool_end: SpoolEnd::NEW,
         }
     }
 
@@ -224,6 +228,8 @@ impl<const N: usize> App<N> {
         self.count_transition(before);
         self.started_up |= !matches!(self.operation.status(), Status::Running(_));
         self.count_fed();
+        let idle = matches!(self.operation.status(), Status::Finished);
+        self.spool_end.watch(&self.unit, idle, now);
         self.drive_motors(now, &mut out);
         out.status_led = match self.operation.status() {
             Status::Running(_) => true,
@@ -296,7 +302,7 @@ impl<const N: usize> App<N> {
             }
             RequestCode::Finda => Some(Response::read(
                 request,
-                self.unit.hub_present().unwrap_or(false).into(),
+                self.spool_end.finda(self.unit.hub_present()).into(),
             )),
             RequestCode::Version | RequestCode::Read => Some(match self.read_register(request.value) {
                 Some(value) => Response::read(request, value),
@@ -371,6 +377,7 @@ impl<const N: usize> App<N> {
             _ => false,
         };
         self.pending_button = None;
+        self.spool_end.clear();
         let names_a_slot = matches!(
             request.code,
             RequestCode::Tool | RequestCode::Load | RequestCode::Eject | RequestCode::Cut
@@ -414,6 +421,7 @@ impl<const N: usize> App<N> {
         let view = registers::View {
             config: &self.config,
             hub: &self.unit.hub,
+            finda: self.spool_end.finda(self.unit.hub_present()),
             feeders: &self.unit.feeders,
             lanes: &self.unit.lanes,
             fsensor: self.unit.fsensor,
@@ -557,7 +565,9 @@ impl<const N: usize> App<N> {
     /// running command too, braked at once ([`Runner::interrupt`]), and its failure is counted
     /// on that slot, not on the command's.
     fn drive_motors(&mut self, now: Instant, out: &mut Outputs<N>) {
-        let allowed = !matches!(self.operation.status(), Status::Failed(_));
+        // A slot whose spool ended grips nothing: it is not followed.
+        let allowed =
+            !matches!(self.operation.status(), Status::Failed(_)) && self.spool_end.reported().is_none();
         let driving = self.operation.driving_slot();
         if let Some((slot, error)) = follower::follow(&mut self.unit, driving, allowed, now, &self.config) {
             self.operation.interrupt(error, &mut self.unit, now);

@@ -5,16 +5,19 @@
 //! the path, on every printer family.
 
 use mmu_model::Fault;
-use mmu_protocol::{ErrorCode, Request, RequestCode, ResultCode};
+use mmu_protocol::{ButtonCode, ErrorCode, Request, RequestCode, ResultCode};
 use mmu_sim::{
     Decision, Link, Operator, Outcome, Personality, Printer, PrinterEvent, PrinterOptions, Sim, SimFault,
     SimLink, SimOptions,
 };
 
-/// Records what the printer saw; gives up on any error screen.
+/// Records what the printer saw; gives up on any error screen but the eject dialog, where it
+/// takes the ejected filament out of its slot (as the screen asks) and presses Continue.
 #[derive(Default)]
 struct Watcher {
     events: Vec<(u64, PrinterEvent)>,
+    /// At the eject dialog: the hub sensor and the printer's sensor, as the model has them.
+    at_eject_dialog: Option<(bool, u8)>,
 }
 
 impl Operator<SimLink> for Watcher {
@@ -24,8 +27,14 @@ impl Operator<SimLink> for Watcher {
         }
     }
 
-    fn decide(&mut self, _link: &mut SimLink, _request: Request, _error: ErrorCode) -> Decision {
-        Decision::GiveUp
+    fn decide(&mut self, link: &mut SimLink, request: Request, error: ErrorCode) -> Decision {
+        if error != ErrorCode::FILAMENT_EJECTED || request.code != RequestCode::Eject {
+            return Decision::GiveUp;
+        }
+        let model = link.sim_mut().model_mut();
+        self.at_eject_dialog = Some((model.hub_filament_present(), model.fsensor_state()));
+        model.remove_filament(usize::from(request.value));
+        Decision::Press(ButtonCode::MIDDLE)
     }
 }
 
@@ -79,11 +88,22 @@ fn printing(personality: Personality, join: bool) -> (Printer<SimLink>, Watcher)
     let mut printer = Printer::new(SimLink::new(sim), options);
     let mut op = Watcher::default();
     printer.connect(&mut op).expect("connects");
-    let outcome = printer.command(&mut op, Request::new(RequestCode::Tool, 0)).unwrap();
-    assert_eq!(outcome, Outcome::Finished(ResultCode::OK), "{personality}: {:?}", op.events);
+    let outcome = printer
+        .command(&mut op, Request::new(RequestCode::Tool, 0))
+        .unwrap();
+    assert_eq!(
+        outcome,
+        Outcome::Finished(ResultCode::OK),
+        "{personality}: {:?}",
+        op.events
+    );
     assert_eq!(printer.print(&mut op, 10_000).unwrap(), None, "{personality}");
     let model = printer.link().sim().model();
-    assert_eq!((model.loaded_slot(), model.fsensor_state()), (Some(0), 2), "{personality}");
+    assert_eq!(
+        (model.loaded_slot(), model.fsensor_state()),
+        (Some(0), 2),
+        "{personality}"
+    );
     op.events.clear();
     (printer, op)
 }
@@ -110,11 +130,18 @@ fn with_spool_join_the_print_goes_on_with_the_next_slot() {
         let commands = op.sent_commands();
         assert_eq!(
             commands,
-            [Request::new(RequestCode::Unload, 0), Request::new(RequestCode::Tool, 1)],
+            [
+                Request::new(RequestCode::Unload, 0),
+                Request::new(RequestCode::Tool, 1)
+            ],
             "{personality}"
         );
         let model = printer.link().sim().model();
-        assert_eq!(model.loaded_slot(), Some(1), "{personality}: the next slot prints");
+        assert_eq!(
+            model.loaded_slot(),
+            Some(1),
+            "{personality}: the next slot prints"
+        );
         assert_eq!(model.fsensor_state(), 2, "{personality}");
         assert!(model.printing().is_some(), "{personality}: the print goes on");
         assert_eq!(printer.loaded_tool(), Some(1), "{personality}");
@@ -134,11 +161,15 @@ fn without_spool_join_the_print_stops_on_the_filament_change_screen_with_the_pat
             "{personality}: {errors:x?} {:?}",
             op.sent_commands()
         );
-        assert!(errors.is_empty(), "{personality}: error screens {errors:x?}");
         assert_eq!(op.runouts(), [(0, None)], "{personality}");
         let mut expected = vec![Request::new(RequestCode::Unload, 0)];
-        if personality != Personality::Mk3s {
+        if personality == Personality::Mk3s {
+            assert!(errors.is_empty(), "{personality}: error screens {errors:x?}");
+        } else {
+            // Buddy ejects the old filament: its dialog is the one screen, with the path clear.
             expected.push(Request::new(RequestCode::Eject, 0));
+            assert_eq!(errors, [ErrorCode::FILAMENT_EJECTED], "{personality}");
+            assert_eq!(op.at_eject_dialog, Some((false, 0)), "{personality}");
         }
         assert_eq!(op.sent_commands(), expected, "{personality}");
         let model = printer.link().sim().model();
@@ -146,5 +177,29 @@ fn without_spool_join_the_print_stops_on_the_filament_change_screen_with_the_pat
         assert!(!model.hub_filament_present(), "{personality}: the hub is clear");
         assert_eq!(model.fsensor_state(), 0, "{personality}: the extruder is clear");
         assert_eq!(printer.loaded_tool(), None, "{personality}");
+    }
+}
+
+#[test]
+fn a_tangle_or_a_clog_while_printing_stays_an_error_and_is_never_a_spool_end() {
+    for personality in Personality::ALL {
+        for fault in [Fault::Jam { slot: 0 }, Fault::BowdenJam] {
+            let (mut printer, mut op) = printing(personality, true);
+            assert!(printer.link_mut().sim_mut().inject(SimFault::Model(fault)));
+            printer.print(&mut op, 60_000).unwrap();
+            assert!(
+                op.runouts().is_empty(),
+                "{personality} {fault:?}: reported as a runout"
+            );
+            // A tangle is the follower's jam: PULLEY CANNOT MOVE (`8047` stalled, `804b` move
+            // failed), as before. A clog in the Bowden tube holds the filament past the hub: the
+            // unit feels nothing (the printer's extruder skips).
+            let pulley = [ErrorCode::STALLED_PULLEY, ErrorCode::MOVE_PULLEY_FAILED];
+            assert!(
+                fault == Fault::BowdenJam || op.errors().iter().any(|e| pulley.contains(e)),
+                "{personality} {fault:?}: {:x?}",
+                op.errors()
+            );
+        }
     }
 }

@@ -74,7 +74,10 @@ impl<L: Link> Printer<L> {
     /// The `M600` (or `M600 A` / `M600 AUTO`) a runout of the loaded slot starts. `None` when
     /// the print goes on (joined to the next slot); else how it stopped: on the filament-change
     /// screen, or on an error the user gave up on.
-    pub(super) fn filament_change(&mut self, op: &mut impl Operator<L>) -> Result<Option<Outcome>, PrinterError> {
+    pub(super) fn filament_change(
+        &mut self,
+        op: &mut impl Operator<L>,
+    ) -> Result<Option<Outcome>, PrinterError> {
         let Some(slot) = self.tool else {
             return Ok(None);
         };
