@@ -14,6 +14,7 @@ fn options(changes: u32, random_faults: bool, seed: u64) -> SoakOptions {
         personality: Personality::default(),
         changes,
         random_faults,
+        spool_ends: false,
         seed,
         sim: SimOptions::default(),
         printer: PrinterOptions {

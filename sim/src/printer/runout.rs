@@ -26,9 +26,6 @@ use mmu_protocol::{Request, RequestCode, ResultCode};
 use super::{Link, Operator, Outcome, Printer, PrinterError, PrinterEvent};
 use crate::Personality;
 
-/// Slots of an MMU3 as the printer counts them (`SpoolJoin::nextSlot` wraps after 4).
-const MMU_SLOTS: u8 = 5;
-
 /// How long the printer prints on after it saw FINDA empty before its `M600` begins, ms. Buddy
 /// queues the `M600` behind the G-code already queued (`enqueue_gcode`); the simulator takes 4 s
 /// of printing for that queue and the planner's moves (an assumption, not measured). The MK3S
@@ -40,11 +37,11 @@ pub fn runout_delay_ms(personality: Personality) -> u64 {
     }
 }
 
-/// The slot SpoolJoin continues with after `slot`: the next one, as the MK3S's
-/// `SpoolJoin::nextSlot` does (Buddy follows the joins the user set up; the simulator's user
-/// joins each slot to the next).
-pub fn join_slot(slot: u8) -> u8 {
-    (slot + 1) % MMU_SLOTS
+/// The slot SpoolJoin continues with after `slot`, going round `cycle` slots: the next one, as
+/// the MK3S's `SpoolJoin::nextSlot` does with 5 (Buddy follows the joins the user set up; the
+/// simulator's user joins each slot to the next).
+pub fn join_slot(slot: u8, cycle: u8) -> u8 {
+    slot.saturating_add(1) % cycle.max(1)
 }
 
 impl<L: Link> Printer<L> {
@@ -82,7 +79,10 @@ impl<L: Link> Printer<L> {
             return Ok(None);
         };
         let personality = self.options.personality;
-        let join = self.options.spool_join.then(|| join_slot(slot));
+        let join = self
+            .options
+            .spool_join
+            .then(|| join_slot(slot, self.options.join_cycle));
         op.event(&mut self.link, &PrinterEvent::Runout { slot, join });
         // The queued print runs first; the check does not fire again meanwhile (Buddy's
         // `FS_EventAutolock` and M600 in progress, the MK3S's `mcode_in_progress`).

@@ -43,6 +43,10 @@ pub struct PrinterOptions {
     /// slot (`M600 A` on Buddy, `M600 AUTO` on the MK3S) instead of stopping on the
     /// filament-change screen ([`crate::printer`]'s `runout` module).
     pub spool_join: bool,
+    /// The slots SpoolJoin goes round: after slot `n` comes `(n + 1) % join_cycle`. The MK3S
+    /// always counts 5 (`SpoolJoin::nextSlot`), whatever the unit has; a Buddy user joins the
+    /// slots the unit has (the soak sets its slot count).
+    pub join_cycle: u8,
 }
 
 impl PrinterOptions {
@@ -66,6 +70,7 @@ impl Default for PrinterOptions {
             command_timeout_ms: 10 * 60 * 1000,
             read_only: false,
             spool_join: false,
+            join_cycle: 5,
         }
     }
 }
