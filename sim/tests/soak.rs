@@ -216,6 +216,8 @@ fn soak_from_environment() {
         number("SOAK_SEED", 1),
     );
     options.printer.command_timeout_ms = number("SOAK_TIMEOUT_MS", 600_000);
+    options.spool_ends = number("SOAK_SPOOL_ENDS", 0) != 0;
+    options.printer.spool_join = number("SOAK_SPOOL_JOIN", 0) != 0;
     if let Ok(name) = std::env::var("SOAK_PRINTER") {
         options.personality = name.parse().expect("SOAK_PRINTER names a printer");
         options.printer.version = options.personality.version();

@@ -76,6 +76,16 @@ const PRINT_AFTER_END_MS: u64 = 240_000;
 
 /// A printer of `personality` (SpoolJoin `join`) printing with slot 0 loaded.
 fn printing(personality: Personality, join: bool) -> (Printer<SimLink>, Watcher) {
+    let (mut printer, mut op) = changed(personality, join);
+    assert_eq!(printer.print(&mut op, 10_000).unwrap(), None, "{personality}");
+    let model = printer.link().sim().model();
+    assert_eq!((model.loaded_slot(), model.fsensor_state()), (Some(0), 2), "{personality}");
+    op.events.clear();
+    (printer, op)
+}
+
+/// A printer of `personality` (SpoolJoin `join`) right after its tool change to slot 0.
+fn changed(personality: Personality, join: bool) -> (Printer<SimLink>, Watcher) {
     let sim = Sim::new(SimOptions {
         printer: personality,
         ..SimOptions::default()
@@ -200,6 +210,43 @@ fn a_tangle_or_a_clog_while_printing_stays_an_error_and_is_never_a_spool_end() {
                 "{personality} {fault:?}: {:x?}",
                 op.errors()
             );
+        }
+    }
+}
+
+#[test]
+fn a_spool_that_ends_as_the_print_starts_is_handled_too() {
+    // The printer's load into the nozzle after the change may still run.
+    for personality in Personality::ALL {
+        for join in [false, true] {
+            for delay_ms in (0..=6000).step_by(500) {
+                let (mut printer, mut op) = changed(personality, join);
+                if delay_ms > 0 {
+                    assert_eq!(printer.print(&mut op, delay_ms).unwrap(), None);
+                }
+                op.events.clear();
+                spool_ends(&mut printer);
+                let ended = printer.print(&mut op, PRINT_AFTER_END_MS).unwrap();
+                let model = printer.link().sim().model();
+                let what = format!(
+                    "{personality} join {join} at {delay_ms} ms: {ended:?} {:x?} {:?}; tip {:?} tail {:?}",
+                    op.errors(),
+                    op.sent_commands(),
+                    model.tip_mm(0),
+                    model.tail_mm(0)
+                );
+                assert_eq!(op.runouts().len(), 1, "{what}");
+                if join {
+                    assert_eq!(ended, None, "{what}");
+                    assert_eq!(model.loaded_slot(), Some(1), "{what}");
+                } else {
+                    assert_eq!(ended, Some(Outcome::FilamentChange(0)), "{what}");
+                    assert!(!model.hub_filament_present(), "{what}");
+                }
+                let unexpected: Vec<ErrorCode> =
+                    op.errors().into_iter().filter(|&e| e != ErrorCode::FILAMENT_EJECTED).collect();
+                assert!(unexpected.is_empty(), "{what}");
+            }
         }
     }
 }

@@ -505,6 +505,8 @@ struct SoakUser {
     runouts: Vec<u8>,
     /// The printer's handling of a runout succeeded (joined, or a clear filament-change screen).
     runout_handled: bool,
+    /// The user pulled a spool's loose end out by hand.
+    pulled_by_hand: bool,
 }
 
 impl SoakUser {
@@ -526,6 +528,16 @@ impl SoakUser {
         };
         self.fixed = true;
         let sim = link.sim_mut();
+        if let SimFault::Model(Fault::SpoolRunout { slot }) = strike.fault {
+            // A spool's loose end that got past the slot's drive gear is out of the unit's reach:
+            // the user pulls the piece out by hand.
+            let model = sim.model();
+            let gear = model.config().drive_gear_mm;
+            if model.tail_mm(slot).is_some_and(|tail| tail > gear) {
+                sim.model_mut().remove_filament(slot);
+                self.pulled_by_hand = true;
+            }
+        }
         sim.clear(strike.fault.kind());
         if let SimFault::Model(Fault::SpoolRunout { slot }) = strike.fault
             && sim.model().tip_mm(slot).is_none()
@@ -780,7 +792,15 @@ fn print(rig: &mut Rig, user: &mut SoakUser, target: u8) -> ChangeEnd {
                     "the filament change after slot {slot} ran out left filament in the path"
                 ))
             } else {
+                // The screen asks for the new filament: the user clears the spool end and puts a
+                // fresh spool's filament in, as at any runout.
                 user.runout_handled = true;
+                user.fix(rig.printer.link_mut());
+                let sim = rig.printer.link_mut().sim_mut();
+                if sim.model().tip_mm(usize::from(slot)).is_none() {
+                    let park_mm = -f32::from(sim.unit_config().park_mm);
+                    sim.model_mut().insert_filament(usize::from(slot), park_mm);
+                }
                 ChangeEnd::Done
             }
         }
@@ -962,7 +982,7 @@ pub fn run_until(
             report.faults_injected += 1;
             report.tally(kind.clone()).injected += 1;
         }
-        let handled = user.runout_handled;
+        let handled = user.runout_handled && !user.pulled_by_hand;
         report
             .spool_ends
             .count(struck.map(|s| s.fault), kind.as_deref(), &user.runouts, handled);

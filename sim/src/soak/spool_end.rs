@@ -15,8 +15,9 @@ pub struct SpoolEndTally {
     pub injected: u32,
     /// Of them: the printer's runout check saw FINDA empty and started its filament change.
     pub reported: u32,
-    /// Of them: the printer's handling succeeded: with SpoolJoin the print went on with the next
-    /// slot; without it the print stopped on the filament-change screen with the path clear.
+    /// Of them: the printer's handling succeeded without the user's hands: with SpoolJoin the print
+    /// went on with the next slot; without it the print stopped on the filament-change screen
+    /// with the path clear. The others ended on an error screen (the user pulled the tail out).
     pub handled: u32,
     /// Runouts the printer saw although no spool had ended (the fault that struck was a tangle,
     /// a jam, a sensor fault, ..., or none): per fault kind, in the order first seen. Must stay
