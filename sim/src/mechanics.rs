@@ -49,7 +49,9 @@
 use std::collections::VecDeque;
 
 use mmu_model::Model;
-use mmu_protocol::{ErrorCode, ParamCode, ProgressCode, Request, RequestCode, RequestDecoder, Response, SILENCE_MS};
+use mmu_protocol::{
+    ErrorCode, ParamCode, ProgressCode, Request, RequestCode, RequestDecoder, Response, SILENCE_MS,
+};
 
 use crate::event::EventKind;
 use crate::personality::Personality;

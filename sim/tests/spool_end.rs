@@ -79,7 +79,11 @@ fn printing(personality: Personality, join: bool) -> (Printer<SimLink>, Watcher)
     let (mut printer, mut op) = changed(personality, join);
     assert_eq!(printer.print(&mut op, 10_000).unwrap(), None, "{personality}");
     let model = printer.link().sim().model();
-    assert_eq!((model.loaded_slot(), model.fsensor_state()), (Some(0), 2), "{personality}");
+    assert_eq!(
+        (model.loaded_slot(), model.fsensor_state()),
+        (Some(0), 2),
+        "{personality}"
+    );
     op.events.clear();
     (printer, op)
 }
@@ -243,8 +247,11 @@ fn a_spool_that_ends_as_the_print_starts_is_handled_too() {
                     assert_eq!(ended, Some(Outcome::FilamentChange(0)), "{what}");
                     assert!(!model.hub_filament_present(), "{what}");
                 }
-                let unexpected: Vec<ErrorCode> =
-                    op.errors().into_iter().filter(|&e| e != ErrorCode::FILAMENT_EJECTED).collect();
+                let unexpected: Vec<ErrorCode> = op
+                    .errors()
+                    .into_iter()
+                    .filter(|&e| e != ErrorCode::FILAMENT_EJECTED)
+                    .collect();
                 assert!(unexpected.is_empty(), "{what}");
             }
         }
