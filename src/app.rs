@@ -302,7 +302,9 @@ impl<const N: usize> App<N> {
             }
             RequestCode::Finda => Some(Response::read(
                 request,
-                self.spool_end.finda(self.unit.hub_present()).into(),
+                self.spool_end
+                    .finda(self.unit.hub_present(), self.unit.active().is_some())
+                    .into(),
             )),
             RequestCode::Version | RequestCode::Read => Some(match self.read_register(request.value) {
                 Some(value) => Response::read(request, value),
@@ -421,7 +423,9 @@ impl<const N: usize> App<N> {
         let view = registers::View {
             config: &self.config,
             hub: &self.unit.hub,
-            finda: self.spool_end.finda(self.unit.hub_present()),
+            finda: self
+                .spool_end
+                .finda(self.unit.hub_present(), self.unit.active().is_some()),
             feeders: &self.unit.feeders,
             lanes: &self.unit.lanes,
             fsensor: self.unit.fsensor,

@@ -15,6 +15,9 @@
 //! whole path: a tangle or a clog stops the filament with the sensor still covered and stays an
 //! error ([`crate::follower`]). A sensor that cannot be read reports nothing.
 //!
+//! A hub sensor that fails reads as what the unit believes (a slot holds the path or none does),
+//! never as a runout of its own.
+//!
 //! Reported, the slot is no longer followed (its drive grips nothing), and the report lasts until
 //! the printer's next command (its `U0`) or a restart.
 
@@ -73,8 +76,11 @@ impl SpoolEnd {
         *self = SpoolEnd::NEW;
     }
 
-    /// What FINDA (register 0x08, `P0`) reads with the hub sensor reading `hub`.
-    pub fn finda(&self, hub: Option<bool>) -> bool {
-        self.reported.is_none() && hub.unwrap_or(false)
+    /// What FINDA (register 0x08, `P0`) reads with the hub sensor reading `hub` (`None`: faulty)
+    /// and `owned` telling whether a slot holds the hub path as far as the unit knows. A faulty
+    /// hub sensor reads as that belief: an empty FINDA would start the printer's filament change
+    /// for a runout that did not happen (the sensor fault itself is reported by the next command).
+    pub fn finda(&self, hub: Option<bool>, owned: bool) -> bool {
+        self.reported.is_none() && hub.unwrap_or(owned)
     }
 }

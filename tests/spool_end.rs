@@ -76,16 +76,17 @@ fn a_tangle_while_printing_stays_a_jam_and_finda_keeps_telling_the_hub() {
 }
 
 #[test]
-fn a_slot_sensor_that_fails_while_printing_is_never_a_spool_end() {
-    for rail in [Rail::Low, Rail::High] {
+fn a_slot_or_hub_sensor_that_fails_while_printing_is_never_a_spool_end() {
+    let sensors = [SensorId::SlotFilament(0), SensorId::HubFilament];
+    for (sensor, rail) in sensors
+        .into_iter()
+        .flat_map(|s| [(s, Rail::Low), (s, Rail::High)])
+    {
         let mut rig = printing();
-        rig.inject(Fault::SensorDisconnected {
-            sensor: SensorId::SlotFilament(0),
-            rail,
-        });
+        rig.inject(Fault::SensorDisconnected { sensor, rail });
         for _ in 0..20 {
             rig.idle(500);
-            assert_eq!(rig.read(0x08), Some(1), "{rail:?}");
+            assert_eq!(rig.read(0x08), Some(1), "{sensor:?} {rail:?}");
         }
     }
 }

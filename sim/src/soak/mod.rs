@@ -314,9 +314,10 @@ impl fmt::Display for SoakReport {
 
 /// The `--fault` name of a fault's kind, without slot and parameters.
 /// A random fault that strikes while the printer prints with `loaded` loaded: a jam or a tangled
-/// spool, a seized drive, sensor noise, a power loss, a noisy line, or the spool's end.
+/// spool, a seized drive, sensor noise, a power loss, a noisy line, the spool's end, or its slot
+/// sensor or the hub sensor disconnected.
 fn draw_print_fault(rng: &mut Rng, loaded: usize) -> SimFault {
-    match rng.next_u64() % 7 {
+    match rng.next_u64() % 8 {
         0 | 1 => SimFault::Model(Fault::Jam { slot: loaded }),
         2 => SimFault::Model(Fault::MotorDead { slot: loaded }),
         3 => SimFault::Model(Fault::SensorNoise {
@@ -328,7 +329,21 @@ fn draw_print_fault(rng: &mut Rng, loaded: usize) -> SimFault {
         5 => SimFault::UartCorrupt {
             probability: draw(rng, 0.001, 0.01, 10_000.0),
         },
-        _ => SimFault::Model(Fault::SpoolRunout { slot: loaded }),
+        6 => SimFault::Model(Fault::SpoolRunout { slot: loaded }),
+        _ => {
+            // The sensors a spool end is read from: one that fails must not look like one.
+            let sensor = if rng.uniform() < 0.5 {
+                SensorId::SlotFilament(loaded)
+            } else {
+                SensorId::HubFilament
+            };
+            let rail = if rng.uniform() < 0.5 {
+                Rail::Low
+            } else {
+                Rail::High
+            };
+            SimFault::Model(Fault::SensorDisconnected { sensor, rail })
+        }
     }
 }
 
