@@ -195,9 +195,14 @@ fn without_spool_join_the_print_stops_on_the_filament_change_screen_with_the_pat
 }
 
 #[test]
-fn a_tangle_or_a_clog_while_printing_stays_an_error_and_is_never_a_spool_end() {
+fn a_tangle_a_fastened_end_or_a_clog_while_printing_stays_an_error_and_is_never_a_runout() {
     for personality in Personality::ALL {
-        for fault in [Fault::Jam { slot: 0 }, Fault::BowdenJam] {
+        let faults = [
+            Fault::Jam { slot: 0 },
+            Fault::SpoolFastened { slot: 0 },
+            Fault::BowdenJam,
+        ];
+        for fault in faults {
             let (mut printer, mut op) = printing(personality, true);
             assert!(printer.link_mut().sim_mut().inject(SimFault::Model(fault)));
             printer.print(&mut op, 60_000).unwrap();
@@ -205,8 +210,8 @@ fn a_tangle_or_a_clog_while_printing_stays_an_error_and_is_never_a_spool_end() {
                 op.runouts().is_empty(),
                 "{personality} {fault:?}: reported as a runout"
             );
-            // A tangle is the follower's jam: PULLEY CANNOT MOVE (`8047` stalled, `804b` move
-            // failed), as before. A clog in the Bowden tube holds the filament past the hub: the
+            // A tangle, and a spool end fastened to the core (it cannot be told from one), is the
+            // follower's jam: PULLEY CANNOT MOVE (`8047` stalled, `804b` move failed). A clog in the Bowden tube holds the filament past the hub: the
             // unit feels nothing (the printer's extruder skips).
             let pulley = [ErrorCode::STALLED_PULLEY, ErrorCode::MOVE_PULLEY_FAILED];
             assert!(

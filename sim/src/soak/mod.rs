@@ -60,8 +60,10 @@ pub const MAX_FAULT_DELAY_MS: u64 = 8000;
 /// With random faults, the chance that a change's fault strikes while the printer prints after
 /// the change rather than during it.
 pub const PRINT_FAULT_PROBABILITY: f64 = 0.3;
-/// With [`SoakOptions::spool_ends`], the share of spool ends among the faults.
+/// With [`SoakOptions::spool_ends`], the share of loose spool ends among the faults.
 pub const SPOOL_END_SHARE: f64 = 0.5;
+/// With [`SoakOptions::spool_ends`], the share of spool ends fastened to the core.
+pub const FASTENED_END_SHARE: f64 = 0.1;
 /// How long the printer prints on after a fault struck while printing, ms: long enough for the
 /// unit to notice, the printer's automatic Retries and the user's fix.
 pub const PRINT_AFTER_FAULT_MS: u64 = 30_000;
@@ -88,8 +90,9 @@ pub struct SoakOptions {
     /// Inject random faults.
     pub random_faults: bool,
     /// Spool ends instead of the random mix: every change gets a fault while the printer prints
-    /// after it, a spool end or one of the print faults (tangle, jam, seized drive, noise, power
-    /// loss, noisy line), one in two ([`SPOOL_END_SHARE`]).
+    /// after it: a loose spool end one in two ([`SPOOL_END_SHARE`]), a spool end fastened to the
+    /// core one in ten ([`FASTENED_END_SHARE`]), else one of the print faults (tangle, seized
+    /// drive, noise, power loss, noisy line, a sensor disconnected).
     pub spool_ends: bool,
     /// Seed of the run (the simulator's and the fault schedule's).
     pub seed: u64,
@@ -371,6 +374,7 @@ fn kind_name(fault: &SimFault) -> String {
             SensorId::MotorHall(_) => "disconnect:motor-hall",
         },
         SimFault::Model(Fault::SpoolRunout { .. }) => "runout",
+        SimFault::Model(Fault::SpoolFastened { .. }) => "fastened-end",
         SimFault::UartCorrupt { .. } => "uart-corrupt",
         SimFault::UartDrop { .. } => "uart-drop",
         SimFault::PowerLoss { .. } => "power-loss",
@@ -957,10 +961,12 @@ pub fn run_until(
             n => others[(rng.next_u64() % n as u64) as usize],
         };
         let planned = if options.spool_ends {
-            let fault = if rng.uniform() < SPOOL_END_SHARE {
-                SimFault::Model(Fault::SpoolRunout {
-                    slot: usize::from(target),
-                })
+            let draw_share = rng.uniform();
+            let slot = usize::from(target);
+            let fault = if draw_share < SPOOL_END_SHARE {
+                SimFault::Model(Fault::SpoolRunout { slot })
+            } else if draw_share < SPOOL_END_SHARE + FASTENED_END_SHARE {
+                SimFault::Model(Fault::SpoolFastened { slot })
             } else {
                 draw_print_fault(&mut rng, usize::from(target))
             };

@@ -19,6 +19,11 @@ pub struct SpoolEndTally {
     /// went on with the next slot; without it the print stopped on the filament-change screen
     /// with the path clear. The others ended on an error screen (the user pulled the tail out).
     pub handled: u32,
+    /// Spool ends fastened to the core that struck while the printer printed: the unit cannot
+    /// tell them from a tangle and reports a jam.
+    pub fastened: u32,
+    /// Of them: reported as a runout (FINDA empty).
+    pub fastened_reported: u32,
     /// Runouts the printer saw although no spool had ended (the fault that struck was a tangle,
     /// a jam, a sensor fault, ..., or none): per fault kind, in the order first seen. Must stay
     /// empty.
@@ -44,6 +49,14 @@ impl SpoolEndTally {
             Some(SimFault::Model(Fault::SpoolRunout { slot })) => Some(slot),
             _ => None,
         };
+        if let (Some(SimFault::Model(Fault::SpoolFastened { slot })), Some(kind)) = (struck, kind)
+            && kind.ends_with("(printing)")
+        {
+            self.fastened += 1;
+            let reported = runouts.iter().any(|&r| usize::from(r) == slot);
+            self.fastened_reported += u32::from(reported);
+            return;
+        }
         if let (Some(slot), Some(kind)) = (spool_end, kind)
             && kind.ends_with("(printing)")
         {
@@ -78,6 +91,13 @@ impl fmt::Display for SpoolEndTally {
             self.handled,
             self.false_total()
         )?;
+        if self.fastened > 0 {
+            write!(
+                f,
+                "\nfastened spool ends: {} while printing, {} reported as a runout (the others stay a jam)",
+                self.fastened, self.fastened_reported
+            )?;
+        }
         for (kind, n) in &self.false_reports {
             write!(f, "\n  false spool end after {kind}: {n}")?;
         }
