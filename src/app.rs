@@ -24,6 +24,7 @@ use crate::persist::{Counters, MAX_SETTINGS, Snapshot};
 use crate::phases::PrinterLink;
 use crate::registers;
 use crate::runner::{Learned, Runner, Status};
+use crate::spool_end::SpoolEnd;
 use crate::time::Instant;
 use crate::unit::{Lane, Unit};
 
@@ -108,6 +109,8 @@ pub struct App<const N: usize> {
     settings_revision: u32,
     /// Filament left and lane health, as they are counted ([`crate::lanes`]).
     ledger: Ledger<N>,
+    /// The loaded slot's spool end while printing, as FINDA reports it ([`SpoolEnd`]).
+    spool_end: SpoolEnd,
 }
 
 impl<const N: usize> App<N> {
@@ -144,6 +147,7 @@ impl<const N: usize> App<N> {
             },
             settings_revision: 0,
             ledger: Ledger::default(),
+            spool_end: SpoolEnd::NEW,
         }
     }
 
@@ -256,6 +260,8 @@ impl<const N: usize> App<N> {
         self.count_transition(before);
         self.started_up |= !matches!(self.operation.status(), Status::Running(_));
         self.count_fed();
+        let idle = matches!(self.operation.status(), Status::Finished);
+        self.spool_end.watch(&self.unit, idle, now);
         self.drive_motors(now, out);
         out.status_led = match self.operation.status() {
             Status::Running(_) => true,
@@ -327,7 +333,9 @@ impl<const N: usize> App<N> {
             }
             RequestCode::Finda => Some(Response::read(
                 request,
-                self.unit.hub_present().unwrap_or(false).into(),
+                self.spool_end
+                    .finda(self.unit.hub_present(), self.unit.active().is_some())
+                    .into(),
             )),
             RequestCode::Version | RequestCode::Read => Some(match self.read_register(request.value) {
                 Some(value) => Response::read(request, value),
@@ -402,6 +410,7 @@ impl<const N: usize> App<N> {
             _ => false,
         };
         self.pending_button = None;
+        self.spool_end.clear();
         let names_a_slot = matches!(
             request.code,
             RequestCode::Tool | RequestCode::Load | RequestCode::Eject | RequestCode::Cut
@@ -458,6 +467,9 @@ impl<const N: usize> App<N> {
         let view = registers::View {
             config: &self.config,
             hub: &self.unit.hub,
+            finda: self
+                .spool_end
+                .finda(self.unit.hub_present(), self.unit.active().is_some()),
             feeders: &self.unit.feeders,
             lanes: &self.unit.lanes,
             fsensor: self.unit.fsensor,
@@ -618,7 +630,9 @@ impl<const N: usize> App<N> {
     /// running command too, braked at once ([`Runner::interrupt`]), and its failure is counted
     /// on that slot, not on the command's.
     fn drive_motors(&mut self, now: Instant, out: &mut Outputs<N>) {
-        let allowed = !matches!(self.operation.status(), Status::Failed(_));
+        // A slot whose spool ended grips nothing: it is not followed.
+        let allowed =
+            !matches!(self.operation.status(), Status::Failed(_)) && self.spool_end.reported().is_none();
         let driving = self.operation.driving_slot();
         if let Some((slot, error)) = follower::follow(&mut self.unit, driving, allowed, now, &self.config) {
             self.operation.interrupt(error, &mut self.unit, now);

@@ -22,6 +22,7 @@ pub mod port;
 pub mod registers;
 pub mod runner;
 pub mod sensor;
+pub mod spool_end;
 #[cfg(feature = "tasks")]
 pub mod tasks;
 pub mod time;

@@ -35,6 +35,9 @@ pub struct View<'a> {
     pub config: &'a Config,
     /// The hub's sensors.
     pub hub: &'a Hub,
+    /// What FINDA reads: the hub sensor, or empty while a spool end is reported
+    /// ([`crate::spool_end`]).
+    pub finda: bool,
     /// Every slot's feeding system.
     pub feeders: &'a [Feeder],
     /// Where each slot's filament is.
@@ -539,9 +542,7 @@ registers! {
             .and_then(|slot| v.lanes.get(slot))
             .map_or(0, |lane| lane.mmu3_state())
     )),
-    HubPresent: read_only(0x08, "hub.present", |v, _, _| Some(
-        v.hub.filament.present().unwrap_or(false).into()
-    )),
+    HubPresent: read_only(0x08, "hub.present", |v, _, _| Some(v.finda.into())),
     // The Core One reports its filament sensor this way instead of `f`.
     Fsensor: writable(
         FSENSOR,
@@ -813,6 +814,7 @@ pub fn settings_view<'a>(config: &'a Config, hub: &'a Hub) -> View<'a> {
     View {
         config,
         hub,
+        finda: false,
         feeders: &[],
         lanes: &[],
         fsensor: 0,

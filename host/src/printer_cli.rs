@@ -80,6 +80,11 @@ pub struct PrinterArgs {
     /// Default: buddy-6.4.
     #[arg(long, value_name = "PRINTER", global = true, value_parser = parse_personality)]
     pub printer: Option<Personality>,
+    /// SpoolJoin on: when the unit reports a runout while printing (FINDA empty), the printer
+    /// joins to the next slot (`M600 A` / `M600 AUTO`) instead of stopping on its
+    /// filament-change screen (`M600`).
+    #[arg(long, global = true)]
+    pub spool_join: bool,
     /// One JSON object per line per event, and a final `result` object.
     #[arg(long, global = true)]
     pub json: bool,
@@ -305,6 +310,9 @@ impl<L: Target> Session<L> {
             Outcome::Rejected => Err(Failure::new(format!(
                 "{label} rejected: the unit answered R every time"
             ))),
+            Outcome::FilamentChange(slot) => Err(Failure::new(format!(
+                "{label}: the print stopped on the filament-change screen after slot {slot} ran out"
+            ))),
             Outcome::GaveUp(error @ ErrorCode::INVALID_TOOL) => Err(Failure::unit(
                 format!(
                     "{label} rejected by the unit: it has no slot {}: {}",
@@ -507,6 +515,7 @@ fn printer_options(args: &PrinterArgs) -> PrinterOptions {
     let defaults = PrinterOptions::of(personality(args));
     PrinterOptions {
         version: args.expect_version.unwrap_or(defaults.version),
+        spool_join: args.spool_join,
         ..defaults
     }
 }

@@ -447,6 +447,10 @@ const COMMANDS: &[(&str, Check)] = &[
         Check::InCi,
     ),
     (
+        "cargo printer --sim --printer mk3s --spool-join soak --changes 40 --faults spool-ends --seed 1",
+        Check::Exits(0),
+    ),
+    (
         "mmu sensors --port /dev/ttyUSB0 --csv > s.csv",
         Check::OnPtyInterrupted(500),
     ),

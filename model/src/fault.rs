@@ -96,6 +96,15 @@ pub enum Fault {
         /// The slot.
         slot: usize,
     },
+    /// The spool of `slot` has ended with its end fastened to the spool's core, where the
+    /// filament is when the fault is injected: it cannot move forward past that point (the slot
+    /// sensor still reads filament), as under a [`Fault::Jam`], and can be pulled back. Clearing
+    /// it puts a new spool behind the filament. It shares the slot's jam limit: with a
+    /// [`Fault::Jam`] of the same slot active, clearing either frees both.
+    SpoolFastened {
+        /// The slot.
+        slot: usize,
+    },
 }
 
 /// Which fault, without its parameters: the key for [`Model::clear`](crate::Model::clear).
@@ -115,6 +124,8 @@ pub enum FaultKind {
     SensorDisconnected(SensorId),
     /// [`Fault::SpoolRunout`] of a slot.
     SpoolRunout(usize),
+    /// [`Fault::SpoolFastened`] of a slot.
+    SpoolFastened(usize),
 }
 
 impl FaultKind {
@@ -124,7 +135,8 @@ impl FaultKind {
             FaultKind::Jam(slot)
             | FaultKind::Slip(slot)
             | FaultKind::MotorDead(slot)
-            | FaultKind::SpoolRunout(slot) => Some(slot),
+            | FaultKind::SpoolRunout(slot)
+            | FaultKind::SpoolFastened(slot) => Some(slot),
             FaultKind::SensorDisconnected(sensor) => sensor.slot(),
             FaultKind::BowdenJam | FaultKind::SensorNoise => None,
         }
@@ -142,6 +154,7 @@ impl Fault {
             Fault::SensorNoise { .. } => FaultKind::SensorNoise,
             Fault::SensorDisconnected { sensor, .. } => FaultKind::SensorDisconnected(sensor),
             Fault::SpoolRunout { slot } => FaultKind::SpoolRunout(slot),
+            Fault::SpoolFastened { slot } => FaultKind::SpoolFastened(slot),
         }
     }
 }

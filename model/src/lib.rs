@@ -793,7 +793,7 @@ impl Model {
         }
         let p = self.p;
         let fault = match fault {
-            Fault::Jam { slot } => {
+            Fault::Jam { slot } | Fault::SpoolFastened { slot } => {
                 let s = &mut self.slots[slot];
                 s.jam_limit = Some(s.rear_travel);
                 fault
@@ -849,7 +849,7 @@ impl Model {
         self.faults.remove(index);
         let p = self.p;
         match kind {
-            FaultKind::Jam(slot) => {
+            FaultKind::Jam(slot) | FaultKind::SpoolFastened(slot) => {
                 if let Some(s) = self.slots.get_mut(slot) {
                     s.jam_limit = None;
                 }

@@ -20,6 +20,7 @@ noise:SIGMA                  every sensor's noise has this standard deviation, A
 disconnect:SENSOR[:low|high] a sensor reads its rail (SENSOR: hub-filament, hub-tension,
                              hub-cutter, slot-filament-K, motor-hall-K; default low)
 runout:SLOT                  the slot's spool runs out (clearing refills it)
+fastened-end:SLOT            the slot's spool ends, its end fastened to the core (clearing: a new spool)
 uart-corrupt:P               each UART byte (both directions) has one bit flipped with probability P
 uart-drop:P                  each UART byte (both directions) is lost with probability P
 power-loss[:OFF_MS]          the unit loses power for OFF_MS (default 500) and restarts
@@ -183,6 +184,7 @@ impl FromStr for SimFault {
                 })
             }
             "runout" => SimFault::Model(Fault::SpoolRunout { slot: slot()? }),
+            "fastened-end" => SimFault::Model(Fault::SpoolFastened { slot: slot()? }),
             "uart-corrupt" => SimFault::UartCorrupt {
                 probability: probability(spec, a)?,
             },
@@ -217,7 +219,8 @@ impl SimFault {
                 Fault::Jam { slot }
                 | Fault::Slip { slot, .. }
                 | Fault::MotorDead { slot }
-                | Fault::SpoolRunout { slot },
+                | Fault::SpoolRunout { slot }
+                | Fault::SpoolFastened { slot },
             ) => Some(slot),
             SimFault::Model(Fault::SensorDisconnected {
                 sensor: SensorId::SlotFilament(slot) | SensorId::MotorHall(slot),
@@ -252,6 +255,7 @@ impl fmt::Display for SimFault {
                 write!(f, "disconnect:{}:{rail}", sensor_name(sensor))
             }
             SimFault::Model(Fault::SpoolRunout { slot }) => write!(f, "runout:{slot}"),
+            SimFault::Model(Fault::SpoolFastened { slot }) => write!(f, "fastened-end:{slot}"),
             SimFault::UartCorrupt { probability } => write!(f, "uart-corrupt:{probability}"),
             SimFault::UartDrop { probability } => write!(f, "uart-drop:{probability}"),
             SimFault::PowerLoss { off_ms } => write!(f, "power-loss:{off_ms}"),
@@ -304,6 +308,7 @@ mod tests {
             "disconnect:motor-hall-2:high",
             "disconnect:slot-filament-0:low",
             "runout:1",
+            "fastened-end:2",
             "uart-corrupt:0.01",
             "uart-drop:0.5",
             "power-loss:300",

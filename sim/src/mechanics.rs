@@ -19,7 +19,10 @@
 //!   `OnMMUProgressMsgSame`). Buddy 6.5.3 then finishes the tool change early, as it does on
 //!   `P2` after `P1c` (aborting its moves): it loads on to the nozzle without waiting for `F`.
 //!   The others load to the nozzle on `T<n> F`.
-//! - **Helping an unload.** During `P3` of a recovery the printer retracts 20 mm.
+//! - **Helping an unload.** During `P3` of a recovery the printer retracts 20 mm; so it does
+//!   with every button it sends on `FSENSOR_DIDNT_SWITCH_OFF` or `FSENSOR_TOO_EARLY`
+//!   (`MMU2::CheckUserInput` → `HelpUnloadToFinda`, BFW v6.5.3 `mmu2_mk4.cpp`, PFW v3.13.3
+//!   `Firmware/mmu2.cpp`).
 //!
 //! Where the simulator departs from the firmware, knowingly: Buddy 6.4.1 retracts 40 mm at
 //! 20 mm/s after the slicer's ramming before it sends `T` (2 s, its whole timeout); the
@@ -46,7 +49,9 @@
 use std::collections::VecDeque;
 
 use mmu_model::Model;
-use mmu_protocol::{ParamCode, ProgressCode, Request, RequestCode, RequestDecoder, Response, SILENCE_MS};
+use mmu_protocol::{
+    ErrorCode, ParamCode, ProgressCode, Request, RequestCode, RequestDecoder, Response, SILENCE_MS,
+};
 
 use crate::event::EventKind;
 use crate::personality::Personality;
@@ -130,6 +135,8 @@ pub struct Mechanics {
     /// Moves planned after the one in progress (the printer's planner queue).
     planned: VecDeque<Move>,
     print_mm_s: f32,
+    /// The error the printer shows (its `lastErrorCode`), until the unit goes on.
+    shown_error: Option<ErrorCode>,
 }
 
 impl Mechanics {
@@ -154,6 +161,7 @@ impl Mechanics {
             finished_early: false,
             planned: VecDeque::new(),
             print_mm_s,
+            shown_error: None,
         }
     }
 
@@ -246,6 +254,16 @@ impl Mechanics {
                 self.slow_mm_s = f32::from(request.value2);
                 false
             }
+            RequestCode::Button => {
+                let helps = matches!(
+                    self.shown_error,
+                    Some(ErrorCode::FSENSOR_DIDNT_SWITCH_OFF | ErrorCode::FSENSOR_TOO_EARLY)
+                );
+                if helps {
+                    self.plan(model, events, "retry-help", -UNLOAD_HELP_MM, UNLOAD_HELP_MM);
+                }
+                false
+            }
             code if code.is_command() && self.command == Some((code, request.value)) => {
                 // The same command again (the unit answered `R`, or the answer was lost): the
                 // printer resends it at once and its moves go on.
@@ -319,6 +337,10 @@ impl Mechanics {
             }
             ParamCode::Finished => {}
         }
+        self.shown_error = match response.param {
+            ParamCode::Error => Some(ErrorCode(response.param_value.unwrap_or(0))),
+            _ => None,
+        };
         match response.param {
             ParamCode::Processing => {
                 let progress = ProgressCode(response.param_value.unwrap_or(0) as u8);

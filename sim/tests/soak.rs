@@ -14,6 +14,7 @@ fn options(changes: u32, random_faults: bool, seed: u64) -> SoakOptions {
         personality: Personality::default(),
         changes,
         random_faults,
+        spool_ends: false,
         seed,
         sim: SimOptions::default(),
         printer: PrinterOptions {
@@ -215,6 +216,8 @@ fn soak_from_environment() {
         number("SOAK_SEED", 1),
     );
     options.printer.command_timeout_ms = number("SOAK_TIMEOUT_MS", 600_000);
+    options.spool_ends = number("SOAK_SPOOL_ENDS", 0) != 0;
+    options.printer.spool_join = number("SOAK_SPOOL_JOIN", 0) != 0;
     if let Ok(name) = std::env::var("SOAK_PRINTER") {
         options.personality = name.parse().expect("SOAK_PRINTER names a printer");
         options.printer.version = options.personality.version();

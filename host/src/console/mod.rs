@@ -380,6 +380,9 @@ impl Bench {
                 Ok(())
             }
             Outcome::Finished(result) => Err(format!("{label} ended with result {}", result.0)),
+            Outcome::FilamentChange(slot) => Err(format!(
+                "{label}: the print stopped on the filament-change screen after slot {slot} ran out"
+            )),
             Outcome::Rejected => Err(format!(
                 "{label} refused: the unit is busy with another command or waits on an error (status says which)"
             )),

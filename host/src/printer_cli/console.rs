@@ -209,6 +209,16 @@ pub enum JsonLine {
         /// The command.
         request: String,
     },
+    /// FINDA read empty while printing: the printer starts its filament change (`M600`), or
+    /// joins to the next slot with SpoolJoin on.
+    Runout {
+        /// The printer's clock, ms.
+        t_ms: u64,
+        /// The slot that ran out.
+        slot: u8,
+        /// The slot SpoolJoin continues with, if on.
+        join: Option<u8>,
+    },
     /// Something happened inside the simulator (a fault, a power loss).
     Sim {
         /// The printer's clock, ms.
@@ -592,6 +602,17 @@ impl<L: Target> Operator<L> for Console {
                 self.show(t_ms, &text, || JsonLine::PrematureFinish {
                     t_ms,
                     request: label.clone(),
+                });
+            }
+            PrinterEvent::Runout { slot, join } => {
+                let text = match join {
+                    Some(next) => format!("FINDA runout of slot {slot}: M600 A, SpoolJoin to slot {next}"),
+                    None => format!("FINDA runout of slot {slot}: M600, filament change"),
+                };
+                self.show(t_ms, &text, || JsonLine::Runout {
+                    t_ms,
+                    slot: *slot,
+                    join: *join,
                 });
             }
             PrinterEvent::Heartbeat(_) => {}

@@ -34,6 +34,9 @@ pub enum Faults {
     None,
     /// Random faults, injected and later cleared.
     Random,
+    /// A fault while printing after every change: a spool end, or a tangle, a jam or another
+    /// print fault, one in two (the figures: spool ends handled, false spool ends).
+    SpoolEnds,
 }
 
 /// `mmu printer soak`: the report, and a failure when it did not pass.
@@ -54,6 +57,7 @@ pub(super) fn run_soak(
     let options = SoakOptions {
         changes: soak.changes,
         random_faults: soak.faults == Faults::Random,
+        spool_ends: soak.faults == Faults::SpoolEnds,
         seed,
         sim: SimOptions {
             slots: args.sim_options.slots,
@@ -118,6 +122,10 @@ fn soak_details(report: &SoakReport, seed: u64) -> Details {
     details.insert("recovered".into(), report.recovered.into());
     details.insert("unrecovered".into(), report.unrecovered.into());
     details.insert("stuck".into(), report.stuck.into());
+    details.insert("spool_ends".into(), report.spool_ends.injected.into());
+    details.insert("spool_ends_reported".into(), report.spool_ends.reported.into());
+    details.insert("spool_ends_handled".into(), report.spool_ends.handled.into());
+    details.insert("false_spool_ends".into(), report.spool_ends.false_total().into());
     details.insert("panics".into(), report.panics.into());
     details
 }

@@ -39,7 +39,10 @@ const MAX_REQUEST_ATTEMPTS: u8 = 5;
 /// The mmu2 layer repeats a command interrupted by a unit restart this many times.
 const MAX_INTERRUPTS: u8 = 3;
 
+mod runout;
 mod vocabulary;
+
+pub use runout::{join_slot, runout_delay_ms};
 
 pub use vocabulary::{
     Decision, Link, LinkFault, Operator, Outcome, PrinterError, PrinterEvent, PrinterOptions, has_retry,
@@ -74,6 +77,8 @@ pub struct Printer<L> {
     dropout_cause: Option<LinkFault>,
     /// The last values of the polled registers ([`Personality::polled_registers`]).
     registers: Vec<Option<u16>>,
+    /// The slot the printer believes in its nozzle (a finished `T` or `L`; `U`, `E` clear it).
+    tool: Option<u8>,
 }
 
 impl<L: Link> Printer<L> {
@@ -90,6 +95,7 @@ impl<L: Link> Printer<L> {
             dropouts: 0,
             dropout_cause: None,
             registers: vec![None; options.personality.polled_registers().len()],
+            tool: None,
         }
     }
 
@@ -193,7 +199,10 @@ impl<L: Link> Printer<L> {
     pub fn command(&mut self, op: &mut impl Operator<L>, request: Request) -> Result<Outcome, PrinterError> {
         for _ in 0..MAX_INTERRUPTS {
             match self.run(op, request)? {
-                Some(outcome) => return Ok(outcome),
+                Some(outcome) => {
+                    self.note_outcome(request, outcome);
+                    return Ok(outcome);
+                }
                 None if request.code == RequestCode::Tool => {
                     let unload = Request::new(RequestCode::Unload, 0);
                     if let Some(outcome) = self.run(op, unload)?
@@ -213,7 +222,22 @@ impl<L: Link> Printer<L> {
     /// command's and retried and shown as during a command, as Prusa's `IdleStep` does on an `E`
     /// answer (it switches to command scope). Returns how such an error ended, or `None` when the
     /// print went on without one.
+    ///
+    /// FINDA reading empty after an idle poll while a filament is believed loaded starts the
+    /// printer's filament change ([`runout`]): with SpoolJoin the print goes on with the next
+    /// slot; without it the print stops on the filament-change screen
+    /// ([`Outcome::FilamentChange`]).
     pub fn print(&mut self, op: &mut impl Operator<L>, ms: u64) -> Result<Option<Outcome>, PrinterError> {
+        self.print_for(op, ms, true)
+    }
+
+    /// [`Printer::print`], with the runout check on or off (off while an `M600` is queued).
+    fn print_for(
+        &mut self,
+        op: &mut impl Operator<L>,
+        ms: u64,
+        runout_check: bool,
+    ) -> Result<Option<Outcome>, PrinterError> {
         let until = self.link.now_ms() + ms;
         let mut ended = None;
         while self.link.now_ms() < until {
@@ -230,6 +254,12 @@ impl<L: Link> Printer<L> {
                 match self.follow_run(op, request, self.link.now_ms())? {
                     Some(Outcome::GaveUp(error)) => return Ok(Some(Outcome::GaveUp(error))),
                     outcome => ended = outcome.or(ended),
+                }
+            }
+            if runout_check && answer.param == ParamCode::Finished && self.runout_seen() {
+                match self.filament_change(op)? {
+                    None => {}
+                    stopped => return Ok(stopped),
                 }
             }
         }

@@ -39,6 +39,14 @@ pub struct PrinterOptions {
     /// Only look: the handshake writes no register (no `W0b`, no `W14`) and no `f` report ever
     /// goes out, so a bench tool reading a unit's settings or sensors changes nothing in it.
     pub read_only: bool,
+    /// SpoolJoin is on: a runout the unit reports (FINDA empty while printing) joins to the next
+    /// slot (`M600 A` on Buddy, `M600 AUTO` on the MK3S) instead of stopping on the
+    /// filament-change screen ([`crate::printer`]'s `runout` module).
+    pub spool_join: bool,
+    /// The slots SpoolJoin goes round: after slot `n` comes `(n + 1) % join_cycle`. The MK3S
+    /// always counts 5 (`SpoolJoin::nextSlot`), whatever the unit has; a Buddy user joins the
+    /// slots the unit has (the soak sets its slot count).
+    pub join_cycle: u8,
 }
 
 impl PrinterOptions {
@@ -61,6 +69,8 @@ impl Default for PrinterOptions {
             slow_feed_mm_s: 20,
             command_timeout_ms: 10 * 60 * 1000,
             read_only: false,
+            spool_join: false,
+            join_cycle: 5,
         }
     }
 }
@@ -99,6 +109,15 @@ pub enum PrinterEvent {
     /// sensor saw the filament during `P1c`, or the unit went on to `P2`); it loads on to the
     /// nozzle and keeps polling until the unit's `F`.
     PrematureFinish(Request),
+    /// FINDA (register 0x08) read empty while the printer printed with `slot` loaded
+    /// (`MMU2::CheckFINDARunout`): it starts its filament change, joining to `join` if SpoolJoin
+    /// is on.
+    Runout {
+        /// The slot the printer believes loaded.
+        slot: u8,
+        /// The slot SpoolJoin continues with, if it is on.
+        join: Option<u8>,
+    },
 }
 
 /// Why the printer lost the link.
@@ -149,6 +168,9 @@ pub enum Outcome {
     Rejected,
     /// The operator gave up on this error.
     GaveUp(ErrorCode),
+    /// A print stopped on the filament-change screen after the unit reported a runout of this
+    /// slot (`M600` without SpoolJoin): the old filament was unloaded; the user loads a new one.
+    FilamentChange(u8),
 }
 
 /// Why the printer could not go on.

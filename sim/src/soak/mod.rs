@@ -48,6 +48,10 @@ use crate::printer::{
 use crate::sim::{CommandRecord, PRINTER_UNLOAD_MM, PRINTER_UNLOAD_MM_S, Sim, SimOptions, status_text};
 use crate::timing::tool_change_minimum;
 
+mod spool_end;
+
+pub use spool_end::SpoolEndTally;
+
 /// With random faults, the chance that a tool change gets a fault.
 pub const FAULT_PROBABILITY: f64 = 0.3;
 /// A fault strikes up to this long after the `T` is sent, ms (uniformly drawn, to the
@@ -56,6 +60,10 @@ pub const MAX_FAULT_DELAY_MS: u64 = 8000;
 /// With random faults, the chance that a change's fault strikes while the printer prints after
 /// the change rather than during it.
 pub const PRINT_FAULT_PROBABILITY: f64 = 0.3;
+/// With [`SoakOptions::spool_ends`], the share of loose spool ends among the faults.
+pub const SPOOL_END_SHARE: f64 = 0.5;
+/// With [`SoakOptions::spool_ends`], the share of spool ends fastened to the core.
+pub const FASTENED_END_SHARE: f64 = 0.1;
 /// How long the printer prints on after a fault struck while printing, ms: long enough for the
 /// unit to notice, the printer's automatic Retries and the user's fix.
 pub const PRINT_AFTER_FAULT_MS: u64 = 30_000;
@@ -81,6 +89,11 @@ pub struct SoakOptions {
     pub changes: u32,
     /// Inject random faults.
     pub random_faults: bool,
+    /// Spool ends instead of the random mix: every change gets a fault while the printer prints
+    /// after it: a loose spool end one in two ([`SPOOL_END_SHARE`]), a spool end fastened to the
+    /// core one in ten ([`FASTENED_END_SHARE`]), else one of the print faults (tangle, seized
+    /// drive, noise, power loss, noisy line, a sensor disconnected).
+    pub spool_ends: bool,
     /// Seed of the run (the simulator's and the fault schedule's).
     pub seed: u64,
     /// The simulated unit.
@@ -160,6 +173,8 @@ pub struct SoakReport {
     pub by_fault_kind: Vec<FaultKindTally>,
     /// Times of the fault-free tool changes.
     pub tool_change_times: ToolChangeTimes,
+    /// Spool ends while printing, and runouts the printer saw without one.
+    pub spool_ends: SpoolEndTally,
     /// Virtual time simulated, s.
     pub simulated_s: f64,
     /// What the persisted state did to the unit's flash (16 pages of 2 KiB), over every rig.
@@ -187,9 +202,14 @@ impl SoakReport {
         )
     }
 
-    /// Nothing unrecovered, stuck or panicked, and the run was not aborted.
+    /// Nothing unrecovered, stuck or panicked, no runout reported without a spool end, and the
+    /// run was not aborted.
     pub fn passed(&self) -> bool {
-        self.unrecovered == 0 && self.stuck == 0 && self.panics == 0 && self.aborted.is_none()
+        self.unrecovered == 0
+            && self.stuck == 0
+            && self.panics == 0
+            && self.spool_ends.false_total() == 0
+            && self.aborted.is_none()
     }
 
     /// Simulated seconds per wall-clock second (0 if no wall time passed).
@@ -261,6 +281,9 @@ impl fmt::Display for SoakReport {
                 self.recovered_after_error, self.recovered
             )?;
         }
+        if self.spool_ends != SpoolEndTally::default() {
+            write!(f, "\n{}", self.spool_ends)?;
+        }
         if !self.by_fault_kind.is_empty() {
             write!(f, "\nfaults by kind:")?;
             for t in &self.by_fault_kind {
@@ -294,9 +317,10 @@ impl fmt::Display for SoakReport {
 
 /// The `--fault` name of a fault's kind, without slot and parameters.
 /// A random fault that strikes while the printer prints with `loaded` loaded: a jam or a tangled
-/// spool, a seized drive, sensor noise, a lost tension sensor, a power loss or a noisy line.
+/// spool, a seized drive, sensor noise, a power loss, a noisy line, the spool's end, or its slot
+/// sensor or the hub sensor disconnected.
 fn draw_print_fault(rng: &mut Rng, loaded: usize) -> SimFault {
-    match rng.next_u64() % 6 {
+    match rng.next_u64() % 8 {
         0 | 1 => SimFault::Model(Fault::Jam { slot: loaded }),
         2 => SimFault::Model(Fault::MotorDead { slot: loaded }),
         3 => SimFault::Model(Fault::SensorNoise {
@@ -305,9 +329,24 @@ fn draw_print_fault(rng: &mut Rng, loaded: usize) -> SimFault {
         4 => SimFault::PowerLoss {
             off_ms: draw(rng, 50.0, 3_000.0, 1.0) as u32,
         },
-        _ => SimFault::UartCorrupt {
+        5 => SimFault::UartCorrupt {
             probability: draw(rng, 0.001, 0.01, 10_000.0),
         },
+        6 => SimFault::Model(Fault::SpoolRunout { slot: loaded }),
+        _ => {
+            // The sensors a spool end is read from: one that fails must not look like one.
+            let sensor = if rng.uniform() < 0.5 {
+                SensorId::SlotFilament(loaded)
+            } else {
+                SensorId::HubFilament
+            };
+            let rail = if rng.uniform() < 0.5 {
+                Rail::Low
+            } else {
+                Rail::High
+            };
+            SimFault::Model(Fault::SensorDisconnected { sensor, rail })
+        }
     }
 }
 
@@ -335,6 +374,7 @@ fn kind_name(fault: &SimFault) -> String {
             SensorId::MotorHall(_) => "disconnect:motor-hall",
         },
         SimFault::Model(Fault::SpoolRunout { .. }) => "runout",
+        SimFault::Model(Fault::SpoolFastened { .. }) => "fastened-end",
         SimFault::UartCorrupt { .. } => "uart-corrupt",
         SimFault::UartDrop { .. } => "uart-drop",
         SimFault::PowerLoss { .. } => "power-loss",
@@ -480,6 +520,12 @@ struct SoakUser {
     presses: u8,
     /// The errors seen, in order (repeats of the same error in a row once).
     errors: Vec<ErrorCode>,
+    /// The slots the printer saw run out (FINDA empty while printing), in order.
+    runouts: Vec<u8>,
+    /// The printer's handling of a runout succeeded (joined, or a clear filament-change screen).
+    runout_handled: bool,
+    /// The user pulled a spool's loose end out by hand.
+    pulled_by_hand: bool,
 }
 
 impl SoakUser {
@@ -501,6 +547,16 @@ impl SoakUser {
         };
         self.fixed = true;
         let sim = link.sim_mut();
+        if let SimFault::Model(Fault::SpoolRunout { slot }) = strike.fault {
+            // A spool's loose end that got past the slot's drive gear is out of the unit's reach:
+            // the user pulls the piece out by hand.
+            let model = sim.model();
+            let gear = model.config().drive_gear_mm;
+            if model.tail_mm(slot).is_some_and(|tail| tail > gear) {
+                sim.model_mut().remove_filament(slot);
+                self.pulled_by_hand = true;
+            }
+        }
         sim.clear(strike.fault.kind());
         if let SimFault::Model(Fault::SpoolRunout { slot }) = strike.fault
             && sim.model().tip_mm(slot).is_none()
@@ -558,11 +614,18 @@ impl Operator<StrikingLink> for SoakUser {
                 }
             }
             PrinterEvent::Error(_, error) if self.errors.last() != Some(error) => self.errors.push(*error),
+            PrinterEvent::Runout { slot, .. } => self.runouts.push(*slot),
             _ => {}
         }
     }
 
-    fn decide(&mut self, link: &mut StrikingLink, _request: Request, error: ErrorCode) -> Decision {
+    fn decide(&mut self, link: &mut StrikingLink, request: Request, error: ErrorCode) -> Decision {
+        if error == ErrorCode::FILAMENT_EJECTED && request.code == RequestCode::Eject {
+            // The filament change's eject: the screen asks to take the filament out.
+            let slot = usize::from(request.value);
+            link.sim_mut().model_mut().remove_filament(slot);
+            return Decision::Press(ButtonCode::MIDDLE);
+        }
         if self.fix(link) {
             self.presses = 0;
         }
@@ -604,6 +667,8 @@ impl Rig {
         .map_err(|error| error.to_string())?;
         let printer_options = PrinterOptions {
             personality: options.personality,
+            // The user joins each slot to the next of the unit's.
+            join_cycle: u8::try_from(options.sim.slots).unwrap_or(u8::MAX),
             ..options.printer
         };
         let mut printer = Printer::new(StrikingLink::new(sim), printer_options);
@@ -681,6 +746,9 @@ fn tool_change(rig: &mut Rig, user: &mut SoakUser, target: u8) -> ChangeEnd {
         }
         Ok(Outcome::Finished(result)) => ChangeEnd::Failed(format!("finished with result {}", result.0)),
         Ok(Outcome::Rejected) => ChangeEnd::Failed("the unit rejected it".into()),
+        Ok(Outcome::FilamentChange(slot)) => {
+            ChangeEnd::Failed(format!("stopped on the filament-change screen for slot {slot}"))
+        }
         Ok(Outcome::GaveUp(error)) => ChangeEnd::Failed(format!("gave up on {error}")),
         Err(error) => ChangeEnd::Stuck(error.to_string()),
     };
@@ -734,6 +802,44 @@ fn print(rig: &mut Rig, user: &mut SoakUser, target: u8) -> ChangeEnd {
     };
     match printed {
         Ok(Some(Outcome::GaveUp(error))) => ChangeEnd::Failed(format!("while printing, gave up on {error}")),
+        Ok(Some(Outcome::FilamentChange(slot))) => {
+            // The filament-change screen: the old filament must be out of the path.
+            rig.loaded = None;
+            let model = rig.sim().model();
+            if model.hub_filament_present() || model.fsensor_state() != 0 {
+                ChangeEnd::Failed(format!(
+                    "the filament change after slot {slot} ran out left filament in the path"
+                ))
+            } else {
+                // The screen asks for the new filament: the user clears the spool end and puts a
+                // fresh spool's filament in, as at any runout.
+                user.runout_handled = true;
+                user.fix(rig.printer.link_mut());
+                let sim = rig.printer.link_mut().sim_mut();
+                if sim.model().tip_mm(usize::from(slot)).is_none() {
+                    let park_mm = -f32::from(sim.unit_config().park_mm);
+                    sim.model_mut().insert_filament(usize::from(slot), park_mm);
+                }
+                ChangeEnd::Done
+            }
+        }
+        Ok(_) if !user.runouts.is_empty() => {
+            // SpoolJoin: the print goes on with the slot the printer joined to.
+            let joined = rig.printer.loaded_tool();
+            rig.loaded = joined;
+            let model = rig.sim().model();
+            if joined.is_some()
+                && model.loaded_slot() == joined.map(usize::from)
+                && model.fsensor_state() != 0
+            {
+                user.runout_handled = true;
+                ChangeEnd::Done
+            } else {
+                ChangeEnd::Failed(format!(
+                    "after SpoolJoin to {joined:?}, that filament is not loaded"
+                ))
+            }
+        }
         Ok(_) => {
             let model = rig.sim().model();
             if model.loaded_slot() == Some(usize::from(target)) && model.fsensor_state() != 0 {
@@ -854,15 +960,28 @@ pub fn run_until(
             0 => 0,
             n => others[(rng.next_u64() % n as u64) as usize],
         };
-        let planned = (options.random_faults && rng.uniform() < FAULT_PROBABILITY).then(|| {
-            if rng.uniform() < PRINT_FAULT_PROBABILITY {
-                let fault = draw_print_fault(&mut rng, usize::from(target));
-                (fault, Moment::Print(rng.next_u64() % (MAX_FAULT_DELAY_MS + 1)))
+        let planned = if options.spool_ends {
+            let draw_share = rng.uniform();
+            let slot = usize::from(target);
+            let fault = if draw_share < SPOOL_END_SHARE {
+                SimFault::Model(Fault::SpoolRunout { slot })
+            } else if draw_share < SPOOL_END_SHARE + FASTENED_END_SHARE {
+                SimFault::Model(Fault::SpoolFastened { slot })
             } else {
-                let fault = draw_fault(&mut rng, usize::from(target));
-                (fault, Moment::Change(rng.next_u64() % (MAX_FAULT_DELAY_MS + 1)))
-            }
-        });
+                draw_print_fault(&mut rng, usize::from(target))
+            };
+            Some((fault, Moment::Print(rng.next_u64() % (MAX_FAULT_DELAY_MS + 1))))
+        } else {
+            (options.random_faults && rng.uniform() < FAULT_PROBABILITY).then(|| {
+                if rng.uniform() < PRINT_FAULT_PROBABILITY {
+                    let fault = draw_print_fault(&mut rng, usize::from(target));
+                    (fault, Moment::Print(rng.next_u64() % (MAX_FAULT_DELAY_MS + 1)))
+                } else {
+                    let fault = draw_fault(&mut rng, usize::from(target));
+                    (fault, Moment::Change(rng.next_u64() % (MAX_FAULT_DELAY_MS + 1)))
+                }
+            })
+        };
         let while_printing = matches!(planned, Some((_, Moment::Print(_))));
         let from = current.loaded;
         let mut user = SoakUser::for_change(target, planned);
@@ -884,6 +1003,10 @@ pub fn run_until(
             report.faults_injected += 1;
             report.tally(kind.clone()).injected += 1;
         }
+        let handled = user.runout_handled && !user.pulled_by_hand;
+        report
+            .spool_ends
+            .count(struck.map(|s| s.fault), kind.as_deref(), &user.runouts, handled);
         let context = || {
             let loaded = from.map_or("nothing loaded".to_string(), |slot| format!("slot {slot} loaded"));
             let fault = match struck {

@@ -1,0 +1,86 @@
+//! A spool that ends while the printer prints, handed to the printer the way its own runout
+//! handling expects (book: "Spool end").
+//!
+//! Prusa's printer starts its filament change (`M600`, or `M600 A` / `M600 AUTO` with SpoolJoin)
+//! when FINDA reads empty after an idle poll while it believes the filament in its nozzle
+//! (`MMU2::CheckFINDARunout`). FINDA is register 0x08 (and `P0`): the hub sensor. Read honestly,
+//! it empties only once the tail has passed the hub: by then the tail is far past the slot's
+//! drive gear, and neither the printer's retract nor the unit can pull it back out (`8002`).
+//!
+//! So FINDA reads empty as soon as the spool end is certain: the loaded slot's own sensor reads
+//! empty for [`CONFIRM_MS`] while the unit runs no command and the printer reports filament at
+//! its sensor. The tail is then just past the slot sensor, a few millimetres past the drive gear;
+//! the printer's ramming before its `U0` pulls it back behind the gear, and the unit's unload
+//! takes it from there. Nothing else empties the slot sensor of a filament that runs through the
+//! whole path: a tangle or a clog stops the filament with the sensor still covered and stays an
+//! error ([`crate::follower`]). A sensor that cannot be read reports nothing.
+//!
+//! A hub sensor that fails reads as what the unit believes (a slot holds the path or none does),
+//! never as a runout of its own.
+//!
+//! Reported, the slot is no longer followed (its drive grips nothing), and the report lasts until
+//! the printer's next command (its `U0`) or a restart.
+
+use crate::time::Instant;
+use crate::unit::{Lane, Unit};
+
+/// How long the loaded slot's sensor must read empty before the unit reports a spool end, ms.
+pub const CONFIRM_MS: u64 = 300;
+
+/// The spool-end watch of the loaded slot.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct SpoolEnd {
+    /// The loaded slot whose sensor reads empty, and since when.
+    candidate: Option<(usize, Instant)>,
+    /// The slot whose spool end FINDA reports.
+    reported: Option<usize>,
+}
+
+impl SpoolEnd {
+    /// Nothing seen.
+    pub const NEW: SpoolEnd = SpoolEnd {
+        candidate: None,
+        reported: None,
+    };
+
+    /// Look at the loaded slot at `now`; `idle` is true while no command runs and no error is
+    /// held.
+    pub fn watch<const N: usize>(&mut self, unit: &Unit<N>, idle: bool, now: Instant) {
+        if self.reported.is_some() {
+            return;
+        }
+        let loose_end = idle
+            .then(|| unit.lanes.iter().position(|&lane| lane == Lane::Loaded))
+            .flatten()
+            .filter(|&slot| unit.owner_proven(slot) && unit.fsensor_triggered())
+            .filter(|&slot| unit.feeders.get(slot).and_then(|f| f.filament.present()) == Some(false));
+        self.candidate = match (loose_end, self.candidate) {
+            (Some(slot), Some((seen, since))) if seen == slot => {
+                if now.millis_since(since) >= CONFIRM_MS {
+                    self.reported = Some(slot);
+                }
+                Some((seen, since))
+            }
+            (Some(slot), _) => Some((slot, now)),
+            (None, _) => None,
+        };
+    }
+
+    /// The slot whose spool end is reported: FINDA reads empty.
+    pub fn reported(&self) -> Option<usize> {
+        self.reported
+    }
+
+    /// The printer took it up (a command started): FINDA tells the hub sensor again.
+    pub fn clear(&mut self) {
+        *self = SpoolEnd::NEW;
+    }
+
+    /// What FINDA (register 0x08, `P0`) reads with the hub sensor reading `hub` (`None`: faulty)
+    /// and `owned` telling whether a slot holds the hub path as far as the unit knows. A faulty
+    /// hub sensor reads as that belief: an empty FINDA would start the printer's filament change
+    /// for a runout that did not happen (the sensor fault itself is reported by the next command).
+    pub fn finda(&self, hub: Option<bool>, owned: bool) -> bool {
+        self.reported.is_none() && hub.unwrap_or(owned)
+    }
+}
