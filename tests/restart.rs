@@ -14,9 +14,13 @@ use mmu_protocol::ParamCode;
 /// Lanes a store can hold for one slot.
 const STORED: [Lane; 4] = [Lane::Unknown, Lane::Parked, Lane::InHub, Lane::Loaded];
 
-/// How far a filament that does not hold the path may be pulled back: the hub search distance
-/// (a belief's proof, or a merge clearance) plus the park distance.
-const SAFE_PULL_MM: f32 = 45.0 + 15.0 + 2.0;
+/// How far behind its slot sensor a filament that does not hold the path may end, mm: a pull
+/// back that proves a stored belief stops at the slot sensor, which sits 5 mm after the drive
+/// gear (`ModelConfig::slot_sensor_mm`, `drive_gear_mm`), so the tip stays in the gear's grip
+/// whichever slot was pulled. (The proof of a belief about a tip deep in the Bowden tube pulls
+/// a slot that turns out not to hold the path back to that sensor: 80 mm from its park position,
+/// where the proof used to stop after the hub search distance.)
+const PAST_SLOT_SENSOR_MM: f32 = 2.0;
 
 /// Set `MMU_RESTART_ALL=1` to run every case (256) instead of every fourth.
 fn cases() -> impl Iterator<Item = ([Lane; 3], Option<usize>)> {
@@ -47,6 +51,10 @@ fn a_restart_proves_or_refuses_and_never_moves_the_wrong_slot() {
             rig.command(t(slot as u8));
         }
         let before: Vec<f32> = (0..3).map(|s| rig.model.tip_mm(s).unwrap()).collect();
+        let (sensor, gear) = (
+            rig.model.config().slot_sensor_mm,
+            rig.model.config().drive_gear_mm,
+        );
         rig.app = App::new(Config::default());
         rig.app.restore(&Snapshot {
             lanes,
@@ -60,10 +68,11 @@ fn a_restart_proves_or_refuses_and_never_moves_the_wrong_slot() {
             _ => None,
         };
         for slot in (0..3).filter(|&s| Some(s) != owner && s != target) {
-            let pulled = before[slot] - rig.model.tip_mm(slot).unwrap();
-            if pulled > SAFE_PULL_MM {
+            let tip = rig.model.tip_mm(slot).unwrap();
+            if tip < sensor - PAST_SLOT_SENSOR_MM || tip <= gear {
                 failures.push(format!(
-                    "stored {lanes:?}, slot {owner:?} holds the path, T{target}: slot {slot} pulled back {pulled:.1} mm ({:?})",
+                    "stored {lanes:?}, slot {owner:?} holds the path, T{target}: slot {slot} pulled back from {:.1} to {tip:.1} mm ({:?})",
+                    before[slot],
                     run.as_ref().map(|r| r.last)
                 ));
             }

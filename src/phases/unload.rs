@@ -64,10 +64,14 @@ impl Unload {
                     ErrorCode::FINDA_DIDNT_SWITCH_OFF,
                 )
             },
+            // Past the proof, an unload: as far as one from the printer's sensor.
             Unload::ProveOwner => reverse(
                 config.load_speed,
-                config.hub_search_mm,
-                ErrorCode::FINDA_VS_EEPROM_DISREPANCY,
+                config
+                    .bowden_mm
+                    .saturating_add(config.fsensor_search_mm)
+                    .saturating_add(config.hub_search_mm),
+                ErrorCode::FINDA_DIDNT_SWITCH_OFF,
             ),
             Unload::ToPark => reverse(
                 config.load_speed,
@@ -95,14 +99,7 @@ impl Unload {
         let fsensor = at.unit.fsensor_triggered();
         Ok(match self {
             Unload::ToHub { await_release } => return unload_to_hub(await_release, run, at),
-            Unload::ProveOwner if !at.hub && !fsensor => Goal::Reached.learning(Milestone::OwnerProven {
-                at_centi: at.odometry,
-            }),
-            Unload::ProveOwner if fsensor || at.toward_goal_mm >= i32::from(at.bounds.max_mm) => {
-                // Filament in the printer, or pulled as far as is safe (Retry adds nothing).
-                return Err(ErrorCode::FINDA_VS_EEPROM_DISREPANCY);
-            }
-            Unload::ProveOwner => Goal::Drive.into(),
+            Unload::ProveOwner => return prove_owner(at),
             Unload::ToPark => match (at.hub, run.mark_centi.or(hub_mark(at.notes, at.slot))) {
                 (true, _) => Goal::Drive.into(),
                 (false, None) => {
@@ -236,6 +233,36 @@ fn pull_out_of_printer<const N: usize>(run: &PhaseRun, at: &Sight<'_, N>) -> Res
             Goal::DriveAt(config.slow_speed)
         }
         _ => Goal::Drive,
+    })
+}
+
+/// `P3` for a slot only believed to hold the hub path (a stored lane, after a restart): pull it
+/// back, which is safe whichever slot really holds the path. A slot that does not hold it has its
+/// tip before the merge, at most [`Config::preload_max_mm`] (the longest feed from the slot
+/// sensor to the hub) ahead of its slot sensor: pulling it back clears its slot sensor within that
+/// distance, and the guard at the slot sensor stops it there, its filament still in the drive
+/// gear (`8008`: the stored belief was wrong, someone has to look). The slot that holds the path
+/// shows it: the hub sensor clears (its tip was short of the printer), or its slot sensor still
+/// sees filament after that distance (its tip was past the hub: a filament that long in front of
+/// the slot sensor runs through the hub). Proven, it is unloaded on to the hub sensor, as far as
+/// an unload from the printer's sensor; the printer's sensor must clear by then
+/// (`8004`, whose Retry makes the printer help with its extruder).
+fn prove_owner<const N: usize>(at: &Sight<'_, N>) -> Result<Decision, ErrorCode> {
+    let past_proof_mm = at.toward_goal_mm - i32::from(at.config.preload_max_mm);
+    Ok(match (at.hub, at.unit.fsensor_triggered()) {
+        (false, false) => Goal::Reached.learning(Milestone::OwnerProven {
+            at_centi: at.odometry,
+        }),
+        // Filament at the printer's sensor before the proof: whose, only a pull against the
+        // printer's gears could tell (Prusa's recovery pulls it out of them before its `U0`).
+        (_, true) if past_proof_mm <= 0 => return Err(ErrorCode::FINDA_VS_EEPROM_DISREPANCY),
+        (_, true) if past_proof_mm > i32::from(at.config.unload_check_mm) => {
+            return Err(ErrorCode::FSENSOR_DIDNT_SWITCH_OFF);
+        }
+        _ if past_proof_mm > 0 && at.unit.proven_owner != Some(at.slot) => {
+            Goal::Drive.learning(Milestone::OwnerInPath)
+        }
+        _ => Goal::Drive.into(),
     })
 }
 
