@@ -23,6 +23,7 @@ fn main() -> ExitCode {
     let options = SoakOptions {
         changes,
         random_faults: false,
+        power_losses: false,
         seed: 1,
         sim: SimOptions::default(),
         printer: PrinterOptions::default(),

@@ -31,12 +31,15 @@
 //! it, as [`Sim::take_finished`] records it) are compared with the physical minimum of
 //! [`crate::timing`].
 
+mod restarts;
+
 use std::fmt;
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::time::Instant;
 
+use mmu_firmware::runner::Status;
 use mmu_model::{Fault, Rail, Rng, SensorId};
-use mmu_protocol::{ButtonCode, ErrorCode, Request, RequestCode, ResultCode};
+use mmu_protocol::{ButtonCode, ErrorCode, ProgressCode, Request, RequestCode, ResultCode};
 
 use crate::fault::SimFault;
 use crate::flash::FlashWear;
@@ -47,6 +50,8 @@ use crate::printer::{
 };
 use crate::sim::{CommandRecord, PRINTER_UNLOAD_MM, PRINTER_UNLOAD_MM_S, Sim, SimOptions, status_text};
 use crate::timing::tool_change_minimum;
+
+pub use restarts::{PhaseRestarts, RestartTally};
 
 /// With random faults, the chance that a tool change gets a fault.
 pub const FAULT_PROBABILITY: f64 = 0.3;
@@ -81,6 +86,10 @@ pub struct SoakOptions {
     pub changes: u32,
     /// Inject random faults.
     pub random_faults: bool,
+    /// Instead: every change gets a power loss of 50 ms to 3 s at a random moment of up to
+    /// [`MAX_POWER_LOSS_DELAY_MS`] after its `T` is sent ([`SoakReport::restarts`] counts how
+    /// the changes ended, by the phase the power went in).
+    pub power_losses: bool,
     /// Seed of the run (the simulator's and the fault schedule's).
     pub seed: u64,
     /// The simulated unit.
@@ -175,6 +184,9 @@ pub struct SoakReport {
     pub fault_log: Vec<String>,
     /// Why the run stopped before its last change (the rig could not be started), if it did.
     pub aborted: Option<String>,
+    /// The power losses that struck while the unit ran a tool change, by phase, and how the
+    /// changes ended.
+    pub restarts: RestartTally,
 }
 
 impl SoakReport {
@@ -285,12 +297,19 @@ impl fmt::Display for SoakReport {
                 self.rig_restarts
             )?;
         }
+        if self.restarts.struck() > 0 {
+            write!(f, "\n{}", self.restarts)?;
+        }
         if let Some(why) = &self.aborted {
             write!(f, "\naborted: {why}")?;
         }
         Ok(())
     }
 }
+
+/// With [`SoakOptions::power_losses`], a change's power loss strikes up to this long after the
+/// `T` is sent, ms: a fault-free change from a loaded slot takes about 9 s.
+pub const MAX_POWER_LOSS_DELAY_MS: u64 = 10_000;
 
 /// The `--fault` name of a fault's kind, without slot and parameters.
 /// A random fault that strikes while the printer prints with `loaded` loaded: a jam or a tangled
@@ -393,6 +412,8 @@ struct Strike {
     fault: SimFault,
     /// When, ms of virtual time.
     at_ms: u64,
+    /// The phase of a tool change the unit was running then, by its progress.
+    in_tool_change: Option<ProgressCode>,
 }
 
 /// The in-process link with a fault that strikes at an exact virtual millisecond: while the
@@ -430,8 +451,16 @@ impl StrikingLink {
             && now >= at_ms
         {
             self.armed = None;
+            let in_tool_change = match self.link.sim().unit_command() {
+                ((RequestCode::Tool, _), Status::Running(progress)) => Some(progress),
+                _ => None,
+            };
             if self.link.sim_mut().inject(fault) {
-                self.struck = Some(Strike { fault, at_ms: now });
+                self.struck = Some(Strike {
+                    fault,
+                    at_ms: now,
+                    in_tool_change,
+                });
             }
         }
     }
@@ -693,14 +722,21 @@ fn tool_change(rig: &mut Rig, user: &mut SoakUser, target: u8) -> ChangeEnd {
 /// `xState::Connecting`, BFW v6.5.3 `mmu2_mk4.cpp`) and takes the command up again once the
 /// unit answers. On Buddy 6.5.3 ten 200 ms timeouts, a power cut of 2 s, are enough for the
 /// screen. A unit that stays silent through [`RECONNECTS`] tries is stuck.
+///
+/// Taken up means followed: the printer still has the command as its request (`ReqMsg`), so a
+/// unit that restarted meanwhile answers `X0 F0` to its `Q0` and the printer sees the command
+/// `Interrupted` (`protocol_logic.cpp` `IdleStep`, `ProcessCommandQueryResponse`): for a tool
+/// change, `U0` and then the `T` again ([`Printer::follow`]).
 fn command(rig: &mut Rig, user: &mut SoakUser, request: Request) -> Result<Outcome, PrinterError> {
     let mut tries = 0;
+    let mut result = rig.printer.command(user, request);
     loop {
-        match rig.printer.command(user, request) {
+        match result {
             Err(PrinterError::NotResponding | PrinterError::ProtocolError) if tries < RECONNECTS => {
                 tries += 1;
                 match rig.printer.connect(user) {
-                    Ok(_) | Err(PrinterError::NotResponding | PrinterError::ProtocolError) => {}
+                    Ok(_) => result = rig.printer.follow(user, request),
+                    Err(PrinterError::NotResponding | PrinterError::ProtocolError) => {}
                     Err(error) => return Err(error),
                 }
             }
@@ -854,6 +890,15 @@ pub fn run_until(
             0 => 0,
             n => others[(rng.next_u64() % n as u64) as usize],
         };
+        let power_loss = options.power_losses.then(|| {
+            let fault = SimFault::PowerLoss {
+                off_ms: draw(&mut rng, 50.0, 3_000.0, 1.0) as u32,
+            };
+            (
+                fault,
+                Moment::Change(rng.next_u64() % (MAX_POWER_LOSS_DELAY_MS + 1)),
+            )
+        });
         let planned = (options.random_faults && rng.uniform() < FAULT_PROBABILITY).then(|| {
             if rng.uniform() < PRINT_FAULT_PROBABILITY {
                 let fault = draw_print_fault(&mut rng, usize::from(target));
@@ -863,6 +908,7 @@ pub fn run_until(
                 (fault, Moment::Change(rng.next_u64() % (MAX_FAULT_DELAY_MS + 1)))
             }
         });
+        let planned = planned.or(power_loss);
         let while_printing = matches!(planned, Some((_, Moment::Print(_))));
         let from = current.loaded;
         let mut user = SoakUser::for_change(target, planned);
@@ -946,6 +992,14 @@ pub fn run_until(
                 )
             }
         };
+        if let Some(strike) = struck
+            && matches!(strike.fault, SimFault::PowerLoss { .. })
+            && !while_printing
+        {
+            let manual = user.errors.contains(&ErrorCode::FINDA_VS_EEPROM_DISREPANCY);
+            let phase = strike.in_tool_change;
+            report.restarts.record(phase, failure_detail.is_none(), manual);
+        }
         if struck.is_some() {
             report.fault_log.push(format!("{} -> {verdict}", context()));
         }

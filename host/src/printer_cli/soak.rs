@@ -34,6 +34,9 @@ pub enum Faults {
     None,
     /// Random faults, injected and later cleared.
     Random,
+    /// A power loss in every change, at a random moment of it: how the changes end after the
+    /// printer's recovery, by the phase the power went in.
+    PowerLoss,
 }
 
 /// `mmu printer soak`: the report, and a failure when it did not pass.
@@ -54,6 +57,7 @@ pub(super) fn run_soak(
     let options = SoakOptions {
         changes: soak.changes,
         random_faults: soak.faults == Faults::Random,
+        power_losses: soak.faults == Faults::PowerLoss,
         seed,
         sim: SimOptions {
             slots: args.sim_options.slots,
