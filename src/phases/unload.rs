@@ -96,7 +96,6 @@ impl Unload {
         run: &mut PhaseRun,
         at: &Sight<'_, N>,
     ) -> Result<Decision, ErrorCode> {
-        let fsensor = at.unit.fsensor_triggered();
         Ok(match self {
             Unload::ToHub { await_release } => return unload_to_hub(await_release, run, at),
             Unload::ProveOwner => return prove_owner(at),
