@@ -9,7 +9,7 @@ use common::{Rig, t};
 use mmu_firmware::persist::Snapshot;
 use mmu_firmware::unit::Lane;
 use mmu_firmware::{App, Config};
-use mmu_protocol::ParamCode;
+use mmu_protocol::{ErrorCode, ParamCode, Request, RequestCode, Response};
 
 /// Lanes a store can hold for one slot.
 const STORED: [Lane; 4] = [Lane::Unknown, Lane::Parked, Lane::InHub, Lane::Loaded];
@@ -93,4 +93,117 @@ fn a_restart_proves_or_refuses_and_never_moves_the_wrong_slot() {
         failures.len(),
         failures.join("\n")
     );
+}
+
+// ---- where a restart mid tool change still asks for UNLOAD MANUALLY -----------------------------
+//
+// After a restart in a tool change the printer sends `U0` (`sim/tests/restart_mid_tool_change.rs`
+// plays the whole recovery, phase by phase). The unit proves the stored slot by pulling it back
+// and carries on; these are the cases where the sensors cannot say which slot holds the path.
+
+/// The unit restarted with `lanes` stored, on the rig's model as it is, and the printer's `U0`.
+fn restart_then_unload(rig: &mut Rig<3>, lanes: [Lane; 3]) -> Response {
+    rig.app = App::new(Config::default());
+    rig.app.restore(&Snapshot {
+        lanes,
+        ..Snapshot::default()
+    });
+    rig.boot();
+    rig.command(Request::new(RequestCode::Unload, 0)).last
+}
+
+/// The store names slot 0, but slot 1 holds the path, its tip in the Bowden tube short of the
+/// printer's sensor (a power loss while it was fed). Pulling slot 0 back clears its slot sensor
+/// with the hub still seeing filament: the belief was wrong, but which other slot holds the path
+/// (1 or 2, both slot sensors seeing filament, neither tip visible) the sensors cannot say.
+/// Slot 0 stops at its slot sensor, still in its drive gear; slot 1 is not moved.
+#[test]
+fn a_wrong_stored_slot_is_disproved_at_its_slot_sensor_then_unload_manually() {
+    let mut rig = Rig::<3>::new();
+    rig.boot();
+    rig.model.insert_filament(1, 200.0);
+    rig.idle(100);
+    let slot1 = rig.model.tip_mm(1).unwrap();
+    let answer = restart_then_unload(&mut rig, [Lane::Loaded, Lane::Parked, Lane::Parked]);
+    assert_eq!(
+        answer.param_value,
+        Some(ErrorCode::FINDA_VS_EEPROM_DISREPANCY.0),
+        "{answer:?}"
+    );
+    let (sensor, gear) = (
+        rig.model.config().slot_sensor_mm,
+        rig.model.config().drive_gear_mm,
+    );
+    let tip = rig.model.tip_mm(0).unwrap();
+    assert!(
+        tip >= sensor - PAST_SLOT_SENSOR_MM && tip > gear,
+        "slot 0 stopped at its slot sensor: {tip} mm"
+    );
+    assert!(
+        tip < sensor + 3.0,
+        "slot 0 was pulled to its slot sensor: {tip} mm"
+    );
+    assert!((rig.model.tip_mm(1).unwrap() - slot1).abs() < 0.5);
+}
+
+/// The stored slot 0 does hold the path, but its spool ran out: the tail is past its slot sensor,
+/// which reads empty, exactly as a slot pulled back to its drive gear does. No pull can prove
+/// the belief (the guard at the slot sensor has nothing to stop on): `8008`, nothing moved.
+#[test]
+fn a_stored_slot_whose_spool_ran_out_cannot_be_proved_unload_manually() {
+    let mut rig = Rig::<3>::new();
+    rig.boot();
+    rig.command(t(0));
+    rig.model.inject(mmu_model::Fault::SpoolRunout { slot: 0 });
+    rig.model.extruder_move(-120.0, 60.0);
+    rig.idle(3_000);
+    let before: Vec<f32> = (0..3).map(|s| rig.model.tip_mm(s).unwrap()).collect();
+    let answer = restart_then_unload(&mut rig, [Lane::Loaded, Lane::Parked, Lane::Parked]);
+    assert_eq!(
+        answer.param_value,
+        Some(ErrorCode::FINDA_VS_EEPROM_DISREPANCY.0),
+        "{answer:?}"
+    );
+    for (slot, tip) in before.iter().enumerate() {
+        let now = rig.model.tip_mm(slot).unwrap();
+        assert!(
+            (now - tip).abs() < 0.5,
+            "slot {slot} moved from {tip} to {now} mm"
+        );
+    }
+}
+
+/// The stored slot 0 holds the path, but the printer's sensor still reads filament when the `U0`
+/// comes: its retract let go of the tip between its sensor and its gears (the MK3S's order, the
+/// rig's default). Without a pull the unit's sensors read exactly as when another slot's
+/// filament is there (`tests/safe_motion.rs`, stale lanes), and it does not pull a filament the
+/// printer may still hold (MMU 3.0.4 pulls nothing before the printer reports its sensor off):
+/// `8008`, nothing moved. (In the printer's own recovery the sensor is off by then:
+/// `sim/tests/restart_mid_tool_change.rs`.)
+#[test]
+fn filament_still_at_the_printers_sensor_cannot_be_proved_unload_manually() {
+    let mut rig = Rig::<3>::new();
+    rig.boot();
+    rig.command(t(0));
+    rig.model.extruder_move(-120.0, 60.0);
+    rig.idle(3_000);
+    assert_ne!(
+        rig.model.fsensor_state(),
+        0,
+        "the tip rests at the printer's sensor"
+    );
+    let before: Vec<f32> = (0..3).map(|s| rig.model.tip_mm(s).unwrap()).collect();
+    let answer = restart_then_unload(&mut rig, [Lane::Loaded, Lane::Parked, Lane::Parked]);
+    assert_eq!(
+        answer.param_value,
+        Some(ErrorCode::FINDA_VS_EEPROM_DISREPANCY.0),
+        "{answer:?}"
+    );
+    for (slot, tip) in before.iter().enumerate() {
+        let now = rig.model.tip_mm(slot).unwrap();
+        assert!(
+            (now - tip).abs() < 0.5,
+            "slot {slot} moved from {tip} to {now} mm"
+        );
+    }
 }
