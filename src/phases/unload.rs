@@ -180,6 +180,10 @@ fn unload_to_hub<const N: usize>(
             at_centi: at.odometry,
             unsure: false,
         }),
+        // On its way back, no longer loaded: recorded (and persisted) while the tip is still far
+        // past the hub, so a restart that finds the hub clear knows the slot was between the hub
+        // and its park position (the start-up check), not loaded with its tip unseen.
+        goal if at.unit.lane(at.slot) == Lane::Loaded => goal.learning(Milestone::Arrived(Lane::InHub)),
         goal => goal.into(),
     })
 }
