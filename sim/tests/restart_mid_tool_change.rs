@@ -39,6 +39,10 @@ struct Ending {
     loaded: Option<usize>,
     /// Slots other than the new one whose tip is past the merge.
     in_path: Vec<usize>,
+    /// The new slot's tip rests between the printer's sensor and its extruder gears: the sensor
+    /// reads it, the gears do not hold it, so the printer's retract before its `U0` cannot pull it
+    /// back (the MK3S's order, played for Buddy 6.4 too).
+    at_printer_sensor: bool,
     cut: bool,
     events: Vec<PrinterEvent>,
 }
@@ -78,24 +82,33 @@ fn power_loss_in(personality: Personality, progress: ProgressCode, after_ms: u64
             .into_iter()
             .filter(|&s| model.tip_mm(s).is_some_and(|tip| tip > merge))
             .collect(),
+        at_printer_sensor: model.tip_mm(1).is_some_and(|tip| {
+            tip >= model.config().bowden_length_mm && tip < model.config().extruder_gears_mm
+        }),
         cut: !sim.phase_cut_pending(),
         events: op.events,
     }
 }
 
 /// A power loss `after_ms` into the phase reporting `progress` of the change from slot 0 to
-/// slot 1, on every printer family, at each of `moments`: the change completes after the
-/// printer's recovery. Returns the cases that did not, described.
-fn check_phase(progress: ProgressCode, moments: &[u64]) {
+/// slot 1, on every printer family, at each of `moments` (each reached by one printer at least):
+/// the change completes after the printer's recovery, without `8008`. The one exception, `8008`
+/// where the unit's sensors cannot tell which slot holds the path: the new slot's tip rests at the
+/// printer's sensor, out of its gears' reach, when the `U0` comes (`tests/restart.rs`
+/// `filament_still_at_the_printers_sensor_cannot_be_proved_unload_manually` says why). Returns
+/// those cases.
+fn check_phase(progress: ProgressCode, moments: &[u64]) -> Vec<String> {
     let mut failures = Vec::new();
-    for personality in Personality::ALL {
-        for &after_ms in moments {
+    let mut cannot_tell = Vec::new();
+    for &after_ms in moments {
+        let mut reached = false;
+        for personality in Personality::ALL {
             let end = power_loss_in(personality, progress, after_ms);
             let case = format!("{personality:?}, {progress} + {after_ms} ms");
             if !end.cut {
-                failures.push(format!("{case}: the phase ended before the cut"));
                 continue;
             }
+            reached = true;
             let interrupted = end
                 .events
                 .contains(&PrinterEvent::Interrupted(Request::new(RequestCode::Tool, 1)));
@@ -104,7 +117,10 @@ fn check_phase(progress: ProgressCode, moments: &[u64]) {
                 .events
                 .iter()
                 .any(|e| matches!(e, PrinterEvent::Error(_, ErrorCode::FINDA_VS_EEPROM_DISREPANCY)));
-            if end.outcome != Outcome::Finished(ResultCode::OK)
+            if end.outcome == Outcome::GaveUp(ErrorCode::FINDA_VS_EEPROM_DISREPANCY) && end.at_printer_sensor
+            {
+                cannot_tell.push(case);
+            } else if end.outcome != Outcome::Finished(ResultCode::OK)
                 || end.loaded != Some(1)
                 || !end.in_path.is_empty()
                 || !interrupted
@@ -122,6 +138,11 @@ fn check_phase(progress: ProgressCode, moments: &[u64]) {
                 ));
             }
         }
+        if !reached {
+            failures.push(format!(
+                "{progress} + {after_ms} ms: the phase ended before the cut on every printer"
+            ));
+        }
     }
     assert!(
         failures.is_empty(),
@@ -129,43 +150,62 @@ fn check_phase(progress: ProgressCode, moments: &[u64]) {
         failures.len(),
         failures.join("\n")
     );
+    cannot_tell
 }
+
+/// No case of `8008`.
+const NONE: [&str; 0] = [];
 
 /// `P3`: slot 0 on its way out of the printer, its tip anywhere from the extruder back to the
 /// hub (1.2 s in: about 100 mm out on every printer).
 #[test]
 fn power_lost_while_unloading_to_the_hub() {
-    check_phase(ProgressCode::UNLOADING_TO_FINDA, &[30, 1200, 2500]);
+    assert_eq!(
+        check_phase(ProgressCode::UNLOADING_TO_FINDA, &[30, 1200, 2500]),
+        NONE
+    );
 }
 
 /// `P19`: slot 0 retracting from the hub sensor to its park position.
 #[test]
 fn power_lost_while_retracting_to_the_park_position() {
-    check_phase(ProgressCode::RETRACTING_FROM_FINDA, &[30, 150]);
+    assert_eq!(check_phase(ProgressCode::RETRACTING_FROM_FINDA, &[30, 150]), NONE);
 }
 
 /// `P5`: slot 1 leaving its park position for the hub sensor.
 #[test]
 fn power_lost_while_feeding_to_the_hub() {
-    check_phase(ProgressCode::FEEDING_TO_FINDA, &[30, 150]);
+    assert_eq!(check_phase(ProgressCode::FEEDING_TO_FINDA, &[30, 150]), NONE);
 }
 
 /// `P6`: slot 1 in the fast feed through the Bowden tube.
 #[test]
 fn power_lost_while_feeding_through_the_bowden_tube() {
-    check_phase(ProgressCode::FEEDING_TO_BONDTECH, &[30, 1000, 2000]);
+    assert_eq!(
+        check_phase(ProgressCode::FEEDING_TO_BONDTECH, &[30, 1000, 2000]),
+        NONE
+    );
 }
 
-/// `P1c`: slot 1 fed slowly to the printer's sensor while the printer co-feeds.
+/// `P1c`: slot 1 fed slowly to the printer's sensor while the printer co-feeds. 1425 ms in, on
+/// Buddy 6.4 and the MK3S, the tip has just passed the printer's sensor, short of its gears: the
+/// `U0` finds the sensor on, and the unit asks for UNLOAD MANUALLY (the one case left).
 #[test]
 fn power_lost_while_feeding_to_the_printers_sensor() {
-    check_phase(ProgressCode::FEEDING_TO_FSENSOR, &[30, 300]);
+    let cannot_tell = check_phase(ProgressCode::FEEDING_TO_FSENSOR, &[30, 300, 1000, 1425]);
+    assert_eq!(
+        cannot_tell,
+        [
+            "Buddy64, FeedingToFSensor + 1425 ms",
+            "Mk3s, FeedingToFSensor + 1425 ms"
+        ]
+    );
 }
 
 /// `P7`: slot 1 pushed into the extruder's gears.
 #[test]
 fn power_lost_while_pushing_into_the_extruder_gears() {
-    check_phase(ProgressCode::FEEDING_TO_NOZZLE, &[30, 200]);
+    assert_eq!(check_phase(ProgressCode::FEEDING_TO_NOZZLE, &[30, 200]), NONE);
 }
 
 /// Every `MMU_SWEEP_MS` ms (default 10) through the phase named by `MMU_SWEEP_PHASE` (its
@@ -182,5 +222,6 @@ fn sweep() {
     let progress = ProgressCode(var("MMU_SWEEP_PHASE", 25) as u8);
     let step = var("MMU_SWEEP_MS", 10);
     let moments: Vec<u64> = (0..var("MMU_SWEEP_UNTIL", 300)).step_by(step as usize).collect();
-    check_phase(progress, &moments);
+    let cannot_tell = check_phase(progress, &moments);
+    println!("8008 with the tip at the printer's sensor: {cannot_tell:?}");
 }
