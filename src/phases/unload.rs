@@ -248,16 +248,18 @@ fn pull_out_of_printer<const N: usize>(run: &PhaseRun, at: &Sight<'_, N>) -> Res
 /// shows it: the hub sensor clears (its tip was short of the printer), or its slot sensor still
 /// sees filament after that distance (its tip was past the hub: a filament that long in front of
 /// the slot sensor runs through the hub). Proven, it is unloaded on to the hub sensor, as far as
-/// an unload from the printer's sensor; the printer's sensor must clear by then
-/// (`8004`, whose Retry makes the printer help with its extruder).
+/// an unload from the printer's sensor; the printer's sensor, off when the proof began, must not
+/// stay on for more than register `0x0c` mm (`8004`, whose Retry makes the printer help).
 fn prove_owner<const N: usize>(at: &Sight<'_, N>) -> Result<Decision, ErrorCode> {
     let past_proof_mm = at.toward_goal_mm - i32::from(at.config.preload_max_mm);
     Ok(match (at.hub, at.unit.fsensor_triggered()) {
         (false, false) => Goal::Reached.learning(Milestone::OwnerProven {
             at_centi: at.odometry,
         }),
-        // Filament at the printer's sensor before the proof: whose, only a pull against the
-        // printer's gears could tell (Prusa's recovery pulls it out of them before its `U0`).
+        // Filament at the printer's sensor before the proof: the unit's sensors read the same
+        // whichever slot's it is, and the printer may still hold it (MMU 3.0.4 pulls nothing
+        // before the printer reports its sensor off). Prusa's recovery retracts it before its
+        // `U0`; a tip left between the sensor and the gears stays (`tests/restart.rs`).
         (_, true) if past_proof_mm <= 0 => return Err(ErrorCode::FINDA_VS_EEPROM_DISREPANCY),
         (_, true) if past_proof_mm > i32::from(at.config.unload_check_mm) => {
             return Err(ErrorCode::FSENSOR_DIDNT_SWITCH_OFF);
