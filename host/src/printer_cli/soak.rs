@@ -123,5 +123,11 @@ fn soak_details(report: &SoakReport, seed: u64) -> Details {
     details.insert("unrecovered".into(), report.unrecovered.into());
     details.insert("stuck".into(), report.stuck.into());
     details.insert("panics".into(), report.panics.into());
+    let restarts = &report.restarts;
+    if restarts.struck() > 0 {
+        details.insert("power_losses_mid_change".into(), restarts.struck().into());
+        details.insert("completed_after_recovery".into(), restarts.completed().into());
+        details.insert("unload_manually".into(), restarts.unload_manually().into());
+    }
     details
 }
