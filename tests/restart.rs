@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::{Rig, t};
+use common::{FsensorReports, Rig, t};
 use mmu_firmware::persist::Snapshot;
 use mmu_firmware::unit::Lane;
 use mmu_firmware::{App, Config};
@@ -110,6 +110,38 @@ fn restart_then_unload(rig: &mut Rig<3>, lanes: [Lane; 3]) -> Response {
     });
     rig.boot();
     rig.command(Request::new(RequestCode::Unload, 0)).last
+}
+
+/// The printer's retract before its `U0` cleared its sensor, but its report (`f0`) comes only
+/// after the `U0`, at its next look: the proof waits for it with the motor free, pulls nothing
+/// while the printer's last word is "filament", then proves slot 0 and unloads it.
+#[test]
+fn the_printers_sensor_report_after_its_u0_is_waited_for_then_the_stored_slot_is_proved() {
+    let mut rig = Rig::<3>::new();
+    rig.boot();
+    rig.command(t(0));
+    rig.app = App::new(Config::default());
+    rig.app.restore(&Snapshot {
+        lanes: [Lane::Loaded, Lane::Parked, Lane::Parked],
+        ..Snapshot::default()
+    });
+    rig.fsensor = FsensorReports::Stuck(1);
+    rig.boot();
+    // The retract: the tip out of the printer, in the Bowden tube.
+    rig.model.insert_filament(0, 300.0);
+    let unload = Request::new(RequestCode::Unload, 0);
+    rig.issue(unload);
+    rig.idle(1_000);
+    let tip = rig.model.tip_mm(0).unwrap();
+    assert!(
+        (tip - 300.0).abs() < 0.5,
+        "nothing pulled before the printer's f0: {tip} mm"
+    );
+    rig.fsensor = FsensorReports::Truthful;
+    let run = rig.follow(unload, 120_000);
+    assert_eq!(run.last.param, ParamCode::Finished, "{run:?}");
+    let parked = -f32::from(rig.app.config().park_mm);
+    assert!(rig.model.tip_mm(0).unwrap() <= parked + 1.0);
 }
 
 /// The store names slot 0, but slot 1 holds the path, its tip in the Bowden tube short of the

@@ -245,6 +245,7 @@ fn soak_from_environment() {
     );
     options.printer.command_timeout_ms = number("SOAK_TIMEOUT_MS", 600_000);
     options.power_losses = number("SOAK_POWER_LOSSES", 0) != 0;
+    options.sim.slots = number("SOAK_SLOTS", 3) as usize;
     if let Ok(name) = std::env::var("SOAK_PRINTER") {
         options.personality = name.parse().expect("SOAK_PRINTER names a printer");
         options.printer.version = options.personality.version();

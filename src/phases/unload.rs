@@ -98,7 +98,7 @@ impl Unload {
     ) -> Result<Decision, ErrorCode> {
         Ok(match self {
             Unload::ToHub { await_release } => return unload_to_hub(await_release, run, at),
-            Unload::ProveOwner => return prove_owner(at),
+            Unload::ProveOwner => return prove_owner(run, at),
             Unload::ToPark => match (at.hub, run.mark_centi.or(hub_mark(at.notes, at.slot))) {
                 (true, _) => Goal::Drive.into(),
                 (false, None) => {
@@ -250,7 +250,7 @@ fn pull_out_of_printer<const N: usize>(run: &PhaseRun, at: &Sight<'_, N>) -> Res
 /// the slot sensor runs through the hub). Proven, it is unloaded on to the hub sensor, as far as
 /// an unload from the printer's sensor; the printer's sensor, off when the proof began, must not
 /// stay on for more than register `0x0c` mm (`8004`, whose Retry makes the printer help).
-fn prove_owner<const N: usize>(at: &Sight<'_, N>) -> Result<Decision, ErrorCode> {
+fn prove_owner<const N: usize>(run: &PhaseRun, at: &Sight<'_, N>) -> Result<Decision, ErrorCode> {
     let past_proof_mm = at.toward_goal_mm - i32::from(at.config.preload_max_mm);
     Ok(match (at.hub, at.unit.fsensor_triggered()) {
         (false, false) => Goal::Reached.learning(Milestone::OwnerProven {
@@ -259,7 +259,12 @@ fn prove_owner<const N: usize>(at: &Sight<'_, N>) -> Result<Decision, ErrorCode>
         // Filament at the printer's sensor before the proof: the unit's sensors read the same
         // whichever slot's it is, and the printer may still hold it (MMU 3.0.4 pulls nothing
         // before the printer reports its sensor off). Prusa's recovery retracts it before its
-        // `U0`; a tip left between the sensor and the gears stays (`tests/restart.rs`).
+        // `U0`, and its report may come just after the `U0`: wait for it, the motor free, as an
+        // unload waits ([`RELEASE_WAIT_MS`]). Still on then (a tip left between the sensor and
+        // the gears, `tests/restart.rs`): `8008`, nothing pulled.
+        (_, true) if past_proof_mm <= 0 && at.now.millis_since(run.started) < RELEASE_WAIT_MS => {
+            Goal::Yield.into()
+        }
         (_, true) if past_proof_mm <= 0 => return Err(ErrorCode::FINDA_VS_EEPROM_DISREPANCY),
         (_, true) if past_proof_mm > i32::from(at.config.unload_check_mm) => {
             return Err(ErrorCode::FSENSOR_DIDNT_SWITCH_OFF);
