@@ -205,18 +205,14 @@ fn a_stored_slot_whose_spool_ran_out_cannot_be_proved_unload_manually() {
     }
 }
 
-/// The stored slot 0 holds the path, but the printer's sensor still reads filament when the `U0`
-/// comes: its retract let go of the tip between its sensor and its gears (the MK3S's order, the
-/// rig's default). Without a pull the unit's sensors read exactly as when another slot's
-/// filament is there (`tests/safe_motion.rs`, stale lanes), and it does not pull a filament the
-/// printer may still hold (MMU 3.0.4 pulls nothing before the printer reports its sensor off):
-/// `8008`, nothing moved. (In the printer's own recovery the sensor is off by then:
-/// `sim/tests/restart_mid_tool_change.rs`.)
-#[test]
-fn filament_still_at_the_printers_sensor_cannot_be_proved_unload_manually() {
+/// Slot `owner` loaded, the printer's retract out of its gears leaving the tip between its sensor
+/// and the gears (the MK3S's order, the rig's default: the sensor still reads filament); then a
+/// restart with slot 0 stored as loaded, and the printer's `U0`, from a printer wanting 3.0.`revision`.
+fn tip_left_at_the_printers_sensor(owner: u8, revision: u8) -> (Rig<3>, Response, Vec<f32>) {
     let mut rig = Rig::<3>::new();
+    rig.wants_revision = revision;
     rig.boot();
-    rig.command(t(0));
+    rig.command(t(owner));
     rig.model.extruder_move(-120.0, 60.0);
     rig.idle(3_000);
     assert_ne!(
@@ -226,6 +222,49 @@ fn filament_still_at_the_printers_sensor_cannot_be_proved_unload_manually() {
     );
     let before: Vec<f32> = (0..3).map(|s| rig.model.tip_mm(s).unwrap()).collect();
     let answer = restart_then_unload(&mut rig, [Lane::Loaded, Lane::Parked, Lane::Parked]);
+    (rig, answer, before)
+}
+
+/// The stored slot 0 holds the path and its tip rests at the printer's sensor when the `U0` comes.
+/// The unit waits for the printer to report its sensor off, then pushes slot 0 forward a few
+/// millimetres: the tip meets the printer's gears and the Bowden tube reads compressed, which
+/// proves the belief; then it unloads slot 0 as MMU 3.0.3 does (pull at once, the printer's sensor
+/// clearing within `0x0c` mm).
+#[test]
+fn filament_at_the_printers_sensor_is_proved_by_a_push_against_its_gears() {
+    let (rig, answer, _) = tip_left_at_the_printers_sensor(0, 3);
+    assert_eq!(answer.param, ParamCode::Finished, "{answer:?}");
+    let parked = -f32::from(rig.app.config().park_mm);
+    let tip = rig.model.tip_mm(0).unwrap();
+    assert!(tip <= parked + 1.0 && tip > -30.0, "slot 0 parked: {tip} mm");
+}
+
+/// The same with slot 1 really holding the path: the push moves slot 0 freely a few millimetres
+/// forward, short of the merge, and the tube never reads compressed. That slot 0 is not the owner
+/// the sensors show; which slot is, they cannot: `8008`, nothing pulled, slot 1 not moved.
+#[test]
+fn a_wrong_stored_slot_pushed_against_nothing_is_unload_manually() {
+    let (rig, answer, before) = tip_left_at_the_printers_sensor(1, 3);
+    assert_eq!(
+        answer.param_value,
+        Some(ErrorCode::FINDA_VS_EEPROM_DISREPANCY.0),
+        "{answer:?}"
+    );
+    let slot0 = rig.model.tip_mm(0).unwrap();
+    assert!(
+        slot0 >= before[0] - 0.5 && slot0 < rig.model.config().merge_mm,
+        "slot 0 pushed from {} to {slot0} mm, short of the merge",
+        before[0]
+    );
+    assert!((rig.model.tip_mm(1).unwrap() - before[1]).abs() < 0.5);
+}
+
+/// A printer that accepted 3.0.4 gets no push and no pull while its sensor reads filament (MMU
+/// 3.0.4 pulls nothing before the printer reports it off, and a proof is followed by a pull): with
+/// the tip left at the sensor, the sensors cannot tell whose it is: `8008`, nothing moved.
+#[test]
+fn filament_at_the_sensor_of_a_printer_on_3_0_4_is_unload_manually() {
+    let (rig, answer, before) = tip_left_at_the_printers_sensor(0, 4);
     assert_eq!(
         answer.param_value,
         Some(ErrorCode::FINDA_VS_EEPROM_DISREPANCY.0),

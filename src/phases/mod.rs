@@ -120,6 +120,15 @@ pub enum Phase {
         /// The slot.
         slot: u8,
     },
+    /// `P3` (`feed.rs`), before [`Phase::ProveOwner`], while the printer's sensor reads filament:
+    /// first wait for the printer to report it off; still on, push the believed slot forward a
+    /// few millimetres, which is safe whichever slot it is. Its filament meeting the printer's
+    /// gears compresses the Bowden tube (the tension sensor) and proves the belief; a slot that
+    /// does not hold the path moves freely, short of the merge: `8008`.
+    PushProof {
+        /// The slot.
+        slot: u8,
+    },
     /// `P19` (`feed.rs`), for a parked slot or one whose tip nobody knows (after `X42` or a wiped
     /// store), when another slot's feed stalls where the slot paths join: pull back the park
     /// distance (less if the slot sensor clears: the tip is at the drive gear), so a tip resting
@@ -165,6 +174,7 @@ impl Phase {
             | Phase::UnloadToHub { slot, .. }
             | Phase::ProveOwner { slot }
             | Phase::ClearMerge { slot }
+            | Phase::PushProof { slot }
             | Phase::EjectFromSlot { slot } => Some(slot as usize),
             Phase::CheckSensors | Phase::AwaitContinue => None,
         }
@@ -178,6 +188,7 @@ impl Phase {
         match self {
             Phase::FeedToHub { max_mm, .. } => Family::Feed(Feed::ToHub { max_mm }),
             Phase::ClearMerge { .. } => Family::Feed(Feed::ClearMerge),
+            Phase::PushProof { .. } => Family::Feed(Feed::PushProof),
             Phase::UnloadToHub { await_release, .. } => Family::Unload(Unload::ToHub { await_release }),
             Phase::ProveOwner { .. } => Family::Unload(Unload::ProveOwner),
             Phase::RetractToPark { .. } => Family::Unload(Unload::ToPark),
