@@ -1,7 +1,9 @@
-//! After a restart the unit either proves which slot holds the hub path before it moves it, or
-//! refuses (`8008`) and moves nothing: whatever the stored lanes say (right, stale, wiped or
-//! impossible) and wherever the filaments really are. Every case: stored lanes x the slot that
-//! really holds the path, then the printer's next tool change.
+//! After a restart the unit either proves which slot holds the hub path before it moves it far,
+//! by a motion safe whichever slot it is (a pull the slot sensor stops, the filament still in its
+//! drive gear; a push short of the merge), or refuses (`8008`): whatever the stored lanes say
+//! (right, stale, wiped or impossible) and wherever the filaments really are. Every case: stored
+//! lanes x the slot that really holds the path, then the printer's next tool change; then the
+//! cases of a restart mid tool change that are proved, and those the sensors cannot tell.
 
 mod common;
 

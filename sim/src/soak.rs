@@ -1,7 +1,7 @@
 //! Soak runs: many tool changes across all slots with random faults injected and later cleared,
 //! recovered as the printer and its user would, and the figures that come out.
 //!
-//! [`run`] plays a printer ([`Printer`] over [`SimLink`], the firmware of
+//! [`run`] plays a printer ([`Printer`] over [`SimLink`](crate::SimLink), the firmware of
 //! [`SoakOptions::personality`] in its protocol and its mechanics) against a fresh [`Sim`] and asks for
 //! tool changes, each to a random slot other than the loaded one. With random faults, some changes
 //! ([`FAULT_PROBABILITY`]) get a fault from a mix that matters to the unit (a jam of the target
@@ -32,18 +32,17 @@
 //! [`crate::timing`].
 
 mod restarts;
+mod striking;
 
 use std::fmt;
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::time::Instant;
 
-use mmu_firmware::runner::Status;
 use mmu_model::{Fault, Rail, Rng, SensorId};
-use mmu_protocol::{ButtonCode, ErrorCode, ProgressCode, Request, RequestCode, ResultCode};
+use mmu_protocol::{ButtonCode, ErrorCode, Request, RequestCode, ResultCode};
 
 use crate::fault::SimFault;
 use crate::flash::FlashWear;
-use crate::link::SimLink;
 use crate::personality::Personality;
 use crate::printer::{
     Decision, Link, Operator, Outcome, Printer, PrinterError, PrinterEvent, PrinterOptions,
@@ -52,6 +51,7 @@ use crate::sim::{CommandRecord, PRINTER_UNLOAD_MM, PRINTER_UNLOAD_MM_S, Sim, Sim
 use crate::timing::tool_change_minimum;
 
 pub use restarts::{PhaseRestarts, RestartTally};
+use striking::StrikingLink;
 
 /// With random faults, the chance that a tool change gets a fault.
 pub const FAULT_PROBABILITY: f64 = 0.3;
@@ -403,93 +403,6 @@ fn draw_fault(rng: &mut Rng, target: usize) -> SimFault {
         _ => SimFault::UartDrop {
             probability: draw(rng, 0.001, 0.01, 10_000.0),
         },
-    }
-}
-
-/// A fault that has struck.
-#[derive(Debug, Clone, Copy)]
-struct Strike {
-    fault: SimFault,
-    /// When, ms of virtual time.
-    at_ms: u64,
-    /// The phase of a tool change the unit was running then, by its progress.
-    in_tool_change: Option<ProgressCode>,
-}
-
-/// The in-process link with a fault that strikes at an exact virtual millisecond: while the
-/// printer waits for the unit, the simulator is stepped one millisecond at a time (as
-/// [`SimLink`] does) and an armed fault is injected as soon as its moment comes.
-struct StrikingLink {
-    link: SimLink,
-    /// The fault waiting to strike and the virtual time it strikes at, ms.
-    armed: Option<(SimFault, u64)>,
-    /// The fault that struck during this change.
-    struck: Option<Strike>,
-}
-
-impl StrikingLink {
-    fn new(sim: Sim) -> Self {
-        StrikingLink {
-            link: SimLink::new(sim),
-            armed: None,
-            struck: None,
-        }
-    }
-
-    fn sim(&self) -> &Sim {
-        self.link.sim()
-    }
-
-    fn sim_mut(&mut self) -> &mut Sim {
-        self.link.sim_mut()
-    }
-
-    /// Inject the armed fault if its moment has come.
-    fn strike_if_due(&mut self) {
-        let now = self.link.now_ms();
-        if let Some((fault, at_ms)) = self.armed
-            && now >= at_ms
-        {
-            self.armed = None;
-            let in_tool_change = match self.link.sim().unit_command() {
-                ((RequestCode::Tool, _), Status::Running(progress)) => Some(progress),
-                _ => None,
-            };
-            if self.link.sim_mut().inject(fault) {
-                self.struck = Some(Strike {
-                    fault,
-                    at_ms: now,
-                    in_tool_change,
-                });
-            }
-        }
-    }
-}
-
-impl Link for StrikingLink {
-    fn send(&mut self, bytes: &[u8]) -> std::io::Result<()> {
-        self.link.send(bytes)
-    }
-
-    fn receive(&mut self, max_ms: u64, into: &mut Vec<u8>) -> std::io::Result<()> {
-        let before = into.len();
-        for _ in 0..max_ms {
-            self.strike_if_due();
-            self.link.receive(1, into)?;
-            if into.len() > before {
-                break;
-            }
-        }
-        self.strike_if_due();
-        Ok(())
-    }
-
-    fn now_ms(&self) -> u64 {
-        self.link.now_ms()
-    }
-
-    fn fsensor(&mut self) -> u8 {
-        self.link.fsensor()
     }
 }
 
