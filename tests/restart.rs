@@ -259,6 +259,22 @@ fn a_wrong_stored_slot_pushed_against_nothing_is_unload_manually() {
         before[0]
     );
     assert!((rig.model.tip_mm(1).unwrap() - before[1]).abs() < 0.5);
+    // Retry (the printer presses it three times by itself) pushes no further.
+    let mut rig = rig;
+    let unload = Request::new(RequestCode::Unload, 0);
+    for _ in 0..3 {
+        rig.send(Request::new(RequestCode::Button, 1));
+        let run = rig.follow(unload, 60_000);
+        assert_eq!(
+            run.last.param_value,
+            Some(ErrorCode::FINDA_VS_EEPROM_DISREPANCY.0)
+        );
+    }
+    let after = rig.model.tip_mm(0).unwrap();
+    assert!(
+        (after - slot0).abs() < 0.5,
+        "Retry pushed slot 0 on from {slot0} to {after} mm"
+    );
 }
 
 /// A printer that accepted 3.0.4 gets no push and no pull while its sensor reads filament (MMU

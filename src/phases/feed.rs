@@ -18,7 +18,7 @@ const SLOT_PROBE_MM: i32 = 10;
 /// park position, 15 mm before the hub sensor, is 7 mm from the merge on the reference unit), so a
 /// slot that does not hold the path stays in its own path; more than the printer's sensor's
 /// distance to its gears (4 mm on an MK3S), so a tip resting between them meets the gears.
-const PUSH_PROOF_MM: u16 = 6;
+const PUSH_PROOF_MM: u16 = 5;
 /// How long the push proof waits for the printer to report its sensor off first, ms: an unload's
 /// wait (MMU 3.0.4 `unload_to_finda.cpp`, 4000 ms).
 const PUSH_PROOF_WAIT_MS: u64 = 4000;
@@ -151,10 +151,14 @@ fn push_proof<const N: usize>(run: &mut PhaseRun, at: &Sight<'_, N>) -> Result<D
         return Err(ErrorCode::FINDA_VS_EEPROM_DISREPANCY);
     }
     if waiting {
-        // The push counts from here, not from where the printer's retract left the odometry.
+        // The push counts from here, not from where the printer's retract left the odometry; a
+        // Retry does not start it again (each would push a slot that does not hold the path
+        // further, into the merge).
         run.mark_centi = Some(at.odometry);
-        run.goal_from_centi = at.odometry;
-        return Ok(Goal::Drive.into());
+        if !run.retried {
+            run.goal_from_centi = at.odometry;
+            return Ok(Goal::Drive.into());
+        }
     }
     let Some(tension) = at.unit.hub.tension.reading() else {
         return Err(ErrorCode::FINDA_VS_EEPROM_DISREPANCY);
