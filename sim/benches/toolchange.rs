@@ -24,6 +24,7 @@ fn main() -> ExitCode {
         changes,
         random_faults: false,
         spool_ends: false,
+        power_losses: false,
         seed: 1,
         sim: SimOptions::default(),
         printer: PrinterOptions::default(),

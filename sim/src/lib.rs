@@ -34,4 +34,4 @@ pub use personality::Personality;
 pub use printer::{
     Decision, Link, LinkFault, Operator, Outcome, Printer, PrinterError, PrinterEvent, PrinterOptions,
 };
-pub use sim::{CommandRecord, Sim, SimOptions};
+pub use sim::{CommandRecord, PhaseCut, Sim, SimOptions};

@@ -99,6 +99,20 @@ pub struct CommandRecord {
     pub had_error: bool,
 }
 
+/// A power cut in a phase of a command: `after_ms` after the unit first reports `progress`
+/// while it runs a command with `code`, for `off_ms` ([`Sim::cut_power_during`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct PhaseCut {
+    /// The command's code (`T` for a tool change).
+    pub code: RequestCode,
+    /// The phase, by the progress code the unit reports in it.
+    pub progress: mmu_protocol::ProgressCode,
+    /// How long into the phase, ms.
+    pub after_ms: u64,
+    /// How long the unit stays unpowered, ms.
+    pub off_ms: u32,
+}
+
 /// The simulated unit. See the [module documentation](self).
 pub struct Sim {
     options: SimOptions,
@@ -120,6 +134,9 @@ pub struct Sim {
     /// A power cut armed for the first step that writes the flash: its off time, and the bytes
     /// written before it was armed.
     cut_at_write: Option<(u32, u64)>,
+    /// A power cut armed for a phase of a command ([`Sim::cut_power_during`]), and when the unit
+    /// was first seen in it.
+    cut_in_phase: Option<(PhaseCut, Option<u64>)>,
     /// Each slot's motor command as last reported.
     last_motors: Vec<MotorCommand>,
     last_command: ((RequestCode, u8), Status),
@@ -175,6 +192,7 @@ impl Sim {
             running: None,
             finished: Vec::new(),
             cut_at_write: None,
+            cut_in_phase: None,
         }
     }
 
@@ -244,6 +262,17 @@ impl Sim {
     pub fn cut_power_at_next_flash_write(&mut self, off_ms: u32) {
         let written = self.logic.flash_wear().bytes_written;
         self.cut_at_write = Some((off_ms, written));
+    }
+
+    /// Cut the power as [`PhaseCut`] says: `after_ms` into the first time the unit reports
+    /// `progress` while it runs a command with `code`.
+    pub fn cut_power_during(&mut self, cut: PhaseCut) {
+        self.cut_in_phase = Some((cut, None));
+    }
+
+    /// A power cut armed by [`Sim::cut_power_during`] has not happened yet.
+    pub fn phase_cut_pending(&self) -> bool {
+        self.cut_in_phase.is_some()
     }
 
     /// Why the unit can no longer be stepped (a firmware bench that stopped), if it cannot.
@@ -391,8 +420,29 @@ impl Sim {
             self.cut_at_write = None;
             self.inject(SimFault::PowerLoss { off_ms });
         }
+        self.cut_in_phase_due();
         self.now_ms += 1;
         self.watch();
+    }
+
+    /// The power cut armed by [`Sim::cut_power_during`], when its time has come.
+    fn cut_in_phase_due(&mut self) {
+        let Some((cut, seen)) = self.cut_in_phase else {
+            return;
+        };
+        let ((code, _), status) = self.logic.command();
+        let seen = match seen {
+            Some(seen) => seen,
+            None if self.is_powered() && code == cut.code && status == Status::Running(cut.progress) => {
+                self.cut_in_phase = Some((cut, Some(self.now_ms)));
+                self.now_ms
+            }
+            None => return,
+        };
+        if self.now_ms >= seen + cut.after_ms {
+            self.cut_in_phase = None;
+            self.inject(SimFault::PowerLoss { off_ms: cut.off_ms });
+        }
     }
 
     fn event(&mut self, what: EventKind) {

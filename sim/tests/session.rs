@@ -307,7 +307,7 @@ fn retry_after_a_bowden_jam_feeds_on_from_where_the_tip_stopped() {
 }
 
 #[test]
-fn a_power_loss_mid_tool_change_is_resumed_once_the_user_unloaded_by_hand() {
+fn a_power_loss_mid_tool_change_is_carried_on_from_the_stored_slot() {
     let (mut printer, mut op) = connected();
     assert_eq!(run(&mut printer, &mut op, RequestCode::Tool, 0), OK);
     let now = printer.link().sim().now_ms();
@@ -329,15 +329,15 @@ fn a_power_loss_mid_tool_change_is_resumed_once_the_user_unloaded_by_hand() {
         "{:?}",
         op.events
     );
-    // Slot 1's tip stopped deep in the Bowden tube: the stored lane says it holds the path, but
-    // pulling it back the distance that is safe for any slot does not clear the hub sensor, so
-    // the unit asks for a manual unload instead of pulling further on a belief.
-    let unload = Request::new(RequestCode::Unload, 0);
+    // Slot 1's tip stopped deep in the Bowden tube and the stored lane says it holds the path:
+    // the printer's `U0` pulls it back, its slot sensor still seeing filament after the longest
+    // slot path proves the belief (a slot that did not hold the path would have cleared it), and
+    // the unload and the `T1` again carry on without UNLOAD MANUALLY.
+    // (`sim/tests/restart_mid_tool_change.rs`: every phase.)
     assert!(
-        op.events.contains(&PrinterEvent::Error(
-            unload,
-            ErrorCode::FINDA_VS_EEPROM_DISREPANCY
-        )),
+        !op.events
+            .iter()
+            .any(|e| matches!(e, PrinterEvent::Error(_, ErrorCode::FINDA_VS_EEPROM_DISREPANCY))),
         "{:?}",
         op.events
     );

@@ -4,7 +4,7 @@
 //! `soak_from_environment` is a developer's tool, ignored by default: in release,
 //! `SOAK_CHANGES=300 SOAK_SEED=7 cargo test --release -p mmu-sim --test soak -- --ignored --nocapture`
 //! runs a random-fault soak and prints its report and notes (`SOAK_PRINTER=buddy-6.5` plays
-//! another printer).
+//! another printer; `SOAK_POWER_LOSSES=1 SOAK_FAULTS=0` cuts the power once in every change).
 
 use mmu_sim::soak::{self, SoakOptions, SoakReport};
 use mmu_sim::{Personality, PrinterOptions, SimOptions};
@@ -15,6 +15,7 @@ fn options(changes: u32, random_faults: bool, seed: u64) -> SoakOptions {
         changes,
         random_faults,
         spool_ends: false,
+        power_losses: false,
         seed,
         sim: SimOptions::default(),
         printer: PrinterOptions {
@@ -201,6 +202,34 @@ fn buddy_6_5_soaks_clean_with_1_3_and_5_slots() {
     }
 }
 
+/// A power loss at a random moment of every change, on every printer family: after the printer's
+/// recovery (`U0`, then the same `T`) each change completes, and none asks for UNLOAD MANUALLY
+/// (`8008`): the unit proves its stored slot and carries on. The figures, by phase, in the report.
+#[test]
+fn a_power_loss_in_every_tool_change_ends_with_the_change_completed() {
+    for personality in Personality::ALL {
+        let mut options = options(16, false, 5);
+        options.power_losses = true;
+        options.personality = personality;
+        options.printer.version = personality.version();
+        let report = soak::run(&options, &mut |_| {});
+        let restarts = &report.restarts;
+        assert!(report.passed(), "{personality}:\n{report}\n{:#?}", report.notes);
+        assert!(restarts.struck() >= 8, "{personality}:\n{report}");
+        assert_eq!(
+            restarts.unload_manually(),
+            0,
+            "{personality}:\n{report}\n{:#?}",
+            report.fault_log
+        );
+        assert_eq!(
+            restarts.completed(),
+            restarts.struck(),
+            "{personality}:\n{report}"
+        );
+    }
+}
+
 #[test]
 #[ignore = "a developer's tool: long in debug builds, run it in release"]
 fn soak_from_environment() {
@@ -218,6 +247,8 @@ fn soak_from_environment() {
     options.printer.command_timeout_ms = number("SOAK_TIMEOUT_MS", 600_000);
     options.spool_ends = number("SOAK_SPOOL_ENDS", 0) != 0;
     options.printer.spool_join = number("SOAK_SPOOL_JOIN", 0) != 0;
+    options.power_losses = number("SOAK_POWER_LOSSES", 0) != 0;
+    options.sim.slots = number("SOAK_SLOTS", 3) as usize;
     if let Ok(name) = std::env::var("SOAK_PRINTER") {
         options.personality = name.parse().expect("SOAK_PRINTER names a printer");
         options.printer.version = options.personality.version();

@@ -281,6 +281,7 @@ pub(crate) fn clear_hub<const N: usize>(
             extend(
                 plan,
                 &[
+                    Phase::PushProof { slot: active as u8 },
                     Phase::ProveOwner { slot: active as u8 },
                     Phase::RetractToPark { slot: active as u8 },
                 ],

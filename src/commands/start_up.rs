@@ -2,8 +2,9 @@
 //! sensors are healthy and that the stored lanes agree with the hub sensor. The printer sees it
 //! as the command `X0`.
 //!
-//! `P1a`. Filament in the hub that no slot owns, or a slot recorded past the park position whose
-//! tip the hub sensor does not see, is `8008` (UNLOAD MANUALLY) and no motor moves; a sensor stuck
+//! `P1a`. Filament in the hub that no slot owns, or a slot recorded as loaded whose tip the hub
+//! sensor does not see, is `8008` (UNLOAD MANUALLY) and no motor moves (a slot recorded between
+//! its park position and the hub, a restart mid tool change, keeps the path); a sensor stuck
 //! at a rail is `800a` (hub) or `804b` (slot).
 
 use mmu_protocol::ErrorCode;

@@ -86,9 +86,12 @@ fn check_sensors<const N: usize>(
     let active = lanes.iter().position(|lane| lane.owns_hub());
     match (hub, active.and_then(|slot| lanes.get_mut(slot))) {
         (true, None) => return Outcome::Fail(ErrorCode::FINDA_VS_EEPROM_DISREPANCY),
-        // The user has looked: the slot's tip is somewhere before the hub sensor. It keeps the
-        // path until the next command parks it from there.
-        (false, Some(lane)) if notes.trust_sensors => *lane = Lane::InHub,
+        // The user has looked, or the slot was on its way between its park position and the hub
+        // (a restart while it was fed or retracted): its tip is somewhere before the hub sensor.
+        // It keeps the path until the next command parks it from there. (MMU 3.0.4's start-up
+        // drops a record FINDA does not confirm: `start_up.cpp` `CheckFINDAvsEEPROM`.) A slot
+        // recorded as loaded that the hub sensor does not see is `8008`: someone has to look.
+        (false, Some(lane)) if notes.trust_sensors || *lane == Lane::InHub => *lane = Lane::InHub,
         (false, Some(_)) => return Outcome::Fail(ErrorCode::FINDA_VS_EEPROM_DISREPANCY),
         _ => {}
     }

@@ -1,17 +1,27 @@
-//! The feed from a slot to the hub (`P5`), and the clearance of the merge (`P19`) that a feed
+//! The feed from a slot to the hub (`P5`), the clearance of the merge (`P19`) that a feed
 //! stalled where the slot paths join calls for: the unit's own part of the path, before the
-//! printer has any say (MMU 3.0.3's `feed_to_finda.cpp`).
+//! printer has any say (MMU 3.0.3's `feed_to_finda.cpp`); and the short push that proves a
+//! stored belief while the printer's sensor reads filament (`P3`).
 
 use mmu_hal_port::Direction;
 use mmu_protocol::{ErrorCode, ProgressCode};
 
+use super::load::{MET_CONFIRM_MS, compressed_for};
 use super::{Bounds, Decision, Goal, Milestone, Outcome, PhaseRun, Sight, SlotSet};
-use crate::config::Config;
+use crate::config::{Config, Contract};
 use crate::unit::{Lane, Unit};
 
 /// How far a slot whose tip nobody knows is fed to find out whether the slot sensor sees it, mm
 /// (the sensor sits just after the drive gear).
 const SLOT_PROBE_MM: i32 = 10;
+/// How far [`Feed::PushProof`] pushes, mm: less than a parked tip's distance to the merge (the
+/// park position, 15 mm before the hub sensor, is 7 mm from the merge on the reference unit), so a
+/// slot that does not hold the path stays in its own path; more than the printer's sensor's
+/// distance to its gears (4 mm on an MK3S), so a tip resting between them meets the gears.
+const PUSH_PROOF_MM: u16 = 5;
+/// How long the push proof waits for the printer to report its sensor off first, ms: an unload's
+/// wait (MMU 3.0.4 `unload_to_finda.cpp`, 4000 ms).
+const PUSH_PROOF_WAIT_MS: u64 = 4000;
 
 /// The feed phases.
 #[derive(Debug, Clone, Copy)]
@@ -20,6 +30,8 @@ pub(super) enum Feed {
     ToHub { max_mm: u16 },
     /// [`super::Phase::ClearMerge`].
     ClearMerge,
+    /// [`super::Phase::PushProof`].
+    PushProof,
 }
 
 impl Feed {
@@ -27,6 +39,7 @@ impl Feed {
         match self {
             Feed::ToHub { .. } => ProgressCode::FEEDING_TO_FINDA,
             Feed::ClearMerge => ProgressCode::RETRACTING_FROM_FINDA,
+            Feed::PushProof => ProgressCode::UNLOADING_TO_FINDA,
         }
     }
 
@@ -44,6 +57,13 @@ impl Feed {
                 config.park_mm,
                 ErrorCode::MOVE_PULLEY_FAILED,
             ),
+            // Waits first: the bound counts only the push.
+            Feed::PushProof => Bounds::new(
+                Direction::Forward,
+                config.slow_speed,
+                PUSH_PROOF_MM,
+                ErrorCode::FINDA_VS_EEPROM_DISREPANCY,
+            ),
         }
     }
 
@@ -54,10 +74,11 @@ impl Feed {
 
     pub(super) fn goal<const N: usize>(
         self,
-        _run: &mut PhaseRun,
+        run: &mut PhaseRun,
         at: &Sight<'_, N>,
     ) -> Result<Decision, ErrorCode> {
         Ok(match self {
+            Feed::PushProof => return push_proof(run, at),
             Feed::ToHub { .. } if at.hub => Goal::Reached.into(),
             Feed::ToHub { .. }
                 if !at.slot_sees
@@ -79,13 +100,17 @@ impl Feed {
     pub(super) const fn arrival(self) -> Option<Lane> {
         match self {
             Feed::ToHub { .. } => Some(Lane::InHub),
-            Feed::ClearMerge => None,
+            Feed::ClearMerge | Feed::PushProof => None,
         }
     }
 
     /// A feed to the hub that stalls may have met another slot's tip where the slot paths join.
     pub(super) fn stopped<const N: usize>(self, error: ErrorCode, unit: &Unit<N>, slot: usize) -> Outcome {
         match (self, error) {
+            // Blocked at once: not by the printer's gears, which compress the tube first.
+            (Feed::PushProof, ErrorCode::STALLED_PULLEY) => {
+                Outcome::Fail(ErrorCode::FINDA_VS_EEPROM_DISREPANCY)
+            }
             (Feed::ToHub { .. }, ErrorCode::STALLED_PULLEY) => match merge_suspects(unit, slot) {
                 0 => Outcome::Fail(ErrorCode::STALLED_PULLEY),
                 suspects => Outcome::Blocked(suspects),
@@ -105,4 +130,44 @@ fn merge_suspects<const N: usize>(unit: &Unit<N>, slot: usize) -> SlotSet {
         .filter(|&other| !unit.clear_of_merge.get(other).copied().unwrap_or(true))
         .filter(|&other| unit.feeders.get(other).and_then(|f| f.filament.present()) != Some(false))
         .fold(0, |set, other| set | (1 << other))
+}
+
+/// [`Feed::PushProof`]: nothing to do with the printer's sensor off (the pull back proves the
+/// belief, [`super::Phase::ProveOwner`]). With it on, wait (the motor free) for the printer to
+/// report it off: its retract before `U0` may be on the way. Still on, a printer that accepted
+/// 3.0.3 or older (which pull at once) gets the push: the tube reading compressed proves that the
+/// slot's filament runs to the printer's gears; pushed [`PUSH_PROOF_MM`] without that, `8008`. A
+/// printer that accepted 3.0.4 gets `8008` at once: MMU 3.0.4 pulls nothing before the printer's
+/// sensor is off, and the pull that would follow a proof is one.
+fn push_proof<const N: usize>(run: &mut PhaseRun, at: &Sight<'_, N>) -> Result<Decision, ErrorCode> {
+    if !at.unit.fsensor_triggered() || at.unit.proven_owner == Some(at.slot) {
+        return Ok(Goal::Reached.into());
+    }
+    let waiting = run.mark_centi.is_none();
+    if waiting && at.now.millis_since(run.started) < PUSH_PROOF_WAIT_MS {
+        return Ok(Goal::Yield.into());
+    }
+    if at.config.version.contract() == Contract::AwaitRelease {
+        return Err(ErrorCode::FINDA_VS_EEPROM_DISREPANCY);
+    }
+    if waiting {
+        // The push counts from here, not from where the printer's retract left the odometry; a
+        // Retry does not start it again (each would push a slot that does not hold the path
+        // further, into the merge).
+        run.mark_centi = Some(at.odometry);
+        if !run.retried {
+            run.goal_from_centi = at.odometry;
+            return Ok(Goal::Drive.into());
+        }
+    }
+    let Some(tension) = at.unit.hub.tension.reading() else {
+        return Err(ErrorCode::FINDA_VS_EEPROM_DISREPANCY);
+    };
+    if compressed_for(run, tension, at.now, at.config) >= MET_CONFIRM_MS {
+        return Ok(Goal::Reached.learning(Milestone::OwnerInPath));
+    }
+    if at.toward_goal_mm >= i32::from(PUSH_PROOF_MM) {
+        return Err(ErrorCode::FINDA_VS_EEPROM_DISREPANCY);
+    }
+    Ok(Goal::Drive.into())
 }

@@ -14,7 +14,7 @@ use crate::unit::{Lane, SensorId};
 /// How long the Bowden tube must read compressed before the push into the extruder stops, ms:
 /// the tip has met something (the gears, turning or idle, or a jam), and the push must stop
 /// while the printer's own push still runs (one noisy reading is not enough).
-const MET_CONFIRM_MS: u64 = 10;
+pub(super) const MET_CONFIRM_MS: u64 = 10;
 /// How long the Bowden tube must read taut, pulled from the extruder's side against the braked
 /// slot motor, before the gears count as holding the tip, ms. A tube only ever goes taut
 /// that way when something pulls the filament on: a jam cannot, a stopped tube cannot.
@@ -191,7 +191,7 @@ fn taut_for(run: &mut PhaseRun, tension: u16, now: Instant, config: &Config) -> 
 /// the push stops as soon as the tip meets something, so the printer's push has the most left to
 /// pull (stopping early is the safe side: the tip may fall short, then no grip shows and Retry
 /// pushes again).
-fn compressed_for(run: &mut PhaseRun, tension: u16, now: Instant, config: &Config) -> u64 {
+pub(super) fn compressed_for(run: &mut PhaseRun, tension: u16, now: Instant, config: &Config) -> u64 {
     let compressed =
         u32::from(tension) + u32::from(config.tension_deadband / 2) < u32::from(config.tension_neutral);
     run.compressed_since = if compressed {

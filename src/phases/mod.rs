@@ -112,10 +112,20 @@ pub enum Phase {
         await_release: bool,
     },
     /// `P3` (`unload.rs`), for a slot only believed to hold the hub path (a stored lane): pull
-    /// back at most the hub search distance, which leaves a parked filament in its drive gear
-    /// whichever slot it is, until the hub sensor clears and proves the belief. Still seeing
-    /// filament there is `8008`: someone has to look.
+    /// back, stopped at the slot sensor (a filament that does not hold the path stays in its drive
+    /// gear: `8008`, someone has to look), until the hub sensor clears or the slot sensor still
+    /// sees filament after the longest slot path (either proves the belief); then on as an
+    /// unload to the hub sensor.
     ProveOwner {
+        /// The slot.
+        slot: u8,
+    },
+    /// `P3` (`feed.rs`), before [`Phase::ProveOwner`], while the printer's sensor reads filament:
+    /// first wait for the printer to report it off; still on, push the believed slot forward a
+    /// few millimetres, which is safe whichever slot it is. Its filament meeting the printer's
+    /// gears compresses the Bowden tube (the tension sensor) and proves the belief; a slot that
+    /// does not hold the path moves freely, short of the merge: `8008`.
+    PushProof {
         /// The slot.
         slot: u8,
     },
@@ -164,6 +174,7 @@ impl Phase {
             | Phase::UnloadToHub { slot, .. }
             | Phase::ProveOwner { slot }
             | Phase::ClearMerge { slot }
+            | Phase::PushProof { slot }
             | Phase::EjectFromSlot { slot } => Some(slot as usize),
             Phase::CheckSensors | Phase::AwaitContinue => None,
         }
@@ -177,6 +188,7 @@ impl Phase {
         match self {
             Phase::FeedToHub { max_mm, .. } => Family::Feed(Feed::ToHub { max_mm }),
             Phase::ClearMerge { .. } => Family::Feed(Feed::ClearMerge),
+            Phase::PushProof { .. } => Family::Feed(Feed::PushProof),
             Phase::UnloadToHub { await_release, .. } => Family::Unload(Unload::ToHub { await_release }),
             Phase::ProveOwner { .. } => Family::Unload(Unload::ProveOwner),
             Phase::RetractToPark { .. } => Family::Unload(Unload::ToPark),
@@ -242,6 +254,15 @@ impl Phase {
         match self.family() {
             Family::Unload(phase) => phase.stopped_at_gear(hub),
             Family::Feed(_) | Family::Load(_) | Family::Check(_) => None,
+        }
+    }
+
+    /// The error of a pull back stopped at the slot sensor with the hub still seeing filament:
+    /// for a belief being proven, another slot holds the path (`8008`); else the phase's own.
+    const fn at_gear_error(self, error: ErrorCode) -> ErrorCode {
+        match self {
+            Phase::ProveOwner { .. } => ErrorCode::FINDA_VS_EEPROM_DISREPANCY,
+            _ => error,
         }
     }
 
@@ -380,6 +401,9 @@ enum Milestone {
     HubCleared { at_centi: i32, unsure: bool },
     /// The hub cleared at this odometry pulling this slot: its claim on the hub path is proven.
     OwnerProven { at_centi: i32 },
+    /// Pulled back further than a tip before the hub can be from its slot sensor, which still
+    /// sees filament: this slot's filament runs through the hub, its claim on the path is proven.
+    OwnerInPath,
     /// Pulled back out of the merge.
     MergeCleared,
     /// The slot's filament is now here.
@@ -408,6 +432,7 @@ fn learn<const N: usize>(milestone: Milestone, slot: usize, notes: &mut Notes, u
             notes.hub_cleared = Some((slot, at_centi));
             unit.proven_owner = Some(slot);
         }
+        Milestone::OwnerInPath => unit.proven_owner = Some(slot),
         Milestone::MergeCleared => {
             if let Some(clear) = unit.clear_of_merge.get_mut(slot) {
                 *clear = true;
@@ -597,7 +622,7 @@ fn step_motion<const N: usize>(
             }
             // Still filament in the hub with this tip at its gear: the hub sensor is wrong, or
             // another filament is there. Not parked.
-            return Outcome::Fail(bounds.error);
+            return Outcome::Fail(phase.at_gear_error(bounds.error));
         }
         Goal::Drive if !(phase.paced_by_printer() && notes.printer.in_doubt(now)) => Motion::Run {
             direction: bounds.direction,

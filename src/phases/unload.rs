@@ -64,10 +64,14 @@ impl Unload {
                     ErrorCode::FINDA_DIDNT_SWITCH_OFF,
                 )
             },
+            // Past the proof, an unload: as far as one from the printer's sensor.
             Unload::ProveOwner => reverse(
                 config.load_speed,
-                config.hub_search_mm,
-                ErrorCode::FINDA_VS_EEPROM_DISREPANCY,
+                config
+                    .bowden_mm
+                    .saturating_add(config.fsensor_search_mm)
+                    .saturating_add(config.hub_search_mm),
+                ErrorCode::FINDA_DIDNT_SWITCH_OFF,
             ),
             Unload::ToPark => reverse(
                 config.load_speed,
@@ -92,17 +96,9 @@ impl Unload {
         run: &mut PhaseRun,
         at: &Sight<'_, N>,
     ) -> Result<Decision, ErrorCode> {
-        let fsensor = at.unit.fsensor_triggered();
         Ok(match self {
             Unload::ToHub { await_release } => return unload_to_hub(await_release, run, at),
-            Unload::ProveOwner if !at.hub && !fsensor => Goal::Reached.learning(Milestone::OwnerProven {
-                at_centi: at.odometry,
-            }),
-            Unload::ProveOwner if fsensor || at.toward_goal_mm >= i32::from(at.bounds.max_mm) => {
-                // Filament in the printer, or pulled as far as is safe (Retry adds nothing).
-                return Err(ErrorCode::FINDA_VS_EEPROM_DISREPANCY);
-            }
-            Unload::ProveOwner => Goal::Drive.into(),
+            Unload::ProveOwner => return prove_owner(run, at),
             Unload::ToPark => match (at.hub, run.mark_centi.or(hub_mark(at.notes, at.slot))) {
                 (true, _) => Goal::Drive.into(),
                 (false, None) => {
@@ -184,6 +180,10 @@ fn unload_to_hub<const N: usize>(
             at_centi: at.odometry,
             unsure: false,
         }),
+        // On its way back, no longer loaded: recorded (and persisted) while the tip is still far
+        // past the hub, so a restart that finds the hub clear knows the slot was between the hub
+        // and its park position (the start-up check), not loaded with its tip unseen.
+        goal if at.unit.lane(at.slot) == Lane::Loaded => goal.learning(Milestone::Arrived(Lane::InHub)),
         goal => goal.into(),
     })
 }
@@ -236,6 +236,54 @@ fn pull_out_of_printer<const N: usize>(run: &PhaseRun, at: &Sight<'_, N>) -> Res
             Goal::DriveAt(config.slow_speed)
         }
         _ => Goal::Drive,
+    })
+}
+
+/// `P3` for a slot only believed to hold the hub path (a stored lane, after a restart): pull it
+/// back, which is safe whichever slot really holds the path. A slot that does not hold it has its
+/// tip before the merge, at most [`Config::preload_max_mm`] (the longest feed from the slot
+/// sensor to the hub) ahead of its slot sensor: pulling it back clears its slot sensor within that
+/// distance, and the guard at the slot sensor stops it there, its filament still in the drive
+/// gear (`8008`: the stored belief was wrong, someone has to look). The slot that holds the path
+/// shows it: the hub sensor clears (its tip was short of the printer), or its slot sensor still
+/// sees filament after that distance (its tip was past the hub: a filament that long in front of
+/// the slot sensor runs through the hub). Proven, it is unloaded on to the hub sensor, as far as
+/// an unload from the printer's sensor; the printer's sensor, off when the proof began, must not
+/// stay on for more than register `0x0c` mm (`8004`, whose Retry makes the printer help).
+fn prove_owner<const N: usize>(run: &PhaseRun, at: &Sight<'_, N>) -> Result<Decision, ErrorCode> {
+    let past_proof_mm = at.toward_goal_mm - i32::from(at.config.preload_max_mm);
+    // Proven before this pull began (the push proof), not by it.
+    let proven_before = at.unit.proven_owner == Some(at.slot) && past_proof_mm <= 0;
+    Ok(match (at.hub, at.unit.fsensor_triggered()) {
+        (false, false) => Goal::Reached.learning(Milestone::OwnerProven {
+            at_centi: at.odometry,
+        }),
+        // Proven by the push ([`super::Phase::PushProof`]) with the printer's sensor on: an
+        // unload, whose sensor must clear within the check distance (MMU 3.0.3).
+        (_, true) if proven_before && at.toward_goal_mm > i32::from(at.config.unload_check_mm) => {
+            return Err(ErrorCode::FSENSOR_DIDNT_SWITCH_OFF);
+        }
+        // Filament at the printer's sensor before the proof (the push proof waited for it to go
+        // off): the unit's sensors read the same whichever slot's it is, and the printer may
+        // still hold it (MMU 3.0.4 pulls nothing before the printer reports its sensor off).
+        // Prusa's recovery retracts it before its `U0`, and its report may come just after the
+        // `U0`: wait for it, the motor free, as an unload waits ([`RELEASE_WAIT_MS`]). Still on
+        // then: `8008`, nothing pulled.
+        (_, true)
+            if !proven_before && past_proof_mm <= 0 && at.now.millis_since(run.started) < RELEASE_WAIT_MS =>
+        {
+            Goal::Yield.into()
+        }
+        (_, true) if !proven_before && past_proof_mm <= 0 => {
+            return Err(ErrorCode::FINDA_VS_EEPROM_DISREPANCY);
+        }
+        (_, true) if past_proof_mm > i32::from(at.config.unload_check_mm) => {
+            return Err(ErrorCode::FSENSOR_DIDNT_SWITCH_OFF);
+        }
+        _ if past_proof_mm > 0 && at.unit.proven_owner != Some(at.slot) => {
+            Goal::Drive.learning(Milestone::OwnerInPath)
+        }
+        _ => Goal::Drive.into(),
     })
 }
 

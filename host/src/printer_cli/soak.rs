@@ -37,6 +37,9 @@ pub enum Faults {
     /// A fault while printing after every change: a spool end, or a tangle, a jam or another
     /// print fault, one in two (the figures: spool ends handled, false spool ends).
     SpoolEnds,
+    /// A power loss in every change, at a random moment of it: how the changes end after the
+    /// printer's recovery, by the phase the power went in.
+    PowerLoss,
 }
 
 /// `mmu printer soak`: the report, and a failure when it did not pass.
@@ -58,6 +61,7 @@ pub(super) fn run_soak(
         changes: soak.changes,
         random_faults: soak.faults == Faults::Random,
         spool_ends: soak.faults == Faults::SpoolEnds,
+        power_losses: soak.faults == Faults::PowerLoss,
         seed,
         sim: SimOptions {
             slots: args.sim_options.slots,
@@ -127,5 +131,11 @@ fn soak_details(report: &SoakReport, seed: u64) -> Details {
     details.insert("spool_ends_handled".into(), report.spool_ends.handled.into());
     details.insert("false_spool_ends".into(), report.spool_ends.false_total().into());
     details.insert("panics".into(), report.panics.into());
+    let restarts = &report.restarts;
+    if restarts.struck() > 0 {
+        details.insert("power_losses_mid_change".into(), restarts.struck().into());
+        details.insert("completed_after_recovery".into(), restarts.completed().into());
+        details.insert("unload_manually".into(), restarts.unload_manually().into());
+    }
     details
 }

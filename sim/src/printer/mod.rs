@@ -2,7 +2,9 @@
 //! its exact version check, `Q0` one heartbeat after the last activity, `f` reports the
 //! moment the printer's filament sensor changes, the register poll, automatic Retry (`B1`) up to
 //! three times per command, a link timeout followed by a new handshake, and the mmu2 layer's
-//! "unload, then again" when the unit restarted under a command. The heartbeat, the timeout, the
+//! "unload, then again" when the unit restarted under a command (BFW v6.5.3 `mmu2_mk4.cpp`
+//! `ToolChangeCommonOnce`: `UnloadInner`, then `T` again; not after a premature finish, when the
+//! printer had already returned from the tool change). The heartbeat, the timeout, the
 //! version, the registers polled and the 6.5.3 "premature finish" of a tool change depend on the
 //! printer played, its [`Personality`](crate::Personality).
 //!
@@ -203,18 +205,30 @@ impl<L: Link> Printer<L> {
                     self.note_outcome(request, outcome);
                     return Ok(outcome);
                 }
-                None if request.code == RequestCode::Tool => {
-                    let unload = Request::new(RequestCode::Unload, 0);
-                    if let Some(outcome) = self.run(op, unload)?
-                        && outcome != Outcome::Finished(ResultCode::OK)
-                    {
+                None => {
+                    if let Some(outcome) = self.unload_after_interrupt(op, request)? {
                         return Ok(outcome);
                     }
                 }
-                None => {}
             }
         }
         Err(PrinterError::Stuck(request))
+    }
+
+    /// After the unit restarted under `request`: for a tool change, the mmu2 layer's `U0` before
+    /// the `T` goes out again (`UnloadInner`, BFW v6.5.3 `mmu2_mk4.cpp`); how it ended if not well.
+    fn unload_after_interrupt(
+        &mut self,
+        op: &mut impl Operator<L>,
+        request: Request,
+    ) -> Result<Option<Outcome>, PrinterError> {
+        if request.code != RequestCode::Tool {
+            return Ok(None);
+        }
+        let unload = Request::new(RequestCode::Unload, 0);
+        Ok(self
+            .run(op, unload)?
+            .filter(|outcome| *outcome != Outcome::Finished(ResultCode::OK)))
     }
 
     /// Print for `ms` (printer clock) after a tool change, polling the unit in idle scope. An
@@ -313,7 +327,10 @@ impl<L: Link> Printer<L> {
         let started = self.link.now_ms();
         match self.follow_run(op, request, started)? {
             Some(outcome) => Ok(outcome),
-            None => self.command(op, request),
+            None => match self.unload_after_interrupt(op, request)? {
+                Some(outcome) => Ok(outcome),
+                None => self.command(op, request),
+            },
         }
     }
 
@@ -351,6 +368,13 @@ impl<L: Link> Printer<L> {
             let echoes = (answer.code, answer.value) == (request.code, request.value);
             if answer.param == ParamCode::Finished && !echoes {
                 op.event(&mut self.link, &PrinterEvent::Interrupted(request));
+                if left_early {
+                    // Buddy 6.5.3 returned from this tool change at its premature finish
+                    // (`ToolChangeCommonOnce` leaves its loop once `manage_response` says
+                    // `PrematureFinish`); the restart is seen later by `mmu_loop`'s `LogicStep`,
+                    // which hands `Interrupted` on to nobody: no unload, no `T` again.
+                    return Ok(Some(Outcome::Finished(ResultCode::OK)));
+                }
                 return Ok(None);
             }
             let new = shown != Some(answer);

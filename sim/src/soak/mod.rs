@@ -1,7 +1,7 @@
 //! Soak runs: many tool changes across all slots with random faults injected and later cleared,
 //! recovered as the printer and its user would, and the figures that come out.
 //!
-//! [`run`] plays a printer ([`Printer`] over [`SimLink`], the firmware of
+//! [`run`] plays a printer ([`Printer`] over [`SimLink`](crate::SimLink), the firmware of
 //! [`SoakOptions::personality`] in its protocol and its mechanics) against a fresh [`Sim`] and asks for
 //! tool changes, each to a random slot other than the loaded one. With random faults, some changes
 //! ([`FAULT_PROBABILITY`]) get a fault from a mix that matters to the unit (a jam of the target
@@ -31,6 +31,9 @@
 //! it, as [`Sim::take_finished`] records it) are compared with the physical minimum of
 //! [`crate::timing`].
 
+mod restarts;
+mod striking;
+
 use std::fmt;
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::time::Instant;
@@ -40,7 +43,6 @@ use mmu_protocol::{ButtonCode, ErrorCode, Request, RequestCode, ResultCode};
 
 use crate::fault::SimFault;
 use crate::flash::FlashWear;
-use crate::link::SimLink;
 use crate::personality::Personality;
 use crate::printer::{
     Decision, Link, Operator, Outcome, Printer, PrinterError, PrinterEvent, PrinterOptions,
@@ -50,7 +52,9 @@ use crate::timing::tool_change_minimum;
 
 mod spool_end;
 
+pub use restarts::{PhaseRestarts, RestartTally};
 pub use spool_end::SpoolEndTally;
+use striking::StrikingLink;
 
 /// With random faults, the chance that a tool change gets a fault.
 pub const FAULT_PROBABILITY: f64 = 0.3;
@@ -94,6 +98,10 @@ pub struct SoakOptions {
     /// core one in ten ([`FASTENED_END_SHARE`]), else one of the print faults (tangle, seized
     /// drive, noise, power loss, noisy line, a sensor disconnected).
     pub spool_ends: bool,
+    /// Instead: every change gets a power loss of 50 ms to 3 s at a random moment of up to
+    /// [`MAX_POWER_LOSS_DELAY_MS`] after its `T` is sent ([`SoakReport::restarts`] counts how
+    /// the changes ended, by the phase the power went in).
+    pub power_losses: bool,
     /// Seed of the run (the simulator's and the fault schedule's).
     pub seed: u64,
     /// The simulated unit.
@@ -190,6 +198,9 @@ pub struct SoakReport {
     pub fault_log: Vec<String>,
     /// Why the run stopped before its last change (the rig could not be started), if it did.
     pub aborted: Option<String>,
+    /// The power losses that struck while the unit ran a tool change, by phase, and how the
+    /// changes ended.
+    pub restarts: RestartTally,
 }
 
 impl SoakReport {
@@ -308,12 +319,19 @@ impl fmt::Display for SoakReport {
                 self.rig_restarts
             )?;
         }
+        if self.restarts.struck() > 0 {
+            write!(f, "\n{}", self.restarts)?;
+        }
         if let Some(why) = &self.aborted {
             write!(f, "\naborted: {why}")?;
         }
         Ok(())
     }
 }
+
+/// With [`SoakOptions::power_losses`], a change's power loss strikes up to this long after the
+/// `T` is sent, ms: a fault-free change from a loaded slot takes about 9 s.
+pub const MAX_POWER_LOSS_DELAY_MS: u64 = 10_000;
 
 /// The `--fault` name of a fault's kind, without slot and parameters.
 /// A random fault that strikes while the printer prints with `loaded` loaded: a jam or a tangled
@@ -424,83 +442,6 @@ fn draw_fault(rng: &mut Rng, target: usize) -> SimFault {
         _ => SimFault::UartDrop {
             probability: draw(rng, 0.001, 0.01, 10_000.0),
         },
-    }
-}
-
-/// A fault that has struck.
-#[derive(Debug, Clone, Copy)]
-struct Strike {
-    fault: SimFault,
-    /// When, ms of virtual time.
-    at_ms: u64,
-}
-
-/// The in-process link with a fault that strikes at an exact virtual millisecond: while the
-/// printer waits for the unit, the simulator is stepped one millisecond at a time (as
-/// [`SimLink`] does) and an armed fault is injected as soon as its moment comes.
-struct StrikingLink {
-    link: SimLink,
-    /// The fault waiting to strike and the virtual time it strikes at, ms.
-    armed: Option<(SimFault, u64)>,
-    /// The fault that struck during this change.
-    struck: Option<Strike>,
-}
-
-impl StrikingLink {
-    fn new(sim: Sim) -> Self {
-        StrikingLink {
-            link: SimLink::new(sim),
-            armed: None,
-            struck: None,
-        }
-    }
-
-    fn sim(&self) -> &Sim {
-        self.link.sim()
-    }
-
-    fn sim_mut(&mut self) -> &mut Sim {
-        self.link.sim_mut()
-    }
-
-    /// Inject the armed fault if its moment has come.
-    fn strike_if_due(&mut self) {
-        let now = self.link.now_ms();
-        if let Some((fault, at_ms)) = self.armed
-            && now >= at_ms
-        {
-            self.armed = None;
-            if self.link.sim_mut().inject(fault) {
-                self.struck = Some(Strike { fault, at_ms: now });
-            }
-        }
-    }
-}
-
-impl Link for StrikingLink {
-    fn send(&mut self, bytes: &[u8]) -> std::io::Result<()> {
-        self.link.send(bytes)
-    }
-
-    fn receive(&mut self, max_ms: u64, into: &mut Vec<u8>) -> std::io::Result<()> {
-        let before = into.len();
-        for _ in 0..max_ms {
-            self.strike_if_due();
-            self.link.receive(1, into)?;
-            if into.len() > before {
-                break;
-            }
-        }
-        self.strike_if_due();
-        Ok(())
-    }
-
-    fn now_ms(&self) -> u64 {
-        self.link.now_ms()
-    }
-
-    fn fsensor(&mut self) -> u8 {
-        self.link.fsensor()
     }
 }
 
@@ -761,14 +702,21 @@ fn tool_change(rig: &mut Rig, user: &mut SoakUser, target: u8) -> ChangeEnd {
 /// `xState::Connecting`, BFW v6.5.3 `mmu2_mk4.cpp`) and takes the command up again once the
 /// unit answers. On Buddy 6.5.3 ten 200 ms timeouts, a power cut of 2 s, are enough for the
 /// screen. A unit that stays silent through [`RECONNECTS`] tries is stuck.
+///
+/// Taken up means followed: the printer still has the command as its request (`ReqMsg`), so a
+/// unit that restarted meanwhile answers `X0 F0` to its `Q0` and the printer sees the command
+/// `Interrupted` (`protocol_logic.cpp` `IdleStep`, `ProcessCommandQueryResponse`): for a tool
+/// change, `U0` and then the `T` again ([`Printer::follow`]).
 fn command(rig: &mut Rig, user: &mut SoakUser, request: Request) -> Result<Outcome, PrinterError> {
     let mut tries = 0;
+    let mut result = rig.printer.command(user, request);
     loop {
-        match rig.printer.command(user, request) {
+        match result {
             Err(PrinterError::NotResponding | PrinterError::ProtocolError) if tries < RECONNECTS => {
                 tries += 1;
                 match rig.printer.connect(user) {
-                    Ok(_) | Err(PrinterError::NotResponding | PrinterError::ProtocolError) => {}
+                    Ok(_) => result = rig.printer.follow(user, request),
+                    Err(PrinterError::NotResponding | PrinterError::ProtocolError) => {}
                     Err(error) => return Err(error),
                 }
             }
@@ -960,6 +908,15 @@ pub fn run_until(
             0 => 0,
             n => others[(rng.next_u64() % n as u64) as usize],
         };
+        let power_loss = options.power_losses.then(|| {
+            let fault = SimFault::PowerLoss {
+                off_ms: draw(&mut rng, 50.0, 3_000.0, 1.0) as u32,
+            };
+            (
+                fault,
+                Moment::Change(rng.next_u64() % (MAX_POWER_LOSS_DELAY_MS + 1)),
+            )
+        });
         let planned = if options.spool_ends {
             let draw_share = rng.uniform();
             let slot = usize::from(target);
@@ -982,6 +939,7 @@ pub fn run_until(
                 }
             })
         };
+        let planned = planned.or(power_loss);
         let while_printing = matches!(planned, Some((_, Moment::Print(_))));
         let from = current.loaded;
         let mut user = SoakUser::for_change(target, planned);
@@ -1069,6 +1027,14 @@ pub fn run_until(
                 )
             }
         };
+        if let Some(strike) = struck
+            && matches!(strike.fault, SimFault::PowerLoss { .. })
+            && !while_printing
+        {
+            let manual = user.errors.contains(&ErrorCode::FINDA_VS_EEPROM_DISREPANCY);
+            let phase = strike.in_tool_change;
+            report.restarts.record(phase, failure_detail.is_none(), manual);
+        }
         if struck.is_some() {
             report.fault_log.push(format!("{} -> {verdict}", context()));
         }
