@@ -548,7 +548,7 @@ fn step_motion<const N: usize>(
         Some(run) => run,
         None => {
             drive.begin(bounds.budget(config), feeder, now);
-            let run = run.insert(PhaseRun::new(now, resume_goal_from.unwrap_or(odometry), odometry));
+            let run = PhaseRun::start(run, now, resume_goal_from.unwrap_or(odometry), odometry);
             run.retried = resume_goal_from.is_some();
             run
         }
