@@ -7,7 +7,8 @@
 //!   exact): scans the sensors (the wait bounded by [`SCAN_TIMEOUT`]), takes at most
 //!   [`control::MAX_RX_PER_STEP`] bytes from [`RX_PIPE`], steps the [`ControlLoop`], applies the
 //!   motor commands, queues the answer in [`TX_PIPE`], feeds the watchdog when the step was on
-//!   time with fresh samples, and signals [`STEPPED`];
+//!   time with fresh samples, and signals [`STEPPED`] when a save piece is due after the step
+//!   ([`Deferral`]: not after a step busy with the printer, unless several in a row were);
 //! - [`run_store`]: restores what the flash holds (then [`BOOTED`]); woken by [`STEPPED`], writes
 //!   what changed, one bounded piece after a step; on [`RESET`] the whole save before a reset;
 //! - [`run_link_rx`] / [`run_link_tx`]: the printer UART (received by DMA into a ring, so no byte
@@ -32,7 +33,7 @@ use mmu_hal_port::{Button, Motors, SensorScan, StatusLed};
 use portable_atomic::{AtomicBool, AtomicU32, Ordering};
 
 use crate::control::{self, ControlLoop, ResetBoard, Tick, TickSchedule};
-use crate::persist::{Boot, EntryCrc, Keeper, Store};
+use crate::persist::{Boot, Deferral, EntryCrc, Keeper, Store};
 use crate::port::{CheckedCrc, SampleClock, WatchedFlash};
 use crate::uart::LineErrors;
 use crate::{App, BoardAction, Instant, Samples, drive};
@@ -73,8 +74,8 @@ pub static TX_BUSY: AtomicBool = AtomicBool::new(false);
 pub static BUTTON: Watch<CriticalSectionRawMutex, bool, 1> = Watch::new();
 /// The status LED's state, sent when it changes.
 pub static LED: Signal<CriticalSectionRawMutex, bool> = Signal::new();
-/// A control step is done; true if it was busy with the printer (took bytes or answered).
-pub static STEPPED: Signal<CriticalSectionRawMutex, bool> = Signal::new();
+/// A control step is done and a save piece is due after it ([`Deferral`]).
+pub static STEPPED: Signal<CriticalSectionRawMutex, ()> = Signal::new();
 /// The store has restored the logic's state: the control task may step.
 pub static BOOTED: Signal<CriticalSectionRawMutex, ()> = Signal::new();
 /// A reset is due: save (or forget) whole, then say so on [`RESET_SAVED`].
@@ -132,6 +133,7 @@ pub async fn run_control<const N: usize, S: SensorScan<N>, M: Motors<N>>(
     let mut line_errors = LineErrors::default();
     // Every step is written here (`ControlLoop::step_into`), not copied out of the step.
     let mut step = control::Step::<N>::none();
+    let mut deferral = Deferral::default();
     loop {
         ticker.next().await;
         let lateness_us = schedule.start(now_us());
@@ -186,7 +188,9 @@ pub async fn run_control<const N: usize, S: SensorScan<N>, M: Motors<N>>(
             };
             control::reset(&mut resetting, action).await;
         }
-        STEPPED.signal(busy);
+        if deferral.piece_due(busy) {
+            STEPPED.signal(());
+        }
         // A flash write stalled the CPU (or the step overran): the ticks missed are dropped
         // rather than caught up in a burst of late, unfed steps; the next is the grid's next
         // tick, so the scan and the step keep their place in the millisecond.
@@ -289,11 +293,12 @@ pub async fn run_store<const N: usize, F: NorFlash, C: EntryCrc>(
     BOOTED.signal(());
     loop {
         match select(STEPPED.wait(), RESET.wait()).await {
-            Either::First(busy) => {
+            Either::First(()) => {
                 let Ok(control) = logic.try_borrow() else {
                     continue;
                 };
-                let wrote = keeper.update_after(control.app(), now(), busy);
+                // The control task deferred the piece after busy steps already.
+                let wrote = keeper.update(control.app(), now());
                 if let Some(_health) = keeper.take_news() {
                     log!(warn, "store: {}", _health);
                 }

@@ -64,7 +64,10 @@ fn check_sensors<const N: usize>(
         .find(|&id| unit.sensor(id).is_some_and(|s| s.reading().is_none()));
     let hub = unit.hub_present();
     if let (Some(_), _) | (None, None) = (unsettled, hub) {
-        let started = run.get_or_insert(PhaseRun::new(now, 0, 0)).started;
+        let started = match run {
+            Some(run) => run.started,
+            None => PhaseRun::start(run, now, 0, 0).started,
+        };
         if now.millis_since(started) > SENSOR_SETTLE_MS {
             return Outcome::Fail(unsettled.map_or(ErrorCode::FINDA_FLICKERS, sensor_fault_error));
         }

@@ -300,8 +300,9 @@ struct Bounds {
     speed: u16,
     max_mm: u16,
     error: ErrorCode,
-    /// Time on top of the nominal duration at `speed`: part of the way goes slower, ms.
-    slower_ms: u32,
+    /// Part of the way goes at the slow speed instead: its nominal duration, twice as every
+    /// bound, comes on top of the nominal duration at `speed` (see [`Bounds::budget`]), mm.
+    slower_mm: u16,
 }
 
 impl Bounds {
@@ -312,7 +313,7 @@ impl Bounds {
             speed,
             max_mm,
             error,
-            slower_ms: 0,
+            slower_mm: 0,
         }
     }
 
@@ -320,20 +321,40 @@ impl Bounds {
     /// limit: [`STILL_MS`], or three revolutions at the slower of `speed` and the slow speed when
     /// they take longer (slow speeds or a long `mm_per_rev_centi` set by the user), never more
     /// than the time bound.
+    ///
+    /// Computed where a phase's motion begins or resumes only (a division is a library call of
+    /// about 140 instructions on the M0+): [`Bounds`] itself holds no time.
     fn budget(&self, config: &Config) -> Budget {
         let speed = u32::from(self.speed.max(1));
-        // At most 65 535 × 2000 + 65 535.
-        let max_ms =
-            u32::from(self.max_mm) * 2000 / speed + self.slower_ms + u32::from(config.phase_slack_ms);
-        // Part of a phase may go at the slow speed (`Goal::DriveAt`). At most 3 × 65 535 × 10.
+        // The slow part (at most 65 535 × 2000 / 1), and none without one.
+        let slower_ms = match self.slower_mm {
+            0 => 0,
+            mm => u32::from(mm) * 2000 / u32::from(config.slow_speed.max(1)),
+        };
+        // At most 65 535 × 2000 + 65 535 × 2000 + 65 535.
+        let max_ms = u32::from(self.max_mm) * 2000 / speed + slower_ms + u32::from(config.phase_slack_ms);
+        // Part of a phase may go at the slow speed (`Goal::DriveAt`).
         let slowest = u32::from(self.speed.min(config.slow_speed).max(1));
-        let three_revolutions_ms = 3 * u32::from(config.mm_per_rev_centi) * 10 / slowest;
         Budget {
             max_mm: self.max_mm,
             max_ms,
-            max_still_ms: STILL_MS.max(three_revolutions_ms).min(max_ms),
+            max_still_ms: still_limit_ms(config.mm_per_rev_centi, slowest).min(max_ms),
             error: self.error,
         }
+    }
+}
+
+/// The still limit before the time bound: [`STILL_MS`], or three revolutions at `slowest` mm/s
+/// (1..=65 535) when they take longer. `3 × 10 × mm_per_rev_centi / slowest` is at most
+/// [`STILL_MS`] exactly when `3 × 10 × mm_per_rev_centi < (STILL_MS + 1) × slowest` (a floor
+/// `⌊a / s⌋ ≤ S` is `a < (S + 1) s`): a multiplication, and the division only past it.
+fn still_limit_ms(mm_per_rev_centi: u16, slowest: u32) -> u32 {
+    // At most 3 × 65 535 × 10 and 3001 × 65 535: both within u32.
+    let three_revolutions = 3 * u32::from(mm_per_rev_centi) * 10;
+    if three_revolutions < (STILL_MS + 1) * slowest {
+        STILL_MS
+    } else {
+        three_revolutions / slowest
     }
 }
 
@@ -552,7 +573,7 @@ fn step_motion<const N: usize>(
         Some(run) => run,
         None => {
             drive.begin(bounds.budget(config), feeder, now);
-            let run = run.insert(PhaseRun::new(now, resume_goal_from.unwrap_or(odometry), odometry));
+            let run = PhaseRun::start(run, now, resume_goal_from.unwrap_or(odometry), odometry);
             run.retried = resume_goal_from.is_some();
             run
         }
@@ -657,5 +678,108 @@ fn step_motion<const N: usize>(
     match drive.run(motion, feeder, tension, now, config) {
         Ok(()) => Outcome::Continue,
         Err(error) => phase.stopped(error, unit, slot),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The still limit as it was written: `STILL_MS.max(3 × 10 × mm_per_rev_centi / slowest)`.
+    fn still_limit_by_division(mm_per_rev_centi: u16, slowest: u32) -> u32 {
+        STILL_MS.max(3 * u32::from(mm_per_rev_centi) * 10 / slowest)
+    }
+
+    /// The comparison in place of the division: every divisor, each with the lengths around its
+    /// boundary (where three revolutions reach STILL_MS + 1 ms) and spread over the whole range;
+    /// every length with the small divisors.
+    #[test]
+    fn the_still_limit_equals_the_division() {
+        for slowest in 1..=u32::from(u16::MAX) {
+            let boundary = (STILL_MS + 1) * slowest / 30;
+            let near = boundary.saturating_sub(2)..=boundary + 2;
+            let spread = (0..=u32::from(u16::MAX))
+                .step_by(997)
+                .chain([u32::from(u16::MAX)]);
+            for mm in near.chain(spread).filter(|&mm| mm <= u32::from(u16::MAX)) {
+                let mm = mm as u16;
+                assert_eq!(
+                    still_limit_ms(mm, slowest),
+                    still_limit_by_division(mm, slowest),
+                    "{mm} {slowest}"
+                );
+            }
+        }
+        for slowest in 1..=64 {
+            for mm in 0..=u16::MAX {
+                assert_eq!(
+                    still_limit_ms(mm, slowest),
+                    still_limit_by_division(mm, slowest),
+                    "{mm} {slowest}"
+                );
+            }
+        }
+    }
+
+    /// The budget as it was written, the slow part's time in the bounds.
+    fn budget_by_division(bounds: &Bounds, config: &Config) -> (u32, u32) {
+        let speed = u32::from(bounds.speed.max(1));
+        let slower_ms = u32::from(bounds.slower_mm) * 2000 / u32::from(config.slow_speed.max(1));
+        let max_ms = u32::from(bounds.max_mm) * 2000 / speed + slower_ms + u32::from(config.phase_slack_ms);
+        let slowest = u32::from(bounds.speed.min(config.slow_speed).max(1));
+        let three_revolutions_ms = 3 * u32::from(config.mm_per_rev_centi) * 10 / slowest;
+        (max_ms, STILL_MS.max(three_revolutions_ms).min(max_ms))
+    }
+
+    /// Every phase's budget, over speeds, lengths and revolutions from the smallest to the
+    /// largest, equals the formula with the divisions.
+    #[test]
+    fn every_budget_equals_the_divisions() {
+        let values = [
+            0u16,
+            1,
+            2,
+            3,
+            19,
+            20,
+            21,
+            95,
+            100,
+            199,
+            200,
+            201,
+            999,
+            1000,
+            30_001,
+            u16::MAX,
+        ];
+        let mut config = Config::default();
+        for &speed in &values {
+            for &slow in &values {
+                for &rev in &values {
+                    for &slower_mm in &[0u16, 20, u16::MAX] {
+                        for &max_mm in &values {
+                            config.slow_speed = slow;
+                            config.mm_per_rev_centi = rev;
+                            let bounds = Bounds {
+                                slower_mm,
+                                ..Bounds::new(
+                                    Direction::Forward,
+                                    speed,
+                                    max_mm,
+                                    ErrorCode::MOVE_PULLEY_FAILED,
+                                )
+                            };
+                            let budget = bounds.budget(&config);
+                            assert_eq!(
+                                (budget.max_ms, budget.max_still_ms),
+                                budget_by_division(&bounds, &config),
+                                "{speed} {slow} {rev} {slower_mm} {max_mm}"
+                            );
+                        }
+                    }
+                }
+            }
+        }
     }
 }

@@ -76,11 +76,20 @@ impl PhaseBudgetUse {
 
 impl PhaseRun {
     /// A phase attempt starting at `now`, its distance goal counting from `goal_from_centi`, with
-    /// the filament at `odometry_centi`.
+    /// the filament at `odometry_centi`, written into `slot` (whatever it held is replaced).
+    ///
+    /// Built in place: a `PhaseRun` returned and then moved into the slot was built on the stack
+    /// and copied (96 bytes: about 130 instructions on the Cortex-M0+, in the millisecond a
+    /// command starts).
     // Out of line: two callers in the step (measured smaller).
     #[inline(never)]
-    pub(super) fn new(now: Instant, goal_from_centi: i32, odometry_centi: i32) -> Self {
-        PhaseRun {
+    pub(super) fn start(
+        slot: &mut Option<PhaseRun>,
+        now: Instant,
+        goal_from_centi: i32,
+        odometry_centi: i32,
+    ) -> &mut PhaseRun {
+        slot.insert(PhaseRun {
             started: now,
             goal_from_centi,
             mark_centi: None,
@@ -91,7 +100,7 @@ impl PhaseRun {
             held: false,
             printer_saw: None,
             retried: false,
-        }
+        })
     }
 
     /// Where the distance goal of this phase counts from (kept for the attempt after Retry).

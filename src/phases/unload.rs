@@ -54,7 +54,7 @@ impl Unload {
         match self {
             Unload::ToHub { .. } => Bounds {
                 // The slow start, twice its nominal duration as every bound.
-                slower_ms: u32::from(RELEASE_SLOW_MM) * 2000 / u32::from(config.slow_speed.max(1)),
+                slower_mm: RELEASE_SLOW_MM,
                 ..reverse(
                     config.unload_speed,
                     config
