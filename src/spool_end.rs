@@ -135,14 +135,17 @@ mod tests {
 
     #[test]
     fn a_spool_end_is_within_the_uncertainty_of_empty() {
-        // A fresh 330 m spool: ± 1 m.
+        // 1/100 mm in a metre.
+        const M: i32 = 100_000;
+        // A fresh 330 m spool: 330 m left, ± 1 m.
         assert!(!fastened_end(330, 0));
-        assert!(!fastened_end(330, 328_000_00 - 100));
-        assert!(fastened_end(330, 329_000_00));
-        // 300 m used: ± 10 m.
-        assert!(fastened_end(330, 320_000_00));
-        assert!(!fastened_end(330, 319_000_00 - 100));
+        // 320 m used: 10 m left, ± 10.6 m; 319 m used: 11 m left, ± 10.57 m.
+        assert!(fastened_end(330, 320 * M));
+        assert!(!fastened_end(330, 319 * M));
+        // A 10 m spool: 9 m used, 1 m left, ± 1.27 m; 8 m used, 2 m left, ± 1.24 m.
+        assert!(fastened_end(10, 9 * M));
+        assert!(!fastened_end(10, 8 * M));
         // Counted past the spool's length.
-        assert!(fastened_end(330, 340_000_00));
+        assert!(fastened_end(330, 340 * M));
     }
 }
