@@ -280,6 +280,32 @@ fn a_fastened_end_of_a_used_up_spool_without_spool_join_stops_on_the_filament_ch
 }
 
 #[test]
+fn a_tangle_on_a_used_up_spool_is_the_one_wrong_guess_and_the_printer_still_goes_on() {
+    // Within the count's uncertainty of empty a tangle stops the filament as a fastened end
+    // does, and nothing the unit senses tells them apart: it is reported as a spool end. The
+    // printer's `U0` pulls the tangled filament back as it would the fastened one, and SpoolJoin
+    // goes on with the next slot: no error screen, one spool end too many.
+    for personality in Personality::ALL {
+        let (mut printer, mut op) = printing(personality, true);
+        nearly_used_up(&mut printer, &mut op);
+        assert!(
+            printer
+                .link_mut()
+                .sim_mut()
+                .inject(SimFault::Model(Fault::Jam { slot: 0 }))
+        );
+        assert_eq!(printer.print(&mut op, PRINT_AFTER_FASTENED_MS).unwrap(), None);
+        assert_eq!(op.runouts(), [(0, Some(1))], "{personality}");
+        assert!(op.errors().is_empty(), "{personality}: {:x?}", op.errors());
+        assert_eq!(
+            printer.link().sim().model().loaded_slot(),
+            Some(1),
+            "{personality}"
+        );
+    }
+}
+
+#[test]
 fn a_tangle_a_fastened_end_or_a_clog_with_filament_left_stays_an_error_and_is_never_a_runout() {
     for personality in Personality::ALL {
         let faults = [
