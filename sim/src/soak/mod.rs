@@ -202,13 +202,15 @@ impl SoakReport {
         )
     }
 
-    /// Nothing unrecovered, stuck or panicked, no runout reported without a spool end, and the
-    /// run was not aborted.
+    /// Nothing unrecovered, stuck or panicked, no runout reported without a spool end, every
+    /// spool end fastened to the core (on a spool counted as used up) handled by the printer, and
+    /// the run was not aborted.
     pub fn passed(&self) -> bool {
         self.unrecovered == 0
             && self.stuck == 0
             && self.panics == 0
             && self.spool_ends.false_total() == 0
+            && self.spool_ends.fastened_handled == self.spool_ends.fastened
             && self.aborted.is_none()
     }
 
