@@ -634,7 +634,18 @@ impl<const N: usize> App<N> {
         let allowed =
             !matches!(self.operation.status(), Status::Failed(_)) && self.spool_end.reported().is_none();
         let driving = self.operation.driving_slot();
-        if let Some((slot, error)) = follower::follow(&mut self.unit, driving, allowed, now, &self.config) {
+        let idle = matches!(self.operation.status(), Status::Finished);
+        if let Some((slot, error)) = follower::follow(&mut self.unit, driving, allowed, now, &self.config)
+            // A spool end fastened to the core, told from a tangle by the filament left: FINDA
+            // reads empty instead of the jam error.
+            && !self.spool_end.report_fastened(
+                &self.unit,
+                slot,
+                idle,
+                self.config.spool_m.get(slot).copied().unwrap_or(0),
+                self.ledger.used_centi().get(slot).copied().unwrap_or(0),
+            )
+        {
             self.operation.interrupt(error, &mut self.unit, now);
             self.ledger.stalled(slot, error, &mut self.counters.lanes);
             self.counters.drive_errors = self.counters.drive_errors.saturating_add(1);

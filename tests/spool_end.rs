@@ -1,6 +1,7 @@
 //! A spool that ends while the printer prints ([`mmu_firmware::spool_end`]): the loose end that
 //! passes the loaded slot's sensor empties FINDA (register 0x08 and `P0`) so that the printer's
-//! own runout check starts its filament change; nothing else does. The printer's side of it, with
+//! own runout check starts its filament change; so does an end fastened to the core on a spool
+//! counted within its uncertainty of empty; nothing else does. The printer's side of it, with
 //! Prusa's logic on every printer family, is `sim/tests/spool_end.rs`.
 
 mod common;
@@ -73,6 +74,51 @@ fn a_tangle_while_printing_stays_a_jam_and_finda_keeps_telling_the_hub() {
     let answer = rig.query();
     assert_eq!((answer.code, answer.param), (RequestCode::Tool, ParamCode::Error));
     assert_eq!(rig.read(0x08), Some(1), "a tangle is never a spool end");
+}
+
+/// Slot 0's spool counted as nearly used up: 1 m left (register 0x59), within the count's
+/// uncertainty of empty.
+fn nearly_used_up(rig: &mut Rig<3>) {
+    let write = Request::write(0x59, 1);
+    assert_eq!(rig.send(write).map(|a| a.param), Some(ParamCode::Accepted));
+    assert_eq!(rig.read(0x59), Some(1));
+}
+
+#[test]
+fn a_fastened_end_of_a_used_up_spool_empties_finda_and_the_unload_pulls_it_back() {
+    let mut rig = printing();
+    nearly_used_up(&mut rig);
+    rig.inject(Fault::SpoolFastened { slot: 0 });
+    rig.idle(10_000);
+    assert_eq!(rig.read(0x08), Some(0), "FINDA reports the spool end");
+    assert_eq!(p0(&mut rig), Some(0));
+    assert_eq!(rig.query(), finished(t(0)), "no jam error");
+    assert!(rig.model.hub_filament_present(), "the filament is whole");
+    // The printer's M600: ramming, then `U0` pulls the filament back toward the spool.
+    rig.model.set_printing(None);
+    rig.model.extruder_move(-80.0, 80.0);
+    rig.idle(1_500);
+    let unload = Request::new(RequestCode::Unload, 0);
+    let run = rig.command(unload);
+    assert_eq!(run.last, finished(unload));
+    assert!(!rig.model.hub_filament_present());
+    assert_eq!(rig.read(0x08), Some(0));
+}
+
+#[test]
+fn a_fastened_end_or_a_tangle_with_filament_left_stays_a_jam() {
+    for fault in [Fault::SpoolFastened { slot: 0 }, Fault::Jam { slot: 0 }] {
+        let mut rig = printing();
+        rig.inject(fault);
+        rig.idle(30_000);
+        let answer = rig.query();
+        assert_eq!(
+            (answer.code, answer.param),
+            (RequestCode::Tool, ParamCode::Error),
+            "{fault:?}"
+        );
+        assert_eq!(rig.read(0x08), Some(1), "{fault:?}: never a spool end");
+    }
 }
 
 #[test]

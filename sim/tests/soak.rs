@@ -266,3 +266,28 @@ fn soak_from_environment() {
         }
     }
 }
+
+#[test]
+fn a_spool_end_soak_hands_every_fastened_end_to_the_printer_and_no_tangle() {
+    // Seed 1, 40 changes: fastened ends (on spools counted 1 m from empty) and tangles (on spools
+    // with plenty left) among the print faults, on each printer family.
+    for personality in Personality::ALL {
+        let mut options = options(40, false, 1);
+        options.spool_ends = true;
+        options.personality = personality;
+        options.printer.version = personality.version();
+        options.printer.spool_join = personality == Personality::Mk3s;
+        let report = soak::run(&options, &mut |_| {});
+        let ends = &report.spool_ends;
+        let tangles = report
+            .by_fault_kind
+            .iter()
+            .find(|t| t.kind == "jam (printing)")
+            .map_or(0, |t| t.injected);
+        assert!(ends.fastened > 0 && tangles > 0, "{personality}: {report}");
+        assert_eq!(ends.fastened_reported, ends.fastened, "{personality}: {report}");
+        assert_eq!(ends.fastened_handled, ends.fastened, "{personality}: {report}");
+        assert_eq!(ends.false_total(), 0, "{personality}: {report}");
+        assert!(report.passed(), "{personality}: {report}\n{:#?}", report.notes);
+    }
+}

@@ -4,6 +4,7 @@
 //! slot, or the plain `M600` stops on the filament-change screen with the old filament out of
 //! the path, on every printer family.
 
+use mmu_firmware::registers::LEFT;
 use mmu_model::Fault;
 use mmu_protocol::{ButtonCode, ErrorCode, Request, RequestCode, ResultCode};
 use mmu_sim::{
@@ -194,8 +195,118 @@ fn without_spool_join_the_print_stops_on_the_filament_change_screen_with_the_pat
     }
 }
 
+/// Slot 0's spool nearly used up, as the unit counts it: 1 m left (`M708 A0x59 X1`), within the
+/// count's uncertainty (± 1 m on a fresh spool) of empty.
+fn nearly_used_up(printer: &mut Printer<SimLink>, op: &mut Watcher) {
+    let answer = printer.request(op, Request::write(LEFT, 1)).unwrap();
+    assert_eq!(answer.param, mmu_protocol::ParamCode::Accepted);
+    op.events.clear();
+}
+
+/// The end of slot 0's spool, fastened to its core, stops the filament where it is now.
+fn fastened_end(printer: &mut Printer<SimLink>) {
+    let injected = printer
+        .link_mut()
+        .sim_mut()
+        .inject(SimFault::Model(Fault::SpoolFastened { slot: 0 }));
+    assert!(injected);
+}
+
+/// How long the print goes on after a fastened end, ms: the follower's motor stands still for
+/// 3 s before the unit decides.
+const PRINT_AFTER_FASTENED_MS: u64 = 60_000;
+
 #[test]
-fn a_tangle_a_fastened_end_or_a_clog_while_printing_stays_an_error_and_is_never_a_runout() {
+fn a_fastened_end_of_a_used_up_spool_with_spool_join_goes_on_with_the_next_slot() {
+    for personality in Personality::ALL {
+        let (mut printer, mut op) = printing(personality, true);
+        nearly_used_up(&mut printer, &mut op);
+        fastened_end(&mut printer);
+        let ended = printer.print(&mut op, PRINT_AFTER_FASTENED_MS).unwrap();
+        let errors = op.errors();
+        assert_eq!(ended, None, "{personality}: {errors:x?} {:?}", op.sent_commands());
+        assert!(errors.is_empty(), "{personality}: error screens {errors:x?}");
+        assert_eq!(op.runouts(), [(0, Some(1))], "{personality}");
+        assert_eq!(
+            op.sent_commands(),
+            [
+                Request::new(RequestCode::Unload, 0),
+                Request::new(RequestCode::Tool, 1)
+            ],
+            "{personality}"
+        );
+        let model = printer.link().sim().model();
+        assert_eq!(
+            model.loaded_slot(),
+            Some(1),
+            "{personality}: the next slot prints"
+        );
+        assert_eq!(model.fsensor_state(), 2, "{personality}");
+        assert!(model.printing().is_some(), "{personality}: the print goes on");
+        assert_eq!(printer.loaded_tool(), Some(1), "{personality}");
+    }
+}
+
+#[test]
+fn a_fastened_end_of_a_used_up_spool_without_spool_join_stops_on_the_filament_change_screen() {
+    for personality in Personality::ALL {
+        let (mut printer, mut op) = printing(personality, false);
+        nearly_used_up(&mut printer, &mut op);
+        fastened_end(&mut printer);
+        let ended = printer.print(&mut op, PRINT_AFTER_FASTENED_MS).unwrap();
+        let errors = op.errors();
+        assert_eq!(
+            ended,
+            Some(Outcome::FilamentChange(0)),
+            "{personality}: {errors:x?} {:?}",
+            op.sent_commands()
+        );
+        assert_eq!(op.runouts(), [(0, None)], "{personality}");
+        let mut expected = vec![Request::new(RequestCode::Unload, 0)];
+        if personality == Personality::Mk3s {
+            assert!(errors.is_empty(), "{personality}: error screens {errors:x?}");
+        } else {
+            expected.push(Request::new(RequestCode::Eject, 0));
+            assert_eq!(errors, [ErrorCode::FILAMENT_EJECTED], "{personality}");
+            assert_eq!(op.at_eject_dialog, Some((false, 0)), "{personality}");
+        }
+        assert_eq!(op.sent_commands(), expected, "{personality}");
+        let model = printer.link().sim().model();
+        assert_eq!(model.loaded_slot(), None, "{personality}");
+        assert!(!model.hub_filament_present(), "{personality}: the hub is clear");
+        assert_eq!(model.fsensor_state(), 0, "{personality}: the extruder is clear");
+        assert_eq!(printer.loaded_tool(), None, "{personality}");
+    }
+}
+
+#[test]
+fn a_tangle_on_a_used_up_spool_is_the_one_wrong_guess_and_the_printer_still_goes_on() {
+    // Within the count's uncertainty of empty a tangle stops the filament as a fastened end
+    // does, and nothing the unit senses tells them apart: it is reported as a spool end. The
+    // printer's `U0` pulls the tangled filament back as it would the fastened one, and SpoolJoin
+    // goes on with the next slot: no error screen, one spool end too many.
+    for personality in Personality::ALL {
+        let (mut printer, mut op) = printing(personality, true);
+        nearly_used_up(&mut printer, &mut op);
+        assert!(
+            printer
+                .link_mut()
+                .sim_mut()
+                .inject(SimFault::Model(Fault::Jam { slot: 0 }))
+        );
+        assert_eq!(printer.print(&mut op, PRINT_AFTER_FASTENED_MS).unwrap(), None);
+        assert_eq!(op.runouts(), [(0, Some(1))], "{personality}");
+        assert!(op.errors().is_empty(), "{personality}: {:x?}", op.errors());
+        assert_eq!(
+            printer.link().sim().model().loaded_slot(),
+            Some(1),
+            "{personality}"
+        );
+    }
+}
+
+#[test]
+fn a_tangle_a_fastened_end_or_a_clog_with_filament_left_stays_an_error_and_is_never_a_runout() {
     for personality in Personality::ALL {
         let faults = [
             Fault::Jam { slot: 0 },
@@ -210,9 +321,10 @@ fn a_tangle_a_fastened_end_or_a_clog_while_printing_stays_an_error_and_is_never_
                 op.runouts().is_empty(),
                 "{personality} {fault:?}: reported as a runout"
             );
-            // A tangle, and a spool end fastened to the core (it cannot be told from one), is the
-            // follower's jam: PULLEY CANNOT MOVE (`8047` stalled, `804b` move failed). A clog in the Bowden tube holds the filament past the hub: the
-            // unit feels nothing (the printer's extruder skips).
+            // With 330 m left, a tangle, and a spool end fastened to the core (it cannot be told
+            // from one with so much left), is the follower's jam: PULLEY CANNOT MOVE (`8047`
+            // stalled, `804b` move failed). A clog in the Bowden tube holds the filament past the
+            // hub: the unit feels nothing (the printer's extruder skips).
             let pulley = [ErrorCode::STALLED_PULLEY, ErrorCode::MOVE_PULLEY_FAILED];
             assert!(
                 fault == Fault::BowdenJam || op.errors().iter().any(|e| pulley.contains(e)),

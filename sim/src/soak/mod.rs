@@ -213,13 +213,15 @@ impl SoakReport {
         )
     }
 
-    /// Nothing unrecovered, stuck or panicked, no runout reported without a spool end, and the
-    /// run was not aborted.
+    /// Nothing unrecovered, stuck or panicked, no runout reported without a spool end, every
+    /// spool end fastened to the core (on a spool counted as used up) handled by the printer, and
+    /// the run was not aborted.
     pub fn passed(&self) -> bool {
         self.unrecovered == 0
             && self.stuck == 0
             && self.panics == 0
             && self.spool_ends.false_total() == 0
+            && self.spool_ends.fastened_handled == self.spool_ends.fastened
             && self.aborted.is_none()
     }
 
@@ -732,6 +734,26 @@ fn print(rig: &mut Rig, user: &mut SoakUser, target: u8) -> ChangeEnd {
     if print_ms == 0 {
         return ChangeEnd::Done;
     }
+    // A spool that ends fastened to its core is one the unit counts as used up.
+    let fastened = spool_end::fastened_slot(rig.printer.link().armed.map(|(fault, _)| fault));
+    if let Some(slot) = fastened
+        && let Err(why) = spool_end::set_left(&mut rig.printer, user, slot, spool_end::FASTENED_LEFT_M)
+    {
+        return ChangeEnd::Failed(why);
+    }
+    let end = print_on(rig, user, target, print_ms);
+    // The user puts a fresh spool behind that filament, and says so (`M708 A0x59+k X330`).
+    if let Some(slot) = fastened {
+        let spool_m = rig.sim().unit_config().spool_m.get(slot).copied().unwrap_or(0);
+        if let Err(why) = spool_end::set_left(&mut rig.printer, user, slot, spool_m) {
+            return ChangeEnd::Failed(why);
+        }
+    }
+    end
+}
+
+/// [`print`] for `print_ms` once its fault is armed.
+fn print_on(rig: &mut Rig, user: &mut SoakUser, target: u8, print_ms: u64) -> ChangeEnd {
     let until = rig.printer.link().now_ms() + print_ms;
     let mut tries = 0;
     let printed = loop {
