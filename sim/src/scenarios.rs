@@ -119,10 +119,7 @@ struct Person {
 
 impl Operator<SimLink> for Person {
     fn event(&mut self, _link: &mut SimLink, event: &PrinterEvent) {
-        if !matches!(
-            event,
-            PrinterEvent::Sent(_) | PrinterEvent::Received(_) | PrinterEvent::Heartbeat(_)
-        ) {
+        if !event.is_routine() {
             self.events.push(event.clone());
         }
     }

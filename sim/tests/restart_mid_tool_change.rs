@@ -20,10 +20,7 @@ struct Watcher {
 
 impl Operator<SimLink> for Watcher {
     fn event(&mut self, _link: &mut SimLink, event: &PrinterEvent) {
-        if !matches!(
-            event,
-            PrinterEvent::Sent(_) | PrinterEvent::Received(_) | PrinterEvent::Heartbeat(_)
-        ) {
+        if !event.is_routine() {
             self.events.push(event.clone());
         }
     }

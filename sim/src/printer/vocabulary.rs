@@ -120,6 +120,17 @@ pub enum PrinterEvent {
     },
 }
 
+impl PrinterEvent {
+    /// The traffic of every poll (a request, an answer, a heartbeat), as opposed to what a
+    /// person at the printer would notice.
+    pub fn is_routine(&self) -> bool {
+        matches!(
+            self,
+            PrinterEvent::Sent(_) | PrinterEvent::Received(_) | PrinterEvent::Heartbeat(_)
+        )
+    }
+}
+
 /// Why the printer lost the link.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum LinkFault {
