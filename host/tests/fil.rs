@@ -110,6 +110,37 @@ fn a_missing_image_or_board_is_refused_clearly() {
     let (code, stderr) = run(&["fil", "--board", "stm32f4"]);
     assert_eq!(code, Some(2), "{stderr}");
     assert!(stderr.contains("g071 or pico"), "{stderr}");
+    // A bench that cannot run fails its scenarios, with the bench's own words under them.
+    let no_benches = std::env::temp_dir().join(format!("mmu-fil-no-benches-{}", std::process::id()));
+    std::fs::create_dir_all(&no_benches).expect("a directory");
+    let output = Command::new(env!("CARGO_BIN_EXE_mmu"))
+        .args([
+            "fil",
+            "--board",
+            "g071",
+            "--only",
+            "MK3S",
+            "--image",
+            "Cargo.toml",
+            "--fil-dir",
+        ])
+        .arg(&no_benches)
+        .arg("--log-dir")
+        .arg(&no_benches)
+        .output()
+        .expect("mmu runs");
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    assert_eq!(output.status.code(), Some(1), "{stdout}");
+    assert!(stdout.contains("FAIL  g071: handshake, MK3S"), "{stdout}");
+    assert!(
+        stdout.contains("the g071 bench exited") && stdout.contains("bench.py"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("firmware-in-the-loop (g071): 0/1 scenarios passed"),
+        "{stdout}"
+    );
+    let _ = std::fs::remove_dir_all(&no_benches);
     let (code, stderr) = run(&["sim", "--stdio", "--firmware", "x.elf"]);
     assert_eq!(code, Some(2), "{stderr}");
     assert!(stderr.contains("--board"), "{stderr}");

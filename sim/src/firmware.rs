@@ -213,11 +213,17 @@ impl FirmwareUnit {
 }
 
 impl Drop for FirmwareUnit {
+    /// `quit`, and a bench that has not ended a second later is killed.
     fn drop(&mut self) {
         let _ = writeln!(self.to_bench, "quit").and_then(|()| self.to_bench.flush());
-        if self.child.wait().is_err() {
-            let _ = self.child.kill();
+        for _ in 0..100 {
+            if !matches!(self.child.try_wait(), Ok(None)) {
+                return;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(10));
         }
+        let _ = self.child.kill();
+        let _ = self.child.wait();
     }
 }
 
