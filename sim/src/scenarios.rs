@@ -65,7 +65,7 @@ pub const SCENARIOS: &[Scenario] = &[
         run: jam_while_printing,
     },
     Scenario {
-        name: "power cut during a flash save",
+        name: "power cut in a millisecond that writes the flash",
         run: power_cut_during_a_save,
     },
     Scenario {
