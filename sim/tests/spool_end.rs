@@ -132,34 +132,77 @@ fn spool_ends(printer: &mut Printer<SimLink>) {
     assert!(injected);
 }
 
+/// SpoolJoin went on with the next slot: `U0`, `T1`, no error screen, slot 1 printing.
+fn went_on_with_the_next_slot(
+    printer: &Printer<SimLink>,
+    op: &Watcher,
+    ended: Option<Outcome>,
+    personality: Personality,
+) {
+    let errors = op.errors();
+    assert_eq!(ended, None, "{personality}: {errors:x?} {:?}", op.sent_commands());
+    assert!(errors.is_empty(), "{personality}: error screens {errors:x?}");
+    assert_eq!(op.runouts(), [(0, Some(1))], "{personality}");
+    let commands = op.sent_commands();
+    assert_eq!(
+        commands,
+        [
+            Request::new(RequestCode::Unload, 0),
+            Request::new(RequestCode::Tool, 1)
+        ],
+        "{personality}"
+    );
+    let model = printer.link().sim().model();
+    assert_eq!(
+        model.loaded_slot(),
+        Some(1),
+        "{personality}: the next slot prints"
+    );
+    assert_eq!(model.fsensor_state(), 2, "{personality}");
+    assert!(model.printing().is_some(), "{personality}: the print goes on");
+    assert_eq!(printer.loaded_tool(), Some(1), "{personality}");
+}
+
+/// The plain filament change stopped on its screen with the old filament out of the path (Buddy
+/// ejects it first: its dialog is the one screen).
+fn stopped_with_the_path_clear(
+    printer: &Printer<SimLink>,
+    op: &Watcher,
+    ended: Option<Outcome>,
+    personality: Personality,
+) {
+    let errors = op.errors();
+    assert_eq!(
+        ended,
+        Some(Outcome::FilamentChange(0)),
+        "{personality}: {errors:x?} {:?}",
+        op.sent_commands()
+    );
+    assert_eq!(op.runouts(), [(0, None)], "{personality}");
+    let mut expected = vec![Request::new(RequestCode::Unload, 0)];
+    if personality == Personality::Mk3s {
+        assert!(errors.is_empty(), "{personality}: error screens {errors:x?}");
+    } else {
+        // Buddy ejects the old filament: its dialog is the one screen, with the path clear.
+        expected.push(Request::new(RequestCode::Eject, 0));
+        assert_eq!(errors, [ErrorCode::FILAMENT_EJECTED], "{personality}");
+        assert_eq!(op.at_eject_dialog, Some((false, 0)), "{personality}");
+    }
+    assert_eq!(op.sent_commands(), expected, "{personality}");
+    let model = printer.link().sim().model();
+    assert_eq!(model.loaded_slot(), None, "{personality}");
+    assert!(!model.hub_filament_present(), "{personality}: the hub is clear");
+    assert_eq!(model.fsensor_state(), 0, "{personality}: the extruder is clear");
+    assert_eq!(printer.loaded_tool(), None, "{personality}");
+}
+
 #[test]
 fn with_spool_join_the_print_goes_on_with_the_next_slot() {
     for personality in Personality::ALL {
         let (mut printer, mut op) = printing(personality, true);
         spool_ends(&mut printer);
         let ended = printer.print(&mut op, PRINT_AFTER_END_MS).unwrap();
-        let errors = op.errors();
-        assert_eq!(ended, None, "{personality}: {errors:x?} {:?}", op.sent_commands());
-        assert!(errors.is_empty(), "{personality}: error screens {errors:x?}");
-        assert_eq!(op.runouts(), [(0, Some(1))], "{personality}");
-        let commands = op.sent_commands();
-        assert_eq!(
-            commands,
-            [
-                Request::new(RequestCode::Unload, 0),
-                Request::new(RequestCode::Tool, 1)
-            ],
-            "{personality}"
-        );
-        let model = printer.link().sim().model();
-        assert_eq!(
-            model.loaded_slot(),
-            Some(1),
-            "{personality}: the next slot prints"
-        );
-        assert_eq!(model.fsensor_state(), 2, "{personality}");
-        assert!(model.printing().is_some(), "{personality}: the print goes on");
-        assert_eq!(printer.loaded_tool(), Some(1), "{personality}");
+        went_on_with_the_next_slot(&printer, &op, ended, personality);
     }
 }
 
@@ -169,29 +212,7 @@ fn without_spool_join_the_print_stops_on_the_filament_change_screen_with_the_pat
         let (mut printer, mut op) = printing(personality, false);
         spool_ends(&mut printer);
         let ended = printer.print(&mut op, PRINT_AFTER_END_MS).unwrap();
-        let errors = op.errors();
-        assert_eq!(
-            ended,
-            Some(Outcome::FilamentChange(0)),
-            "{personality}: {errors:x?} {:?}",
-            op.sent_commands()
-        );
-        assert_eq!(op.runouts(), [(0, None)], "{personality}");
-        let mut expected = vec![Request::new(RequestCode::Unload, 0)];
-        if personality == Personality::Mk3s {
-            assert!(errors.is_empty(), "{personality}: error screens {errors:x?}");
-        } else {
-            // Buddy ejects the old filament: its dialog is the one screen, with the path clear.
-            expected.push(Request::new(RequestCode::Eject, 0));
-            assert_eq!(errors, [ErrorCode::FILAMENT_EJECTED], "{personality}");
-            assert_eq!(op.at_eject_dialog, Some((false, 0)), "{personality}");
-        }
-        assert_eq!(op.sent_commands(), expected, "{personality}");
-        let model = printer.link().sim().model();
-        assert_eq!(model.loaded_slot(), None, "{personality}");
-        assert!(!model.hub_filament_present(), "{personality}: the hub is clear");
-        assert_eq!(model.fsensor_state(), 0, "{personality}: the extruder is clear");
-        assert_eq!(printer.loaded_tool(), None, "{personality}");
+        stopped_with_the_path_clear(&printer, &op, ended, personality);
     }
 }
 
@@ -223,27 +244,7 @@ fn a_fastened_end_of_a_used_up_spool_with_spool_join_goes_on_with_the_next_slot(
         nearly_used_up(&mut printer, &mut op);
         fastened_end(&mut printer);
         let ended = printer.print(&mut op, PRINT_AFTER_FASTENED_MS).unwrap();
-        let errors = op.errors();
-        assert_eq!(ended, None, "{personality}: {errors:x?} {:?}", op.sent_commands());
-        assert!(errors.is_empty(), "{personality}: error screens {errors:x?}");
-        assert_eq!(op.runouts(), [(0, Some(1))], "{personality}");
-        assert_eq!(
-            op.sent_commands(),
-            [
-                Request::new(RequestCode::Unload, 0),
-                Request::new(RequestCode::Tool, 1)
-            ],
-            "{personality}"
-        );
-        let model = printer.link().sim().model();
-        assert_eq!(
-            model.loaded_slot(),
-            Some(1),
-            "{personality}: the next slot prints"
-        );
-        assert_eq!(model.fsensor_state(), 2, "{personality}");
-        assert!(model.printing().is_some(), "{personality}: the print goes on");
-        assert_eq!(printer.loaded_tool(), Some(1), "{personality}");
+        went_on_with_the_next_slot(&printer, &op, ended, personality);
     }
 }
 
@@ -254,28 +255,7 @@ fn a_fastened_end_of_a_used_up_spool_without_spool_join_stops_on_the_filament_ch
         nearly_used_up(&mut printer, &mut op);
         fastened_end(&mut printer);
         let ended = printer.print(&mut op, PRINT_AFTER_FASTENED_MS).unwrap();
-        let errors = op.errors();
-        assert_eq!(
-            ended,
-            Some(Outcome::FilamentChange(0)),
-            "{personality}: {errors:x?} {:?}",
-            op.sent_commands()
-        );
-        assert_eq!(op.runouts(), [(0, None)], "{personality}");
-        let mut expected = vec![Request::new(RequestCode::Unload, 0)];
-        if personality == Personality::Mk3s {
-            assert!(errors.is_empty(), "{personality}: error screens {errors:x?}");
-        } else {
-            expected.push(Request::new(RequestCode::Eject, 0));
-            assert_eq!(errors, [ErrorCode::FILAMENT_EJECTED], "{personality}");
-            assert_eq!(op.at_eject_dialog, Some((false, 0)), "{personality}");
-        }
-        assert_eq!(op.sent_commands(), expected, "{personality}");
-        let model = printer.link().sim().model();
-        assert_eq!(model.loaded_slot(), None, "{personality}");
-        assert!(!model.hub_filament_present(), "{personality}: the hub is clear");
-        assert_eq!(model.fsensor_state(), 0, "{personality}: the extruder is clear");
-        assert_eq!(printer.loaded_tool(), None, "{personality}");
+        stopped_with_the_path_clear(&printer, &op, ended, personality);
     }
 }
 
