@@ -180,7 +180,6 @@ fn a_wrong_stored_slot_is_disproved_at_its_slot_sensor_then_unload_manually() {
     assert!((rig.model.tip_mm(1).unwrap() - slot1).abs() < 0.5);
 }
 
-/// The stored slot 0 does hold the path, but its spool ran out: the tail is past its slot sensor,
 /// The unit answered `8008` (UNLOAD MANUALLY) and no slot's tip moved from where it was `before`.
 fn unload_manually_with_nothing_moved(rig: &Rig<3>, answer: &Response, before: &[f32]) {
     assert_eq!(
@@ -197,6 +196,7 @@ fn unload_manually_with_nothing_moved(rig: &Rig<3>, answer: &Response, before: &
     }
 }
 
+/// The stored slot 0 does hold the path, but its spool ran out: the tail is past its slot sensor,
 /// which reads empty, exactly as a slot pulled back to its drive gear does. No pull can prove
 /// the belief (the guard at the slot sensor has nothing to stop on): `8008`, nothing moved.
 #[test]
