@@ -665,8 +665,7 @@ impl<const N: usize> App<N> {
 // Out of line: smaller (measured), and called only on a revolution.
 #[inline(never)]
 fn add_centi(mm: u32, centi: u8, more: u32) -> (u32, u8) {
-    // ⌈2³⁷ / 100⌉: `x / 100` for every u32.
-    let more_mm = crate::sensor::mul_high(more, 0x51eb_851f) >> 5;
+    let more_mm = crate::arith::BY_100.divide(more);
     let centi = more - more_mm * 100 + u32::from(centi);
     let carry = u32::from(centi >= 100);
     // Below 100 after the carry; `more_mm + carry` is below 2³².

@@ -300,15 +300,9 @@ fn schedule_lag_mm(speed: u16, elapsed_ms: u64, moved_centi: i32) -> i32 {
     let Some(scheduled) = elapsed_ms.checked_mul(u32::from(speed)) else {
         return 1000;
     };
-    // ⌈2³⁵ / 10⌉: exact for every u32; the quotient is below 2²⁹.
-    let scheduled_centi = (crate::sensor::mul_high(scheduled, 0xcccc_cccd) >> 3) as i32;
-    // Beyond ±100 000 centi the truncated quotient is beyond ±1000 and clamped anyway.
-    let lag_centi = scheduled_centi
-        .saturating_sub(moved_centi)
-        .clamp(-100_000, 100_000);
-    // ⌈2³² / 100⌉: exact up to 100 000.
-    let lag_mm = crate::sensor::mul_high(lag_centi.unsigned_abs(), 42_949_673) as i32;
-    (if lag_centi < 0 { -lag_mm } else { lag_mm }).clamp(-1000, 1000)
+    // Below 2²⁹.
+    let scheduled_centi = crate::arith::BY_10.divide(scheduled) as i32;
+    crate::arith::centi_to_mm(scheduled_centi.saturating_sub(moved_centi)).clamp(-1000, 1000)
 }
 
 /// The duty that moves the filament at `speed` mm/s without feedback, per mille (not limited):

@@ -67,13 +67,13 @@ impl Feeder {
     /// Where the motor has moved the filament since start, mm (forward positive; wraps with the
     /// odometry, see [`Feeder::odometry_centi`]).
     pub fn odometry_mm(&self) -> i32 {
-        self.odometry_centi / 100
+        crate::arith::centi_to_mm(self.odometry_centi)
     }
 
     /// Filament speed from the motor's last revolution period, mm/s (0 when it stands still).
     pub fn speed_mm_s(&self, now: Instant, config: &Config) -> u16 {
-        let speed = u64::from(self.hall.rpm(now)) * u64::from(config.mm_per_rev_centi) / 6000;
-        speed.min(u64::from(u16::MAX)) as u16
+        let speed = self.hall.speed_mm_s(now, config.mm_per_rev_centi);
+        speed.min(u32::from(u16::MAX)) as u16
     }
 
     /// The odometry in 1/100 mm. It wraps: a distance is the `wrapping_sub` of two readings

@@ -9,6 +9,7 @@
 #![warn(missing_docs)]
 
 pub mod app;
+pub mod arith;
 pub mod commands;
 pub mod config;
 pub mod control;

@@ -16,6 +16,7 @@
 //! ([`FilterKind`]) as constants the compiler folds. The results are exactly those of the sort
 //! and divisions they replace (see the tests).
 
+use crate::arith::{div1000, mul_high};
 use crate::time::Instant;
 
 /// The longest median or average window.
@@ -245,25 +246,6 @@ fn divide_small(sum: u32, len: usize) -> u32 {
             .get(len)
             .map_or(sum, |&reciprocal| mul_high(sum, reciprocal)),
     }
-}
-
-/// The high 32 bits of the 64-bit product `a × b`, from 16-bit halves: four single-cycle
-/// multiplications on the Cortex-M0+ instead of the 64-bit multiplication routine
-/// (`__aeabi_lmul`), which LLVM would otherwise turn this back into (hence the `black_box`).
-// Out of line: five callers (132 B smaller than inlined; the idle step no costlier, measured).
-#[inline(never)]
-pub(crate) fn mul_high(a: u32, b: u32) -> u32 {
-    let (a0, a1) = (a & 0xffff, a >> 16);
-    let (b0, b1) = (b & 0xffff, core::hint::black_box(b >> 16));
-    let (low, cross1, cross2) = (a0 * b0, a0 * b1, a1 * b0);
-    let carry = ((low >> 16) + (cross1 & 0xffff) + (cross2 & 0xffff)) >> 16;
-    a1 * b1 + (cross1 >> 16) + (cross2 >> 16) + carry
-}
-
-/// `x / 1000` for any `u32`, without a division (the multiplier is `⌈2³⁸ / 1000⌉`).
-#[inline(always)]
-pub fn div1000(x: u32) -> u32 {
-    mul_high(x, 0x1062_4dd3) >> 6
 }
 
 /// One step of the exponential smoothing for one weight `w`, prepared once per weight:
@@ -676,15 +658,25 @@ impl RevolutionCounter {
     /// Revolutions per minute from the last full period; 0 when the motor has not turned for
     /// longer than that period (or has turned less than twice).
     pub fn rpm(&self, now: Instant) -> u32 {
-        match self.period_ms {
-            Some(period)
-                if period > 0 && now.millis_since(self.last_revolution) <= period.saturating_mul(2) =>
-            {
-                // A 32-bit division (a period over 60 s is 0 rpm): the 64-bit one costs twice.
-                u32::try_from(period).map_or(0, |period| 60_000 / period)
-            }
-            _ => 0,
-        }
+        self.live_period_ms(now).map_or(0, |period| 60_000 / period)
+    }
+
+    /// The speed of what a revolution moves by `centi_per_rev` 1/100 mm, mm/s, from the last
+    /// full period (`centi_per_rev × 10 / period`: one division); 0 when [`Self::rpm`] is.
+    pub fn speed_mm_s(&self, now: Instant, centi_per_rev: u16) -> u32 {
+        self.live_period_ms(now)
+            .map_or(0, |period| u32::from(centi_per_rev) * 10 / period)
+    }
+
+    /// The last full period, ms, unless the motor has not turned for longer than it (or has
+    /// turned less than twice). In 32 bits (a period over 2³² ms is no speed at all): the 64-bit
+    /// division costs twice.
+    fn live_period_ms(&self, now: Instant) -> Option<u32> {
+        self.period_ms
+            .filter(|&period| {
+                period > 0 && now.millis_since(self.last_revolution) <= period.saturating_mul(2)
+            })
+            .and_then(|period| u32::try_from(period).ok())
     }
 }
 

@@ -21,7 +21,7 @@ impl Instant {
     /// division, a library call of about 200 instructions on a core without a divider (two of
     /// them every control step). The high word is folded into the low one (2³² = 4 294 967 ×
     /// 1000 + 296) until it is gone, which takes no round at all for the first 71 minutes of
-    /// uptime and at most four after them; the low word takes [`crate::sensor::div1000`].
+    /// uptime and at most four after them; the low word takes [`crate::arith::div1000`].
     pub fn from_micros(us: u64) -> Self {
         let (mut x, mut ms) = (us, 0u64);
         while x >> 32 != 0 {
@@ -29,7 +29,7 @@ impl Instant {
             ms += high * 4_294_967;
             x = high * 296 + (x & 0xffff_ffff);
         }
-        Instant(ms + u64::from(crate::sensor::div1000(x as u32)))
+        Instant(ms + u64::from(crate::arith::div1000(x as u32)))
     }
 
     /// Milliseconds since the start.

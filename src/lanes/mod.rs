@@ -21,6 +21,7 @@ pub use figures::{LaneFigures, WINDOW, roll, roll_signed};
 
 use mmu_protocol::{ErrorCode, RequestCode};
 
+use crate::arith::{BY_100, BY_1000, centi_to_mm};
 use crate::config::Config;
 use crate::feeder::distance_centi;
 use crate::runner::Status;
@@ -93,7 +94,10 @@ impl<const N: usize> Default for Ledger<N> {
 
 /// The whole metres of `used_centi` (none below 0).
 fn used_m(used_centi: i32) -> u16 {
-    (used_centi.max(0) / CENTI_PER_M).min(i32::from(u16::MAX)) as u16
+    // By 100, then by 1000: 100 000 has no exact 32-bit reciprocal (`crate::arith`).
+    BY_1000
+        .divide(BY_100.divide(used_centi.max(0).unsigned_abs()))
+        .min(u32::from(u16::MAX)) as u16
 }
 
 /// The warning bits of register 0x5e: bit k, slot k's last load distance drifted (`drifted`);
@@ -112,7 +116,7 @@ pub fn warnings(drifted: u8, used_centi: &[i32], spool_m: &[u16]) -> u16 {
 /// Filament left of a spool of `spool_m` metres once `used_centi` left it, mm (never below 0).
 pub fn left_mm(spool_m: u16, used_centi: i32) -> u32 {
     // At most 65.5 km less 21.5 km or more: no overflow in 32 bits.
-    let left = i32::from(spool_m) * 1000 - used_centi / 100;
+    let left = i32::from(spool_m) * 1000 - centi_to_mm(used_centi);
     left.max(0) as u32
 }
 
@@ -257,7 +261,7 @@ impl<const N: usize> Ledger<N> {
         let Some(at_hub) = change.at_hub_centi.take() else {
             return;
         };
-        let Ok(mm) = u16::try_from(distance_centi(at_hub, odometry) / 100) else {
+        let Ok(mm) = u16::try_from(centi_to_mm(distance_centi(at_hub, odometry))) else {
             return;
         };
         let Some(lane) = figures.get_mut(change.slot) else {

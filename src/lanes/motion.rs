@@ -50,16 +50,11 @@ impl MotionTally {
         };
         self.commanded_mm_ms = self.commanded_mm_ms.saturating_add(u32::from(speed) * dt_ms);
         self.counted_centi = self.counted_centi.saturating_add(moved.unsigned_abs());
-        // Sampled at each revolution (the speed is measured from its period), in 32 bits (as
-        // `Feeder::speed_mm_s`, whose 64-bit division costs a few hundred instructions).
+        // Sampled at each revolution (the speed is measured from its period).
         if moved == 0 {
             return;
         }
-        let measured = feeder
-            .hall
-            .rpm(now)
-            .saturating_mul(u32::from(config.mm_per_rev_centi))
-            / 6000;
+        let measured = feeder.hall.speed_mm_s(now, config.mm_per_rev_centi);
         if measured >= u32::from(MIN_SPEED) {
             self.duty_sum = self.duty_sum.saturating_add(u32::from(duty.permille()));
             self.speed_sum = self.speed_sum.saturating_add(measured);

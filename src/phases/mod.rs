@@ -23,6 +23,7 @@ mod unload;
 use mmu_hal_port::Direction;
 use mmu_protocol::{ErrorCode, ProgressCode};
 
+use crate::arith::centi_to_mm;
 use crate::config::Config;
 use crate::drive::{Budget, Motion};
 use crate::feeder::distance_centi;
@@ -579,8 +580,8 @@ fn step_motion<const N: usize>(
         }
     };
     let toward_goal_mm = match bounds.direction {
-        Direction::Forward => distance_centi(run.goal_from_centi, odometry) / 100,
-        Direction::Reverse => distance_centi(odometry, run.goal_from_centi) / 100,
+        Direction::Forward => centi_to_mm(distance_centi(run.goal_from_centi, odometry)),
+        Direction::Reverse => centi_to_mm(distance_centi(odometry, run.goal_from_centi)),
     };
     if let Some(fault) = [
         SensorId::MotorHall(slot),

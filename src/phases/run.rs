@@ -2,6 +2,7 @@
 //! and how much of its budget the drive's leases have used. Kept apart from the phases so their
 //! goals read as decisions, and the budget arithmetic sits in one place.
 
+use crate::arith::BY_100;
 use crate::drive::{Budget, millis_u32};
 use crate::feeder::distance_centi;
 use crate::time::Instant;
@@ -53,7 +54,7 @@ impl PhaseBudgetUse {
 
     /// End the lease in progress at `now`, counting what it used.
     pub(super) fn end(&mut self, now: Instant, odometry_centi: i32) {
-        let mm = distance_centi(self.from_centi, odometry_centi).unsigned_abs() / 100;
+        let mm = BY_100.divide(distance_centi(self.from_centi, odometry_centi).unsigned_abs());
         self.used_mm = self.used_mm.saturating_add(u16::try_from(mm).unwrap_or(u16::MAX));
         self.used_ms = self
             .used_ms
