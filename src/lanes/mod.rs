@@ -71,6 +71,8 @@ pub struct Ledger<const N: usize> {
     motions: [MotionTally; N],
     /// Per slot: a move is tallied, to fold once the command stops driving it (bit k).
     open: u8,
+    /// Per slot: its move ended in the last step, to fold in this one (bit k).
+    ended: u8,
     tool_change: Option<ToolChange>,
     /// Per slot: its last load distance drifted from its rolling figure (bit k).
     drifted: u8,
@@ -85,6 +87,7 @@ impl<const N: usize> Default for Ledger<N> {
             lanes: [Lane::Unknown; N],
             motions: [MotionTally::default(); N],
             open: 0,
+            ended: 0,
             tool_change: None,
             drifted: 0,
             last_step: Instant::ZERO,
@@ -205,6 +208,17 @@ impl<const N: usize> Ledger<N> {
             self.lanes_seen(&unit.lanes, figures);
         }
         let driving = driving.filter(|&slot| slot < N);
+        // A move that ended in the last step is folded first: the step that ends a move usually
+        // starts the next phase, whose budget divides too (a fold divides twice; the step-cost
+        // benchmark's busiest millisecond had both).
+        if self.ended != 0 {
+            for (slot, (tally, lane)) in self.motions.iter_mut().zip(figures.iter_mut()).enumerate() {
+                if self.ended & (1 << slot) != 0 {
+                    tally.fold(lane, config);
+                }
+            }
+            self.ended = 0;
+        }
         if let (Some(slot), Some(tally), Some(drive), Some(feeder)) = (
             driving,
             driving.and_then(|slot| self.motions.get_mut(slot)),
@@ -216,15 +230,8 @@ impl<const N: usize> Ledger<N> {
             self.open |= 1 << slot;
         }
         let driving_bit = driving.map_or(0, |slot| 1u8 << slot);
-        if self.open & !driving_bit != 0 {
-            for (slot, (tally, lane)) in self.motions.iter_mut().zip(figures.iter_mut()).enumerate() {
-                let bit = 1u8 << slot;
-                if self.open & bit != 0 && bit != driving_bit {
-                    tally.fold(lane, config);
-                    self.open &= !bit;
-                }
-            }
-        }
+        self.ended = self.open & !driving_bit;
+        self.open &= driving_bit;
         if self.tool_change.is_some() {
             self.watch_load(unit, driving, figures);
         }
