@@ -297,8 +297,15 @@ pub const fn stopped<const N: usize>() -> [MotorCommand; N] {
 /// it, and a schedule lasts a few phases, each braked by its budget after at most `u16::MAX` mm.
 fn schedule_lag_mm(speed: u16, elapsed_ms: u64, moved_centi: i32) -> i32 {
     let elapsed_ms = u32::try_from(elapsed_ms).unwrap_or(u32::MAX);
-    let Some(scheduled) = elapsed_ms.checked_mul(u32::from(speed)) else {
-        return 1000;
+    // Below 2¹⁶ ms the product fits without the overflow check, whose 64-bit multiplication is
+    // a library call: the first 65 s of every schedule.
+    let scheduled = if elapsed_ms < 1 << 16 {
+        elapsed_ms * u32::from(speed)
+    } else {
+        match elapsed_ms.checked_mul(u32::from(speed)) {
+            Some(scheduled) => scheduled,
+            None => return 1000,
+        }
     };
     // Below 2²⁹.
     let scheduled_centi = crate::arith::BY_10.divide(scheduled) as i32;

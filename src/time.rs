@@ -38,8 +38,9 @@ impl Instant {
     }
 
     /// Milliseconds from `earlier` to `self`, 0 if `earlier` is later.
-    // Out of line: about twenty callers, a 64-bit saturating subtraction each (0.19 KiB).
-    #[inline(never)]
+    // Inlined: a dozen calls a step, each a call's overhead around four instructions (the
+    // step-cost benchmark: about 100 instructions a millisecond, for about 0.2 KiB of flash).
+    #[inline(always)]
     pub const fn millis_since(self, earlier: Instant) -> u64 {
         self.0.saturating_sub(earlier.0)
     }
