@@ -60,6 +60,9 @@ pub struct Outputs<const N: usize> {
     pub action: Option<BoardAction>,
     /// The status LED: lit while a command runs, blinking in an error state.
     pub status_led: bool,
+    /// A phase of the running command began in this step (its motion's budget worked out, its
+    /// motor started): one of the costliest steps, after which the board defers its save piece.
+    pub phase_began: bool,
 }
 
 impl<const N: usize> Outputs<N> {
@@ -70,6 +73,7 @@ impl<const N: usize> Outputs<N> {
             tx: Vec::new(),
             action: None,
             status_led: false,
+            phase_began: false,
         }
     }
 }
@@ -209,6 +213,7 @@ impl<const N: usize> App<N> {
         out.tx.clear();
         out.action = None;
         out.status_led = false;
+        out.phase_began = false;
         self.now = now;
         // The answers of the last step have gone out: an `S2` from now on follows them.
         self.negotiation.answered_this_step = None;
@@ -258,6 +263,7 @@ impl<const N: usize> App<N> {
         self.operation
             .step(&mut self.unit, now, &self.config, self.printer);
         self.count_transition(before);
+        out.phase_began = self.operation.phase_began_at(now);
         self.started_up |= !matches!(self.operation.status(), Status::Running(_));
         self.count_fed();
         let idle = matches!(self.operation.status(), Status::Finished);

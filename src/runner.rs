@@ -191,6 +191,12 @@ impl Runner {
         self.status
     }
 
+    /// Whether the phase running began (or resumed) at `now`: its motion's budget was worked
+    /// out in this step.
+    pub fn phase_began_at(&self, now: Instant) -> bool {
+        self.run.as_ref().is_some_and(|run| run.started() == now)
+    }
+
     /// The phase running (or failed), if any.
     pub fn phase(&self) -> Option<Phase> {
         self.plan.get(self.index).copied()

@@ -8,7 +8,8 @@
 //!   [`control::MAX_RX_PER_STEP`] bytes from [`RX_PIPE`], steps the [`ControlLoop`], applies the
 //!   motor commands, queues the answer in [`TX_PIPE`], feeds the watchdog when the step was on
 //!   time with fresh samples, and signals [`STEPPED`] when a save piece is due after the step
-//!   ([`Deferral`]: not after a step busy with the printer, unless several in a row were);
+//!   ([`Deferral`]: not after a step busy with the printer or beginning a phase, unless several
+//!   in a row were);
 //! - [`run_store`]: restores what the flash holds (then [`BOOTED`]); woken by [`STEPPED`], writes
 //!   what changed, one bounded piece after a step; on [`RESET`] the whole save before a reset;
 //! - [`run_link_rx`] / [`run_link_tx`]: the printer UART (received by DMA into a ring, so no byte
@@ -179,7 +180,10 @@ pub async fn run_control<const N: usize, S: SensorScan<N>, M: Motors<N>>(
                 log_stats(&stats, &now_errors.since(&line_errors));
                 line_errors = now_errors;
             }
-            (step.out.action, received > 0 || !step.out.tx.is_empty())
+            (
+                step.out.action,
+                received > 0 || !step.out.tx.is_empty() || step.out.phase_began,
+            )
         };
         if let Some(action) = action {
             let mut resetting = Resetting::<M, N> {

@@ -55,8 +55,9 @@ pub struct Deferral {
 }
 
 impl Deferral {
-    /// After a step that was `busy` with the printer: true when a save piece runs after it (not
-    /// busy, or [`MAX_DEFERRED_STEPS`] busy steps in a row went without one).
+    /// After a step that was `busy` (with the printer, or beginning a phase: the costliest
+    /// steps): true when a save piece runs after it (not busy, or [`MAX_DEFERRED_STEPS`] busy
+    /// steps in a row went without one).
     pub fn piece_due(&mut self, busy: bool) -> bool {
         if busy && self.deferred < MAX_DEFERRED_STEPS {
             self.deferred += 1;

@@ -84,6 +84,11 @@ impl PhaseRun {
     /// command starts).
     // Out of line: two callers in the step (measured smaller).
     #[inline(never)]
+    /// When the phase began (or began again after a Retry).
+    pub fn started(&self) -> Instant {
+        self.started
+    }
+
     pub(super) fn start(
         slot: &mut Option<PhaseRun>,
         now: Instant,
