@@ -24,8 +24,9 @@
 //! 114 instructions each at the step-cost cycle model), about 7 600 instructions a millisecond;
 //! now a sensor costs one wake-up, the set-up's register writes and at most 2 µs of polling
 //! (`read_many` stopping the ADC). The step-cost harness (bench-mcu, `scripts/step-cost.sh`,
-//! which models this scan) measured the Pico's idle median 11 529 -> 9 666 instructions and its
-//! worst millisecond 15 788 -> 13 925 (27.8 % -> 24.5 % of 1 ms at 125 MHz; the bar is 25 %).
+//! which models this scan) measured the Pico's idle median 11 529 -> 9 792 instructions and its
+//! worst millisecond 15 788 -> 14 051 (27.8 % -> 24.7 % of 1 ms at 125 MHz; the bar is 25 %);
+//! the real images on the emulated Pico (fil/pico) spend 1 764 fewer a millisecond.
 //! A conversion error anywhere in a sensor's free run (the settling conversions included) fails
 //! the scan: `read_many` reports the ADC's sticky error flag.
 //! Settling, reasoned (not measured on hardware): the CD74HC4067's on-resistance at 3.3 V is a
