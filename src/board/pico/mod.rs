@@ -375,14 +375,15 @@ impl Sampler {
     /// [`SETTLE_CONVERSIONS`] discarded (the multiplexer settling), the last [`OVERSAMPLE`]
     /// averaged.
     ///
-    /// What embassy-rp 0.10's `read_many` does around the transfer, relied on here: it stops the
-    /// ADC after the DMA's last transfer (clears START_MANY, then busy-waits for the conversion
-    /// under way, at most 2 µs), so the conversions that ended between the DMA's completion and
-    /// that stop (about the wake-up's time, up to the FIFO's four; FCS.OVER beyond) stay in the
-    /// FIFO; its next call drains them (it waits for READY and reads the FIFO until empty) before
-    /// it arms the DMA, so they never reach a kept conversion (the last sensor's wait in the FIFO
-    /// for the next scan). Its error check reads CS.ERR_STICKY, cleared at its start: a failed
-    /// conversion anywhere in the free run, the discarded ones included, fails the sensor.
+    /// What embassy-rp 0.10's `read_many` does around the transfer, relied on here (no
+    /// work-around needed): it stops the ADC only once woken after the DMA's last transfer
+    /// (clears START_MANY, then busy-waits for the conversion under way, at most 2 µs), so the
+    /// conversions that ended meanwhile (the wake-up takes several; the FIFO keeps four and sets
+    /// FCS.OVER, which nothing reads or clears) stay in the FIFO; its next call drains them (it
+    /// waits for READY and reads the FIFO until empty) before it arms the DMA, so they never
+    /// reach a kept conversion (the last sensor's wait in the FIFO for the next scan). Its error
+    /// check reads CS.ERR_STICKY, cleared at its start: a failed conversion anywhere in the free
+    /// run, the discarded ones and those after the DMA's last transfer included, fails the sensor.
     async fn read(&mut self, channel: u8) -> Result<u16, adc::Error> {
         self.select(channel);
         let mut conversions = [0u16; CONVERSIONS];
