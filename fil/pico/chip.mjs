@@ -12,7 +12,7 @@
 import { RP2040 } from 'rp2040js';
 import { attachFlash } from './flash-model.mjs';
 import {
-  patchAircr, patchUartReceive, patchUartRegisters, patchUartTxInterrupt, patchUdfFault,
+  patchAdcDreq, patchAircr, patchUartReceive, patchUartRegisters, patchUartTxInterrupt, patchUdfFault,
   disabled, patchXipCtrl, sevSetsEvent,
 } from './patches.mjs';
 
@@ -82,6 +82,7 @@ export class Chip {
 
     uart.onByte = (byte) => this.tx.push(byte);
     const adc = rp2040.adc;
+    patchAdcDreq(adc);
     adc.onADCRead = (channel) => {
       // The conversion samples the input at its start; the multiplexer passes the sensor of
       // the channel its select lines pick (channels no sensor is wired to read 0).

@@ -115,6 +115,43 @@ export function patchUartReceive(uart) {
   };
 }
 
+const ADC_FCS = 0x08;
+const ADC_FIFO = 0x0c;
+const ADC_FCS_DREQ_EN = 1 << 3;
+
+/**
+ * ADC DREQ. rp2040js raises DREQ_ADC only when a conversion enters the FIFO and withdraws it only
+ * when a FIFO read leaves fewer entries than FCS.THRESH, and only while FCS.DREQ_EN is set: a
+ * request raised before DREQ_EN is cleared, or the FIFO drained with DREQ_EN clear (or read
+ * empty), stays raised, so the next DMA channel paced by it moves that many words at once from
+ * the empty FIFO (zeros, FCS.UNDER). embassy-rp's `Adc::read_many` does exactly that sequence
+ * (it leaves the conversions that end after the DMA's last transfer in the FIFO, clears DREQ_EN,
+ * and at its next call drains the FIFO before setting DREQ_EN): every read after the first
+ * completes at once with zeros. RP2040 DS 4.9.3 (FCS.DREQ_EN, THRESH): the ADC requests a DMA
+ * transfer while DREQ_EN is set and the FIFO holds at least THRESH entries; here re-evaluated
+ * at every FIFO push and read and every FCS write.
+ */
+export function patchAdcDreq(adc) {
+  if (disabled('adc-dreq')) return;
+  const dma = adc.rp2040.dma;
+  adc.updateDMA = function updateDMA() {
+    const thresh = (this.fcs >>> 24) & 0xf;
+    if (this.fcs & ADC_FCS_DREQ_EN && this.fifo.itemCount >= thresh) dma.setDREQ(this.dreq);
+    else dma.clearDREQ(this.dreq);
+  };
+  const read = adc.readUint32.bind(adc);
+  adc.readUint32 = (offset) => {
+    const value = read(offset);
+    if (offset === ADC_FIFO) adc.updateDMA();
+    return value;
+  };
+  const write = adc.writeUint32.bind(adc);
+  adc.writeUint32 = (offset, value) => {
+    write(offset, value);
+    if (offset === ADC_FCS) adc.updateDMA();
+  };
+}
+
 /**
  * XIP_CTRL (0x14000000) is not mapped in rp2040js: reads log "invalid memory address". The boot
  * ROM's flash_flush_cache writes FLUSH and polls STAT.FLUSH_READY. RP2040 DS 2.6.3.1: STAT =

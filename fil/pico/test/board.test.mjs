@@ -10,6 +10,11 @@ const SIO = 0xd0000000;
 const IO_BANK0 = 0x40014000;
 const ADC = 0x4004c000;
 const PWM = 0x40050000;
+const DMA = 0x50000000;
+const RAM = 0x20000000;
+const DREQ_ADC = 36;
+const SET = 0x2000;
+const CLEAR = 0x3000;
 
 function sioOutput(rp2040, pin, high) {
   rp2040.writeUint32(IO_BANK0 + pin * 8 + 4, 5); // FUNCSEL: SIO
@@ -67,4 +72,50 @@ test('each slot reports STBY, IN1, IN2 and its PWM duty from the slice registers
   assert.equal(chip.motors()[2], '010:1000');
   sioOutput(rp2040, 8, false);
   assert.equal(chip.motors()[2], '010:0');
+});
+
+/**
+ * One sensor as src/board/pico/mod.rs reads it with embassy-rp's `Adc::read_many` (DMA_CH3):
+ * stop a free run and drain the FIFO, FIFO and DREQ on (THRESH 1), the DMA channel armed for
+ * `count` halfwords, START_MANY at divider 0 (back to back, 2 us each); after the DMA's last
+ * transfer START_MANY cleared and FIFO and DREQ off (the conversions since stay in the FIFO).
+ */
+function readMany(rp2040, count) {
+  rp2040.writeUint32(ADC + CLEAR, 1 << 3); // CS: START_MANY off
+  rp2040.clock.tick(3000);
+  while (!(rp2040.readUint32(ADC + 0x08) & (1 << 8))) rp2040.readUint32(ADC + 0x0c); // drain
+  rp2040.writeUint32(ADC + 0x08, (1 << 24) | (1 << 3) | 1); // FCS: THRESH 1, DREQ_EN, EN
+  const ch = DMA + 3 * 0x40;
+  const to = RAM + 0x400;
+  rp2040.writeUint32(ch + 0x00, ADC + 0x0c); // READ_ADDR: FIFO
+  rp2040.writeUint32(ch + 0x04, to); // WRITE_ADDR
+  rp2040.writeUint32(ch + 0x08, count); // TRANS_COUNT
+  // CTRL_TRIG: EN, halfword, INCR_WRITE, CHAIN_TO itself, TREQ_SEL ADC
+  rp2040.writeUint32(ch + 0x0c, 1 | (1 << 2) | (1 << 5) | (3 << 11) | (DREQ_ADC << 15));
+  rp2040.writeUint32(ADC + 0x10, 0); // DIV
+  rp2040.writeUint32(ADC + SET, 1 << 3); // CS: START_MANY
+  let us = 0;
+  while (rp2040.readUint32(ch + 0x0c) & (1 << 24)) { // BUSY
+    rp2040.clock.tick(1000);
+    assert.ok(++us < 100, 'the DMA completes');
+  }
+  rp2040.clock.tick(8000); // the wake-up: conversions go on into the FIFO
+  rp2040.writeUint32(ADC + CLEAR, 1 << 3);
+  rp2040.clock.tick(3000);
+  rp2040.writeUint32(ADC + 0x08 + CLEAR, (1 << 3) | (1 << 1) | 1); // FCS: DREQ_EN, SHIFT, EN off
+  return { us, samples: Array.from({ length: count }, (_, i) => rp2040.readUint16(to + 2 * i)) };
+}
+
+test('ADC0 by DMA: free-running conversions reach RAM with the sensor the multiplexer selects', () => {
+  const chip = bareChip();
+  const { rp2040 } = chip;
+  chip.sensors.splice(0, 9, 100, 200, 300, 400, 500, 600, 700, 800, 900);
+  rp2040.writeUint32(ADC + 0x00, 1); // CS: EN, AINSEL 0
+  for (let sensor = 0; sensor < 9; sensor++) {
+    const channel = MUX_CHANNEL[sensor];
+    for (let bit = 0; bit < 4; bit++) sioOutput(rp2040, 2 + bit, channel & (1 << bit));
+    const { us, samples } = readMany(rp2040, 9);
+    assert.deepEqual(samples, new Array(9).fill(100 * (sensor + 1)), `sensor ${sensor} on channel ${channel}`);
+    assert.ok(us >= 17 && us <= 19, `nine conversions of 2 us, not at once (${us} us)`);
+  }
 });

@@ -1,6 +1,6 @@
 // One test per patch of patches.mjs (and the watchdog reset of chip.mjs), on a chip without
 // firmware whose registers the test drives. Each fails with its patch left out:
-//   FIL_PICO_DISABLE=uart-registers|uart-tx|uart-receive|xip-ctrl|sev|aircr|udf|watchdog npm test
+//   FIL_PICO_DISABLE=uart-registers|uart-tx|uart-receive|adc-dreq|xip-ctrl|sev|aircr|udf|watchdog npm test
 
 import assert from 'node:assert/strict';
 import { test } from 'node:test';
@@ -11,6 +11,8 @@ const UART0_IRQ = 20;
 const DMA = 0x50000000;
 const DREQ_UART0_RX = 21;
 const RAM = 0x20000000;
+const ADC = 0x4004c000;
+const DREQ_ADC = 36;
 
 function enableUart(rp2040) {
   rp2040.writeUint32(UART0 + 0x30, (1 << 9) | (1 << 8) | 1); // UARTCR: RXE | TXE | UARTEN
@@ -76,6 +78,31 @@ test('uart-receive: a byte arriving at a full FIFO is lost and sets UARTRSR.OE',
   assert.equal(rp2040.readUint32(UART0 + 0x00) & 0xff, 0, 'the FIFO kept the oldest bytes');
   rp2040.writeUint32(UART0 + 0x04, 0); // ECR
   assert.equal(rp2040.readUint32(UART0 + 0x04), 0);
+});
+
+test('adc-dreq: a FIFO drained with DREQ_EN clear requests nothing; the DMA waits for conversions', () => {
+  const { rp2040 } = bareChip();
+  const fcs = (dreq) => rp2040.writeUint32(ADC + 0x08, (1 << 24) | (dreq ? 1 << 3 : 0) | 1); // THRESH 1, EN
+  rp2040.writeUint32(ADC + 0x00, 1); // CS: EN
+  fcs(true);
+  rp2040.writeUint32(ADC + 0x00, 1 | (1 << 2)); // START_ONCE: one conversion into the FIFO
+  rp2040.clock.tick(3000);
+  assert.equal((rp2040.readUint32(ADC + 0x08) >> 16) & 0xf, 1, 'FIFO level 1: the request raised');
+  fcs(false); // as embassy-rp's read_many ends: DREQ_EN cleared with the entry left
+  rp2040.readUint32(ADC + 0x0c); // and its next call drains the FIFO, then sets DREQ_EN
+  fcs(true);
+  const ch = DMA + 3 * 0x40;
+  rp2040.writeUint32(ch + 0x00, ADC + 0x0c); // READ_ADDR: FIFO
+  rp2040.writeUint32(ch + 0x04, RAM + 0x200); // WRITE_ADDR
+  rp2040.writeUint32(ch + 0x08, 2); // TRANS_COUNT
+  // CTRL_TRIG: EN, halfword, INCR_WRITE, CHAIN_TO itself, TREQ_SEL ADC
+  rp2040.writeUint32(ch + 0x0c, 1 | (1 << 2) | (1 << 5) | (3 << 11) | (DREQ_ADC << 15));
+  rp2040.clock.tick(0);
+  assert.equal(rp2040.readUint32(ch + 0x08), 2, 'nothing moved from the empty FIFO');
+  assert.equal(rp2040.readUint32(ADC + 0x08) & (1 << 10), 0, 'FCS.UNDER: no read of the empty FIFO');
+  rp2040.writeUint32(ADC + 0x00, 1 | (1 << 2)); // a conversion: one transfer
+  rp2040.clock.tick(3000);
+  assert.equal(rp2040.readUint32(ch + 0x08), 1, 'one conversion, one transfer');
 });
 
 test('xip-ctrl: STAT says flush ready and FIFO empty, STREAM_CTR reads 0, no unmapped access', () => {

@@ -9,14 +9,26 @@
 //! mirrors it (`scripts/check-pinmap.sh`) and the emergency stop derives its pins from it.
 //!
 //! The sensor scan: the RP2040 has four ADC inputs, the unit nine sensors. The multiplexer's
-//! four select lines pick one sensor at a time onto ADC0; each sensor gets [`SETTLE_US`] to
-//! settle, then [`OVERSAMPLE`] blocking conversions (2 µs each, 48 MHz ADC clock) averaged. The scan
-//! visits the multiplexer's channels in Gray-code order ([`MUX_CHANNEL`]: one select line
-//! changes per step, so no intermediate channel is ever selected in passing), at the start of
-//! each control tick, before the step: 9 x (10 + 4 x 2) µs = 162 µs, the CPU free while each
-//! sensor settles (an embassy-time timer) and busy for its 8 µs of conversions (waiting for each
-//! conversion's interrupt through the executor cost more than the conversion: the step-cost
-//! harness measured the whole millisecond at 38 % with it).
+//! four select lines pick one sensor at a time onto ADC0, in Gray-code order ([`MUX_CHANNEL`]:
+//! one select line changes per step, so no intermediate channel is ever selected in passing), at
+//! the start of each control tick, before the step. Per sensor: the select lines, then one
+//! embassy-rp `Adc::read_many` of [`CONVERSIONS`] free-running conversions (ADC clock divider 0:
+//! back to back, 2 µs each at 48 MHz) that the ADC's FIFO hands to a DMA channel (DMA_CH3): the
+//! first [`SETTLE_CONVERSIONS`] are discarded and ARE the settling time (the first kept one
+//! samples [`SETTLE_US`] after the select lines changed, at the earliest), the last
+//! [`OVERSAMPLE`] are averaged. The CPU sets the transfer up, sleeps, and is woken once per
+//! sensor by the DMA's completion interrupt: 9 x 18 µs of conversions, about 270 µs with the
+//! set-ups and wake-ups (measured on the emulated Pico, fil/pico), the CPU free during the
+//! conversions. Why: the scan was an embassy-time timer of 10 µs per sensor to settle (a wake-up
+//! through the executor, about 370 instructions) and then four blocking conversions (polling,
+//! 114 instructions each at the step-cost cycle model), about 7 600 instructions a millisecond;
+//! now a sensor costs one wake-up, the set-up's register writes and at most 2 µs of polling
+//! (`read_many` stopping the ADC). The step-cost harness (bench-mcu, `scripts/step-cost.sh`,
+//! which models this scan) measured the Pico's idle median 11 529 -> 9 792 instructions and its
+//! worst millisecond 15 788 -> 14 051 (27.8 % -> 24.7 % of 1 ms at 125 MHz; the bar is 25 %);
+//! the real images on the emulated Pico (fil/pico) spend 1 764 fewer a millisecond.
+//! A conversion error anywhere in a sensor's free run (the settling conversions included) fails
+//! the scan: `read_many` reports the ADC's sticky error flag.
 //! Settling, reasoned (not measured on hardware): the CD74HC4067's on-resistance at 3.3 V is a
 //! few hundred ohms and its common output about 50-90 pF, with a Hall sensor's output of a few
 //! hundred ohms a time constant well under 0.1 µs; 12-bit settling needs about 9 of them, so
@@ -59,10 +71,20 @@ pub const WATCHDOG_TIMEOUT: Duration = Duration::from_millis(600);
 const BAUD: u32 = 115_200;
 /// PWM: 125 MHz / (6249 + 1) = 20 kHz, above hearing, below the TB6612FNG's 100 kHz.
 const PWM_TOP: u16 = 6_249;
-/// The multiplexer's settling time after its select lines change, µs (see the module header).
-const SETTLE_US: u64 = 10;
+/// One conversion of the free-running ADC, µs: 96 cycles of its 48 MHz clock (divider 0).
+const CONVERSION_US: u32 = 2;
+/// The ADC clock divider for back-to-back conversions (any value below 96 is the same).
+const FREE_RUNNING: u16 = 0;
+/// Conversions discarded per sensor while the multiplexer settles (see the module header).
+const SETTLE_CONVERSIONS: usize = 5;
+/// The multiplexer's settling time after its select lines change, µs: the discarded
+/// conversions' time, at least the 10 µs the module header reasons.
+const SETTLE_US: u32 = SETTLE_CONVERSIONS as u32 * CONVERSION_US;
+const _: () = assert!(SETTLE_US >= 10);
 /// Conversions averaged per sensor.
-const OVERSAMPLE: u32 = 4;
+const OVERSAMPLE: usize = 4;
+/// Conversions per sensor: one DMA transfer.
+const CONVERSIONS: usize = SETTLE_CONVERSIONS + OVERSAMPLE;
 /// Sensors: two per slot and three on the hub (as on the G071).
 const ANALOG_INPUTS: usize = 2 * SLOTS + 3;
 /// The first hub input.
@@ -82,7 +104,8 @@ const MUX_CHANNEL: [u8; ANALOG_INPUTS] = {
 bind_interrupts!(struct Irqs {
     ADC_IRQ_FIFO => adc::InterruptHandler;
     UART0_IRQ => uart::InterruptHandler<UART0>;
-    DMA_IRQ_0 => dma::InterruptHandler<peripherals::DMA_CH0>, dma::InterruptHandler<peripherals::DMA_CH1>;
+    DMA_IRQ_0 => dma::InterruptHandler<peripherals::DMA_CH0>, dma::InterruptHandler<peripherals::DMA_CH1>,
+        dma::InterruptHandler<peripherals::DMA_CH3>;
 });
 
 /// Declares the board's pin map once and derives from it the [`Parts`] struct that takes every
@@ -132,6 +155,7 @@ pin_map! {
         printer_tx_dma: DMA_CH0, "The printer UART's transmit DMA";
         printer_rx_dma: DMA_CH1, "embassy-rp's receive DMA channel (unused: uart_ring's is DMA_CH2)";
         printer_ring_dma: DMA_CH2, "The printer UART's receive ring";
+        sensor_dma: DMA_CH3, "The sensor scan: ADC0's FIFO into RAM (Adc::read_many)";
         pwm_chip1: PWM_SLICE3, "Motor PWM of TB6612 #1, 20 kHz";
         pwm_chip2: PWM_SLICE4, "Motor PWM of TB6612 #2, 20 kHz";
         watchdog: WATCHDOG, "The watchdog, fed by the control task";
@@ -334,6 +358,8 @@ impl mmu_hal_port::Watchdog for Watchdog {
 pub struct Sampler {
     adc: Adc<'static, adc::Async>,
     input: adc::Channel<'static>,
+    /// Moves the ADC's FIFO into a sensor's conversions.
+    dma: dma::Channel<'static>,
     select: [Output<'static>; 4],
 }
 
@@ -345,18 +371,31 @@ impl Sampler {
         }
     }
 
-    /// One sensor: select, settle, [`OVERSAMPLE`] conversions averaged.
+    /// One sensor: select, then [`CONVERSIONS`] free-running conversions by DMA, the first
+    /// [`SETTLE_CONVERSIONS`] discarded (the multiplexer settling), the last [`OVERSAMPLE`]
+    /// averaged.
+    ///
+    /// What embassy-rp 0.10's `read_many` does around the transfer, relied on here (no
+    /// work-around needed): it stops the ADC only once woken after the DMA's last transfer
+    /// (clears START_MANY, then busy-waits for the conversion under way, at most 2 µs), so the
+    /// conversions that ended meanwhile (the wake-up takes several; the FIFO keeps four and sets
+    /// FCS.OVER, which nothing reads or clears) stay in the FIFO; its next call drains them (it
+    /// waits for READY and reads the FIFO until empty) before it arms the DMA, so they never
+    /// reach a kept conversion (the last sensor's wait in the FIFO for the next scan). Its error
+    /// check reads CS.ERR_STICKY, cleared at its start: a failed conversion anywhere in the free
+    /// run, the discarded ones and those after the DMA's last transfer included, fails the sensor.
     async fn read(&mut self, channel: u8) -> Result<u16, adc::Error> {
         self.select(channel);
-        Timer::after_micros(SETTLE_US).await;
-        let mut sum = 0u32;
-        for _ in 0..OVERSAMPLE {
-            // Blocking: a conversion takes 2 µs (96 cycles of the 48 MHz ADC clock), less than
-            // waiting for its interrupt through the executor costs (measured on the step-cost
-            // harness: about 300 instructions, 5 µs, a conversion).
-            sum += u32::from(self.adc.blocking_read(&mut self.input)?);
-        }
-        Ok((sum / OVERSAMPLE) as u16)
+        let mut conversions = [0u16; CONVERSIONS];
+        self.adc
+            .read_many(&mut self.input, &mut conversions, FREE_RUNNING, &mut self.dma)
+            .await?;
+        let sum: u32 = conversions
+            .iter()
+            .skip(SETTLE_CONVERSIONS)
+            .map(|&conversion| u32::from(conversion))
+            .sum();
+        Ok((sum / OVERSAMPLE as u32) as u16)
     }
 }
 
@@ -455,6 +494,7 @@ pub fn init() -> BoardParts {
     let sampler = Sampler {
         adc: Adc::new(parts.adc, Irqs, adc::Config::default()),
         input: adc::Channel::new_pin(parts.mux_sig, Pull::None),
+        dma: dma::Channel::new(parts.sensor_dma, Irqs),
         select: [
             low(parts.mux_s0),
             low(parts.mux_s1),
