@@ -46,6 +46,8 @@
 # The session's bytes reach the UART at the line's rate (12 a millisecond at most). The limits
 # below are regression guards at the measured figures plus about 3 %, not the bar; lower them
 # as the cost comes down.
+set -euo pipefail
+
 MAX_WORST="${MAX_WORST:-8450}"
 MAX_STEP="${MAX_STEP:-8450}"
 MAX_IDLE="${MAX_IDLE:-4070}"

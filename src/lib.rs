@@ -17,6 +17,7 @@ pub mod drive;
 pub mod feeder;
 pub mod follower;
 pub mod lanes;
+pub mod link_buffer;
 pub mod persist;
 pub mod phases;
 pub mod port;

@@ -5,15 +5,16 @@
 //!
 //! - [`run_control`], every millisecond on an embassy-time [`Ticker`] (1 MHz ticks: the period is
 //!   exact): scans the sensors (the wait bounded by [`SCAN_TIMEOUT`]), takes at most
-//!   [`control::MAX_RX_PER_STEP`] bytes from [`RX_PIPE`], steps the [`ControlLoop`], applies the
-//!   motor commands, queues the answer in [`TX_PIPE`], feeds the watchdog when the step was on
+//!   [`control::MAX_RX_PER_STEP`] bytes from [`RX_BUFFER`], steps the [`ControlLoop`], applies the
+//!   motor commands, queues the answer in [`TX_BUFFER`], feeds the watchdog when the step was on
 //!   time with fresh samples, and signals [`STEPPED`] when a save piece is due after the step
 //!   ([`Deferral`]: not after a step busy with the printer or beginning a phase, unless several
 //!   in a row were);
 //! - [`run_store`]: restores what the flash holds (then [`BOOTED`]); woken by [`STEPPED`], writes
 //!   what changed, one bounded piece after a step; on [`RESET`] the whole save before a reset;
 //! - [`run_link_rx`] / [`run_link_tx`]: the printer UART (received by DMA into a ring, so no byte
-//!   is lost while a flash erase stalls the CPU) to and from [`RX_PIPE`] / [`TX_PIPE`];
+//!   is lost while a flash erase stalls the CPU) to and from [`RX_BUFFER`] / [`TX_BUFFER`]
+//!   ([`LinkBuffer`]s: why not embassy-sync's `Pipe`, see there);
 //! - [`run_button`]: the button's level, at each edge, in [`BUTTON`] (the control loop debounces);
 //! - [`run_status_led`]: the LED, from [`LED`].
 //!
@@ -24,8 +25,8 @@ use core::cell::RefCell;
 use core::ops::Range;
 
 use embassy_futures::select::{Either, select};
+use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
-use embassy_sync::pipe::Pipe;
 use embassy_sync::signal::Signal;
 use embassy_sync::watch::Watch;
 use embassy_time::{Duration, Ticker, Timer, with_timeout};
@@ -34,6 +35,7 @@ use mmu_hal_port::{Button, Motors, SensorScan, StatusLed};
 use portable_atomic::{AtomicBool, AtomicU32, Ordering};
 
 use crate::control::{self, ControlLoop, ResetBoard, Tick, TickSchedule};
+use crate::link_buffer::LinkBuffer;
 use crate::persist::{Boot, Deferral, EntryCrc, Keeper, Store};
 use crate::port::{CheckedCrc, SampleClock, WatchedFlash};
 use crate::uart::LineErrors;
@@ -64,11 +66,16 @@ pub const WHOLE_JOB_FEEDS: u32 = 6;
 /// (`crate::TX_CAPACITY` = 48).
 pub const TX_QUEUE: usize = 256;
 
+/// A [`LinkBuffer`] shared by two tasks of the one thread executor.
+pub type SharedBuffer<const N: usize> = Mutex<CriticalSectionRawMutex, RefCell<LinkBuffer<N>>>;
+
 /// Bytes from the printer waiting for the control task (it takes at most
 /// `control::MAX_RX_PER_STEP` a step); the UART's DMA ring holds what does not fit yet.
-pub static RX_PIPE: Pipe<CriticalSectionRawMutex, { control::RX_RING }> = Pipe::new();
+pub static RX_BUFFER: SharedBuffer<{ control::RX_RING }> = Mutex::new(RefCell::new(LinkBuffer::new()));
 /// Responses waiting for the UART.
-pub static TX_PIPE: Pipe<CriticalSectionRawMutex, TX_QUEUE> = Pipe::new();
+pub static TX_BUFFER: SharedBuffer<TX_QUEUE> = Mutex::new(RefCell::new(LinkBuffer::new()));
+/// [`TX_BUFFER`] has bytes for the link's transmit task.
+pub static TX_READY: Signal<CriticalSectionRawMutex, ()> = Signal::new();
 /// True while the link's transmit task has bytes in flight.
 pub static TX_BUSY: AtomicBool = AtomicBool::new(false);
 /// The button's level (true: held down).
@@ -205,36 +212,36 @@ pub async fn run_control<const N: usize, S: SensorScan<N>, M: Motors<N>>(
     }
 }
 
-/// Moves the oldest bytes waiting in [`RX_PIPE`] into `rx`, as many as wait and fit; returns how
-/// many. Two reads: the pipe's `try_read` hands out only the part before its ring wraps, and a
-/// step must take as many as the rule allows (`control::RxQueue::take_step`), not fewer.
-fn take_received(rx: &mut [u8]) -> usize {
-    let mut taken = 0;
-    while let Some(rest) = rx.get_mut(taken..)
-        && !rest.is_empty()
-        && let Ok(count) = RX_PIPE.try_read(rest)
-    {
-        taken += count;
-    }
-    taken
+/// `f` on the buffer `shared`, under its lock (never held across an `.await`, so never
+/// borrowed twice: `None` would be a bug, and is treated as a buffer that takes nothing).
+fn with_buffer<const N: usize, R>(
+    shared: &SharedBuffer<N>,
+    f: impl FnOnce(&mut LinkBuffer<N>) -> R,
+) -> Option<R> {
+    shared.lock(|cell| cell.try_borrow_mut().ok().map(|mut buffer| f(&mut buffer)))
 }
 
-/// Queues a whole response for the printer, or nothing when it does not fit. Several writes:
-/// the pipe's `try_write` takes only what fits before its ring wraps (a single call sent the
-/// printer half a response; the step-cost harness caught it).
+/// Moves the oldest bytes waiting in [`RX_BUFFER`] into `rx`, as many as wait and fit; returns
+/// how many.
+fn take_received(rx: &mut [u8]) -> usize {
+    with_buffer(&RX_BUFFER, |buffer| buffer.take(rx)).unwrap_or(0)
+}
+
+/// Queues a whole response for the printer, or nothing when it does not fit.
 pub fn send(bytes: &[u8]) -> bool {
-    if TX_PIPE.free_capacity() < bytes.len() {
+    let queued = with_buffer(&TX_BUFFER, |buffer| {
+        buffer.room() >= bytes.len() && buffer.push(bytes) == bytes.len()
+    });
+    if queued != Some(true) {
         return false;
     }
-    let mut rest = bytes;
-    while !rest.is_empty() {
-        match TX_PIPE.try_write(rest) {
-            Ok(count) => rest = rest.get(count..).unwrap_or_default(),
-            // Cannot happen: the room was checked, and only this task writes.
-            Err(_) => return false,
-        }
-    }
+    TX_READY.signal(());
     true
+}
+
+/// Whether responses wait for the UART.
+fn tx_waiting() -> bool {
+    with_buffer(&TX_BUFFER, |buffer| !buffer.is_empty()).unwrap_or(false)
 }
 
 /// The receive errors so far.
@@ -260,7 +267,7 @@ impl<M: Motors<N>, const N: usize> ResetBoard for Resetting<'_, M, N> {
 
     async fn flush(&mut self) {
         let sent = async {
-            while !TX_PIPE.is_empty() || TX_BUSY.load(Ordering::Relaxed) {
+            while tx_waiting() || TX_BUSY.load(Ordering::Relaxed) {
                 Timer::after_micros(200).await;
             }
         };
@@ -386,14 +393,26 @@ fn log_restored<const N: usize, F: NorFlash, C: EntryCrc>(_keeper: &Keeper<F, N,
     }
 }
 
-/// The link's receive task: moves what the UART's DMA ring received into [`RX_PIPE`], waiting
+/// The link's receive task: moves what the UART's DMA ring received into [`RX_BUFFER`], waiting
 /// for room when the control task is behind (the ring holds the rest), and counts the receive
 /// errors; `classify` tells what an error of the board's UART counts as.
 pub async fn run_link_rx<R: embedded_io_async::Read>(mut rx: R, classify: fn(&R::Error) -> LineError) -> ! {
     let mut buf = [0u8; 32];
     loop {
         match rx.read(&mut buf).await {
-            Ok(count) => RX_PIPE.write_all(buf.get(..count).unwrap_or_default()).await,
+            Ok(count) => {
+                let mut rest = buf.get(..count).unwrap_or_default();
+                loop {
+                    let pushed = with_buffer(&RX_BUFFER, |buffer| buffer.push(rest)).unwrap_or(0);
+                    rest = rest.get(pushed..).unwrap_or_default();
+                    if rest.is_empty() {
+                        break;
+                    }
+                    // The control task takes a step's worth a period; the UART's ring holds
+                    // what arrives meanwhile.
+                    Timer::after(PERIOD).await;
+                }
+            }
             Err(e) => {
                 let counter = match classify(&e) {
                     LineError::Overrun => &OVERRUNS,
@@ -405,16 +424,23 @@ pub async fn run_link_rx<R: embedded_io_async::Read>(mut rx: R, classify: fn(&R:
     }
 }
 
-/// The link's transmit task: sends what the control task queued in [`TX_PIPE`].
+/// The link's transmit task: sends what the control task queued in [`TX_BUFFER`], woken by
+/// [`TX_READY`].
 pub async fn run_link_tx<W: embedded_io_async::Write>(mut tx: W) -> ! {
     let mut buf = [0u8; 64];
     loop {
-        let count = TX_PIPE.read(&mut buf).await;
-        TX_BUSY.store(true, Ordering::Relaxed);
-        // A write error leaves nothing to retry: the printer asks again.
-        let _ = tx.write_all(buf.get(..count).unwrap_or_default()).await;
-        let _ = tx.flush().await;
-        TX_BUSY.store(!TX_PIPE.is_empty(), Ordering::Relaxed);
+        TX_READY.wait().await;
+        loop {
+            let count = with_buffer(&TX_BUFFER, |buffer| buffer.take(&mut buf)).unwrap_or(0);
+            if count == 0 {
+                break;
+            }
+            TX_BUSY.store(true, Ordering::Relaxed);
+            // A write error leaves nothing to retry: the printer asks again.
+            let _ = tx.write_all(buf.get(..count).unwrap_or_default()).await;
+            let _ = tx.flush().await;
+        }
+        TX_BUSY.store(false, Ordering::Relaxed);
     }
 }
 
