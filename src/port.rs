@@ -6,7 +6,7 @@
 
 use embedded_storage::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
 
-use crate::persist::{EntryCrc, SoftwareCrc, iso_hdlc};
+use crate::persist::{BitwiseCrc, EntryCrc, iso_hdlc};
 
 /// A NOR flash that never feeds the watchdog on its own: only before an erase, and only as many
 /// times as its owner allowed for the job at hand ([`WatchedFlash::allow_feeds`]).
@@ -94,8 +94,8 @@ impl<F: NorFlash> NorFlash for WatchedFlash<F> {
 pub enum CheckedCrc<H> {
     /// The CRC unit, which passed the check.
     Unit(H),
-    /// The software CRC: the unit failed the check.
-    Software(SoftwareCrc),
+    /// The software CRC, bit by bit: the unit failed the check.
+    Software(BitwiseCrc),
 }
 
 impl<H: EntryCrc> CheckedCrc<H> {
@@ -108,7 +108,7 @@ impl<H: EntryCrc> CheckedCrc<H> {
         if value == iso_hdlc::CHECK {
             (CheckedCrc::Unit(unit), value)
         } else {
-            (CheckedCrc::Software(SoftwareCrc::default()), value)
+            (CheckedCrc::Software(BitwiseCrc::default()), value)
         }
     }
 
@@ -176,6 +176,7 @@ mod tests {
     extern crate std;
     use std::vec::Vec;
 
+    use crate::persist::SoftwareCrc;
     use crate::persist::ram_flash::{PAGE, RamFlash};
 
     static FEEDS: AtomicU32 = AtomicU32::new(0);

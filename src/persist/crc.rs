@@ -6,7 +6,7 @@
 //! consistent by itself (an entry counts only when its trailer matches what the same unit
 //! computes over it).
 
-use crc::{CRC_32_ISO_HDLC, Crc, Digest};
+use crc::{CRC_32_ISO_HDLC, Crc, Digest, NoTable, Table};
 
 /// CRC-32/ISO-HDLC (the CRC of zip and Ethernet), as the STM32G0's CRC unit is set up for it
 /// (RM0444, "Cyclic redundancy check calculation unit"): the polynomial (`CRC_POL`, 32 bits),
@@ -39,32 +39,55 @@ pub trait EntryCrc {
     fn value(&mut self) -> u32;
 }
 
-/// A static: a [`SoftwareCrc`] keeps a running digest of it.
-static TABLE_CRC: Crc<u32> = Crc::<u32>::new(&CRC_32_ISO_HDLC);
+/// An [`EntryCrc`] on a running digest of the `crc` crate's CRC-32/ISO-HDLC with the table
+/// implementation `$table`, kept in the static `$crc`.
+macro_rules! software_crc {
+    ($(#[$doc:meta])* $name:ident, $crc:ident, $table:ty) => {
+        static $crc: Crc<u32, $table> = Crc::<u32, $table>::new(&CRC_32_ISO_HDLC);
 
-/// CRC-32/ISO-HDLC in software, with the `crc` crate's 1 KiB table: the host and the benchmark.
-#[derive(Clone)]
-pub struct SoftwareCrc(Digest<'static, u32>);
+        $(#[$doc])*
+        #[derive(Clone)]
+        pub struct $name(Digest<'static, u32, $table>);
 
-impl Default for SoftwareCrc {
-    fn default() -> Self {
-        SoftwareCrc(TABLE_CRC.digest())
-    }
+        impl Default for $name {
+            fn default() -> Self {
+                $name($crc.digest())
+            }
+        }
+
+        impl EntryCrc for $name {
+            fn start(&mut self) {
+                self.0 = $crc.digest();
+            }
+
+            fn add(&mut self, bytes: &[u8]) {
+                self.0.update(bytes);
+            }
+
+            fn value(&mut self) -> u32 {
+                self.0.clone().finalize()
+            }
+        }
+    };
 }
 
-impl EntryCrc for SoftwareCrc {
-    fn start(&mut self) {
-        self.0 = TABLE_CRC.digest();
-    }
+software_crc!(
+    /// CRC-32/ISO-HDLC in software, with the `crc` crate's 1 KiB table: the Pico, the host and
+    /// the benchmark.
+    SoftwareCrc,
+    TABLE_CRC,
+    Table<1>
+);
 
-    fn add(&mut self, bytes: &[u8]) {
-        self.0.update(bytes);
-    }
-
-    fn value(&mut self) -> u32 {
-        self.0.clone().finalize()
-    }
-}
+software_crc!(
+    /// CRC-32/ISO-HDLC in software bit by bit (eight shifts a byte where the table takes one
+    /// lookup): the fallback of a board whose CRC unit failed its check at boot
+    /// (`crate::port::CheckedCrc`). Correct and slower, for a fault that should never happen,
+    /// without a 1 KiB table in the flash of every unit that has a CRC unit.
+    BitwiseCrc,
+    BITWISE_CRC,
+    NoTable
+);
 
 #[cfg(test)]
 mod tests {
@@ -115,8 +138,8 @@ mod tests {
         register ^ iso_hdlc::FINAL_XOR
     }
 
-    fn software(chunks: &[&[u8]]) -> u32 {
-        let mut crc = SoftwareCrc::default();
+    fn software<C: EntryCrc + Default>(chunks: &[&[u8]]) -> u32 {
+        let mut crc = C::default();
         crc.add(b"left over from a previous entry");
         crc.start();
         for chunk in chunks {
@@ -126,9 +149,14 @@ mod tests {
     }
 
     #[test]
-    fn the_software_crc_is_crc32_iso_hdlc() {
+    fn the_software_crcs_are_crc32_iso_hdlc() {
+        software_crc_is_crc32_iso_hdlc::<SoftwareCrc>();
+        software_crc_is_crc32_iso_hdlc::<BitwiseCrc>();
+    }
+
+    fn software_crc_is_crc32_iso_hdlc<C: EntryCrc + Default>() {
         // The catalogue's check value: the CRC of "123456789".
-        assert_eq!(software(&[b"123456789"]), iso_hdlc::CHECK);
+        assert_eq!(software::<C>(&[b"123456789"]), iso_hdlc::CHECK);
         assert_eq!(CRC_32_ISO_HDLC.check, iso_hdlc::CHECK);
         let mut state = 0x1234_5678u32;
         let data: [u8; 200] = core::array::from_fn(|_| {
@@ -137,11 +165,11 @@ mod tests {
         });
         for len in [0, 1, 7, 8, 24, 64, 200] {
             let bytes = &data[..len];
-            assert_eq!(software(&[bytes]), reference(bytes), "{len} bytes");
+            assert_eq!(software::<C>(&[bytes]), reference(bytes), "{len} bytes");
             for split in [0, 1.min(len), len / 2, len] {
                 let (a, b) = bytes.split_at(split);
                 assert_eq!(
-                    software(&[a, b]),
+                    software::<C>(&[a, b]),
                     reference(bytes),
                     "{len} bytes split at {split}"
                 );

@@ -26,7 +26,7 @@ use heapless::Vec;
 use crate::lanes::LaneFigures;
 use crate::unit::Lane;
 
-pub use crc::{EntryCrc, SoftwareCrc, iso_hdlc};
+pub use crc::{BitwiseCrc, EntryCrc, SoftwareCrc, iso_hdlc};
 pub use keeper::{
     Boot, Deferral, ERASE_BURST, ERASES_AT_BOOT, ERASES_PER_HOUR, FULL_CHECK_MS, Health, Keeper,
     MAX_DEFERRED_STEPS, RETRY_MAX_MS,
