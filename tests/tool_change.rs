@@ -267,3 +267,28 @@ fn hub_threshold_fixed_then_retry_loads() {
     rig.retry_finishes(t(0));
     assert_eq!(rig.model.loaded_slot(), Some(0));
 }
+
+/// The board defers its save piece after a step that begins a phase (the costliest steps on the
+/// MCU, `Outputs::phase_began`): each phase of a tool change says so once, in the step it
+/// begins, and no other step does.
+#[test]
+fn each_phase_of_a_tool_change_says_once_that_it_began() {
+    let mut rig = Rig::<3>::new();
+    rig.boot();
+    rig.command(t(0));
+    let before = rig.phase_began_log.len();
+    let run = rig.command(t(1));
+    let began = rig.phase_began_log[before..]
+        .iter()
+        .filter(|&&began| began)
+        .count();
+    // Unload to the slot sensor, retract, park; feed to the hub, to the printer's sensor, to the
+    // nozzle: a progress code each.
+    assert_eq!(run.progress.len(), 6, "{:?}", run.progress);
+    assert_eq!(began, run.progress.len());
+    rig.idle(2000);
+    assert!(
+        !rig.phase_began_log[rig.phase_began_log.len() - 2000..].contains(&true),
+        "an idle unit begins no phase"
+    );
+}

@@ -121,6 +121,8 @@ pub struct Rig<const N: usize> {
     reported_fsensor: u8,
     /// Every motor command the App gave, per step.
     pub motor_log: Vec<[MotorCommand; N]>,
+    /// Per step: the App said a phase began in it (`Outputs::phase_began`).
+    pub phase_began_log: Vec<bool>,
     /// The printer's firmware.
     pub printer: PrinterKind,
     /// The progress the printer last saw (`None` between runs and after an error: the printer's
@@ -151,6 +153,7 @@ impl<const N: usize> Rig<N> {
             decoder: ResponseDecoder::new(),
             reported_fsensor: 0,
             motor_log: Vec::new(),
+            phase_began_log: Vec::new(),
             printer: PrinterKind::Mk4,
             seen_progress: None,
             load_started: false,
@@ -167,6 +170,7 @@ impl<const N: usize> Rig<N> {
         let out = self.app.step(Instant::from_millis(self.now), &samples, rx);
         self.model.step(STEP_MS as u32, &out.motors);
         self.motor_log.push(out.motors);
+        self.phase_began_log.push(out.phase_began);
         self.now += STEP_MS;
         let mut responses = Vec::new();
         for &byte in out.tx.iter() {
