@@ -265,10 +265,12 @@ impl<const N: usize> App<N> {
         self.count_transition(before);
         out.phase_began = self.operation.phase_began_at(now);
         self.started_up |= !matches!(self.operation.status(), Status::Running(_));
-        self.count_fed();
+        // Once: `Runner::driving_slot` looks the phase up in the plan.
+        let driving = self.operation.driving_slot();
+        self.count_fed(driving);
         let idle = matches!(self.operation.status(), Status::Finished);
         self.spool_end.watch(&self.unit, idle, now);
-        self.drive_motors(now, out);
+        self.drive_motors(now, driving, out);
         out.status_led = match self.operation.status() {
             Status::Running(_) => true,
             Status::Failed(_) => (now.as_millis() / ERROR_BLINK_MS).is_multiple_of(2),
@@ -441,9 +443,8 @@ impl<const N: usize> App<N> {
 
     /// Add the motion of the slot the running command drives to its fed distance (the extruder
     /// pulling a loaded slot while printing does not count), and every slot's motion to what
-    /// left its spool ([`Ledger::moved`]).
-    fn count_fed(&mut self) {
-        let driving = self.operation.driving_slot();
+    /// left its spool ([`Ledger::moved`]). `driving`: the slot the running command drives.
+    fn count_fed(&mut self, driving: Option<usize>) {
         for (slot, feeder) in self.unit.feeders.iter().enumerate() {
             let odometry = feeder.odometry_centi();
             let seen = core::mem::replace(&mut self.odometry_seen[slot], odometry);
@@ -634,12 +635,11 @@ impl<const N: usize> App<N> {
     /// The running phase drives its slot; a loaded slot follows the extruder through the tension
     /// sensor ([`follower`]); every other motor coasts. A slot that could not follow stops the
     /// running command too, braked at once ([`Runner::interrupt`]), and its failure is counted
-    /// on that slot, not on the command's.
-    fn drive_motors(&mut self, now: Instant, out: &mut Outputs<N>) {
+    /// on that slot, not on the command's. `driving`: the slot the running command drives.
+    fn drive_motors(&mut self, now: Instant, driving: Option<usize>, out: &mut Outputs<N>) {
         // A slot whose spool ended grips nothing: it is not followed.
         let allowed =
             !matches!(self.operation.status(), Status::Failed(_)) && self.spool_end.reported().is_none();
-        let driving = self.operation.driving_slot();
         let idle = matches!(self.operation.status(), Status::Finished);
         if let Some((slot, error)) = follower::follow(&mut self.unit, driving, allowed, now, &self.config)
             // A spool end fastened to the core, told from a tangle by the filament left: FINDA
