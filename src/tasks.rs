@@ -4,7 +4,7 @@
 //! (bench-mcu/harness) polls the same code on Embassy's raw executor.
 //!
 //! - [`run_control`], every millisecond on an embassy-time [`Ticker`] (1 MHz ticks: the period is
-//!   exact): scans the sensors (the wait bounded by [`SCAN_TIMEOUT`]), takes at most
+//!   exact): scans the sensors (the wait bounded by the next tick), takes at most
 //!   [`control::MAX_RX_PER_STEP`] bytes from [`RX_BUFFER`], steps the [`ControlLoop`], applies the
 //!   motor commands, queues the answer in [`TX_BUFFER`], feeds the watchdog when the step was on
 //!   time with fresh samples, and signals [`STEPPED`] when a save piece is due after the step
@@ -29,7 +29,7 @@ use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::signal::Signal;
 use embassy_sync::watch::Watch;
-use embassy_time::{Duration, Ticker, Timer, with_timeout};
+use embassy_time::{Duration, Ticker, Timer, with_deadline, with_timeout};
 use embedded_storage::nor_flash::NorFlash;
 use mmu_hal_port::{Button, Motors, SensorScan, StatusLed};
 use portable_atomic::{AtomicBool, AtomicU32, Ordering};
@@ -52,10 +52,6 @@ macro_rules! log {
 
 /// The control period: 1 ms, exact at embassy-time's 1 MHz tick.
 pub const PERIOD: Duration = Duration::from_micros(1_000);
-/// The longest the control task waits for a sensor scan (the G071's DMA scan takes about 210 µs,
-/// the Pico's multiplexed one about 170 µs); past it the step runs on the previous samples,
-/// whose age then grows until `control::MAX_SAMPLE_AGE_US` stops the watchdog feed.
-pub const SCAN_TIMEOUT: Duration = Duration::from_micros(600);
 /// The longest a reset waits for the last response to leave the UART.
 pub const FLUSH_BEFORE_RESET: Duration = Duration::from_millis(20);
 /// Watchdog feeds the flash may give during a job that must run whole (the boot's repair, the
@@ -132,7 +128,13 @@ pub async fn run_control<const N: usize, S: SensorScan<N>, M: Motors<N>>(
 ) -> ! {
     BOOTED.wait().await;
     let mut ticker = Ticker::every(PERIOD);
-    let mut schedule = TickSchedule::new(now_us(), PERIOD.as_micros());
+    // Ticks at whole periods of the uptime: the Pico's UART ring is looked at on the same grid
+    // (`board::pico::uart_ring`), so one alarm wakes both.
+    let period_us = PERIOD.as_micros();
+    let mut schedule = TickSchedule::new(now_us() / period_us * period_us, period_us);
+    // The Ticker on the schedule's grid to the microsecond: the scan's bound below is the next
+    // tick, the same instant, so the time driver has one alarm a period.
+    align(&mut ticker, &schedule);
     let mut samples = Samples::<N>::uniform(mmu_hal_port::ADC_MAX / 2);
     let mut sample_clock = SampleClock::new(now_us());
     let mut button = BUTTON.receiver();
@@ -145,7 +147,14 @@ pub async fn run_control<const N: usize, S: SensorScan<N>, M: Motors<N>>(
     loop {
         ticker.next().await;
         let lateness_us = schedule.start(now_us());
-        if let Ok(Ok(scan)) = with_timeout(SCAN_TIMEOUT, sampler.scan()).await {
+        // The scan (the G071's DMA scan takes about 210 µs, the Pico's about 270 µs) is waited for
+        // until the next tick at most; past it the step runs late on the previous samples, and
+        // neither a late step nor old samples feed the watchdog (`control::feeds_watchdog`). A
+        // bound of its own (600 µs) cost the time driver an alarm and this task a wake-up every
+        // period, and the Pico a timer re-armed at each of its nine conversions' wake-ups: about
+        // 400 instructions a millisecond on the emulated G071, 600 on the emulated Pico.
+        let next_tick = embassy_time::Instant::from_micros(schedule.deadline_us());
+        if let Ok(Ok(scan)) = with_deadline(next_tick, sampler.scan()).await {
             samples = scan;
             sample_clock.fresh(now_us());
         }
@@ -207,7 +216,7 @@ pub async fn run_control<const N: usize, S: SensorScan<N>, M: Motors<N>>(
         // tick, so the scan and the step keep their place in the millisecond.
         if STORE_WROTE.swap(false, Ordering::Relaxed) || lateness_us > control::ON_TIME_US {
             schedule.skip_missed(now_us());
-            ticker.reset_at(embassy_time::Instant::from_micros(schedule.deadline_us()));
+            align(&mut ticker, &schedule);
         }
     }
 }
@@ -219,6 +228,15 @@ fn with_buffer<const N: usize, R>(
     f: impl FnOnce(&mut LinkBuffer<N>) -> R,
 ) -> Option<R> {
     shared.lock(|cell| cell.try_borrow_mut().ok().map(|mut buffer| f(&mut buffer)))
+}
+
+/// Makes `ticker` tick next at `schedule`'s deadline. `Ticker::reset_at(d)` ticks a period
+/// after `d` (as if it had just ticked at `d`): given the deadline itself, the Ticker ran a period
+/// behind the schedule after every flash write, each later step counted a period late (and the
+/// scan, bounded by the schedule's next tick, was given none).
+fn align(ticker: &mut Ticker, schedule: &TickSchedule) {
+    let deadline = embassy_time::Instant::from_micros(schedule.deadline_us());
+    ticker.reset_at(deadline.checked_sub(PERIOD).unwrap_or(deadline));
 }
 
 /// Moves the oldest bytes waiting in [`RX_BUFFER`] into `rx`, as many as wait and fit; returns

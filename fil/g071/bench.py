@@ -37,6 +37,9 @@ TIM3_AF = 1  # PC6/PC7/PC8 AF1 = TIM3_CH1/2/3 (STM32G071 datasheet, alternate fu
 BOARD, SLOT_COUNT = "g071", 3
 
 
+# Milliseconds after a start before the load counts (the boot, the store's restore).
+LOAD_SETTLE_MS = 200
+
 class Bench:
     def __init__(self, image, rtt=None):
         segments, self.symbols = elf.load(image)
@@ -47,6 +50,10 @@ class Bench:
         self.line_count = 0     # characters in that run so far
         self.wall = 0.0
         self.cpu = 0.0
+        # (instructions, bytes received, ms) of each millisecond after a start's first
+        # LOAD_SETTLE_MS (see load_summary); the steps since the chip last started.
+        self.load = []
+        self.steps_since_start = 0
 
     # ---- outputs -----------------------------------------------------------------------------
     def level(self, pin):
@@ -113,13 +120,48 @@ class Bench:
                 self.line_count += 1
                 chip.usart1.deliver(self.line_origin + clock.char_time(self.line_count), byte)
         t0, c0 = time.perf_counter(), time.process_time()
+        resets, executed = chip.resets, chip.cpu.native.count()
+        flash_ops = chip.erases() + chip.programs()
         chip.run_until(end)
+        if chip.resets != resets or not chip.powered:
+            self.steps_since_start = 0
+        elif us == 1000:
+            self.steps_since_start += 1
+            if self.steps_since_start > LOAD_SETTLE_MS:
+                wrote = chip.erases() + chip.programs() != flash_ops
+                self.load.append((chip.cpu.native.count() - executed, len(rx), round(end / clock.us(1000)), wrote))
         self.wall += time.perf_counter() - t0
         self.cpu += time.process_time() - c0
         sent = bytes(b for _, b in chip.usart1.take_sent()) if chip.powered else b""
         self.pump_rtt()
         tx = sent.hex() if sent else "-"
         return f"ok {' '.join(self.motors())} {tx} {chip.resets} {chip.erases()} {chip.programs()}"
+
+    def load_summary(self):
+        """The CPU's load in each 1 ms step after a start's first LOAD_SETTLE_MS (the boot and
+        the store's restore are not the control loop): instructions executed in the milliseconds
+        without a flash write (median, 99th and 99.9th percentile, busiest) and the busiest with
+        one, with the step-cost benchmark's cycle model (2.2 cycles an instruction,
+        scripts/step-cost.sh) for the percentage. One line, for the log."""
+        plain = sorted(m for m in self.load if not m[3])
+        writing = [m for m in self.load if m[3]]
+        if not plain:
+            return "load: no millisecond measured"
+
+        def pct(n):
+            return f"{100 * n * 2.2 / clock.us(1000):.1f} %"
+
+        def at(q):
+            n = plain[min(len(plain) - 1, int(q * len(plain)))][0]
+            return f"{n} ({pct(n)})"
+        worst = plain[-1]
+        line = (f"load: {len(plain)} ms without a flash write, instructions a millisecond: median "
+                f"{at(0.5)}, 99 % {at(0.99)}, 99.9 % {at(0.999)}, busiest {worst[0]} ({pct(worst[0])} "
+                f"of 1 ms at 64 MHz, 2.2 cycles an instruction) at {worst[2]} ms, {worst[1]} bytes received")
+        if writing:
+            busiest = max(writing)
+            line += f"; {len(writing)} ms with one, busiest {busiest[0]} ({pct(busiest[0])}) at {busiest[2]} ms"
+        return line
 
     def handle(self, line):
         words = line.split()
@@ -163,6 +205,7 @@ def main():
     print(f"ready {BOARD} {SLOT_COUNT}", file=out, flush=True)
     for line in sys.stdin:
         if line.strip() == "quit":
+            print(bench.load_summary(), file=sys.stderr, flush=True)
             break
         try:
             answer = bench.handle(line)

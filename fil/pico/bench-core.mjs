@@ -24,6 +24,11 @@ export function flashFromElf(elfBytes) {
   return flash;
 }
 
+/** Milliseconds after a chip starts before its load counts (boot, the store's restore). */
+const LOAD_SETTLE_MS = 200;
+/** Cycles of the 125 MHz clk_sys in 1 ms. */
+const CYCLES_PER_MS = 125_000;
+
 export class Bench {
   constructor(elfBytes, { log = () => {} } = {}) {
     this.log = log;
@@ -34,7 +39,34 @@ export class Bench {
     this.rxQueue = []; // { byte, at }: bytes on the line, `at` when their stop bit ends
     this.lineFreeAt = 0;
     this.sensors = new Array(9).fill(0);
+    this.load = []; // [instructions, cycles, bytes received, ms] of each millisecond (see loadSummary)
     this.chip = this.newChip(flashFromElf(elfBytes), null);
+  }
+
+  /**
+   * The CPU's load in each 1 ms step after a chip's first LOAD_SETTLE_MS (its boot and the
+   * store's restore are not the control loop): in the milliseconds without a flash write, the
+   * cycles rp2040js counts (median, 99th and 99.9th percentile, busiest, with its instructions);
+   * the busiest with one. One line, for the log.
+   */
+  loadSummary() {
+    const plain = this.load.filter((m) => !m[4]).sort((a, b) => a[1] - b[1]);
+    const writing = this.load.filter((m) => m[4]);
+    if (!plain.length) return 'load: no millisecond measured';
+    const pct = (c) => `${((100 * c) / CYCLES_PER_MS).toFixed(1)} %`;
+    const at = (q) => {
+      const m = plain[Math.min(plain.length - 1, Math.floor(q * plain.length))];
+      return `${m[1]} (${pct(m[1])}, ${m[0]} instructions)`;
+    };
+    const worst = plain[plain.length - 1];
+    let line = `load: ${plain.length} ms without a flash write, cycles a millisecond: median ${at(0.5)}, ` +
+      `99 % ${at(0.99)}, 99.9 % ${at(0.999)}, busiest ${worst[1]} (${pct(worst[1])} of 1 ms at 125 MHz, ` +
+      `${worst[0]} instructions) at ${worst[3]} ms, ${worst[2]} bytes received`;
+    if (writing.length) {
+      const busiest = writing.reduce((a, b) => (b[1] > a[1] ? b : a));
+      line += `; ${writing.length} ms with one, busiest ${busiest[1]} (${pct(busiest[1])}) at ${busiest[3]} ms`;
+    }
+    return line;
   }
 
   newChip(flash, watchdog) {
@@ -71,6 +103,9 @@ export class Bench {
    * Returns { motors, tx, resets, erases, programs }.
    */
   step(us, sensors, rx) {
+    const [chip, resets] = [this.chip, this.resets];
+    const [executed, cycles] = chip ? [chip.executed, chip.busyCycles] : [0, 0];
+    const flashOps = this.counters.erases + this.counters.programs;
     const start = this.nanos;
     const end = start + us * 1000;
     sensors.forEach((value, i) => { this.sensors[i] = value; });
@@ -94,6 +129,13 @@ export class Bench {
     this.runUntil(end);
     collect();
     this.nanos = end;
+    if (chip && this.chip === chip && this.resets === resets && us === 1000) {
+      chip.stepsRun = (chip.stepsRun ?? 0) + 1;
+      if (chip.stepsRun > LOAD_SETTLE_MS) {
+        const wrote = this.counters.erases + this.counters.programs !== flashOps;
+        this.load.push([chip.executed - executed, chip.busyCycles - cycles, rx.length, Math.round(end / 1e6), wrote]);
+      }
+    }
     const motors = this.chip ? this.chip.motors() : ['000:0', '000:0', '000:0'];
     return { motors, tx, resets: this.resets, ...this.counters };
   }

@@ -81,7 +81,10 @@ async function main(argv) {
   const lines = createInterface({ input: process.stdin, crlfDelay: Infinity });
   for await (const line of lines) {
     if (line.trim() === '') continue;
-    if (line.trim() === 'quit') break;
+    if (line.trim() === 'quit') {
+      log(bench.loadSummary());
+      break;
+    }
     let answer;
     try {
       answer = handle(bench, line);

@@ -43,6 +43,9 @@ export class Chip {
    * @param {(msg:string)=>void} o.log diagnostics (stderr)
    */
   constructor({ bootrom, flash, counters, watchdog = null, log = () => {} }) {
+    /** Instructions executed and the cycles they took (rp2040js's Cortex-M0+ timings): the load. */
+    this.executed = 0;
+    this.busyCycles = 0;
     this.log = log;
     this.sensors = new Array(9).fill(0);
     this.tx = [];
@@ -182,6 +185,8 @@ export class Chip {
         clock.tick(Math.min(next, untilNanos) - clock.nanos);
       } else {
         const cycles = core.executeInstruction();
+        this.executed += 1;
+        this.busyCycles += cycles;
         this.takeFault();
         // clock.tick(cycles * 8) without its call when no alarm is due: the same time, the
         // same alarms at the same instants.
