@@ -154,10 +154,22 @@ fn run_board(board: Board, image: &Path, fil_dir: &Path, log: &Path, only: Optio
     };
     let started = Instant::now();
     let name = board.name();
+    let mut loads_seen = 0;
     let verdicts = run_all(&mut new_unit, only, &mut |verdict| {
         let took = verdict.took.as_secs_f64();
+        // The bench's `load:` line, written when the scenario's unit quit (fil/*/README).
+        let loads = load_lines(log);
+        let load = (loads.len() > loads_seen)
+            .then(|| loads.last().cloned())
+            .flatten();
+        loads_seen = loads.len();
         match &verdict.result {
-            Ok(()) => println!("  ok    {name}: {} ({took:.1} s)", verdict.name),
+            Ok(()) => {
+                println!("  ok    {name}: {} ({took:.1} s)", verdict.name);
+                if let Some(load) = load {
+                    println!("        {load}");
+                }
+            }
             Err(why) => {
                 println!("  FAIL  {name}: {} ({took:.1} s): {why}", verdict.name);
                 for line in last_lines(log, 15) {
@@ -173,6 +185,16 @@ fn run_board(board: Board, image: &Path, fil_dir: &Path, log: &Path, only: Optio
         started.elapsed().as_secs_f64()
     );
     (summary, passed == verdicts.len())
+}
+
+/// The `load:` lines of the bench log at `path`: what each scenario's milliseconds cost the
+/// image, from the bench's prefix on (none when it cannot be read).
+fn load_lines(path: &Path) -> Vec<String> {
+    let text = std::fs::read_to_string(path).unwrap_or_default();
+    text.lines()
+        .filter_map(|line| line.find("load: ").map(|at| line[at..].to_string()))
+        .filter(|load| !load.contains("no millisecond"))
+        .collect()
 }
 
 /// The last `n` lines of the file at `path` (none when it cannot be read).
