@@ -52,6 +52,8 @@ macro_rules! log {
 
 /// The control period: 1 ms, exact at embassy-time's 1 MHz tick.
 pub const PERIOD: Duration = Duration::from_micros(1_000);
+/// The scan's bound in a step that starts late (the scan is otherwise bounded by the next tick).
+pub const LATE_SCAN: Duration = Duration::from_micros(600);
 /// The longest a reset waits for the last response to leave the UART.
 pub const FLUSH_BEFORE_RESET: Duration = Duration::from_millis(20);
 /// Watchdog feeds the flash may give during a job that must run whole (the boot's repair, the
@@ -146,15 +148,20 @@ pub async fn run_control<const N: usize, S: SensorScan<N>, M: Motors<N>>(
     let mut deferral = Deferral::default();
     loop {
         ticker.next().await;
-        let lateness_us = schedule.start(now_us());
+        let started_us = now_us();
+        let lateness_us = schedule.start(started_us);
         // The scan (the G071's DMA scan takes about 210 µs, the Pico's about 270 µs) is waited for
-        // until the next tick at most; past it the step runs late on the previous samples, and
-        // neither a late step nor old samples feed the watchdog (`control::feeds_watchdog`). A
-        // bound of its own (600 µs) cost the time driver an alarm and this task a wake-up every
-        // period, and the Pico a timer re-armed at each of its nine conversions' wake-ups: about
-        // 400 instructions a millisecond on the emulated G071, 600 on the emulated Pico.
-        let next_tick = embassy_time::Instant::from_micros(schedule.deadline_us());
-        if let Ok(Ok(scan)) = with_deadline(next_tick, sampler.scan()).await {
+        // until the next tick at most, or [`LATE_SCAN`] in a step that starts so late (after a
+        // flash write) that the next tick is near or past; past it the step runs on the previous
+        // samples, and neither a late step nor old samples feed the watchdog
+        // (`control::feeds_watchdog`). A bound of its own in every step cost the time driver an
+        // alarm and this task a wake-up every period, and the Pico a timer re-armed at each of its
+        // nine conversions' wake-ups: about 400 instructions a millisecond on the emulated G071,
+        // 600 on the emulated Pico.
+        let bound_us = schedule.deadline_us().max(started_us + LATE_SCAN.as_micros());
+        if let Ok(Ok(scan)) =
+            with_deadline(embassy_time::Instant::from_micros(bound_us), sampler.scan()).await
+        {
             samples = scan;
             sample_clock.fresh(now_us());
         }
