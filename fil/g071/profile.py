@@ -1,0 +1,77 @@
+#!/usr/bin/env python3
+"""Where the real image's milliseconds go: runs IMAGE on the bench with the sensors at rest (slot
+0's filament at its sensor) for WARM ms, then counts the instructions of the next WINDOW ms by
+function (a Unicorn block hook on the flash, named from the ELF's symbols with llvm-nm).
+
+    python3 fil/g071/profile.py IMAGE [--warm 400] [--window 20] [--top 40]
+
+Prints the instructions of each millisecond of the window, their mean, and the functions (their
+own instructions, not their callees') a millisecond on average.
+"""
+
+import argparse
+import bisect
+import collections
+import os
+import subprocess
+import sys
+
+import unicorn
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+
+import bench as bench_module  # noqa: E402
+
+REST, FILAMENT = 2048, 3000
+LEVELS = [REST, FILAMENT] + [REST] * 7
+
+
+def functions(image):
+    """(start, size, name) of every function of `image`, by start."""
+    out = subprocess.run(["llvm-nm", "--print-size", "--defined-only", "-C", image],
+                         capture_output=True, text=True, check=True).stdout
+    found = []
+    for line in out.splitlines():
+        parts = line.split(None, 3)
+        if len(parts) == 4 and parts[2] in "tTwW":
+            found.append((int(parts[0], 16) & ~1, int(parts[1], 16), parts[3]))
+    return sorted(found)
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("image")
+    parser.add_argument("--warm", type=int, default=400, help="milliseconds run before the window")
+    parser.add_argument("--window", type=int, default=20, help="milliseconds profiled")
+    parser.add_argument("--top", type=int, default=40, help="functions listed")
+    args = parser.parse_args()
+    bench = bench_module.Bench(args.image)
+    for _ in range(args.warm):
+        bench.step(1000, LEVELS, b"")
+    named = functions(args.image)
+    starts = [start for start, _, _ in named]
+    counts = collections.Counter()
+
+    def on_block(_uc, address, size, _data):
+        i = bisect.bisect_right(starts, address) - 1
+        inside = i >= 0 and address < named[i][0] + max(named[i][1], 2)
+        # Thumb: two bytes an instruction but for the few 32-bit ones (BL): close enough here.
+        counts[named[i][2] if inside else hex(address)] += max(1, size // 2)
+
+    chip = bench.chip
+    chip.uc.hook_add(unicorn.UC_HOOK_BLOCK, on_block, begin=0x0800_0000, end=0x0801_FFFF)
+    chip.uc.ctl_flush_tb()  # blocks translated before the hook would not call it
+    per_ms = []
+    for _ in range(args.window):
+        before = chip.cpu.native.count()
+        bench.step(1000, LEVELS, b"")
+        per_ms.append(chip.cpu.native.count() - before)
+    print(f"instructions a millisecond: {per_ms}")
+    print(f"mean {sum(per_ms) / len(per_ms):.0f} over {len(per_ms)} ms after {args.warm}")
+    for name, n in counts.most_common(args.top):
+        print(f"{n / args.window:8.0f}  {name}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
