@@ -4,15 +4,11 @@
 import assert from 'node:assert/strict';
 import { test } from 'node:test';
 import { MUX_CHANNEL } from '../chip.mjs';
-import { bareChip } from './helpers.mjs';
+import { ADC, RAM, armAdcDma, bareChip } from './helpers.mjs';
 
 const SIO = 0xd0000000;
 const IO_BANK0 = 0x40014000;
-const ADC = 0x4004c000;
 const PWM = 0x40050000;
-const DMA = 0x50000000;
-const RAM = 0x20000000;
-const DREQ_ADC = 36;
 const SET = 0x2000;
 const CLEAR = 0x3000;
 
@@ -85,13 +81,8 @@ function readMany(rp2040, count) {
   rp2040.clock.tick(3000);
   while (!(rp2040.readUint32(ADC + 0x08) & (1 << 8))) rp2040.readUint32(ADC + 0x0c); // drain
   rp2040.writeUint32(ADC + 0x08, (1 << 24) | (1 << 3) | 1); // FCS: THRESH 1, DREQ_EN, EN
-  const ch = DMA + 3 * 0x40;
   const to = RAM + 0x400;
-  rp2040.writeUint32(ch + 0x00, ADC + 0x0c); // READ_ADDR: FIFO
-  rp2040.writeUint32(ch + 0x04, to); // WRITE_ADDR
-  rp2040.writeUint32(ch + 0x08, count); // TRANS_COUNT
-  // CTRL_TRIG: EN, halfword, INCR_WRITE, CHAIN_TO itself, TREQ_SEL ADC
-  rp2040.writeUint32(ch + 0x0c, 1 | (1 << 2) | (1 << 5) | (3 << 11) | (DREQ_ADC << 15));
+  const ch = armAdcDma(rp2040, to, count);
   rp2040.writeUint32(ADC + 0x10, 0); // DIV
   rp2040.writeUint32(ADC + SET, 1 << 3); // CS: START_MANY
   let us = 0;

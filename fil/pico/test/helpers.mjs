@@ -47,6 +47,27 @@ export function tinyElf(halfwords) {
   return elf;
 }
 
+/** The register blocks and the ADC's DMA request the tests drive (RP2040 datasheet 2.2). */
+export const ADC = 0x4004c000;
+export const DMA = 0x50000000;
+export const RAM = 0x20000000;
+export const DREQ_ADC = 36;
+
+/**
+ * Arms DMA channel 3 (the one src/board/pico/mod.rs takes for the scan) as embassy-rp's
+ * `Adc::read_many` does: `count` halfwords from the ADC's FIFO to `to`, paced by the ADC's
+ * request. Returns the channel's register block.
+ */
+export function armAdcDma(rp2040, to, count) {
+  const ch = DMA + 3 * 0x40;
+  rp2040.writeUint32(ch + 0x00, ADC + 0x0c); // READ_ADDR: FIFO
+  rp2040.writeUint32(ch + 0x04, to); // WRITE_ADDR
+  rp2040.writeUint32(ch + 0x08, count); // TRANS_COUNT
+  // CTRL_TRIG: EN, halfword, INCR_WRITE, CHAIN_TO itself, TREQ_SEL ADC
+  rp2040.writeUint32(ch + 0x0c, 1 | (1 << 2) | (1 << 5) | (3 << 11) | (DREQ_ADC << 15));
+  return ch;
+}
+
 /** Thumb: `b .` (an endless loop), `wfi`. */
 export const B_SELF = 0xe7fe;
 export const WFI = 0xbf30;

@@ -4,15 +4,11 @@
 
 import assert from 'node:assert/strict';
 import { test } from 'node:test';
-import { B_SELF, bareChip, runCode } from './helpers.mjs';
+import { ADC, B_SELF, DMA, RAM, armAdcDma, bareChip, runCode } from './helpers.mjs';
 
 const UART0 = 0x40034000;
 const UART0_IRQ = 20;
-const DMA = 0x50000000;
 const DREQ_UART0_RX = 21;
-const RAM = 0x20000000;
-const ADC = 0x4004c000;
-const DREQ_ADC = 36;
 
 function enableUart(rp2040) {
   rp2040.writeUint32(UART0 + 0x30, (1 << 9) | (1 << 8) | 1); // UARTCR: RXE | TXE | UARTEN
@@ -91,12 +87,7 @@ test('adc-dreq: a FIFO drained with DREQ_EN clear requests nothing; the DMA wait
   fcs(false); // as embassy-rp's read_many ends: DREQ_EN cleared with the entry left
   rp2040.readUint32(ADC + 0x0c); // and its next call drains the FIFO, then sets DREQ_EN
   fcs(true);
-  const ch = DMA + 3 * 0x40;
-  rp2040.writeUint32(ch + 0x00, ADC + 0x0c); // READ_ADDR: FIFO
-  rp2040.writeUint32(ch + 0x04, RAM + 0x200); // WRITE_ADDR
-  rp2040.writeUint32(ch + 0x08, 2); // TRANS_COUNT
-  // CTRL_TRIG: EN, halfword, INCR_WRITE, CHAIN_TO itself, TREQ_SEL ADC
-  rp2040.writeUint32(ch + 0x0c, 1 | (1 << 2) | (1 << 5) | (3 << 11) | (DREQ_ADC << 15));
+  const ch = armAdcDma(rp2040, RAM + 0x200, 2);
   rp2040.clock.tick(0);
   assert.equal(rp2040.readUint32(ch + 0x08), 2, 'nothing moved from the empty FIFO');
   assert.equal(rp2040.readUint32(ADC + 0x08) & (1 << 10), 0, 'FCS.UNDER: no read of the empty FIFO');
