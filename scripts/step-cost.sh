@@ -18,12 +18,12 @@
 # The design bar is 25 % of 1 ms (7 272 instructions at 64 MHz; 14 204 on the Pico at 125 MHz,
 # the same cycle model), and the limits below are the bar: CI fails when a millisecond goes over.
 # Measured 2026-11-27 on main (book, "Step cost on the MCU", says what brought it there):
-#   NUCLEO-G071RB: idle median 3 882 (13.3 %), worst millisecond 7 177 (24.7 %: a phase of a
-#     tool change beginning as 6 bytes arrive), worst with a flash write 6 970;
-#   Pico (the multiplexed scan by DMA, 9 wake-ups): idle median 9 723 (17.1 %), worst 13 021
-#     (22.9 %), with a flash write 12 811.
+#   NUCLEO-G071RB: idle median 3 884 (13.4 %), worst millisecond 7 191 (24.7 %: a phase of a
+#     tool change beginning as 6 bytes arrive), worst with a flash write 6 965;
+#   Pico (the multiplexed scan by DMA, 9 wake-ups): idle median 9 725 (17.1 %), worst 13 035
+#     (22.9 %), with a flash write 12 806.
 # Before this round's step-cost work: G071 worst 8 211 (28.2 %), Pico 15 788 (27.8 %). The
-# G071's margin is 95 instructions: a change that adds to the busiest millisecond (a phase
+# G071's margin is 81 instructions: a change that adds to the busiest millisecond (a phase
 # beginning while a request is answered) must pay for itself. `run.py ELF SESSION --profile N
 # --profile-at MS` lists where a millisecond goes. The stand-ins for the HAL drivers cost less
 # than the drivers: the real images on the emulated chips (`mmu fil`, each bench's `load:` line)

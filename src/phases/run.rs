@@ -76,6 +76,11 @@ impl PhaseBudgetUse {
 }
 
 impl PhaseRun {
+    /// When the phase began (or began again after a Retry).
+    pub fn started(&self) -> Instant {
+        self.started
+    }
+
     /// A phase attempt starting at `now`, its distance goal counting from `goal_from_centi`, with
     /// the filament at `odometry_centi`, written into `slot` (whatever it held is replaced).
     ///
@@ -84,11 +89,6 @@ impl PhaseRun {
     /// command starts).
     // Out of line: two callers in the step (measured smaller).
     #[inline(never)]
-    /// When the phase began (or began again after a Retry).
-    pub fn started(&self) -> Instant {
-        self.started
-    }
-
     pub(super) fn start(
         slot: &mut Option<PhaseRun>,
         now: Instant,
