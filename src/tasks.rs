@@ -130,10 +130,9 @@ pub async fn run_control<const N: usize, S: SensorScan<N>, M: Motors<N>>(
 ) -> ! {
     BOOTED.wait().await;
     let mut ticker = Ticker::every(PERIOD);
-    // Ticks at whole periods of the uptime: the Pico's UART ring is looked at on the same grid
-    // (`board::pico::uart_ring`), so one alarm wakes both.
+    // The first tick on the grid of whole periods: a period before it, the schedule starts.
     let period_us = PERIOD.as_micros();
-    let mut schedule = TickSchedule::new(now_us() / period_us * period_us, period_us);
+    let mut schedule = TickSchedule::new(next_tick_us(now_us()) - period_us, period_us);
     // The Ticker on the schedule's grid to the microsecond: the scan's bound below is the next
     // tick, the same instant, so the time driver has one alarm a period.
     align(&mut ticker, &schedule);
@@ -235,6 +234,14 @@ fn with_buffer<const N: usize, R>(
     f: impl FnOnce(&mut LinkBuffer<N>) -> R,
 ) -> Option<R> {
     shared.lock(|cell| cell.try_borrow_mut().ok().map(|mut buffer| f(&mut buffer)))
+}
+
+/// The control task's first tick after `now_us`: the ticks fall on whole periods of the uptime,
+/// so that other tasks that look at something every tick (the Pico's UART ring) wake with the
+/// control task, on one alarm of the time driver.
+pub fn next_tick_us(now_us: u64) -> u64 {
+    let period_us = PERIOD.as_micros();
+    (now_us / period_us + 1) * period_us
 }
 
 /// Makes `ticker` tick next at `schedule`'s deadline. `Ticker::reset_at(d)` ticks a period

@@ -20,19 +20,13 @@ use embassy_rp::peripherals::DMA_CH2;
 use embassy_rp::uart::{self, Async, UartRx};
 use embassy_time::Timer;
 use mmu_firmware::control::PICO_DMA_RING;
+use mmu_firmware::tasks;
 use mmu_firmware::uart::DmaRing;
 
 /// The DMA channel of the ring (DMA_CH0 and DMA_CH1 are embassy-rp's, for the UART).
 const CHANNEL: usize = 2;
 /// log2 of the ring's size, CTRL.RING_SIZE.
 const RING_BITS: u8 = PICO_DMA_RING.trailing_zeros() as u8;
-/// How often a read waiting for bytes looks at the ring, µs: the DMA raises no interrupt per
-/// byte (and the UART's receive timeout never fires while the DMA empties its FIFO). At the
-/// control task's ticks (whole milliseconds of the uptime, `tasks::run_control`): the time
-/// driver wakes both with one alarm (a poll every 500 µs between the ticks cost the emulated
-/// Pico about 770 instructions a millisecond more), and the control task takes at most a step's
-/// worth a tick anyway.
-const POLL_US: u64 = 1_000;
 /// The transfer count a start loads: the channel stops after this many bytes (4.3 days of a
 /// line that never pauses) and is started again by [`RingRx::written`].
 const TRANSFER: u32 = u32::MAX;
@@ -160,8 +154,13 @@ impl embedded_io_async::Read for RingRx {
                     .take(written, |i| unsafe { ptr::read_volatile(ring.add(i)) }, buf);
                 return Ok(count);
             }
-            let now = embassy_time::Instant::now().as_micros();
-            Timer::at(embassy_time::Instant::from_micros((now / POLL_US + 1) * POLL_US)).await;
+            // Looked at again at the control task's next tick (`tasks::next_tick_us`): the DMA
+            // raises no interrupt per byte (and the UART's receive timeout never fires while the
+            // DMA empties its FIFO), and on the tick the time driver wakes both tasks with one
+            // alarm (a look every 500 µs between the ticks cost the emulated Pico about 770
+            // instructions a millisecond more); the control task takes a step's worth a tick.
+            let next = tasks::next_tick_us(embassy_time::Instant::now().as_micros());
+            Timer::at(embassy_time::Instant::from_micros(next)).await;
         }
     }
 }
