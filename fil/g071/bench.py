@@ -17,6 +17,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 import clock  # noqa: E402
 import elf  # noqa: E402
+import profile as profiling  # noqa: E402
 from chip import Chip  # noqa: E402
 from cpu import EmulationError  # noqa: E402
 
@@ -39,6 +40,11 @@ BOARD, SLOT_COUNT = "g071", 3
 
 # Milliseconds after a start before the load counts (the boot, the store's restore).
 LOAD_SETTLE_MS = 200
+# With FIL_G071_PROFILE=K in the environment, the bench profiles every millisecond it measures
+# by function and logs the K busiest ones' profiles at the end (slower: a Unicorn block hook).
+PROFILE_ENV = "FIL_G071_PROFILE"
+# Functions listed for each profiled millisecond.
+PROFILE_TOP = 25
 
 class Bench:
     def __init__(self, image, rtt=None):
@@ -54,6 +60,10 @@ class Bench:
         # LOAD_SETTLE_MS (see load_summary); the steps since the chip last started.
         self.load = []
         self.steps_since_start = 0
+        # (instructions, ms, functions) of the busiest milliseconds measured, with PROFILE_ENV.
+        self.profile_keep = int(os.environ.get(PROFILE_ENV, "0") or 0)
+        self.profile = profiling.FunctionCounts(image, self.chip) if self.profile_keep else None
+        self.busiest = []
 
     # ---- outputs -----------------------------------------------------------------------------
     def level(self, pin):
@@ -122,6 +132,7 @@ class Bench:
         t0, c0 = time.perf_counter(), time.process_time()
         resets, executed = chip.resets, chip.cpu.native.count()
         flash_ops = chip.erases() + chip.programs()
+        functions = self.profile.snapshot() if self.profile else None
         chip.run_until(end)
         if chip.resets != resets or not chip.powered:
             self.steps_since_start = 0
@@ -129,13 +140,31 @@ class Bench:
             self.steps_since_start += 1
             if self.steps_since_start > LOAD_SETTLE_MS:
                 wrote = chip.erases() + chip.programs() != flash_ops
-                self.load.append((chip.cpu.native.count() - executed, len(rx), round(end / clock.us(1000)), wrote))
+                n, ms = chip.cpu.native.count() - executed, round(end / clock.us(1000))
+                self.load.append((n, len(rx), ms, wrote))
+                if functions is not None:
+                    self.keep_profile(n, ms, wrote, self.profile.counts - functions)
         self.wall += time.perf_counter() - t0
         self.cpu += time.process_time() - c0
         sent = bytes(b for _, b in chip.usart1.take_sent()) if chip.powered else b""
         self.pump_rtt()
         tx = sent.hex() if sent else "-"
         return f"ok {' '.join(self.motors())} {tx} {chip.resets} {chip.erases()} {chip.programs()}"
+
+    def keep_profile(self, instructions, ms, wrote, functions):
+        """Keeps this millisecond's profile if it is among the busiest `profile_keep`."""
+        self.busiest.append((instructions, ms, wrote, functions))
+        self.busiest.sort(key=lambda m: m[0], reverse=True)
+        del self.busiest[self.profile_keep:]
+
+    def profile_report(self):
+        """The busiest milliseconds' profiles (PROFILE_ENV), for the log."""
+        lines = []
+        for instructions, ms, wrote, functions in self.busiest:
+            with_write = ", with a flash write" if wrote else ""
+            lines.append(f"profile: {instructions} instructions at {ms} ms{with_write}")
+            lines += [f"profile: {n:7}  {name}" for name, n in functions.most_common(PROFILE_TOP)]
+        return "\n".join(lines)
 
     def load_summary(self):
         """The CPU's load in each 1 ms step after a start's first LOAD_SETTLE_MS (the boot and
@@ -206,6 +235,8 @@ def main():
     for line in sys.stdin:
         if line.strip() == "quit":
             print(bench.load_summary(), file=sys.stderr, flush=True)
+            if bench.profile:
+                print(bench.profile_report(), file=sys.stderr, flush=True)
             break
         try:
             answer = bench.handle(line)

@@ -1,12 +1,13 @@
 #!/usr/bin/env python3
-"""Where the real image's milliseconds go: runs IMAGE on the bench with the sensors at rest (slot
-0's filament at its sensor) for WARM ms, then counts the instructions of the next WINDOW ms by
+"""Where the real image's milliseconds go: runs IMAGE on the bench with the sensors at rest
+(slot 0's filament at its sensor) for WARM ms, then counts the instructions of the next WINDOW ms by
 function (a Unicorn block hook on the flash, named from the ELF's symbols with llvm-nm).
 
     python3 fil/g071/profile.py IMAGE [--warm 400] [--window 20] [--top 40]
 
 Prints the instructions of each millisecond of the window, their mean, and the functions (their
-own instructions, not their callees') a millisecond on average.
+own instructions, not their callees') a millisecond on average. `FunctionCounts` is also what the
+bench uses to profile a scenario's busiest milliseconds (FIL_G071_PROFILE, fil/g071/README.md).
 """
 
 import argparse
@@ -19,8 +20,6 @@ import sys
 import unicorn
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-
-import bench as bench_module  # noqa: E402
 
 REST, FILAMENT = 2048, 3000
 LEVELS = [REST, FILAMENT] + [REST] * 7
@@ -38,7 +37,32 @@ def functions(image):
     return sorted(found)
 
 
+class FunctionCounts:
+    """Instructions executed in flash by function, counted from the moment it is attached to
+    `chip` (`counts`: name -> instructions; a function's own, not its callees')."""
+
+    def __init__(self, image, chip):
+        self.named = functions(image)
+        self.starts = [start for start, _, _ in self.named]
+        self.counts = collections.Counter()
+        chip.uc.hook_add(unicorn.UC_HOOK_BLOCK, self._on_block, begin=0x0800_0000, end=0x0801_FFFF)
+        chip.uc.ctl_flush_tb()  # blocks translated before the hook would not call it
+
+    def _on_block(self, _uc, address, size, _data):
+        i = bisect.bisect_right(self.starts, address) - 1
+        named = self.named
+        inside = i >= 0 and address < named[i][0] + max(named[i][1], 2)
+        # Thumb: two bytes an instruction but for the few 32-bit ones (BL): close enough here.
+        self.counts[named[i][2] if inside else hex(address)] += max(1, size // 2)
+
+    def snapshot(self):
+        """A copy of the counts so far (subtract two snapshots for what ran between)."""
+        return collections.Counter(self.counts)
+
+
 def main():
+    import bench as bench_module  # a cycle otherwise: the bench imports this module
+
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("image")
     parser.add_argument("--warm", type=int, default=400, help="milliseconds run before the window")
@@ -48,19 +72,8 @@ def main():
     bench = bench_module.Bench(args.image)
     for _ in range(args.warm):
         bench.step(1000, LEVELS, b"")
-    named = functions(args.image)
-    starts = [start for start, _, _ in named]
-    counts = collections.Counter()
-
-    def on_block(_uc, address, size, _data):
-        i = bisect.bisect_right(starts, address) - 1
-        inside = i >= 0 and address < named[i][0] + max(named[i][1], 2)
-        # Thumb: two bytes an instruction but for the few 32-bit ones (BL): close enough here.
-        counts[named[i][2] if inside else hex(address)] += max(1, size // 2)
-
     chip = bench.chip
-    chip.uc.hook_add(unicorn.UC_HOOK_BLOCK, on_block, begin=0x0800_0000, end=0x0801_FFFF)
-    chip.uc.ctl_flush_tb()  # blocks translated before the hook would not call it
+    profile = FunctionCounts(args.image, chip)
     per_ms = []
     for _ in range(args.window):
         before = chip.cpu.native.count()
@@ -68,7 +81,7 @@ def main():
         per_ms.append(chip.cpu.native.count() - before)
     print(f"instructions a millisecond: {per_ms}")
     print(f"mean {sum(per_ms) / len(per_ms):.0f} over {len(per_ms)} ms after {args.warm}")
-    for name, n in counts.most_common(args.top):
+    for name, n in profile.counts.most_common(args.top):
         print(f"{n / args.window:8.0f}  {name}")
     return 0
 

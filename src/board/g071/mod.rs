@@ -1,6 +1,6 @@
 //! The reference board: a NUCLEO-G071RB (STM32G071RB, Cortex-M0+, 64 MHz, 3.3 V) driving two
 //! TB6612FNG dual H-bridges and nine analog Hall sensors, wired to a Prusa printer's MMU port,
-//! on embassy-stm32's drivers: the ADC scanned by DMA, `SimplePwm` on TIM3, the printer UART
+//! on embassy-stm32's drivers: the ADC converting continuously into a DMA ring, `SimplePwm` on TIM3, the printer UART
 //! (USART1) received by DMA into a ring (`RingBufferedUartRx`) and sent by DMA, the blocking flash
 //! driver under the store, `IndependentWatchdog`, the CRC unit, the button on EXTI, and
 //! embassy-time's driver on TIM2.
@@ -14,7 +14,9 @@
 use core::ops::Range;
 use core::sync::atomic::{AtomicBool, Ordering};
 
-use embassy_stm32::adc::{self, Adc, AdcChannel as _, AdcConfig, AnyAdcChannel, Averaging, SampleTime};
+use embassy_stm32::adc::{
+    self, Adc, AdcChannel as _, AdcConfig, AnyAdcChannel, Averaging, RingBufferedAdc, SampleTime,
+};
 use embassy_stm32::exti::{self, ExtiInput};
 use embassy_stm32::flash::{self, Blocking, Flash};
 use embassy_stm32::gpio::{AnyPin, Level, Output, OutputType, Pin, Pull, Speed};
@@ -26,6 +28,7 @@ use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm, SimplePwmChannel};
 use embassy_stm32::usart::{self, RingBufferedUartRx, Uart, UartTx};
 use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_stm32::{Peri, bind_interrupts, crc, dma, interrupt, pac};
+use embassy_time::Timer;
 use embedded_storage::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
 use mmu_firmware::persist::EntryCrc;
 use mmu_hal_port::tb6612::Tb6612;
@@ -109,7 +112,7 @@ macro_rules! pin_map {
 pin_map! {
     peripherals {
         pwm_timer: TIM3, "Motor PWM, 20 kHz, channels 1-3 (TIM2 is embassy-time's driver)";
-        adc: ADC1, "All nine Hall sensors, one scan per millisecond";
+        adc: ADC1, "All nine Hall sensors, scanned continuously (a scan about every 210 µs)";
         adc_dma: DMA1_CH1, "The ADC scan's DMA channel";
         printer_uart: USART1, "Printer MMU port, 115200 8N1: a USART with FIFO (USART2 stays on the ST-LINK VCP)";
         printer_rx_dma: DMA1_CH2, "The printer UART's receive ring";
@@ -459,12 +462,20 @@ const ANALOG_INPUTS: usize = 2 * SLOTS + 3;
 /// The first hub input.
 const HUB_INPUTS: usize = 2 * SLOTS;
 
-/// The ADC: one scan of all nine Hall sensors by DMA per call, about 210 µs (9 channels x 8
-/// oversampled conversions of 2.9 µs), during which the CPU sleeps or runs other tasks.
+/// Conversions in the ADC's DMA ring: twelve whole scans, about 2.5 ms of continuous conversion,
+/// so a step up to a millisecond late still finds the scan before it unlapped.
+const ADC_RING: usize = 12 * ANALOG_INPUTS;
+/// A whole scan of the nine sensors in continuous conversion (9 channels x 8 oversampled
+/// conversions of (79.5 + 12.5) / 32 MHz): how long a step waits for a fresh scan when the ring
+/// had none (its first, or after a flash write stalled the CPU past a lap).
+const SCAN_US: u64 = 210;
+
+/// The ADC: the nine Hall sensors converted over and over (continuous mode, one scan about every
+/// 210 µs) into a DMA ring (embassy-stm32's `RingBufferedAdc`); a scan takes the latest whole one.
+/// Why not a DMA `read` per period: it reconfigured the sequence and the DMA channel and woke the
+/// control task at its end every millisecond (measured on the emulated G071, fil/g071).
 pub struct Sampler {
-    adc: Adc<'static, ADC1>,
-    dma: Peri<'static, DMA1_CH1>,
-    inputs: [AnyAdcChannel<'static, ADC1>; ANALOG_INPUTS],
+    ring: RingBufferedAdc<'static, ADC1>,
     /// Where each input's conversion lands in a scan's results. The G0 ADC converts the selected
     /// channels (CHSELR) in ascending channel number whatever order they are listed in (RM0444,
     /// ADC: CHSELRMOD = 0, SCANDIR = 0), so it is the number of inputs on a lower channel.
@@ -473,7 +484,8 @@ pub struct Sampler {
 
 impl Sampler {
     /// Embassy's driver for the regulator, calibration, clock (64 MHz system clock / 2 = 32 MHz,
-    /// the G0 allows 35) and 8x hardware oversampling. `inputs` in the order of [`ANALOG_INPUTS`].
+    /// the G0 allows 35) and 8x hardware oversampling, then the continuous conversion into the
+    /// ring. `inputs` in the order of [`ANALOG_INPUTS`].
     fn new(
         adc: Peri<'static, ADC1>,
         dma: Peri<'static, DMA1_CH1>,
@@ -493,24 +505,44 @@ impl Sampler {
                 *position += u8::from(other.get_hw_channel() < own.get_hw_channel());
             }
         }
-        Sampler {
-            adc,
+        static RING: StaticCell<[u16; ADC_RING]> = StaticCell::new();
+        let mut ring = adc.into_ring_buffered(
             dma,
-            inputs,
-            scan_positions,
-        }
+            RING.init([0; ADC_RING]),
+            Irqs,
+            inputs.into_iter().map(|input| (input, SAMPLE_TIME)),
+            adc::CONTINUOUS,
+            adc::Exten::DISABLED,
+        );
+        ring.start();
+        Sampler { ring, scan_positions }
+    }
+
+    /// Reads the latest whole scan in the ring into `raw`, in scan (channel) order; false if
+    /// none arrived since the last.
+    fn latest(&mut self, raw: &mut [u16; ANALOG_INPUTS]) -> bool {
+        self.ring.read_latest(raw) == ANALOG_INPUTS
     }
 }
 
-impl SensorScan<SLOTS> for Sampler {
-    type Error = core::convert::Infallible;
+/// No whole scan arrived in the ring since the last, even after waiting one out.
+#[derive(Debug)]
+pub struct NoScan;
 
-    /// embassy-stm32's DMA `read` of the whole sequence. The caller bounds the wait: a scan that
-    /// never completes is dropped (the DMA transfer stops; the next read stops the ADC first).
-    async fn scan(&mut self) -> Result<Samples<SLOTS>, Self::Error> {
+impl SensorScan<SLOTS> for Sampler {
+    type Error = NoScan;
+
+    /// The latest whole scan; none in the ring (the first scan, or the ring lapped while a flash
+    /// write stalled the CPU: the ring then starts afresh), one scan's time later. The caller
+    /// bounds the wait.
+    async fn scan(&mut self) -> Result<Samples<SLOTS>, NoScan> {
         let mut raw = [0u16; ANALOG_INPUTS];
-        let sequence = self.inputs.iter_mut().map(|input| (input, SAMPLE_TIME));
-        self.adc.read(self.dma.reborrow(), Irqs, sequence, &mut raw).await;
+        if !self.latest(&mut raw) {
+            Timer::after_micros(SCAN_US).await;
+            if !self.latest(&mut raw) {
+                return Err(NoScan);
+            }
+        }
         let positions = &self.scan_positions;
         let input = |index: usize| {
             let position = positions.get(index).map_or(usize::MAX, |&at| usize::from(at));
