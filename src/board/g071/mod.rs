@@ -465,9 +465,8 @@ const HUB_INPUTS: usize = 2 * SLOTS;
 /// Conversions in the ADC's DMA ring: twelve whole scans, about 2.5 ms of continuous conversion,
 /// so a step up to a millisecond late still finds the scan before it unlapped.
 const ADC_RING: usize = 12 * ANALOG_INPUTS;
-/// A whole scan of the nine sensors in continuous conversion (9 channels x 8 oversampled
-/// conversions of (79.5 + 12.5) / 32 MHz): how long a step waits for a fresh scan when the ring
-/// had none (its first, or after a flash write stalled the CPU past a lap).
+/// A whole scan of the nine sensors in continuous conversion: 9 channels x 8 oversampled
+/// conversions of (79.5 + 12.5) / 32 MHz = 207 µs.
 const SCAN_US: u64 = 210;
 
 /// The ADC: the nine Hall sensors converted over and over (continuous mode, one scan about every
@@ -532,13 +531,15 @@ pub struct NoScan;
 impl SensorScan<SLOTS> for Sampler {
     type Error = NoScan;
 
-    /// The latest whole scan; none in the ring (the first scan, or the ring lapped while a flash
-    /// write stalled the CPU: the ring then starts afresh), one scan's time later. The caller
-    /// bounds the wait.
+    /// The latest whole scan; if none arrived since the last (the first scan, or the ring lapped
+    /// while a flash write stalled the CPU: the ring then starts afresh), the one that ends
+    /// within two scans' time. The caller bounds the wait.
     async fn scan(&mut self) -> Result<Samples<SLOTS>, NoScan> {
         let mut raw = [0u16; ANALOG_INPUTS];
         if !self.latest(&mut raw) {
-            Timer::after_micros(SCAN_US).await;
+            // The ring starts afresh where the DMA is, mid-scan at worst: the next whole scan
+            // ends at most two scans later.
+            Timer::after_micros(2 * SCAN_US).await;
             if !self.latest(&mut raw) {
                 return Err(NoScan);
             }
