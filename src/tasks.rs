@@ -72,7 +72,8 @@ pub type SharedBuffer<const N: usize> = Mutex<CriticalSectionRawMutex, RefCell<L
 pub static RX_BUFFER: SharedBuffer<{ control::RX_RING }> = Mutex::new(RefCell::new(LinkBuffer::new()));
 /// Responses waiting for the UART.
 pub static TX_BUFFER: SharedBuffer<TX_QUEUE> = Mutex::new(RefCell::new(LinkBuffer::new()));
-/// [`TX_BUFFER`] has bytes for the link's transmit task.
+/// [`TX_BUFFER`] has bytes for the link's transmit task: signalled by the control task at the
+/// tick after the step that queued them (see [`run_control`]), or before a reset.
 pub static TX_READY: Signal<CriticalSectionRawMutex, ()> = Signal::new();
 /// True while the link's transmit task has bytes in flight.
 pub static TX_BUSY: AtomicBool = AtomicBool::new(false);
@@ -145,8 +146,17 @@ pub async fn run_control<const N: usize, S: SensorScan<N>, M: Motors<N>>(
     // Every step is written here (`ControlLoop::step_into`), not copied out of the step.
     let mut step = control::Step::<N>::none();
     let mut deferral = Deferral::default();
+    // A step's answer goes out at the next tick, not in the millisecond of the step that made
+    // it: the transmit task's run (about 700 instructions on the emulated G071: the UART's DMA
+    // set up, its two completions) then falls in a millisecond of its own instead of the
+    // busiest, the one that answered a request or began a phase. The printer waits up to 2 s.
+    let mut answer_queued = false;
     loop {
         ticker.next().await;
+        let sending = core::mem::take(&mut answer_queued);
+        if sending {
+            TX_READY.signal(());
+        }
         let started_us = now_us();
         let lateness_us = schedule.start(started_us);
         // The scan (the G071's takes the ADC ring's latest, or waits one out, about 210 µs; the
@@ -188,8 +198,12 @@ pub async fn run_control<const N: usize, S: SensorScan<N>, M: Motors<N>>(
                 led = Some(step.out.status_led);
                 LED.signal(step.out.status_led);
             }
-            if !step.out.tx.is_empty() && !send(&step.out.tx) {
-                control.tx_dropped();
+            if !step.out.tx.is_empty() {
+                if queue_answer(&step.out.tx) {
+                    answer_queued = true;
+                } else {
+                    control.tx_dropped();
+                }
             }
             if step.button_pressed {
                 log!(info, "button: Middle");
@@ -204,7 +218,7 @@ pub async fn run_control<const N: usize, S: SensorScan<N>, M: Motors<N>>(
             }
             (
                 step.out.action,
-                received > 0 || !step.out.tx.is_empty() || step.out.phase_began,
+                received > 0 || sending || !step.out.tx.is_empty() || step.out.phase_began,
             )
         };
         if let Some(action) = action {
@@ -259,16 +273,12 @@ fn take_received(rx: &mut [u8]) -> usize {
     with_buffer(&RX_BUFFER, |buffer| buffer.take(rx)).unwrap_or(0)
 }
 
-/// Queues a whole response for the printer, or nothing when it does not fit.
-pub fn send(bytes: &[u8]) -> bool {
-    let queued = with_buffer(&TX_BUFFER, |buffer| {
+/// Queues a whole response for the printer, or nothing when it does not fit; true if queued.
+/// The transmit task sends it once [`TX_READY`] is signalled.
+pub fn queue_answer(bytes: &[u8]) -> bool {
+    with_buffer(&TX_BUFFER, |buffer| {
         buffer.room() >= bytes.len() && buffer.push(bytes) == bytes.len()
-    });
-    if queued != Some(true) {
-        return false;
-    }
-    TX_READY.signal(());
-    true
+    }) == Some(true)
 }
 
 /// Whether responses wait for the UART.
@@ -298,6 +308,8 @@ impl<M: Motors<N>, const N: usize> ResetBoard for Resetting<'_, M, N> {
     }
 
     async fn flush(&mut self) {
+        // The last step's answer, queued for the next tick, goes now.
+        TX_READY.signal(());
         let sent = async {
             while tx_waiting() || TX_BUSY.load(Ordering::Relaxed) {
                 Timer::after_micros(200).await;
