@@ -324,9 +324,14 @@ impl SensorScan<SLOTS> for Sampler {
 /// handlers (embassy-rp runs the handler of each channel bound to DMA_IRQ_0); the transfer
 /// polled again (CTRL_TRIG), dropped (CHAN_ABORT read, written; CTRL_TRIG read), the drop guard
 /// (START_MANY cleared, up to 2 µs busy for READY: one [`conversion`], FCS cleared), CS read for
-/// the sticky error. The four kept conversions summed. Checked against the real code on the
-/// emulated Pico (fil/pico, rp2040js: the image's instructions a millisecond, idle): the scan's
-/// change saves 1 764 there, and this stand-in's change saves less than that here.
+/// the sticky error. The four kept conversions summed. The stand-in's timer is the control
+/// task's one timer registration, as the scan's bound is (`tasks::bounded`): its expiry takes
+/// the bound with it, so here the bound is registered again at every wake-up, where the board's
+/// DMA wake-up leaves it standing; and this time driver neither walks its queue nor sets an
+/// alarm when a registration changes, which is what `bounded` saves on the board (measured on
+/// the emulated Pico, not here). Checked against the real code on the emulated Pico (fil/pico,
+/// rp2040js: the image's instructions a millisecond, idle): the scan's change saves 1 764
+/// there, and this stand-in's change saves less than that here.
 #[cfg(feature = "pico")]
 impl SensorScan<SLOTS> for Sampler {
     type Error = Infallible;
