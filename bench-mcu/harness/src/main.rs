@@ -313,7 +313,8 @@ impl SensorScan<SLOTS> for Sampler {
 }
 
 /// The Pico's scan (feature `pico`), as src/board/pico does it on the CPU: per sensor, the
-/// multiplexer's four select lines, then embassy-rp 0.10's `Adc::read_many` of nine free-running
+/// multiplexer's select lines that change (one in the Gray-code order, two from the last sensor
+/// to the first), then embassy-rp 0.10's `Adc::read_many` of nine free-running
 /// conversions into DMA_CH3 (`read_many_inner` and `dma::Channel::read`), register access for
 /// register access: CS set up (read, write), READY read, the FIFO drained of the previous
 /// sensor's [`FIFO_LEFTOVERS`] (a FCS read before each FIFO read, one after), FCS written, the
@@ -338,10 +339,18 @@ impl SensorScan<SLOTS> for Sampler {
 
     async fn scan(&mut self) -> Result<Samples<SLOTS>, Infallible> {
         let mut sum = 0u32;
-        for channel in 0..(2 * SLOTS + 3) {
+        // The multiplexer's channels in the Gray-code scan order; the last sensor's selected.
+        let gray = |sensor: u32| sensor ^ (sensor >> 1);
+        let mut selected = gray(2 * SLOTS as u32 + 2);
+        for channel in 0..(2 * SLOTS as u32 + 3) {
+            // The select lines that change: one, two from the last sensor to the first.
+            let changed = selected ^ gray(channel);
             for bit in 0..4 {
-                write_register(6, u32::from(channel & (1 << bit) != 0) << bit);
+                if changed & (1 << bit) != 0 {
+                    write_register(6, gray(channel) & (1 << bit));
+                }
             }
+            selected = gray(channel);
             // read_many_inner: CS modify, READY, the FIFO drained, FCS.
             write_register(4, read_register(4) | 1);
             let _ = read_register(4);

@@ -361,14 +361,25 @@ pub struct Sampler {
     /// Moves the ADC's FIFO into a sensor's conversions.
     dma: dma::Channel<'static>,
     select: [Output<'static>; 4],
+    /// The channel the select lines pick now (all low at start: C0).
+    selected: u8,
+    /// A sensor's conversions, as the DMA writes them (every one, at each read): kept here
+    /// rather than zeroed on the stack at every sensor.
+    conversions: [u16; CONVERSIONS],
 }
 
 impl Sampler {
-    /// Selects multiplexer channel `channel` (S0 = bit 0 .. S3 = bit 3).
+    /// Selects multiplexer channel `channel` (S0 = bit 0 .. S3 = bit 3), writing only the lines
+    /// that change: one a sensor in the Gray-code scan order, two from the last sensor to the
+    /// first.
     fn select(&mut self, channel: u8) {
+        let changed = self.selected ^ channel;
         for (bit, line) in self.select.iter_mut().enumerate() {
-            line.set_level(Level::from(channel & (1 << bit) != 0));
+            if changed & (1 << bit) != 0 {
+                line.set_level(Level::from(channel & (1 << bit) != 0));
+            }
         }
+        self.selected = channel;
     }
 
     /// One sensor: select, then [`CONVERSIONS`] free-running conversions by DMA, the first
@@ -386,11 +397,16 @@ impl Sampler {
     /// run, the discarded ones and those after the DMA's last transfer included, fails the sensor.
     async fn read(&mut self, channel: u8) -> Result<u16, adc::Error> {
         self.select(channel);
-        let mut conversions = [0u16; CONVERSIONS];
         self.adc
-            .read_many(&mut self.input, &mut conversions, FREE_RUNNING, &mut self.dma)
+            .read_many(
+                &mut self.input,
+                &mut self.conversions,
+                FREE_RUNNING,
+                &mut self.dma,
+            )
             .await?;
-        let sum: u32 = conversions
+        let sum: u32 = self
+            .conversions
             .iter()
             .skip(SETTLE_CONVERSIONS)
             .map(|&conversion| u32::from(conversion))
@@ -501,6 +517,8 @@ pub fn init() -> BoardParts {
             low(parts.mux_s2),
             low(parts.mux_s3),
         ],
+        selected: 0,
+        conversions: [0; CONVERSIONS],
     };
 
     super::Parts {
