@@ -20,8 +20,11 @@
 # Measured 2026-11-27 on main (book, "Step cost on the MCU", says what brought it there):
 #   NUCLEO-G071RB: idle median 3 884 (13.4 %), worst millisecond 7 191 (24.7 %: a phase of a
 #     tool change beginning as 6 bytes arrive), worst with a flash write 6 965;
-#   Pico (the multiplexed scan by DMA, 9 wake-ups): idle median 9 725 (17.1 %), worst 13 035
-#     (22.9 %), with a flash write 12 806.
+#   Pico (the multiplexed scan by DMA, 9 wake-ups): idle median 8 984 (15.8 %), worst 12 294
+#     (21.6 %), with a flash write 12 065; 9 725, 13 035 and 12 806 before the scan's bound was
+#     `tasks::bounded` (about 130 more here, about 600 fewer on the emulated Pico:
+#     bench-mcu/harness's Pico scan says why), the select lines that change only, and the ADC
+#     stopped in the DMA's interrupt (about 870 fewer here, 1 000 on the emulated Pico).
 # Before this round's step-cost work: G071 worst 8 211 (28.2 %), Pico 15 788 (27.8 %). The
 # G071's margin is 81 instructions: a change that adds to the busiest millisecond (a phase
 # beginning while a request is answered) must pay for itself. `run.py ELF SESSION --profile N

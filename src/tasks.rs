@@ -22,14 +22,17 @@
 //! only within an allowance ([`WatchedFlash`]).
 
 use core::cell::RefCell;
+use core::future::{Future, poll_fn};
 use core::ops::Range;
+use core::pin::{Pin, pin};
+use core::task::Poll;
 
 use embassy_futures::select::{Either, select};
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use embassy_sync::signal::Signal;
 use embassy_sync::watch::Watch;
-use embassy_time::{Duration, Ticker, Timer, with_deadline, with_timeout};
+use embassy_time::{Duration, Ticker, Timer, with_timeout};
 use embedded_storage::nor_flash::NorFlash;
 use mmu_hal_port::{Button, Motors, SensorScan, StatusLed};
 use portable_atomic::{AtomicBool, AtomicU32, Ordering};
@@ -166,11 +169,11 @@ pub async fn run_control<const N: usize, S: SensorScan<N>, M: Motors<N>>(
         // (`control::feeds_watchdog`). A bound of its own in every step cost the time driver an
         // alarm and this task a wake-up every period, and the Pico a timer re-armed at each of its
         // nine conversions' wake-ups: about 400 instructions a millisecond on the emulated G071,
-        // 600 on the emulated Pico.
+        // 600 on the emulated Pico. [`bounded`], not `with_deadline`: it registers the bound with
+        // the time driver once, not again at each of the Pico's wake-ups.
         let bound_us = schedule.deadline_us().max(started_us + LATE_SCAN.as_micros());
-        if let Ok(Ok(scan)) =
-            with_deadline(embassy_time::Instant::from_micros(bound_us), sampler.scan()).await
-        {
+        let scan = pin!(sampler.scan());
+        if let Some(Ok(scan)) = bounded(embassy_time::Instant::from_micros(bound_us), scan).await {
             samples = scan;
             sample_clock.fresh(now_us());
         }
@@ -239,6 +242,46 @@ pub async fn run_control<const N: usize, S: SensorScan<N>, M: Motors<N>>(
             align(&mut ticker, &schedule);
         }
     }
+}
+
+/// `fut`'s output, or `None` once `deadline` has passed first: embassy-time's `with_deadline`,
+/// minus its cost at every wake-up of `fut` (the Pico's scan wakes nine times a step).
+///
+/// `with_deadline` polls its `Timer` after every pending poll of `fut`, and each poll registers
+/// the deadline again (`schedule_wake`); the timer queue of embassy-time-queue-utils 0.3 (both
+/// boards' time drivers and the step-cost harness use it) takes a deadline at or before the
+/// task's registered one as a change, so the driver walks the queue and sets its alarm again,
+/// the same alarm, every time. Here the first pending poll registers `deadline`, the later ones
+/// `deadline` + 1 tick: a registration still standing at or before it makes that a no-op in the
+/// queue (no walk, no alarm), and one that is gone is made again. It can be gone: embassy-executor
+/// 0.10 keeps a task's registration across polls (only its expiry removes it, waking the task),
+/// but the task's one registration takes the earliest of the instants asked for, so a stale
+/// earlier one (the previous step's bound, after a late step) expires during the scan and takes
+/// this one with it. So the wake-up comes at `deadline`, or a tick (1 µs) after it in that case.
+pub fn bounded<F: Future>(
+    deadline: embassy_time::Instant,
+    mut fut: Pin<&mut F>,
+) -> impl Future<Output = Option<F::Output>> {
+    let mut registered = false;
+    poll_fn(move |cx| {
+        if let Poll::Ready(output) = fut.as_mut().poll(cx) {
+            return Poll::Ready(Some(output));
+        }
+        // The first pending poll registers without reading the clock (a deadline already past
+        // wakes the task at once), as a `Timer` does.
+        let at = if registered {
+            if embassy_time::Instant::now() >= deadline {
+                return Poll::Ready(None);
+            }
+            deadline + Duration::from_ticks(1)
+        } else {
+            registered = true;
+            deadline
+        };
+        // A new Timer's first poll registers `at` for this task and is pending.
+        let _ = Pin::new(&mut Timer::at(at)).poll(cx);
+        Poll::Pending
+    })
 }
 
 /// `f` on the buffer `shared`, under its lock (never held across an `.await`, so never

@@ -313,30 +313,45 @@ impl SensorScan<SLOTS> for Sampler {
 }
 
 /// The Pico's scan (feature `pico`), as src/board/pico does it on the CPU: per sensor, the
-/// multiplexer's four select lines, then embassy-rp 0.10's `Adc::read_many` of nine free-running
-/// conversions into DMA_CH3 (`read_many_inner` and `dma::Channel::read`), register access for
-/// register access: CS set up (read, write), READY read, the FIFO drained of the previous
-/// sensor's [`FIFO_LEFTOVERS`] (a FCS read before each FIFO read, one after), FCS written, the
-/// channel's READ_ADDR, WRITE_ADDR, TRANS_COUNT and CTRL_TRIG written, DIV (read, write),
-/// START_MANY set, the transfer polled (CTRL_TRIG read); then one `Timer::after_micros(18)`
-/// await for the nine conversions, standing for the DMA completion interrupt's wake-up (the same
-/// executor path: the task woken, polled again), and the register accesses of the interrupt's
-/// handlers (embassy-rp runs the handler of each channel bound to DMA_IRQ_0); the transfer
+/// multiplexer's select lines that change (one in the Gray-code order, two from the last sensor to
+/// the first), then embassy-rp 0.10's `Adc::read_many` of nine free-running conversions into
+/// DMA_CH3 (`read_many_inner` and `dma::Channel::read`), register access for register access: CS
+/// set up (read, write), READY read, the FIFO drained of the previous sensor's [`FIFO_LEFTOVERS`]
+/// (a FCS read before each FIFO read, one after), FCS written, the channel's READ_ADDR, WRITE_ADDR,
+/// TRANS_COUNT and CTRL_TRIG written, DIV (read, write), START_MANY set, the transfer polled
+/// (CTRL_TRIG read); then one `Timer::after_micros(18)` await for the nine conversions, standing
+/// for the DMA completion interrupt's wake-up (the same executor path: the task woken, polled
+/// again), and the register accesses of the interrupt's handlers (embassy-rp runs the handler of
+/// each channel bound to DMA_IRQ_0, and the board's StopConversions stops the ADC); the transfer
 /// polled again (CTRL_TRIG), dropped (CHAN_ABORT read, written; CTRL_TRIG read), the drop guard
-/// (START_MANY cleared, up to 2 µs busy for READY: one [`conversion`], FCS cleared), CS read for
-/// the sticky error. The four kept conversions summed. Checked against the real code on the
-/// emulated Pico (fil/pico, rp2040js: the image's instructions a millisecond, idle): the scan's
-/// change saves 1 764 there, and this stand-in's change saves less than that here.
+/// (START_MANY cleared, READY read once: the ADC stopped while the task woke; before
+/// StopConversions, up to 2 µs busy for it, counted as 28 loads), FCS cleared, CS read for the
+/// sticky error. The four kept conversions summed. The stand-in's timer is the control task's one
+/// timer registration, as the scan's bound is (`tasks::bounded`): its expiry takes the bound with
+/// it, so here the bound is registered again at every wake-up, where the board's DMA wake-up leaves
+/// it standing; and this time driver neither walks its queue nor sets an alarm when a registration
+/// changes, which is what `bounded` saves on the board (measured on the emulated Pico, not here).
+/// Checked against the real code on the emulated Pico (fil/pico, rp2040js: the image's instructions
+/// a millisecond, idle): the scan's change saves 1 764 there, and this stand-in's change saves less
+/// than that here.
 #[cfg(feature = "pico")]
 impl SensorScan<SLOTS> for Sampler {
     type Error = Infallible;
 
     async fn scan(&mut self) -> Result<Samples<SLOTS>, Infallible> {
         let mut sum = 0u32;
-        for channel in 0..(2 * SLOTS + 3) {
+        // The multiplexer's channels in the Gray-code scan order; the last sensor's selected.
+        let gray = |sensor: u32| sensor ^ (sensor >> 1);
+        let mut selected = gray(2 * SLOTS as u32 + 2);
+        for channel in 0..(2 * SLOTS as u32 + 3) {
+            // The select lines that change: one, two from the last sensor to the first.
+            let changed = selected ^ gray(channel);
             for bit in 0..4 {
-                write_register(6, u32::from(channel & (1 << bit) != 0) << bit);
+                if changed & (1 << bit) != 0 {
+                    write_register(6, gray(channel) & (1 << bit));
+                }
             }
+            selected = gray(channel);
             // read_many_inner: CS modify, READY, the FIFO drained, FCS.
             write_register(4, read_register(4) | 1);
             let _ = read_register(4);
@@ -356,19 +371,23 @@ impl SensorScan<SLOTS> for Sampler {
             let _ = read_register(7);
             embassy_time::Timer::after_micros(18).await;
             // DMA_IRQ_0's handlers (DMA_CH0, DMA_CH1, DMA_CH3 bound): each reads its channel's
-            // CTRL_TRIG and INTS0; DMA_CH3's clears its INTS0 bit and wakes the task.
+            // CTRL_TRIG and INTS0; DMA_CH3's clears its INTS0 bit and wakes the task. Then the
+            // board's StopConversions: DMA_CH3's CTRL_TRIG read, START_MANY cleared.
             for _ in 0..3 {
                 let _ = read_register(7);
                 let _ = read_register(6);
             }
             write_register(6, 1 << 3);
+            let _ = read_register(7);
+            write_register(4, 1 << 3);
             // The transfer's second poll and its drop (CHAN_ABORT modify, CTRL_TRIG read).
             let _ = read_register(7);
             write_register(7, read_register(7) | 1 << 3);
             let _ = read_register(7);
-            // The drop guard: START_MANY cleared, READY awaited, FCS cleared; the sticky error.
+            // The drop guard: START_MANY cleared, READY read (the ADC stopped meanwhile), FCS
+            // cleared; the sticky error.
             write_register(4, 1 << 3);
-            sum += conversion();
+            sum += read_register(4).wrapping_add(2048);
             write_register(5, 0b1011);
             let _ = read_register(4);
             for _ in 0..4 {
@@ -381,28 +400,17 @@ impl SensorScan<SLOTS> for Sampler {
 }
 
 /// The conversions a Pico sensor's `read_many` leaves in the ADC's FIFO for the next one to
-/// drain: those that end between the DMA's last transfer and the drop guard's stop (the wake-up
-/// takes longer than three conversions of 2 µs; rp2040js in fil/pico shows the FIFO full, 4).
+/// drain: the one under way at the DMA's last transfer, which the board's interrupt lets end
+/// when it stops the ADC (StopConversions; before it, those that ended until the drop guard's
+/// stop: the wake-up takes longer than three conversions, and rp2040js showed the FIFO full, 4).
 #[cfg(feature = "pico")]
-const FIFO_LEFTOVERS: usize = 4;
+const FIFO_LEFTOVERS: usize = 1;
 
 /// A volatile load from a stand-in register, as a driver's register read.
 #[cfg(feature = "pico")]
 fn read_register(index: usize) -> u32 {
     // SAFETY: inside the array; single-threaded.
     unsafe { (REGISTERS.0.get().cast::<u32>()).add(index % 8).read_volatile() }
-}
-
-/// The drop guard's wait for the conversion under way when it clears START_MANY, up to 2 µs of
-/// polling the ADC's ready flag, 250 cycles at 125 MHz, counted as the 114 instructions the
-/// cycle model (2.2 cycles an instruction) makes of them: a loop of volatile loads.
-#[cfg(feature = "pico")]
-fn conversion() -> u32 {
-    let mut value = 0u32;
-    for _ in 0..28 {
-        value = read_register(4);
-    }
-    value.wrapping_add(2048)
 }
 
 /// A GPIO output: a store to its port's set/reset register.

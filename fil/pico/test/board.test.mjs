@@ -73,8 +73,10 @@ test('each slot reports STBY, IN1, IN2 and its PWM duty from the slice registers
 /**
  * One sensor as src/board/pico/mod.rs reads it with embassy-rp's `Adc::read_many` (DMA_CH3):
  * stop a free run and drain the FIFO, FIFO and DREQ on (THRESH 1), the DMA channel armed for
- * `count` halfwords, START_MANY at divider 0 (back to back, 2 us each); after the DMA's last
- * transfer START_MANY cleared and FIFO and DREQ off (the conversions since stay in the FIFO).
+ * `count` halfwords, START_MANY at divider 0 (back to back, 2 us each); at the DMA's last
+ * transfer the board's interrupt handler (StopConversions) clears START_MANY, so the conversion
+ * under way ends during the wake-up and no other starts: read_many's guard finds READY at once,
+ * and that one conversion stays in the FIFO; then FIFO and DREQ off.
  */
 function readMany(rp2040, count) {
   rp2040.writeUint32(ADC + CLEAR, 1 << 3); // CS: START_MANY off
@@ -90,9 +92,11 @@ function readMany(rp2040, count) {
     rp2040.clock.tick(1000);
     assert.ok(++us < 100, 'the DMA completes');
   }
-  rp2040.clock.tick(8000); // the wake-up: conversions go on into the FIFO
-  rp2040.writeUint32(ADC + CLEAR, 1 << 3);
-  rp2040.clock.tick(3000);
+  rp2040.writeUint32(ADC + CLEAR, 1 << 3); // the DMA's interrupt: START_MANY off
+  rp2040.clock.tick(8000); // the wake-up
+  rp2040.writeUint32(ADC + CLEAR, 1 << 3); // read_many's guard: START_MANY off, READY polled
+  assert.ok(rp2040.readUint32(ADC + 0x00) & (1 << 8), 'READY: the ADC stopped during the wake-up');
+  assert.equal((rp2040.readUint32(ADC + 0x08) >> 16) & 0xf, 1, 'one conversion after the last transfer');
   rp2040.writeUint32(ADC + 0x08 + CLEAR, (1 << 3) | (1 << 1) | 1); // FCS: DREQ_EN, SHIFT, EN off
   return { us, samples: Array.from({ length: count }, (_, i) => rp2040.readUint16(to + 2 * i)) };
 }

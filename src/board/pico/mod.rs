@@ -22,11 +22,20 @@
 //! conversions. Why: the scan was an embassy-time timer of 10 µs per sensor to settle (a wake-up
 //! through the executor, about 370 instructions) and then four blocking conversions (polling,
 //! 114 instructions each at the step-cost cycle model), about 7 600 instructions a millisecond;
-//! now a sensor costs one wake-up, the set-up's register writes and at most 2 µs of polling
-//! (`read_many` stopping the ADC). The step-cost harness (bench-mcu, `scripts/step-cost.sh`,
-//! which models this scan) measured the Pico's idle median 11 529 -> 9 792 instructions and its
-//! worst millisecond 15 788 -> 14 051 (27.8 % -> 24.7 % of 1 ms at 125 MHz; the bar is 25 %);
-//! the real images on the emulated Pico (fil/pico) spend 1 764 fewer a millisecond.
+//! now a sensor costs one wake-up and the set-up's register writes (the DMA's completion
+//! interrupt stops the ADC, [`StopConversions`], so `read_many`'s stop finds it stopped rather
+//! than polling up to 2 µs for the conversion under way). The step-cost harness (bench-mcu,
+//! `scripts/step-cost.sh`, which models this scan) measured the Pico's idle median 11 529 ->
+//! 9 792 instructions and its worst millisecond 15 788 -> 14 051 (27.8 % -> 24.7 % of 1 ms at
+//! 125 MHz; the bar is 25 %); the real images on the emulated Pico (fil/pico) spend 1 764 fewer
+//! a millisecond. Since, on the real image (idle: `node fil/pico/profile.mjs
+//! dist/mmu-firmware-pico.elf`, instructions / rp2040js cycles a millisecond, 16 616 / 27 983
+//! before): the scan's bound registered once a scan, not at each wake-up (`tasks::bounded`),
+//! 15 908 / 26 671; only the select lines that change written ([`Sampler::select`]) and no
+//! buffer zeroed per sensor, 15 409 / 26 184; the ADC stopped in the DMA's interrupt,
+//! 14 398 / 23 766 (`read_many`'s poll for READY about 900 -> 27). The twelve scenarios'
+//! busiest milliseconds without a flash write (`mmu fil --board pico`): 31 719 - 35 064 ->
+//! 27 615 - 30 959 cycles, at most 24.8 % of 1 ms (the bar: 31 250).
 //! A conversion error anywhere in a sensor's free run (the settling conversions included) fails
 //! the scan: `read_many` reports the ADC's sticky error flag.
 //! Settling, reasoned (not measured on hardware): the CD74HC4067's on-resistance at 3.3 V is a
@@ -41,11 +50,12 @@ use core::ops::Range;
 use embassy_rp::adc::{self, Adc};
 use embassy_rp::flash::{Blocking, Flash};
 use embassy_rp::gpio::{Input, Level, Output, Pull};
+use embassy_rp::interrupt::typelevel::Handler;
 use embassy_rp::peripherals::{self, FLASH, UART0};
 use embassy_rp::pwm::{self, Pwm, PwmError, PwmOutput};
 use embassy_rp::uart::{self, Uart, UartTx};
 use embassy_rp::watchdog::Watchdog as RpWatchdog;
-use embassy_rp::{Peri, bind_interrupts, dma, pac};
+use embassy_rp::{Peri, bind_interrupts, dma, interrupt, pac};
 use embassy_time::{Duration, Timer};
 use embedded_hal::pwm::{ErrorType, SetDutyCycle};
 use mmu_firmware::persist::SoftwareCrc;
@@ -105,8 +115,53 @@ bind_interrupts!(struct Irqs {
     ADC_IRQ_FIFO => adc::InterruptHandler;
     UART0_IRQ => uart::InterruptHandler<UART0>;
     DMA_IRQ_0 => dma::InterruptHandler<peripherals::DMA_CH0>, dma::InterruptHandler<peripherals::DMA_CH1>,
-        dma::InterruptHandler<peripherals::DMA_CH3>;
+        dma::InterruptHandler<peripherals::DMA_CH3>, StopConversions;
 });
+
+/// The sensor scan's DMA channel (`Parts::sensor_dma`), for [`StopConversions`].
+const SENSOR_DMA: usize = 3;
+
+/// Stops the ADC's free run when a sensor's transfer is done, in the DMA completion interrupt,
+/// rather than when the woken task gets to `read_many`'s drop guard: the one place this board
+/// writes the ADC outside embassy-rp's driver.
+///
+/// `read_many` stops the ADC only once its task is woken (it clears CS.START_MANY, then polls
+/// CS.READY until the conversion under way ends, up to 2 µs); by then the ADC has started more
+/// conversions nobody keeps, and the polling was about 900 instructions a millisecond on the
+/// emulated Pico (nine sensors; more or less as the wake-up's length falls against the 2 µs
+/// conversions). Cleared here, START_MANY lets the conversion under way end and starts no other
+/// while the task wakes, so the guard mostly finds READY set. The channel idle is the condition
+/// (not its interrupt flag, which `dma::InterruptHandler` clears: the order of the handlers does
+/// not matter): while a transfer runs it is busy, and `read_many` arms it before it sets
+/// START_MANY; otherwise the ADC is stopped already, or running on after a transfer, or the
+/// interrupt is another channel's. `read_many`'s guard clears START_MANY again (harmless) and
+/// still waits for READY; its error check (CS.ERR_STICKY) and its drain of the FIFO at the next
+/// sensor are unchanged.
+struct StopConversions;
+
+impl Handler<interrupt::typelevel::DMA_IRQ_0> for StopConversions {
+    unsafe fn on_interrupt() {
+        if !pac::DMA.ch(SENSOR_DMA).ctrl_trig().read().busy() {
+            let mut stop = pac::adc::regs::Cs(0);
+            stop.set_start_many(true);
+            // SAFETY: CS's atomic bit-clear alias (RP2040 datasheet 2.1.2: the register's
+            // address + 0x3000), the write `read_many`'s guard makes: it clears START_MANY only,
+            // never the write-1-to-clear ERR_STICKY that a read-modify-write would.
+            unsafe {
+                pac::ADC
+                    .cs()
+                    .as_ptr()
+                    .cast::<u8>()
+                    .add(ATOMIC_CLEAR)
+                    .cast::<pac::adc::regs::Cs>()
+                    .write_volatile(stop)
+            };
+        }
+    }
+}
+
+/// The offset of a peripheral register's atomic bit-clear alias (RP2040 datasheet 2.1.2).
+const ATOMIC_CLEAR: usize = 0x3000;
 
 /// Declares the board's pin map once and derives from it the [`Parts`] struct that takes every
 /// used singleton out of the HAL's `Peripherals`, and the masks [`STOP_STBY`] and [`STOP_OFF`]
@@ -361,36 +416,55 @@ pub struct Sampler {
     /// Moves the ADC's FIFO into a sensor's conversions.
     dma: dma::Channel<'static>,
     select: [Output<'static>; 4],
+    /// The channel the select lines pick now (all low at start: C0).
+    selected: u8,
+    /// A sensor's conversions, as the DMA writes them (every one, at each read): kept here
+    /// rather than zeroed on the stack at every sensor.
+    conversions: [u16; CONVERSIONS],
 }
 
 impl Sampler {
-    /// Selects multiplexer channel `channel` (S0 = bit 0 .. S3 = bit 3).
+    /// Selects multiplexer channel `channel` (S0 = bit 0 .. S3 = bit 3), writing only the lines
+    /// that change: one a sensor in the Gray-code scan order, two from the last sensor to the
+    /// first.
     fn select(&mut self, channel: u8) {
+        let changed = self.selected ^ channel;
         for (bit, line) in self.select.iter_mut().enumerate() {
-            line.set_level(Level::from(channel & (1 << bit) != 0));
+            if changed & (1 << bit) != 0 {
+                line.set_level(Level::from(channel & (1 << bit) != 0));
+            }
         }
+        self.selected = channel;
     }
 
     /// One sensor: select, then [`CONVERSIONS`] free-running conversions by DMA, the first
     /// [`SETTLE_CONVERSIONS`] discarded (the multiplexer settling), the last [`OVERSAMPLE`]
     /// averaged.
     ///
-    /// What embassy-rp 0.10's `read_many` does around the transfer, relied on here (no
-    /// work-around needed): it stops the ADC only once woken after the DMA's last transfer
-    /// (clears START_MANY, then busy-waits for the conversion under way, at most 2 µs), so the
-    /// conversions that ended meanwhile (the wake-up takes several; the FIFO keeps four and sets
-    /// FCS.OVER, which nothing reads or clears) stay in the FIFO; its next call drains them (it
-    /// waits for READY and reads the FIFO until empty) before it arms the DMA, so they never
-    /// reach a kept conversion (the last sensor's wait in the FIFO for the next scan). Its error
-    /// check reads CS.ERR_STICKY, cleared at its start: a failed conversion anywhere in the free
-    /// run, the discarded ones and those after the DMA's last transfer included, fails the sensor.
+    /// What embassy-rp 0.10's `read_many` does around the transfer, relied on here: it stops
+    /// the ADC only once woken after the DMA's last transfer (clears START_MANY, then busy-waits
+    /// for the conversion under way, at most 2 µs), which [`StopConversions`] does sooner, in
+    /// the DMA's completion interrupt, so that the wait finds the ADC stopped; the conversion
+    /// that ends after the DMA's last transfer (the one under way when START_MANY is cleared;
+    /// without the interrupt's stop, every one that ended until the wake-up: the FIFO keeps four
+    /// and sets FCS.OVER, which nothing reads or clears) stays in the FIFO; its next call drains
+    /// it (it waits for READY and reads the FIFO until empty) before it arms the DMA, so it never
+    /// reaches a kept conversion (the last sensor's waits in the FIFO for the next scan). Its
+    /// error check reads CS.ERR_STICKY, cleared at its start: a failed conversion anywhere in the
+    /// free run, the discarded ones and the one after the DMA's last transfer included, fails
+    /// the sensor.
     async fn read(&mut self, channel: u8) -> Result<u16, adc::Error> {
         self.select(channel);
-        let mut conversions = [0u16; CONVERSIONS];
         self.adc
-            .read_many(&mut self.input, &mut conversions, FREE_RUNNING, &mut self.dma)
+            .read_many(
+                &mut self.input,
+                &mut self.conversions,
+                FREE_RUNNING,
+                &mut self.dma,
+            )
             .await?;
-        let sum: u32 = conversions
+        let sum: u32 = self
+            .conversions
             .iter()
             .skip(SETTLE_CONVERSIONS)
             .map(|&conversion| u32::from(conversion))
@@ -501,6 +575,8 @@ pub fn init() -> BoardParts {
             low(parts.mux_s2),
             low(parts.mux_s3),
         ],
+        selected: 0,
+        conversions: [0; CONVERSIONS],
     };
 
     super::Parts {
