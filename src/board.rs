@@ -16,6 +16,8 @@
 //! What both boards share is here: [`Parts`], and the motors on two TB6612FNG ([`Bridges`],
 //! from mmu-hal-port, which the step-cost harness drives too).
 
+mod ring_rx;
+
 #[cfg(feature = "g071")]
 mod g071;
 #[cfg(feature = "g071")]

@@ -78,6 +78,9 @@ pub static TX_BUFFER: SharedBuffer<TX_QUEUE> = Mutex::new(RefCell::new(LinkBuffe
 /// [`TX_BUFFER`] has bytes for the link's transmit task: signalled by the control task at the
 /// tick after the step that queued them (see [`run_control`]), or before a reset.
 pub static TX_READY: Signal<CriticalSectionRawMutex, ()> = Signal::new();
+/// The control task has stepped: signalled at the end of every step, for the boards' receive
+/// rings, which look at their DMA ring once a step (`board::ring_rx`).
+pub static TICKED: Signal<CriticalSectionRawMutex, ()> = Signal::new();
 /// True while the link's transmit task has bytes in flight.
 pub static TX_BUSY: AtomicBool = AtomicBool::new(false);
 /// The button's level (true: held down).
@@ -234,6 +237,7 @@ pub async fn run_control<const N: usize, S: SensorScan<N>, M: Motors<N>>(
         if deferral.piece_due(busy) {
             STEPPED.signal(());
         }
+        TICKED.signal(());
         // A flash write stalled the CPU (or the step overran): the ticks missed are dropped
         // rather than caught up in a burst of late, unfed steps; the next is the grid's next
         // tick, so the scan and the step keep their place in the millisecond.

@@ -1,7 +1,7 @@
 //! The reference board: a NUCLEO-G071RB (STM32G071RB, Cortex-M0+, 64 MHz, 3.3 V) driving two
 //! TB6612FNG dual H-bridges and nine analog Hall sensors, wired to a Prusa printer's MMU port,
 //! on embassy-stm32's drivers: the ADC converting continuously into a DMA ring, `SimplePwm` on TIM3, the printer UART
-//! (USART1) received by DMA into a ring (`RingBufferedUartRx`) and sent by DMA, the blocking flash
+//! (USART1) sent by DMA and received by a circular DMA transfer into a ring (`uart_ring`), the blocking flash
 //! driver under the store, `IndependentWatchdog`, the CRC unit, the button on EXTI, and
 //! embassy-time's driver on TIM2.
 //!
@@ -11,31 +11,32 @@
 //! channels it names. Register code is left only where the HAL has no driver: the emergency stop
 //! (raw GPIO writes, usable in the fault handler), the reset flags and the flash's ECC register.
 
+mod uart_ring;
+
+use core::cell::UnsafeCell;
 use core::ops::Range;
 use core::sync::atomic::{AtomicBool, Ordering};
 
-use embassy_stm32::adc::{
-    self, Adc, AdcChannel as _, AdcConfig, AnyAdcChannel, Averaging, RingBufferedAdc, SampleTime,
-};
+use embassy_stm32::adc::{self, Adc, AdcChannel as _, AdcConfig, AnyAdcChannel, Averaging, SampleTime};
 use embassy_stm32::exti::{self, ExtiInput};
 use embassy_stm32::flash::{self, Blocking, Flash};
 use embassy_stm32::gpio::{AnyPin, Level, Output, OutputType, Pin, Pull, Speed};
+use embassy_stm32::interrupt::InterruptExt as _;
 use embassy_stm32::peripherals::{self, ADC1, DMA1_CH1, TIM3};
 use embassy_stm32::rcc::{self, Pll, PllMul, PllPreDiv, PllRDiv, PllSource, Sysclk};
 use embassy_stm32::time::khz;
 use embassy_stm32::timer::low_level::CountingMode;
 use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm, SimplePwmChannel};
-use embassy_stm32::usart::{self, RingBufferedUartRx, Uart, UartTx};
+use embassy_stm32::usart::{self, UartTx};
 use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_stm32::{Peri, bind_interrupts, crc, dma, interrupt, pac};
-use embassy_time::Timer;
 use embedded_storage::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
 use mmu_firmware::persist::EntryCrc;
 use mmu_hal_port::tb6612::Tb6612;
 use mmu_hal_port::{HubSamples, Samples, SensorScan, SlotSamples};
-use static_cell::StaticCell;
 
 use super::{Bridges, LineError, NotConnected};
+use uart_ring::G071Ring;
 
 /// The board, as the boot log names it.
 pub const NAME: &str = "NUCLEO-G071RB";
@@ -429,7 +430,7 @@ pub type Motors = Bridges<
     Tb6612<Pwm, Output<'static>, Output<'static>, Pwm, NotConnected, NotConnected, Output<'static>>,
 >;
 /// The printer UART's receive side.
-pub type LinkRx = RingBufferedUartRx<'static>;
+pub type LinkRx = super::ring_rx::RingRx<G071Ring, { mmu_firmware::control::G071_DMA_RING }>;
 /// The printer UART's transmit side.
 pub type LinkTx = UartTx<'static, embassy_stm32::mode::Async>;
 /// LD4.
@@ -462,24 +463,43 @@ const ANALOG_INPUTS: usize = 2 * SLOTS + 3;
 /// The first hub input.
 const HUB_INPUTS: usize = 2 * SLOTS;
 
-/// Conversions in the ADC's DMA ring: twelve whole scans, about 2.5 ms of continuous conversion,
-/// so a step up to a millisecond late still finds the scan before it unlapped.
-const ADC_RING: usize = 12 * ANALOG_INPUTS;
-/// A whole scan of the nine sensors in continuous conversion: 9 channels x 8 oversampled
-/// conversions of (79.5 + 12.5) / 32 MHz = 207 µs.
-const SCAN_US: u64 = 210;
+/// Conversions in the ADC's DMA ring: 24 whole scans, about 5 ms of continuous conversion. A
+/// step reads the newest whole scan, which the DMA reaches again only a lap (5 ms) later; the
+/// DMA's half- and full-ring interrupts (embassy-stm32's ring sets them) come every 2.5 ms.
+const ADC_RING: usize = 24 * ANALOG_INPUTS;
 
-/// The ADC: the nine Hall sensors converted over and over (continuous mode, one scan about every
-/// 210 µs) into a DMA ring (embassy-stm32's `RingBufferedAdc`); a scan takes the latest whole one.
-/// Why not a DMA `read` per period: it reconfigured the sequence and the DMA channel and woke the
-/// control task at its end every millisecond (measured on the emulated G071, fil/g071).
+/// The ADC's DMA ring, written only by the DMA (embassy-stm32's ring set the transfer up, then
+/// was forgotten: [`Sampler::new`]), read only through volatile reads of the one [`Sampler`].
+struct AdcRing(UnsafeCell<[u16; ADC_RING]>);
+
+// SAFETY: see above: the CPU never writes it, and reads only whole scans the DMA has written.
+unsafe impl Sync for AdcRing {}
+
+static ADC_RING_BUFFER: AdcRing = AdcRing(UnsafeCell::new([0; ADC_RING]));
+
+/// The ADC: the nine Hall sensors converted over and over (continuous mode, a scan every 207 µs:
+/// 9 channels x 8 oversampled conversions of (79.5 + 12.5) / 32 MHz) into a DMA ring; a scan
+/// takes the newest whole one.
+///
+/// Why: a DMA `read` per step reconfigured the sequence and the DMA channel and woke the control
+/// task at its end (about 1 100 instructions a millisecond on the emulated G071), and embassy-stm32
+/// 0.6's own reader of the ring, `RingBufferedAdc::read_latest`, computes `(pos + i) % cap` for
+/// every element (`src/dma/ringbuffer/mod.rs`, `DmaIndex::as_index`: a library division each on
+/// the M0+; about 800 instructions a step). So the driver configures the ADC and starts the
+/// circular transfer (`into_ring_buffered`, `start`) and is then forgotten, the DMA running on;
+/// the scan reads the DMA channel's count (CNDTR) and the ring itself, in this one place.
 pub struct Sampler {
-    ring: RingBufferedAdc<'static, ADC1>,
+    ring: *const u16,
     /// Where each input's conversion lands in a scan's results. The G0 ADC converts the selected
     /// channels (CHSELR) in ascending channel number whatever order they are listed in (RM0444,
     /// ADC: CHSELRMOD = 0, SCANDIR = 0), so it is the number of inputs on a lower channel.
     scan_positions: [u8; ANALOG_INPUTS],
+    /// The DMA's place in the ring at the last scan, to tell a stopped ADC from a running one.
+    last_position: usize,
 }
+
+/// The DMA1 channel of the ADC's ring (`DMA1_CH1`), as `pac::DMA1.ch` numbers it.
+const ADC_DMA_CHANNEL: usize = 0;
 
 impl Sampler {
     /// Embassy's driver for the regulator, calibration, clock (64 MHz system clock / 2 = 32 MHz,
@@ -504,46 +524,69 @@ impl Sampler {
                 *position += u8::from(other.get_hw_channel() < own.get_hw_channel());
             }
         }
-        static RING: StaticCell<[u16; ADC_RING]> = StaticCell::new();
-        let mut ring = adc.into_ring_buffered(
+        let ring = ADC_RING_BUFFER.0.get();
+        // SAFETY: the only reference ever made to the ring, given to the driver, which is
+        // forgotten below: nothing uses it after that; the scan reads through `ring`.
+        let buffer = unsafe { &mut *ring };
+        let mut driver = adc.into_ring_buffered(
             dma,
-            RING.init([0; ADC_RING]),
+            buffer,
             Irqs,
             inputs.into_iter().map(|input| (input, SAMPLE_TIME)),
             adc::CONTINUOUS,
             adc::Exten::DISABLED,
         );
-        ring.start();
-        Sampler { ring, scan_positions }
+        driver.start();
+        // Dropped, it would stop the ADC and the DMA.
+        core::mem::forget(driver);
+        Sampler {
+            ring: ring.cast::<u16>().cast_const(),
+            scan_positions,
+            last_position: usize::MAX,
+        }
     }
 
-    /// Reads the latest whole scan in the ring into `raw`, in scan (channel) order; false if
-    /// none arrived since the last.
-    fn latest(&mut self, raw: &mut [u16; ANALOG_INPUTS]) -> bool {
-        self.ring.read_latest(raw) == ANALOG_INPUTS
+    /// The newest whole scan in the ring, in scan (channel) order; `None` if the DMA has not
+    /// moved since the last look (the ADC stopped).
+    fn latest(&mut self) -> Option<[u16; ANALOG_INPUTS]> {
+        let remaining = usize::from(pac::DMA1.ch(ADC_DMA_CHANNEL).ndtr().read().ndt());
+        // Where the DMA writes next (CNDTR counts down from the ring's length, reloaded at 0).
+        let position = match ADC_RING.saturating_sub(remaining) {
+            ADC_RING => 0,
+            position => position,
+        };
+        if position == self.last_position {
+            return None;
+        }
+        self.last_position = position;
+        // The DMA wrote scans from the ring's start, whole scans back to back: the newest whole
+        // one ends at the last multiple of a scan at or before `position`. (`u8`: a division by
+        // a constant the compiler makes a multiplication, not a library call.)
+        let partial = usize::from(position as u8 % ANALOG_INPUTS as u8);
+        let end = position - partial;
+        let start = if end >= ANALOG_INPUTS { end } else { end + ADC_RING } - ANALOG_INPUTS;
+        // `start + ANALOG_INPUTS <= ADC_RING`: `end` is a multiple of a scan below `ADC_RING`.
+        Some(core::array::from_fn(|k| {
+            // SAFETY: `start + k < ADC_RING`: inside the ring; a volatile read, as the DMA
+            // writes it.
+            unsafe { core::ptr::read_volatile(self.ring.add(start + k)) }
+        }))
     }
 }
 
-/// No whole scan arrived in the ring since the last, even after waiting one out.
+// The ring's offsets fit the `u8` of [`Sampler::latest`], and it holds whole scans.
+const _: () = assert!(ADC_RING <= 255 && ADC_RING.is_multiple_of(ANALOG_INPUTS));
+
+/// The ADC's DMA has not moved since the last scan: the ADC stopped.
 #[derive(Debug)]
-pub struct NoScan;
+pub struct AdcStopped;
 
 impl SensorScan<SLOTS> for Sampler {
-    type Error = NoScan;
+    type Error = AdcStopped;
 
-    /// The latest whole scan; if none arrived since the last (the first scan, or the ring lapped
-    /// while a flash write stalled the CPU: the ring then starts afresh), the one that ends
-    /// within two scans' time. The caller bounds the wait.
-    async fn scan(&mut self) -> Result<Samples<SLOTS>, NoScan> {
-        let mut raw = [0u16; ANALOG_INPUTS];
-        if !self.latest(&mut raw) {
-            // The ring starts afresh where the DMA is, mid-scan at worst: the next whole scan
-            // ends at most two scans later.
-            Timer::after_micros(2 * SCAN_US).await;
-            if !self.latest(&mut raw) {
-                return Err(NoScan);
-            }
-        }
+    /// The newest whole scan (at most 207 µs old when the step begins).
+    async fn scan(&mut self) -> Result<Samples<SLOTS>, AdcStopped> {
+        let raw = self.latest().ok_or(AdcStopped)?;
         let positions = &self.scan_positions;
         let input = |index: usize| {
             let position = positions.get(index).map_or(usize::MAX, |&at| usize::from(at));
@@ -629,22 +672,25 @@ pub fn init() -> BoardParts {
     // Every error of these drivers is `Infallible`.
     let (Ok(chip1), Ok(chip2)) = (chip1, chip2);
 
-    // The printer UART: 115 200 8N1, received by DMA into a ring the CPU need not attend.
+    // The printer UART: 115 200 8N1, sent by embassy-stm32's `UartTx` (which configures
+    // USART1), received by DMA into a ring the CPU need not attend (`uart_ring`).
     let mut uart_config = usart::Config::default();
     uart_config.baudrate = BAUD;
-    let uart = defmt::unwrap!(Uart::new(
+    let link_tx = defmt::unwrap!(UartTx::new(
         parts.printer_uart,
-        parts.printer_rx,
         parts.printer_tx,
         parts.printer_tx_dma,
-        parts.printer_rx_dma,
         Irqs,
         uart_config,
     ));
-    let (link_tx, link_rx) = uart.split();
-    static RX_RING: StaticCell<[u8; mmu_firmware::control::G071_DMA_RING]> = StaticCell::new();
-    let mut link_rx = link_rx.into_ring_buffered(RX_RING.init([0; mmu_firmware::control::G071_DMA_RING]));
-    link_rx.start_uart();
+    // embassy-stm32 0.6's `UartTx::new` leaves USART1's interrupt disabled in the NVIC (only the
+    // receiver's constructors enable it), and its async `flush` waits for the transmission-complete
+    // interrupt: without this the first flush never returns and nothing more is sent (found on
+    // the emulated G071: the second answer stayed in the transmit buffer).
+    interrupt::USART1.unpend();
+    // SAFETY: its handler is bound (`Irqs`); no critical section relies on it being masked.
+    unsafe { interrupt::USART1.enable() };
+    let link_rx = G071Ring::start(parts.printer_rx, parts.printer_rx_dma);
 
     // In the order of `ANALOG_INPUTS`.
     let sampler = Sampler::new(

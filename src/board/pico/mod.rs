@@ -63,7 +63,7 @@ use mmu_hal_port::tb6612::Tb6612;
 use mmu_hal_port::{HubSamples, Samples, SensorScan, SlotSamples};
 
 use super::{Bridges, LineError};
-pub use uart_ring::RingRx;
+pub use uart_ring::{PicoRing, RingRx};
 
 /// The board, as the boot log names it.
 pub const NAME: &str = "Raspberry Pi Pico";
@@ -563,7 +563,7 @@ pub fn init() -> BoardParts {
         uart_config,
     );
     let (link_tx, rx) = uart.split();
-    let link_rx = RingRx::start(rx, parts.printer_ring_dma);
+    let link_rx = PicoRing::start(rx, parts.printer_ring_dma);
 
     let sampler = Sampler {
         adc: Adc::new(parts.adc, Irqs, adc::Config::default()),

@@ -1,5 +1,5 @@
 //! The printer UART's receive ring on the Pico: one DMA channel copies every byte UART0 receives
-//! into an 8 KiB ring in RAM, whatever the CPU does; [`RingRx`] reads it.
+//! into an 8 KiB ring in RAM, whatever the CPU does; `board::ring_rx::RingRx` reads it.
 //!
 //! Hand-written, in this one place, because embassy-rp 0.10 has no ring-buffered UART receiver
 //! (its `UartRx::read` fills a buffer of a given length, its `BufferedUart` is interrupt-driven)
@@ -18,10 +18,9 @@ use embassy_rp::pac;
 use embassy_rp::pac::dma::vals::{DataSize, TreqSel};
 use embassy_rp::peripherals::DMA_CH2;
 use embassy_rp::uart::{self, Async, UartRx};
-use embassy_time::Timer;
 use mmu_firmware::control::PICO_DMA_RING;
-use mmu_firmware::tasks;
-use mmu_firmware::uart::DmaRing;
+
+use super::super::ring_rx::RingSource;
 
 /// The DMA channel of the ring (DMA_CH0 and DMA_CH1 are embassy-rp's, for the UART).
 const CHANNEL: usize = 2;
@@ -32,7 +31,7 @@ const RING_BITS: u8 = PICO_DMA_RING.trailing_zeros() as u8;
 const TRANSFER: u32 = u32::MAX;
 
 /// The ring, aligned to its size as the DMA's address wrap requires. Written only by the DMA,
-/// read only through volatile reads of the one [`RingRx`] (which owns the DMA channel).
+/// read only through volatile reads of the one [`PicoRing`] (which owns the DMA channel).
 #[repr(C, align(8192))]
 struct Ring(UnsafeCell<[u8; PICO_DMA_RING]>);
 
@@ -45,22 +44,22 @@ const _: () = assert!(core::mem::align_of::<Ring>() == PICO_DMA_RING);
 /// alignment).
 static RING: Ring = Ring(UnsafeCell::new([0; PICO_DMA_RING]));
 
-/// The printer UART's receive side: the DMA ring and its reader.
-pub struct RingRx {
+/// The printer UART's receive ring: UART0's DMA channel and what it has written.
+pub struct PicoRing {
     /// Keeps UART0's RX pin in its UART function (never read through).
     _rx: UartRx<'static, Async>,
     _channel: Peri<'static, DMA_CH2>,
     ring: *const u8,
-    reader: DmaRing<PICO_DMA_RING>,
     /// Bytes written by the transfers before the current one, wrapping.
     base: u32,
-    /// Lost bytes already reported.
-    reported_lost: u32,
 }
 
-impl RingRx {
+/// The receive side, as `tasks::run_link_rx` reads it.
+pub type RingRx = super::super::ring_rx::RingRx<PicoRing, PICO_DMA_RING>;
+
+impl PicoRing {
     /// Starts the channel: UART0's data register into the ring, paced by its RX request.
-    pub fn start(rx: UartRx<'static, Async>, channel: Peri<'static, DMA_CH2>) -> Self {
+    pub fn start(rx: UartRx<'static, Async>, channel: Peri<'static, DMA_CH2>) -> RingRx {
         let ring = RING.0.get().cast::<u8>().cast_const();
         pac::UART0.uartdmacr().modify(|w| w.set_rxdmae(true));
         let ch = pac::DMA.ch(CHANNEL);
@@ -68,14 +67,12 @@ impl RingRx {
         ch.write_addr().write_value(ring as u32);
         ch.trans_count().write_value(TRANSFER);
         Self::trigger();
-        RingRx {
+        RingRx::new(PicoRing {
             _rx: rx,
             _channel: channel,
             ring,
-            reader: DmaRing::new(),
             base: 0,
-            reported_lost: 0,
-        }
+        })
     }
 
     /// Starts (or restarts) a transfer of [`TRANSFER`] bytes; the write address goes on where
@@ -94,6 +91,11 @@ impl RingRx {
             w.set_irq_quiet(true);
         });
     }
+}
+
+impl RingSource<PICO_DMA_RING> for PicoRing {
+    type Error = uart::Error;
+    const LOST: uart::Error = uart::Error::Overrun;
 
     /// Bytes the DMA has written since the start, wrapping; restarts a finished transfer.
     fn written(&mut self) -> u32 {
@@ -109,7 +111,7 @@ impl RingRx {
     }
 
     /// UART0's receive errors since the last look (UARTRSR, cleared by a write).
-    fn line_error() -> Option<uart::Error> {
+    fn line_error(&mut self) -> Option<uart::Error> {
         let rsr = pac::UART0.uartrsr().read();
         if !(rsr.oe() || rsr.be() || rsr.pe() || rsr.fe()) {
             return None;
@@ -125,42 +127,10 @@ impl RingRx {
             uart::Error::Framing
         })
     }
-}
 
-impl embedded_io_async::ErrorType for RingRx {
-    type Error = uart::Error;
-}
-
-impl embedded_io_async::Read for RingRx {
-    /// The bytes waiting, as many as fit (at least one: waits for it). An error is reported
-    /// once, with no bytes: the ring lapped (bytes lost, reported at the read after the one that
-    /// found it) or UART0 saw a bad frame.
-    async fn read(&mut self, buf: &mut [u8]) -> Result<usize, uart::Error> {
-        if self.reader.lost() != self.reported_lost {
-            self.reported_lost = self.reader.lost();
-            return Err(uart::Error::Overrun);
-        }
-        loop {
-            if let Some(error) = Self::line_error() {
-                return Err(error);
-            }
-            let written = self.written();
-            if self.reader.waiting(written) > 0 {
-                let ring = self.ring;
-                // SAFETY: `i < PICO_DMA_RING`, inside the ring; a volatile read, as the DMA
-                // writes it.
-                let count = self
-                    .reader
-                    .take(written, |i| unsafe { ptr::read_volatile(ring.add(i)) }, buf);
-                return Ok(count);
-            }
-            // Looked at again at the control task's next tick (`tasks::next_tick_us`): the DMA
-            // raises no interrupt per byte (and the UART's receive timeout never fires while the
-            // DMA empties its FIFO), and on the tick the time driver wakes both tasks with one
-            // alarm (a look every 500 µs between the ticks cost the emulated Pico about 770
-            // instructions a millisecond more); the control task takes a step's worth a tick.
-            let next = tasks::next_tick_us(embassy_time::Instant::now().as_micros());
-            Timer::at(embassy_time::Instant::from_micros(next)).await;
-        }
+    fn byte(&self, index: usize) -> u8 {
+        // SAFETY: `index < PICO_DMA_RING` (the trait's contract), inside the ring; a volatile
+        // read, as the DMA writes it.
+        unsafe { ptr::read_volatile(self.ring.add(index)) }
     }
 }

@@ -1,0 +1,139 @@
+//! The printer UART's receive ring on the NUCLEO-G071RB: DMA1 channel 2 copies every byte USART1
+//! receives into a 512-byte ring in RAM, circularly, whatever the CPU does; `board::ring_rx::
+//! RingRx` reads it at each control tick.
+//!
+//! In this one place instead of embassy-stm32 0.6's `RingBufferedUartRx`, for its cost, measured
+//! on the emulated G071 (`FIL_G071_PROFILE`, fil/g071/README.md): woken by USART1's idle-line
+//! interrupt after each message, its read found the bytes through `ReadableDmaRingBuffer`, which
+//! computes `(pos + i) % cap` for every byte (`src/dma/ringbuffer/mod.rs`, `DmaIndex::as_index`:
+//! a library division on the M0+, which has no divide instruction), about 2 400 instructions in
+//! a millisecond in which a message arrived. The channel is still embassy-stm32's (`dma::Channel`,
+//! a circular `Transfer`: DMAMUX request, addresses, CCR); this module adds USART1's receiver
+//! (CR1.RE, CR3.DMAR: RM0444, USART, "Reception using DMA") and reads CNDTR through the
+//! transfer.
+//!
+//! The DMA's count of written bytes comes from CNDTR's moves between two looks: fewer than the
+//! ring's 512 bytes arrive between two (`control::G071_DMA_RING` holds the longest flash stall's
+//! bytes, 40 ms, plus a step's: the tests of `mmu_firmware::uart`), so a move is never a whole
+//! lap.
+
+use core::cell::UnsafeCell;
+use core::ptr;
+
+use embassy_stm32::dma::{self, Transfer, TransferOptions};
+use embassy_stm32::gpio::{AfType, Flex, Pull};
+use embassy_stm32::peripherals::{DMA1_CH2, PB7, USART1};
+use embassy_stm32::usart;
+use embassy_stm32::{Peri, pac};
+use mmu_firmware::control::G071_DMA_RING;
+use static_cell::StaticCell;
+
+use super::super::ring_rx::{RingRx, RingSource};
+use super::Irqs;
+
+/// The ring. Written only by the DMA, read only through volatile reads of the one [`G071Ring`].
+struct Ring(UnsafeCell<[u8; G071_DMA_RING]>);
+
+// SAFETY: see above: the CPU never writes it, and reads it only where the DMA has written.
+unsafe impl Sync for Ring {}
+
+static RING: Ring = Ring(UnsafeCell::new([0; G071_DMA_RING]));
+
+/// The ring's offset of CNDTR's count `remaining` (`G071_DMA_RING` down to 1, reloaded at 0).
+fn position(remaining: u32) -> u32 {
+    (G071_DMA_RING as u32).wrapping_sub(remaining) & (G071_DMA_RING as u32 - 1)
+}
+
+/// The printer UART's receive ring: USART1's RX DMA channel and what it has written.
+pub struct G071Ring {
+    transfer: Transfer<'static>,
+    /// Keeps PB7 in its USART1_RX function (never read through).
+    _rx: Flex<'static>,
+    ring: *const u8,
+    /// Bytes written since the start, wrapping, as of the last look.
+    written: u32,
+    /// The ring's offset the DMA writes next, as of the last look.
+    position: u32,
+}
+
+impl G071Ring {
+    /// Starts USART1's receiver (configured and enabled for transmission by embassy-stm32's
+    /// `UartTx`) into the ring by `channel`, PB7 as its RX pin.
+    pub fn start(
+        rx: Peri<'static, PB7>,
+        channel: Peri<'static, DMA1_CH2>,
+    ) -> RingRx<G071Ring, G071_DMA_RING> {
+        let af = usart::RxPin::<USART1>::af_num(&*rx);
+        let mut pin = Flex::new(rx);
+        pin.set_as_af_unchecked(af, AfType::input(Pull::Up));
+        let request = usart::RxDma::<USART1>::request(&*channel);
+        static CHANNEL: StaticCell<dma::Channel<'static>> = StaticCell::new();
+        let channel = CHANNEL.init(dma::Channel::new(channel, Irqs));
+        let ring = RING.0.get().cast::<u8>();
+        let mut options = TransferOptions::default();
+        options.circular = true;
+        options.half_transfer_ir = false;
+        options.complete_transfer_ir = false;
+        // SAFETY: the ring is static, written by nothing else, and the transfer is never dropped
+        // (the receive side lives as long as the firmware).
+        let transfer = unsafe {
+            channel.read_raw(
+                request,
+                pac::USART1.rdr().as_ptr().cast::<u8>(),
+                ptr::slice_from_raw_parts_mut(ring, G071_DMA_RING),
+                options,
+            )
+        };
+        pac::USART1.cr3().modify(|w| w.set_dmar(true));
+        pac::USART1.cr1().modify(|w| w.set_re(true));
+        RingRx::new(G071Ring {
+            transfer,
+            _rx: pin,
+            ring: ring.cast_const(),
+            written: 0,
+            position: 0,
+        })
+    }
+}
+
+impl RingSource<G071_DMA_RING> for G071Ring {
+    type Error = usart::Error;
+    const LOST: usart::Error = usart::Error::Overrun;
+
+    fn written(&mut self) -> u32 {
+        let position = position(self.transfer.get_remaining_transfers());
+        let moved = position.wrapping_sub(self.position) & (G071_DMA_RING as u32 - 1);
+        self.position = position;
+        self.written = self.written.wrapping_add(moved);
+        self.written
+    }
+
+    /// USART1's receive errors since the last look (ISR PE, FE, NE, ORE; cleared through ICR).
+    fn line_error(&mut self) -> Option<usart::Error> {
+        let isr = pac::USART1.isr().read();
+        if !(isr.pe() || isr.fe() || isr.ne() || isr.ore()) {
+            return None;
+        }
+        pac::USART1.icr().write(|w| {
+            w.set_pe(true);
+            w.set_fe(true);
+            w.set_ne(true);
+            w.set_ore(true);
+        });
+        Some(if isr.ore() {
+            usart::Error::Overrun
+        } else if isr.pe() {
+            usart::Error::Parity
+        } else if isr.ne() {
+            usart::Error::Noise
+        } else {
+            usart::Error::Framing
+        })
+    }
+
+    fn byte(&self, index: usize) -> u8 {
+        // SAFETY: `index < G071_DMA_RING` (the trait's contract), inside the ring; a volatile
+        // read, as the DMA writes it.
+        unsafe { ptr::read_volatile(self.ring.add(index)) }
+    }
+}
