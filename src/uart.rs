@@ -6,10 +6,13 @@
 //! erases a 4 KiB sector, up to 400 ms), and an interrupt-driven driver loses every byte past the
 //! USART's own FIFO meanwhile. A DMA transfer needs no CPU, so the ring keeps filling.
 //!
-//! - NUCLEO-G071RB: embassy-stm32's `RingBufferedUartRx` is that ring (src/board/g071/).
+//! - NUCLEO-G071RB: embassy-stm32's DMA channel in a circular transfer (src/board/g071/uart_ring.rs;
+//!   its own `RingBufferedUartRx` divides once per byte read, too dear on the M0+).
 //! - Pico: embassy-rp 0.10 has no ring-buffered UART receiver, so the board runs one DMA channel
-//!   in ring mode itself (src/board/pico/uart_ring.rs), and [`DmaRing`] here is its reader, the
-//!   part with decisions, tested below against a model of the DMA.
+//!   in ring mode itself (src/board/pico/uart_ring.rs).
+//!
+//! [`DmaRing`] here is both boards' reader (src/board/ring_rx.rs), the part with decisions,
+//! tested below against a model of the DMA.
 //!
 //! The tests also hold the ring sizes to the longest stall of each board
 //! ([`crate::control::G071_DMA_RING`], [`crate::control::PICO_DMA_RING`]): a page erase while the

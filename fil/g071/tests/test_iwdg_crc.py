@@ -71,6 +71,20 @@ class CrcTest(unittest.TestCase):
         w32(unit, 0x00, int.from_bytes(b"1234", "little"))
         self.assertEqual(r32(unit, 0x00) ^ 0xFFFF_FFFF, binascii.crc32(b"1234"))
 
+    def test_big_endian_words_with_byte_reversal_as_the_firmware_feeds_them(self):
+        # RM0444, CRC: a 32-bit write is processed from its most significant bit, REV_IN by byte
+        # reverses each byte in place: bytes in order are the word's big-endian bytes (the
+        # G071 board's HardwareCrc::add), the rest one byte a write.
+        unit = Crc(FakeChip())
+        w32(unit, 0x14, 0x04C11DB7)
+        w32(unit, 0x10, 0xFFFF_FFFF)
+        w32(unit, 0x08, (0b01 << 5) | (1 << 7) | 1)
+        data = b"123456789"
+        for at in range(0, 8, 4):
+            w32(unit, 0x00, int.from_bytes(data[at:at + 4], "big"))
+        feed_bytes(unit, data[8:])
+        self.assertEqual(r32(unit, 0x00) ^ 0xFFFF_FFFF, 0xCBF43926)
+
     def test_16_bit_polynomial(self):
         unit = Crc(FakeChip())
         w32(unit, 0x14, 0x1021)

@@ -322,9 +322,19 @@ impl EntryCrc for HardwareCrc {
         self.0.reset();
     }
 
-    /// One 8-bit write of the data register per byte.
+    /// A 32-bit write of the data register per four bytes, the rest one 8-bit write each. With
+    /// the input bit-reversed by byte the unit takes a word's bytes from its most significant
+    /// (RM0444, CRC: "the data ... processed MSB first"), so a word is the bytes in big-endian
+    /// order. A byte a write cost a save piece about 460 instructions for its 64 bytes on the
+    /// emulated G071; `CheckedCrc` checks the unit this way at boot.
     fn add(&mut self, bytes: &[u8]) {
-        self.0.feed_bytes(bytes);
+        let mut words = bytes.chunks_exact(4);
+        for word in &mut words {
+            if let Ok(word) = <[u8; 4]>::try_from(word) {
+                self.0.feed_word(u32::from_be_bytes(word));
+            }
+        }
+        self.0.feed_bytes(words.remainder());
     }
 
     fn value(&mut self) -> u32 {
