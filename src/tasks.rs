@@ -165,8 +165,8 @@ pub async fn run_control<const N: usize, S: SensorScan<N>, M: Motors<N>>(
         }
         let started_us = now_us();
         let lateness_us = schedule.start(started_us);
-        // The scan (the G071's takes the ADC ring's latest, or waits one out, about 210 µs; the
-        // Pico's takes about 270 µs) is waited for until the next tick at most, or [`LATE_SCAN`] in a step that starts so late (after a
+        // The scan (the G071's takes the ADC ring's newest whole scan at once; the Pico's takes
+        // about 270 µs) is waited for until the next tick at most, or [`LATE_SCAN`] in a step that starts so late (after a
         // flash write) that the next tick is near or past; past it the step runs on the previous
         // samples, and neither a late step nor old samples feed the watchdog
         // (`control::feeds_watchdog`). A bound of its own in every step cost the time driver an
@@ -297,9 +297,9 @@ fn with_buffer<const N: usize, R>(
     shared.lock(|cell| cell.try_borrow_mut().ok().map(|mut buffer| f(&mut buffer)))
 }
 
-/// The control task's first tick after `now_us`: the ticks fall on whole periods of the uptime,
-/// so that other tasks that look at something every tick (the Pico's UART ring) wake with the
-/// control task, on one alarm of the time driver.
+/// The control task's first tick after `now_us`: the ticks fall on whole periods of the uptime
+/// (other tasks that look at something every tick wait for [`TICKED`] instead, on no alarm of
+/// their own).
 pub fn next_tick_us(now_us: u64) -> u64 {
     let period_us = PERIOD.as_micros();
     (now_us / period_us + 1) * period_us

@@ -6,7 +6,7 @@
 //! any hour stay under [`ERASE_BURST`] + [`ERASES_PER_HOUR`] whatever happens (each erase stalls
 //! the CPU up to 40 ms on the STM32G0); a unit starts with only [`ERASES_AT_BOOT`] of them, so
 //! that a reset loop cannot renew the budget at every boot. Each call of [`Keeper::update`] does
-//! one bounded piece of a save (at most 8 double words programmed or one page erased). [`Keeper::update_after`]
+//! one bounded piece of a save (at most 4 double words programmed or one page erased). [`Keeper::update_after`]
 //! runs none after a step that was busy with the printer, so that a step and the piece after it
 //! fit a quarter of the 1 ms period together; after [`MAX_DEFERRED_STEPS`] busy steps in a row
 //! it runs one anyway (a save must end): only a printer that sends without a pause for 8 ms

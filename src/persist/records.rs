@@ -100,8 +100,8 @@ fn body(bytes: &[u8], count: Option<usize>, head: usize, entry: usize) -> Option
     fits.then_some((fields, entries))
 }
 
-/// Writes a record's fields in order into an entry's payload, in place; bytes past the end are
-/// dropped (every record built here fits [`MAX_RECORD`]).
+/// Writes a record's fields in order into an entry's payload, in place; from the first field
+/// that does not fit, nothing more is written (every record built here fits [`MAX_RECORD`]).
 pub(super) struct Writer<'a> {
     out: &'a mut [u8],
     len: usize,
@@ -122,6 +122,7 @@ impl<'a> Writer<'a> {
     /// not fit. One bounds check a field, not one a byte: a save piece laying out the counters
     /// (about 120 bytes) cost about 1 160 instructions on the emulated G071.
     fn field(&mut self, value: u32, width: usize) {
+        debug_assert!(width <= 4, "a field of {width} bytes");
         let end = self.len + width;
         let bytes = value.to_le_bytes();
         match (self.out.get_mut(self.len..end), width) {
@@ -129,7 +130,11 @@ impl<'a> Writer<'a> {
             (Some([a, b]), 2) => [*a, *b] = [bytes[0], bytes[1]],
             (Some([a, b, c, d]), 4) => [*a, *b, *c, *d] = bytes,
             (Some(to), _) => to.iter_mut().zip(bytes).for_each(|(to, byte)| *to = byte),
-            (None, _) => return,
+            (None, _) => {
+                // Full: a later, narrower field must not land where this one belonged.
+                self.len = self.out.len();
+                return;
+            }
         }
         self.len = end;
     }

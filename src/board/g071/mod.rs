@@ -8,8 +8,11 @@
 //! The `pin_map!` table below is the single source of truth for pins, timers, DMA channels and
 //! the UART: the book's wiring table mirrors it (`scripts/check-pinmap.sh` compares the two), the
 //! emergency stop derives its pins from it, and the sensor scan order is computed from the
-//! channels it names. Register code is left only where the HAL has no driver: the emergency stop
-//! (raw GPIO writes, usable in the fault handler), the reset flags and the flash's ECC register.
+//! channels it names. Register code is left where the HAL has no driver: the emergency stop
+//! (raw GPIO writes, usable in the fault handler), the reset flags and the flash's ECC register;
+//! and where its drivers cost too much on the M0+, each in one place: the ADC ring's and the
+//! UART ring's positions read from the DMA (`Sampler::latest`, `uart_ring`), USART1's receiver
+//! and its error flags (`uart_ring`), and USART1's interrupt enabled (`init`).
 
 mod uart_ring;
 
@@ -506,6 +509,8 @@ pub struct Sampler {
     scan_positions: [u8; ANALOG_INPUTS],
     /// The DMA's place in the ring at the last scan, to tell a stopped ADC from a running one.
     last_position: usize,
+    /// A whole scan has been written since the start (the ring's tail holds none before).
+    scanned: bool,
 }
 
 /// The DMA1 channel of the ADC's ring (`DMA1_CH1`), as `pac::DMA1.ch` numbers it.
@@ -553,6 +558,7 @@ impl Sampler {
             ring: ring.cast::<u16>().cast_const(),
             scan_positions,
             last_position: usize::MAX,
+            scanned: false,
         }
     }
 
@@ -569,6 +575,10 @@ impl Sampler {
             return None;
         }
         self.last_position = position;
+        self.scanned |= position >= ANALOG_INPUTS;
+        if !self.scanned {
+            return None;
+        }
         // The DMA wrote scans from the ring's start, whole scans back to back: the newest whole
         // one ends at the last multiple of a scan at or before `position`. (`u8`: a division by
         // a constant the compiler makes a multiplication, not a library call.)
@@ -587,7 +597,11 @@ impl Sampler {
 // The ring's offsets fit the `u8` of [`Sampler::latest`], and it holds whole scans.
 const _: () = assert!(ADC_RING <= 255 && ADC_RING.is_multiple_of(ANALOG_INPUTS));
 
-/// The ADC's DMA has not moved since the last scan: the ADC stopped.
+/// The ADC's DMA has not moved since the last scan (the ADC stopped), or no whole scan exists yet.
+/// An overrun would stop it for good (embassy-stm32 leaves OVRMOD at 0: the ADC then makes no DMA
+/// request until OVR is cleared), and nothing here restarts it: the stale samples stop the
+/// watchdog's feed and the reset restarts it. The DMA has the highest priority and reads a
+/// result every 2.9 µs: none happened in the emulated scenarios (fil/g071).
 #[derive(Debug)]
 pub struct AdcStopped;
 

@@ -15,7 +15,9 @@
 //! The DMA's count of written bytes comes from CNDTR's moves between two looks: fewer than the
 //! ring's 512 bytes arrive between two (`control::G071_DMA_RING` holds the longest flash stall's
 //! bytes, 40 ms, plus a step's: the tests of `mmu_firmware::uart`), so a move is never a whole
-//! lap.
+//! lap. Before the first step the store's boot may erase more than one page (a repair) with no
+//! look: a printer that sends more than 512 bytes meanwhile loses the oldest unreported (the
+//! firmware ignores frames while it starts anyway; the Pico's count is exact).
 
 use core::cell::UnsafeCell;
 use core::ptr;
