@@ -33,8 +33,8 @@
 # --profile N --profile-at MS` lists where a millisecond goes. The stand-ins for the HAL drivers
 # cost less than the drivers: the real images on the emulated chips (`mmu fil`, each bench's
 # `load:` line) run about 560 (G071) and 5 000 (Pico) instructions more an idle millisecond;
-# their busiest milliseconds without a flash write are within the bar, those with one are not
-# on the Pico, nor in one G071 millisecond (book: "The benchmark against the real images").
+# their busiest milliseconds are within the bar but the Pico's that write the flash and one G071
+# millisecond by a few tens (book: "The benchmark against the real images").
 MAX_WORST="${MAX_WORST:-7272}"
 MAX_STEP="${MAX_STEP:-7272}"
 MAX_IDLE="${MAX_IDLE:-4000}"

@@ -166,9 +166,9 @@ pub async fn run_control<const N: usize, S: SensorScan<N>, M: Motors<N>>(
         let started_us = now_us();
         let lateness_us = schedule.start(started_us);
         // The scan (the G071's takes the ADC ring's newest whole scan at once; the Pico's takes
-        // about 270 µs) is waited for until the next tick at most, or [`LATE_SCAN`] in a step that starts so late (after a
-        // flash write) that the next tick is near or past; past it the step runs on the previous
-        // samples, and neither a late step nor old samples feed the watchdog
+        // about 270 µs) is waited for until the next tick at most, or [`LATE_SCAN`] in a step
+        // that starts so late (after a flash write) that the next tick is near or past; past it
+        // the step runs on the previous samples, and neither a late step nor old samples feed the watchdog
         // (`control::feeds_watchdog`). A bound of its own in every step cost the time driver an
         // alarm and this task a wake-up every period, and the Pico a timer re-armed at each of its
         // nine conversions' wake-ups: about 400 instructions a millisecond on the emulated G071,

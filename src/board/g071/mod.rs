@@ -1,9 +1,9 @@
 //! The reference board: a NUCLEO-G071RB (STM32G071RB, Cortex-M0+, 64 MHz, 3.3 V) driving two
 //! TB6612FNG dual H-bridges and nine analog Hall sensors, wired to a Prusa printer's MMU port,
-//! on embassy-stm32's drivers: the ADC converting continuously into a DMA ring, `SimplePwm` on TIM3, the printer UART
-//! (USART1) sent by DMA and received by a circular DMA transfer into a ring (`uart_ring`), the blocking flash
-//! driver under the store, `IndependentWatchdog`, the CRC unit, the button on EXTI, and
-//! embassy-time's driver on TIM2.
+//! on embassy-stm32's drivers: the ADC converting continuously into a DMA ring, `SimplePwm` on
+//! TIM3, the printer UART (USART1) sent by DMA and received by a circular DMA transfer into a ring
+//! (`uart_ring`), the blocking flash driver under the store, `IndependentWatchdog`, the CRC unit,
+//! the button on EXTI, and embassy-time's driver on TIM2.
 //!
 //! The `pin_map!` table below is the single source of truth for pins, timers, DMA channels and
 //! the UART: the book's wiring table mirrors it (`scripts/check-pinmap.sh` compares the two), the
@@ -331,13 +331,11 @@ impl EntryCrc for HardwareCrc {
     /// order. A byte a write cost a save piece about 460 instructions for its 64 bytes on the
     /// emulated G071; `CheckedCrc` checks the unit this way at boot.
     fn add(&mut self, bytes: &[u8]) {
-        let mut words = bytes.chunks_exact(4);
-        for word in &mut words {
-            if let Ok(word) = <[u8; 4]>::try_from(word) {
-                self.0.feed_word(u32::from_be_bytes(word));
-            }
+        let (words, rest) = bytes.as_chunks::<4>();
+        for &word in words {
+            self.0.feed_word(u32::from_be_bytes(word));
         }
-        self.0.feed_bytes(words.remainder());
+        self.0.feed_bytes(rest);
     }
 
     fn value(&mut self) -> u32 {
@@ -502,7 +500,6 @@ static ADC_RING_BUFFER: AdcRing = AdcRing(UnsafeCell::new([0; ADC_RING]));
 /// circular transfer (`into_ring_buffered`, `start`) and is then forgotten, the DMA running on;
 /// the scan reads the DMA channel's count (CNDTR) and the ring itself, in this one place.
 pub struct Sampler {
-    ring: *const u16,
     /// Where each input's conversion lands in a scan's results. The G0 ADC converts the selected
     /// channels (CHSELR) in ascending channel number whatever order they are listed in (RM0444,
     /// ADC: CHSELRMOD = 0, SCANDIR = 0), so it is the number of inputs on a lower channel.
@@ -539,10 +536,9 @@ impl Sampler {
                 *position += u8::from(other.get_hw_channel() < own.get_hw_channel());
             }
         }
-        let ring = ADC_RING_BUFFER.0.get();
         // SAFETY: the only reference ever made to the ring, given to the driver, which is
-        // forgotten below: nothing uses it after that; the scan reads through `ring`.
-        let buffer = unsafe { &mut *ring };
+        // forgotten below: nothing uses it after that; the scan reads through raw pointers.
+        let buffer = unsafe { &mut *ADC_RING_BUFFER.0.get() };
         let mut driver = adc.into_ring_buffered(
             dma,
             buffer,
@@ -555,7 +551,6 @@ impl Sampler {
         // Dropped, it would stop the ADC and the DMA.
         core::mem::forget(driver);
         Sampler {
-            ring: ring.cast::<u16>().cast_const(),
             scan_positions,
             last_position: usize::MAX,
             scanned: false,
@@ -589,7 +584,7 @@ impl Sampler {
         Some(core::array::from_fn(|k| {
             // SAFETY: `start + k < ADC_RING`: inside the ring; a volatile read, as the DMA
             // writes it.
-            unsafe { core::ptr::read_volatile(self.ring.add(start + k)) }
+            unsafe { core::ptr::read_volatile(ADC_RING_BUFFER.0.get().cast::<u16>().add(start + k)) }
         }))
     }
 }

@@ -51,7 +51,6 @@ pub struct G071Ring {
     transfer: Transfer<'static>,
     /// Keeps PB7 in its USART1_RX function (never read through).
     _rx: Flex<'static>,
-    ring: *const u8,
     /// Bytes written since the start, wrapping, as of the last look.
     written: u32,
     /// The ring's offset the DMA writes next, as of the last look.
@@ -91,7 +90,6 @@ impl G071Ring {
         RingRx::new(G071Ring {
             transfer,
             _rx: pin,
-            ring: ring.cast_const(),
             written: 0,
             position: 0,
         })
@@ -136,6 +134,6 @@ impl RingSource<G071_DMA_RING> for G071Ring {
     fn byte(&self, index: usize) -> u8 {
         // SAFETY: `index < G071_DMA_RING` (the trait's contract), inside the ring; a volatile
         // read, as the DMA writes it.
-        unsafe { ptr::read_volatile(self.ring.add(index)) }
+        unsafe { ptr::read_volatile(RING.0.get().cast::<u8>().add(index)) }
     }
 }

@@ -49,7 +49,6 @@ pub struct PicoRing {
     /// Keeps UART0's RX pin in its UART function (never read through).
     _rx: UartRx<'static, Async>,
     _channel: Peri<'static, DMA_CH2>,
-    ring: *const u8,
     /// Bytes written by the transfers before the current one, wrapping.
     base: u32,
 }
@@ -60,7 +59,7 @@ pub type RingRx = super::super::ring_rx::RingRx<PicoRing, PICO_DMA_RING>;
 impl PicoRing {
     /// Starts the channel: UART0's data register into the ring, paced by its RX request.
     pub fn start(rx: UartRx<'static, Async>, channel: Peri<'static, DMA_CH2>) -> RingRx {
-        let ring = RING.0.get().cast::<u8>().cast_const();
+        let ring = RING.0.get().cast::<u8>();
         pac::UART0.uartdmacr().modify(|w| w.set_rxdmae(true));
         let ch = pac::DMA.ch(CHANNEL);
         ch.read_addr().write_value(pac::UART0.uartdr().as_ptr() as u32);
@@ -70,7 +69,6 @@ impl PicoRing {
         RingRx::new(PicoRing {
             _rx: rx,
             _channel: channel,
-            ring,
             base: 0,
         })
     }
@@ -131,6 +129,6 @@ impl RingSource<PICO_DMA_RING> for PicoRing {
     fn byte(&self, index: usize) -> u8 {
         // SAFETY: `index < PICO_DMA_RING` (the trait's contract), inside the ring; a volatile
         // read, as the DMA writes it.
-        unsafe { ptr::read_volatile(self.ring.add(index)) }
+        unsafe { ptr::read_volatile(RING.0.get().cast::<u8>().add(index)) }
     }
 }
