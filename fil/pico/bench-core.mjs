@@ -6,6 +6,7 @@ import { readFileSync } from 'node:fs';
 import { fileURLToPath } from 'node:url';
 import { Chip, FLASH_BYTES } from './chip.mjs';
 import { parseElf } from './elf.mjs';
+import { byFunction } from './symbols.mjs';
 
 const BOOTROM = fileURLToPath(new URL('./bootrom-b1.bin', import.meta.url));
 /** 115200 Bd, 8N1: ten bits a byte, 86.8 us. */
@@ -28,10 +29,18 @@ export function flashFromElf(elfBytes) {
 const LOAD_SETTLE_MS = 200;
 /** Cycles of the 125 MHz clk_sys in 1 ms. */
 const CYCLES_PER_MS = 125_000;
+/** Functions listed for each profiled millisecond (`profile` of the Bench). */
+const PROFILE_TOP = 25;
 
 export class Bench {
-  constructor(elfBytes, { log = () => {} } = {}) {
+  /**
+   * `profile`: `{ keep, nameOf }` to profile every measured millisecond by function and keep the
+   * `keep` busiest (`profileReport`); `nameOf(pc)` names an address (symbols.mjs).
+   */
+  constructor(elfBytes, { log = () => {}, profile = null } = {}) {
     this.log = log;
+    this.profile = profile;
+    this.busiest = []; // [cycles, instructions, ms, wrote, counts by address] with `profile`
     this.bootrom = new Uint8Array(readFileSync(BOOTROM));
     this.counters = { erases: 0, programs: 0 };
     this.resets = 0;
@@ -67,6 +76,23 @@ export class Bench {
       line += `; ${writing.length} ms with one, busiest ${busiest[1]} (${pct(busiest[1])}) at ${busiest[3]} ms`;
     }
     return line;
+  }
+
+  /** Keeps a measured millisecond's cycles by address if it is among the `profile.keep` busiest. */
+  keepProfile([instructions, cycles, , ms, wrote], counts) {
+    this.busiest.push([cycles, instructions, ms, wrote, counts]);
+    this.busiest.sort((a, b) => b[0] - a[0]);
+    this.busiest.length = Math.min(this.busiest.length, this.profile.keep);
+  }
+
+  /** The busiest milliseconds' cycles by function (`profile`), lines for the log. */
+  profileReport() {
+    return this.busiest.flatMap(([cycles, instructions, ms, wrote, counts]) => [
+      `profile: ${cycles} cycles (${instructions} instructions) at ${ms} ms${wrote ? ', with a flash write' : ''}`,
+      ...byFunction(counts, this.profile.nameOf)
+        .slice(0, PROFILE_TOP)
+        .map(([name, n]) => `profile: ${String(n).padStart(7)}  ${name}`),
+    ]);
   }
 
   newChip(flash, watchdog) {
@@ -106,6 +132,7 @@ export class Bench {
     const [chip, resets] = [this.chip, this.resets];
     const [executed, cycles] = chip ? [chip.executed, chip.busyCycles] : [0, 0];
     const flashOps = this.counters.erases + this.counters.programs;
+    if (chip && this.profile) chip.pcCycles = new Map();
     const start = this.nanos;
     const end = start + us * 1000;
     sensors.forEach((value, i) => { this.sensors[i] = value; });
@@ -134,6 +161,7 @@ export class Bench {
       if (chip.stepsRun > LOAD_SETTLE_MS) {
         const wrote = this.counters.erases + this.counters.programs !== flashOps;
         this.load.push([chip.executed - executed, chip.busyCycles - cycles, rx.length, Math.round(end / 1e6), wrote]);
+        if (this.profile) this.keepProfile(this.load.at(-1), chip.pcCycles);
       }
     }
     const motors = this.chip ? this.chip.motors() : ['000:0', '000:0', '000:0'];

@@ -9,6 +9,11 @@ import { appendFileSync, readFileSync } from 'node:fs';
 import { createInterface } from 'node:readline';
 
 const HEX = /^([0-9a-f]{2})*$/;
+/**
+ * With FIL_PICO_PROFILE=K in the environment the bench profiles every millisecond it measures
+ * by function and logs the K busiest ones' cycles by function at the end (after `load:`).
+ */
+const PROFILE_ENV = 'FIL_PICO_PROFILE';
 
 /** Parses one request line into a call on `bench`; returns the answer line. Throws on errors. */
 export function handle(bench, line) {
@@ -71,7 +76,10 @@ async function main(argv) {
     });
     const { RttReader } = await import('./rtt.mjs');
     const elf = readFileSync(args[0]);
-    bench = new Bench(elf, { log });
+    const keep = Number(process.env[PROFILE_ENV] || 0);
+    const { symbolNamer } = await import('./symbols.mjs');
+    const profile = keep > 0 ? { keep, nameOf: symbolNamer(args[0]) } : null;
+    bench = new Bench(elf, { log, profile });
     if (rttFile) rtt = new RttReader(elf, (bytes) => appendFileSync(rttFile, bytes));
   } catch (e) {
     out(`error ${e.message}`);
@@ -83,6 +91,7 @@ async function main(argv) {
     if (line.trim() === '') continue;
     if (line.trim() === 'quit') {
       log(bench.loadSummary());
+      bench.profileReport().forEach(log);
       break;
     }
     let answer;

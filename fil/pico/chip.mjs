@@ -46,6 +46,8 @@ export class Chip {
     /** Instructions executed and the cycles they took (rp2040js's Cortex-M0+ timings): the load. */
     this.executed = 0;
     this.busyCycles = 0;
+    /** Cycles by instruction address while a Map is set here (the bench's profiles). */
+    this.pcCycles = null;
     this.log = log;
     this.sensors = new Array(9).fill(0);
     this.tx = [];
@@ -184,7 +186,9 @@ export class Chip {
         const next = clock.nextAlarm ? clock.nextAlarm.nanos : Infinity;
         clock.tick(Math.min(next, untilNanos) - clock.nanos);
       } else {
+        const pc = core.PC;
         const cycles = core.executeInstruction();
+        if (this.pcCycles) this.pcCycles.set(pc, (this.pcCycles.get(pc) ?? 0) + cycles);
         this.executed += 1;
         this.busyCycles += cycles;
         this.takeFault();
