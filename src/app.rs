@@ -572,8 +572,9 @@ impl<const N: usize> App<N> {
     }
 
     /// Take back what a previous run kept, before the first step. Settings go through the
-    /// register checks (a value out of range is dropped); the start-up check then compares the
-    /// lanes with what the sensors show.
+    /// register checks (a value out of range is dropped), and the drives compute what they derive
+    /// from them now rather than in the first move; the start-up check then compares the lanes
+    /// with what the sensors show.
     pub fn restore(&mut self, snapshot: &Snapshot<N>) {
         for (slot, &lane) in snapshot.lanes.iter().enumerate() {
             self.unit.set_lane(slot, lane);
@@ -586,6 +587,9 @@ impl<const N: usize> App<N> {
             for &(address, value) in &snapshot.settings {
                 self.write_register(address, value);
             }
+        }
+        for drive in &mut self.unit.drives {
+            drive.prepare(&self.config);
         }
     }
 

@@ -59,7 +59,26 @@ impl Divisor {
         None
     }
 
-    /// `x / d`, for every `x`.
+    /// `d`'s reciprocal for a divisor known only at run time (a setting), exact for every `x`
+    /// below 2³¹; `None` for 0 and 1. With `2ˢ⁻¹ < d ≤ 2ˢ`, `m = ⌈2³¹⁺ˢ / d⌉` fits in 32 bits, and
+    /// `x m / 2³¹⁺ˢ` exceeds `x / d` by less than `x / 2³¹⁺ˢ < 2⁻ˢ ≤ 1 / d`: too little to reach
+    /// the next whole quotient. Built with one 64-bit division.
+    pub const fn for_dividends_below_2_31(d: u32) -> Option<Self> {
+        if d < 2 {
+            return None;
+        }
+        let s = u32::BITS - (d - 1).leading_zeros();
+        let multiplier = (1u64 << (31 + s)).div_ceil(d as u64);
+        if multiplier > u32::MAX as u64 {
+            return None;
+        }
+        Some(Divisor {
+            multiplier: multiplier as u32,
+            shift: s - 1,
+        })
+    }
+
+    /// `x / d`, for every `x` (below 2³¹ for [`Divisor::for_dividends_below_2_31`]).
     #[inline(always)]
     pub fn divide(self, x: u32) -> u32 {
         mul_high(x, self.multiplier) >> self.shift
@@ -93,12 +112,59 @@ pub fn centi_to_mm(centi: i32) -> i32 {
     BY_100.divide_signed(centi)
 }
 
+/// Whether `⌊dividend / divisor⌋ < x` (`divisor` 0 counts as 1), without the division, which a
+/// bound checked every millisecond would pay each time: `⌊a / d⌋ < x` exactly when `a < x × d`,
+/// the product compared in 64 bits from [`mul_high`] and the low word.
+pub fn quotient_below(dividend: u32, divisor: u32, x: u32) -> bool {
+    let divisor = divisor.max(1);
+    mul_high(x, divisor) != 0 || dividend < x.wrapping_mul(divisor)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use proptest::prelude::*;
 
     const EDGES: [u32; 8] = [0, 1, 99, 100, 999, 1000, u32::MAX - 1, u32::MAX];
+
+    #[test]
+    fn a_run_time_reciprocal_is_exact_at_the_edges_and_absent_for_0_and_1() {
+        assert_eq!(Divisor::for_dividends_below_2_31(0), None);
+        assert_eq!(Divisor::for_dividends_below_2_31(1), None);
+        let dividends = [0, 1, 999, 1000, 65_535_000, (1 << 31) - 2, (1 << 31) - 1];
+        for d in [
+            2,
+            3,
+            7,
+            150,
+            1000,
+            1 << 16,
+            (1 << 16) + 1,
+            u32::MAX / 2,
+            u32::MAX - 1,
+            u32::MAX,
+        ] {
+            let divisor = Divisor::for_dividends_below_2_31(d).unwrap();
+            let around_d = [d - 1, d, d.saturating_add(1)].map(|x| x.min((1 << 31) - 1));
+            for x in dividends.into_iter().chain(around_d) {
+                assert_eq!(divisor.divide(x), x / d, "{x} / {d}");
+            }
+        }
+    }
+
+    #[test]
+    fn a_quotient_below_x_is_the_division_compared() {
+        for a in EDGES {
+            for d in EDGES {
+                for x in EDGES
+                    .into_iter()
+                    .chain([a / d.max(1), (a / d.max(1)).saturating_add(1)])
+                {
+                    assert_eq!(quotient_below(a, d, x), a / d.max(1) < x, "{a} / {d} < {x}");
+                }
+            }
+        }
+    }
 
     #[test]
     fn the_reciprocals_are_those_of_the_literature() {
@@ -151,6 +217,26 @@ mod tests {
     }
 
     proptest! {
+        #[test]
+        fn a_quotient_below_x_is_the_division_compared_anywhere(a: u32, d: u32, x: u32) {
+            prop_assert_eq!(quotient_below(a, d, x), a / d.max(1) < x);
+            // Near the quotient, where the answer turns.
+            let q = a / d.max(1);
+            prop_assert!(!quotient_below(a, d, q));
+            prop_assert_eq!(quotient_below(a, d, q.saturating_add(1)), q < u32::MAX);
+        }
+
+        #[test]
+        fn a_run_time_reciprocal_divides_every_dividend_below_2_31(x in 0u32..1 << 31, d in 2u32..) {
+            let divisor = Divisor::for_dividends_below_2_31(d).unwrap();
+            prop_assert_eq!(divisor.divide(x), x / d);
+            // The largest dividend, and the multiple of d just below it and the one before.
+            let top = (1 << 31) - 1;
+            for x in [top, top / d * d, (top / d * d).saturating_sub(1)] {
+                prop_assert_eq!(divisor.divide(x), x / d);
+            }
+        }
+
         #[test]
         fn a_reciprocal_divides_as_the_division_does(x: u32, d in 2u32..1 << 20) {
             // Divisors without an exact 32-bit reciprocal have none, never a wrong one.

@@ -9,6 +9,7 @@
 use mmu_hal_port::{Direction, Duty, MotorCommand};
 use mmu_protocol::ErrorCode;
 
+use crate::arith::Divisor;
 use crate::config::Config;
 use crate::feeder::{Feeder, distance_centi};
 use crate::time::Instant;
@@ -59,10 +60,42 @@ struct SpeedSchedule {
     speed: u16,
     since: Instant,
     from_centi: i32,
-    /// [`open_loop_duty`] of `speed`, and the `full_duty_speed` it was computed for: a division
-    /// done when the move starts (or the setting changes), not every step of it.
-    open_loop: i32,
+}
+
+/// [`open_loop_duty`] by the reciprocal of the setting it divides by, `full_duty_speed`: a
+/// library division (about 140 instructions on the Cortex-M0+) in the first step of every move,
+/// among the busiest milliseconds of a tool change, becomes a multiplication. Building the
+/// reciprocal takes a 64-bit division (about 500 instructions): done at compile time for the
+/// default setting, at boot for a restored one ([`SlotDrive::prepare`]), and in the first step
+/// that meets a setting changed since.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct OpenLoop {
     full_duty_speed: u16,
+    /// `None` for a `full_duty_speed` of 0 or 1 (taken as 1).
+    per_full_duty_speed: Option<Divisor>,
+}
+
+impl OpenLoop {
+    /// For the default setting.
+    const DEFAULT: OpenLoop = OpenLoop::new(Config::DEFAULT.full_duty_speed);
+
+    const fn new(full_duty_speed: u16) -> Self {
+        OpenLoop {
+            full_duty_speed,
+            per_full_duty_speed: Divisor::for_dividends_below_2_31(full_duty_speed as u32),
+        }
+    }
+
+    /// [`open_loop_duty`]`(speed, full_duty_speed)`.
+    fn duty(&mut self, speed: u16, full_duty_speed: u16) -> i32 {
+        if full_duty_speed != self.full_duty_speed {
+            *self = OpenLoop::new(full_duty_speed);
+        }
+        // At most 65 535 000: below 2³¹.
+        let scaled = u32::from(speed) * 1000;
+        self.per_full_duty_speed
+            .map_or(scaled, |divisor| divisor.divide(scaled)) as i32
+    }
 }
 
 /// The budget of the motion in progress and where it began.
@@ -78,6 +111,7 @@ struct DriveLease {
 pub struct SlotDrive {
     command: MotorCommand,
     schedule: Option<SpeedSchedule>,
+    open_loop: OpenLoop,
     lease: Option<DriveLease>,
     /// Since when the motor has been driven at or above the stall duty.
     hard_drive_since: Option<Instant>,
@@ -98,6 +132,7 @@ impl SlotDrive {
     pub const NEW: SlotDrive = SlotDrive {
         command: MotorCommand::Coast,
         schedule: None,
+        open_loop: OpenLoop::DEFAULT,
         lease: None,
         hard_drive_since: None,
         counting: None,
@@ -111,6 +146,12 @@ impl SlotDrive {
             started: now,
             from_centi: feeder.odometry_centi(),
         });
+    }
+
+    /// Computes now what a move computes from `config` (the open-loop duty's reciprocal), so that
+    /// the first move does not: at boot, once the settings are restored.
+    pub fn prepare(&mut self, config: &Config) {
+        self.open_loop.duty(0, config.full_duty_speed);
     }
 
     /// Drive as `motion` this step, within the budget given to [`SlotDrive::begin`]. Past the
@@ -132,8 +173,9 @@ impl SlotDrive {
             Motion::Run { direction, speed } => self.follow_schedule(direction, speed, feeder, now, config),
             Motion::Follow { speed } => {
                 self.schedule = None;
+                let open_loop = self.open_loop.duty(speed, config.full_duty_speed);
                 self.set(
-                    MotorCommand::forward(follow_duty(speed, tension, config)),
+                    MotorCommand::forward(tension_corrected(open_loop, tension, config)),
                     now,
                     config,
                 );
@@ -221,29 +263,23 @@ impl SlotDrive {
         config: &Config,
     ) {
         let odometry = feeder.odometry_centi();
-        let mut schedule = match self.schedule {
+        let schedule = match self.schedule {
             Some(schedule) if schedule.direction == direction && schedule.speed == speed => schedule,
             _ => SpeedSchedule {
                 direction,
                 speed,
                 since: now,
                 from_centi: odometry,
-                open_loop: open_loop_duty(speed, config.full_duty_speed),
-                full_duty_speed: config.full_duty_speed,
             },
         };
-        if schedule.full_duty_speed != config.full_duty_speed {
-            schedule.open_loop = open_loop_duty(speed, config.full_duty_speed);
-            schedule.full_duty_speed = config.full_duty_speed;
-        }
         self.schedule = Some(schedule);
+        let open_loop = self.open_loop.duty(speed, config.full_duty_speed);
         let moved_centi = match direction {
             Direction::Forward => distance_centi(schedule.from_centi, odometry),
             Direction::Reverse => distance_centi(odometry, schedule.from_centi),
         };
         let lag_mm = schedule_lag_mm(speed, now.millis_since(schedule.since), moved_centi);
-        let duty =
-            (schedule.open_loop + CATCH_UP_GAIN * lag_mm).clamp(0, i32::from(config.max_duty.min(1000)));
+        let duty = (open_loop + CATCH_UP_GAIN * lag_mm).clamp(0, i32::from(config.max_duty.min(1000)));
         self.set(
             MotorCommand::Drive {
                 direction,
@@ -314,9 +350,7 @@ fn schedule_lag_mm(speed: u16, elapsed_ms: u64, moved_centi: i32) -> i32 {
 
 /// The duty that moves the filament at `speed` mm/s without feedback, per mille (not limited):
 /// `speed × 1000 / full_duty_speed`. A library division on the Cortex-M0+, except for the
-/// follower's `speed` 0, which it asks for every step.
-// Out of line: three callers, one copy.
-#[inline(never)]
+/// follower's `speed` 0, which it asks for every step (a move's steps take [`OpenLoop`]).
 fn open_loop_duty(speed: u16, full_duty_speed: u16) -> i32 {
     if speed == 0 {
         return 0;
@@ -328,7 +362,11 @@ fn open_loop_duty(speed: u16, full_duty_speed: u16) -> i32 {
 /// extruder pulls it taut, less when it is compressed. Without a healthy tension sensor it is the
 /// open-loop duty for `speed`.
 pub fn follow_duty(speed: u16, tension: Option<u16>, config: &Config) -> Duty {
-    let open_loop = open_loop_duty(speed, config.full_duty_speed);
+    tension_corrected(open_loop_duty(speed, config.full_duty_speed), tension, config)
+}
+
+/// [`follow_duty`] from its open-loop part, `open_loop` per mille.
+fn tension_corrected(open_loop: i32, tension: Option<u16>, config: &Config) -> Duty {
     let correction = tension.map_or(0, |value| {
         let deviation = i32::from(value) - i32::from(config.tension_neutral);
         let deadband = i32::from(config.tension_deadband);
@@ -366,6 +404,72 @@ mod tests {
             Instant::from_millis(now_ms),
             &config,
         )
+    }
+
+    #[test]
+    fn the_open_loop_cache_is_the_division_for_every_speed_and_setting() {
+        let mut open_loop = OpenLoop::DEFAULT;
+        for full_duty_speed in (0..=u16::MAX)
+            .step_by(97)
+            .chain([1, 2, 3, 149, 150, 151, u16::MAX])
+        {
+            for speed in (0..=u16::MAX).step_by(89).chain([1, 149, 150, 151, u16::MAX]) {
+                assert_eq!(
+                    open_loop.duty(speed, full_duty_speed),
+                    open_loop_duty(speed, full_duty_speed),
+                    "{speed} mm/s at {full_duty_speed}"
+                );
+            }
+        }
+    }
+
+    /// The open-loop part of the duty is `speed × 1000 / full_duty_speed` whatever came before:
+    /// a new speed, a new setting (`full_duty_speed` written by the printer mid-move), a switch
+    /// between following and a schedule. Motor still, no tension reading: the duty is that part.
+    #[test]
+    fn the_open_loop_duty_follows_every_change_of_speed_and_setting() {
+        let (mut config, feeder, mut drive) = (Config::default(), Feeder::default(), SlotDrive::NEW);
+        let budget = Budget {
+            max_mm: u16::MAX,
+            max_ms: u32::MAX,
+            max_still_ms: u32::MAX,
+            error: ErrorCode::MOVE_PULLEY_FAILED,
+        };
+        drive.begin(budget, &feeder, Instant::ZERO);
+        let follow = |speed| Motion::Follow { speed };
+        let run = |speed| Motion::Run {
+            direction: Direction::Forward,
+            speed,
+        };
+        // (motion, full_duty_speed, duty ‰): each step at the same instant, so a schedule has
+        // no lag to catch up and its duty is the open-loop one.
+        let steps = [
+            (follow(50), 200, 250),
+            (follow(50), 200, 250),
+            (follow(50), 100, 500),
+            (follow(30), 100, 300),
+            (run(30), 100, 300),
+            (run(30), 150, 200),
+            (run(45), 150, 300),
+            (follow(45), 150, 300),
+            (follow(0), 150, 0),
+            (follow(45), 90, 500),
+            (run(0), 90, 0),
+        ];
+        for (i, (motion, full_duty_speed, duty)) in steps.into_iter().enumerate() {
+            config.full_duty_speed = full_duty_speed;
+            drive
+                .run(motion, &feeder, None, Instant::from_millis(1), &config)
+                .unwrap();
+            let permille = match drive.command() {
+                MotorCommand::Drive { duty, .. } => duty.permille(),
+                _ => 0,
+            };
+            assert_eq!(
+                permille, duty,
+                "step {i}: {motion:?} at full duty speed {full_duty_speed}"
+            );
+        }
     }
 
     #[test]

@@ -23,6 +23,7 @@ use mmu_protocol::{ErrorCode, RequestCode};
 
 use crate::arith::{BY_100, BY_1000, centi_to_mm};
 use crate::config::Config;
+use crate::drive::millis_u32;
 use crate::feeder::distance_centi;
 use crate::runner::Status;
 use crate::time::Instant;
@@ -348,8 +349,10 @@ impl<const N: usize> Ledger<N> {
                 {
                     lane.record_outcome(change.clean);
                     if change.clean {
-                        let ds = now.millis_since(change.started) / 100;
-                        lane.load_ds = roll(lane.load_ds, ds.min(u64::from(u16::MAX)) as u16);
+                        // Tenths of a second, by the reciprocal (a 64-bit division is a
+                        // library call of a few hundred instructions on the Cortex-M0+).
+                        let ds = BY_100.divide(millis_u32(now.millis_since(change.started)));
+                        lane.load_ds = roll(lane.load_ds, ds.min(u32::from(u16::MAX)) as u16);
                     }
                 }
             }

@@ -7,6 +7,7 @@ use mmu_hal_port::Direction;
 use mmu_protocol::{ErrorCode, ProgressCode};
 
 use super::{Bounds, Decision, Goal, PhaseRun, Sight, sensor_fault_error};
+use crate::arith::quotient_below;
 use crate::config::Config;
 use crate::time::Instant;
 use crate::unit::{Lane, SensorId};
@@ -166,10 +167,14 @@ fn push_into_gears(
     if !run.pushed {
         return Ok(Goal::Drive);
     }
-    let printer_push_ms = u64::from(config.extra_load_mm.saturating_add(2)) * 1000
-        / u64::from(config.slow_speed.max(1))
-        + PRINTER_PUSH_MARGIN_MS;
-    if now.millis_since(run.started) > printer_push_ms {
+    // Past the printer's push (`(extra_load_mm + 2) × 1000 / slow_speed` ms, plus the margin):
+    // compared without the division, which this millisecond of every hold would otherwise pay.
+    let push_distance_mm_1000 = u32::from(config.extra_load_mm.saturating_add(2)) * 1000;
+    let beyond_margin_ms = now
+        .millis_since(run.started)
+        .saturating_sub(PRINTER_PUSH_MARGIN_MS);
+    let beyond_margin_ms = u32::try_from(beyond_margin_ms).unwrap_or(u32::MAX);
+    if quotient_below(push_distance_mm_1000, config.slow_speed.into(), beyond_margin_ms) {
         Err(ErrorCode::FSENSOR_DIDNT_SWITCH_ON)
     } else {
         Ok(Goal::Hold)
@@ -200,4 +205,42 @@ pub(super) fn compressed_for(run: &mut PhaseRun, tension: u16, now: Instant, con
         None
     };
     run.compressed_since.map_or(0, |since| now.millis_since(since))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The push went its distance with the tube at rest: from here on only the printer's push
+    /// can show a grip, and it lasts `extra_load_mm + 2` mm at the slow speed plus the margin.
+    #[test]
+    fn the_unit_holds_until_the_printers_push_is_over_and_then_reports_8003() {
+        for (extra_load_mm, slow_speed) in [(30, 20), (0, 1), (7, 3), (65_535, 65_535), (100, 0)] {
+            let config = Config {
+                extra_load_mm,
+                slow_speed,
+                ..Config::default()
+            };
+            let started = Instant::from_millis(5_000);
+            let mut slot = None;
+            let run = PhaseRun::start(&mut slot, started, 0, 0);
+            run.pushed = true;
+            let neutral = config.tension_neutral;
+            let push_ms = (u64::from(extra_load_mm) + 2) * 1000 / u64::from(slow_speed.max(1)) + 600;
+            let at = |ms: u64| Instant::from_millis(5_000 + ms);
+            for ms in [0, push_ms - 1, push_ms] {
+                assert!(
+                    matches!(push_into_gears(run, neutral, 0, at(ms), &config), Ok(Goal::Hold)),
+                    "{extra_load_mm} mm at {slow_speed} mm/s: held at {ms} of {push_ms} ms"
+                );
+            }
+            for ms in [push_ms + 1, push_ms + 10_000, u64::from(u32::MAX) + push_ms] {
+                assert_eq!(
+                    push_into_gears(run, neutral, 0, at(ms), &config).err(),
+                    Some(ErrorCode::FSENSOR_DIDNT_SWITCH_ON),
+                    "{extra_load_mm} mm at {slow_speed} mm/s: {ms} of {push_ms} ms"
+                );
+            }
+        }
+    }
 }
