@@ -98,6 +98,12 @@ pub static RESET_SAVED: Signal<CriticalSectionRawMutex, ()> = Signal::new();
 /// The store wrote to flash after the last step (the CPU stalled): the control task drops the
 /// ticks it missed instead of catching up in a burst.
 pub static STORE_WROTE: AtomicBool = AtomicBool::new(false);
+/// Control steps taken since boot, wrapping; written by the control task alone. A debugger
+/// reads it by name to see the loop run, and the emulated-chip benches (fil/) measure the load of
+/// the milliseconds in which it moved: the control task's, not the boot's (the store's restore,
+/// its repair after a power cut).
+#[unsafe(no_mangle)]
+pub static MMU_CONTROL_STEPS: AtomicU32 = AtomicU32::new(0);
 /// Overruns the link reported.
 pub static OVERRUNS: AtomicU32 = AtomicU32::new(0);
 /// Garbled frames the link reported.
@@ -238,6 +244,8 @@ pub async fn run_control<const N: usize, S: SensorScan<N>, M: Motors<N>>(
             STEPPED.signal(());
         }
         TICKED.signal(());
+        let steps = MMU_CONTROL_STEPS.load(Ordering::Relaxed);
+        MMU_CONTROL_STEPS.store(steps.wrapping_add(1), Ordering::Relaxed);
         // A flash write stalled the CPU (or the step overran): the ticks missed are dropped
         // rather than caught up in a burst of late, unfed steps; the next is the grid's next
         // tick, so the scan and the step keep their place in the millisecond.

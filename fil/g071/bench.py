@@ -38,8 +38,10 @@ TIM3_AF = 1  # PC6/PC7/PC8 AF1 = TIM3_CH1/2/3 (STM32G071 datasheet, alternate fu
 BOARD, SLOT_COUNT = "g071", 3
 
 
-# Milliseconds after a start before the load counts (the boot, the store's restore).
-LOAD_SETTLE_MS = 200
+# The firmware's count of control steps (src/tasks.rs): the load counts the milliseconds in which
+# it moved after the first step, the control task's, not the boot's (the store's restore, its
+# repair after a power cut, the log of what it restored).
+CONTROL_STEPS = "MMU_CONTROL_STEPS"
 # With FIL_G071_PROFILE=K in the environment, the bench profiles every millisecond it measures
 # by function and logs the K busiest ones' profiles at the end (slower: a Unicorn block hook).
 PROFILE_ENV = "FIL_G071_PROFILE"
@@ -56,10 +58,10 @@ class Bench:
         self.line_count = 0     # characters in that run so far
         self.wall = 0.0
         self.cpu = 0.0
-        # (instructions, bytes received, ms) of each millisecond after a start's first
-        # LOAD_SETTLE_MS (see load_summary); the steps since the chip last started.
+        # (instructions, bytes received, ms, wrote) of each millisecond with a control step (see
+        # load_summary).
         self.load = []
-        self.steps_since_start = 0
+        self.control_steps = self.symbols.get(CONTROL_STEPS)
         # (instructions, ms, functions) of the busiest milliseconds measured, with PROFILE_ENV.
         self.profile_keep = int(os.environ.get(PROFILE_ENV, "0") or 0)
         self.profile = profiling.FunctionCounts(image, self.chip) if self.profile_keep else None
@@ -133,23 +135,28 @@ class Bench:
         resets, executed = chip.resets, chip.cpu.native.count()
         flash_ops = chip.erases() + chip.programs()
         functions = self.profile.snapshot() if self.profile else None
+        steps = self.steps_taken()
         chip.run_until(end)
-        if chip.resets != resets or not chip.powered:
-            self.steps_since_start = 0
-        elif us == 1000:
-            self.steps_since_start += 1
-            if self.steps_since_start > LOAD_SETTLE_MS:
-                wrote = chip.erases() + chip.programs() != flash_ops
-                n, ms = chip.cpu.native.count() - executed, round(end / clock.us(1000))
-                self.load.append((n, len(rx), ms, wrote))
-                if functions is not None:
-                    self.keep_profile(n, ms, wrote, self.profile.counts - functions)
+        # A millisecond of the control loop: it stepped, and had stepped before the millisecond
+        # began (the first step's millisecond also holds the end of the boot).
+        if chip.resets == resets and chip.powered and us == 1000 and steps and self.steps_taken() != steps:
+            wrote = chip.erases() + chip.programs() != flash_ops
+            n, ms = chip.cpu.native.count() - executed, round(end / clock.us(1000))
+            self.load.append((n, len(rx), ms, wrote))
+            if functions is not None:
+                self.keep_profile(n, ms, wrote, self.profile.counts - functions)
         self.wall += time.perf_counter() - t0
         self.cpu += time.process_time() - c0
         sent = bytes(b for _, b in chip.usart1.take_sent()) if chip.powered else b""
         self.pump_rtt()
         tx = sent.hex() if sent else "-"
         return f"ok {' '.join(self.motors())} {tx} {chip.resets} {chip.erases()} {chip.programs()}"
+
+    def steps_taken(self):
+        """The firmware's count of control steps, or None (no such symbol, or no power)."""
+        if self.control_steps is None or not self.chip.powered:
+            return None
+        return int.from_bytes(self.chip.memory.read(self.control_steps, 4), "little")
 
     def keep_profile(self, instructions, ms, wrote, functions):
         """Keeps this millisecond's profile if it is among the busiest `profile_keep`."""
@@ -167,14 +174,17 @@ class Bench:
         return "\n".join(lines)
 
     def load_summary(self):
-        """The CPU's load in each 1 ms step after a start's first LOAD_SETTLE_MS (the boot and
-        the store's restore are not the control loop): instructions executed in the milliseconds
-        without a flash write (median, 99th and 99.9th percentile, busiest) and the busiest with
+        """The CPU's load in each 1 ms step in which the control task stepped, after its first
+        step (CONTROL_STEPS moved; the boot and the store's restore are not the control loop):
+        instructions executed
+        in the milliseconds without a flash write (median, 99th and 99.9th percentile, busiest) and the busiest with
         one, with the step-cost benchmark's cycle model (2.2 cycles an instruction,
         scripts/step-cost.sh) for the percentage. One line, for the log."""
         plain = sorted(m for m in self.load if not m[3])
         writing = [m for m in self.load if m[3]]
         if not plain:
+            if self.control_steps is None:
+                return f"load: no millisecond measured (the image has no {CONTROL_STEPS})"
             return "load: no millisecond measured"
 
         def pct(n):

@@ -25,8 +25,12 @@ export function flashFromElf(elfBytes) {
   return flash;
 }
 
-/** Milliseconds after a chip starts before its load counts (boot, the store's restore). */
-const LOAD_SETTLE_MS = 200;
+/**
+ * The firmware's count of control steps (src/tasks.rs): the load counts the milliseconds in
+ * which it moved after the first step, the control task's, not the boot's (the store's restore,
+ * its repair, the log of what it restored).
+ */
+const CONTROL_STEPS = 'MMU_CONTROL_STEPS';
 /** Cycles of the 125 MHz clk_sys in 1 ms. */
 const CYCLES_PER_MS = 125_000;
 /** Functions listed for each profiled millisecond (`profile` of the Bench). */
@@ -48,20 +52,24 @@ export class Bench {
     this.rxQueue = []; // { byte, at }: bytes on the line, `at` when their stop bit ends
     this.lineFreeAt = 0;
     this.sensors = new Array(9).fill(0);
-    this.load = []; // [instructions, cycles, bytes received, ms] of each millisecond (see loadSummary)
+    this.load = []; // [instructions, cycles, bytes received, ms, wrote] of each control millisecond
+    this.controlSteps = parseElf(elfBytes).symbols.get(CONTROL_STEPS);
     this.chip = this.newChip(flashFromElf(elfBytes), null);
   }
 
   /**
-   * The CPU's load in each 1 ms step after a chip's first LOAD_SETTLE_MS (its boot and the
-   * store's restore are not the control loop): in the milliseconds without a flash write, the
+   * The CPU's load in each 1 ms step in which the control task stepped, after its first step
+   * (CONTROL_STEPS moved; the boot and the store's restore are not the control loop): in the milliseconds without a flash write, the
    * cycles rp2040js counts (median, 99th and 99.9th percentile, busiest, with its instructions);
    * the busiest with one. One line, for the log.
    */
   loadSummary() {
     const plain = this.load.filter((m) => !m[4]).sort((a, b) => a[1] - b[1]);
     const writing = this.load.filter((m) => m[4]);
-    if (!plain.length) return 'load: no millisecond measured';
+    if (!plain.length) {
+      const why = this.controlSteps === undefined ? ` (the image has no ${CONTROL_STEPS})` : '';
+      return `load: no millisecond measured${why}`;
+    }
     const pct = (c) => `${((100 * c) / CYCLES_PER_MS).toFixed(1)} %`;
     const at = (q) => {
       const m = plain[Math.min(plain.length - 1, Math.floor(q * plain.length))];
@@ -76,6 +84,12 @@ export class Bench {
       line += `; ${writing.length} ms with one, busiest ${busiest[1]} (${pct(busiest[1])}) at ${busiest[3]} ms`;
     }
     return line;
+  }
+
+  /** The firmware's count of control steps on `chip`, or undefined (no such symbol, no chip). */
+  stepsTaken(chip) {
+    if (!chip || this.controlSteps === undefined) return undefined;
+    return chip.rp2040.readUint32(this.controlSteps);
   }
 
   /** Keeps a measured millisecond's cycles by address if it is among the `profile.keep` busiest. */
@@ -133,6 +147,7 @@ export class Bench {
     const [executed, cycles] = chip ? [chip.executed, chip.busyCycles] : [0, 0];
     const flashOps = this.counters.erases + this.counters.programs;
     if (chip && this.profile) chip.pcCycles = new Map();
+    const steps = this.stepsTaken(chip);
     const start = this.nanos;
     const end = start + us * 1000;
     sensors.forEach((value, i) => { this.sensors[i] = value; });
@@ -156,13 +171,13 @@ export class Bench {
     this.runUntil(end);
     collect();
     this.nanos = end;
-    if (chip && this.chip === chip && this.resets === resets && us === 1000) {
-      chip.stepsRun = (chip.stepsRun ?? 0) + 1;
-      if (chip.stepsRun > LOAD_SETTLE_MS) {
-        const wrote = this.counters.erases + this.counters.programs !== flashOps;
-        this.load.push([chip.executed - executed, chip.busyCycles - cycles, rx.length, Math.round(end / 1e6), wrote]);
-        if (this.profile) this.keepProfile(this.load.at(-1), chip.pcCycles);
-      }
+    // A millisecond of the control loop: it stepped, and had stepped before the millisecond began
+    // (the first step's millisecond also holds the end of the boot).
+    const stepped = steps > 0 && this.stepsTaken(chip) !== steps;
+    if (chip && this.chip === chip && this.resets === resets && us === 1000 && stepped) {
+      const wrote = this.counters.erases + this.counters.programs !== flashOps;
+      this.load.push([chip.executed - executed, chip.busyCycles - cycles, rx.length, Math.round(end / 1e6), wrote]);
+      if (this.profile) this.keepProfile(this.load.at(-1), chip.pcCycles);
     }
     const motors = this.chip ? this.chip.motors() : ['000:0', '000:0', '000:0'];
     return { motors, tx, resets: this.resets, ...this.counters };

@@ -184,3 +184,29 @@ class EraseDuringRequestTest(unittest.TestCase):
                 break
         self.assertTrue(tx.startswith(b"S0 A"), tx)
         self.assertGreaterEqual(chip.time, stall_end)
+
+
+@unittest.skipUnless(os.path.exists(IMAGE), f"no firmware image at {IMAGE} (set FIL_G071_IMAGE)")
+class LoadTest(unittest.TestCase):
+    """The bench's `load:` counts the control task's milliseconds (the firmware's
+    MMU_CONTROL_STEPS moved since the first step), not the boot's (a store restore once made a
+    25 605-instruction millisecond the power-cut scenario's busiest) nor those a page erase
+    stalls whole."""
+
+    def test_only_the_milliseconds_with_a_control_step_are_counted(self):
+        import bench as bench_module
+        bench = bench_module.Bench(IMAGE)
+        bench.chip.memory.write(0x0801_8000, b"\x5a" * 0x8000)  # a damaged store: an erase
+        levels = [2000] * 9
+        stepped = []
+        for ms in range(1, 101):
+            before = bench.steps_taken()
+            bench.step(1000, levels, b"")
+            if bench.steps_taken() != before:
+                stepped.append(ms)
+        self.assertGreater(stepped[0], 1, "the boot comes before the first step")
+        self.assertGreater(bench.chip.erases(), 0)
+        stalled = [ms for ms in range(stepped[0], 101) if ms not in stepped]
+        self.assertGreaterEqual(len(stalled), 10, "the erase stalled the loop for some ms")
+        # The first step's millisecond also holds the end of the boot: counted from the next.
+        self.assertEqual([m[2] for m in bench.load], stepped[1:])

@@ -3,9 +3,10 @@
 // pico dist). Skipped, saying so, when there is none.
 
 import assert from 'node:assert/strict';
-import { existsSync } from 'node:fs';
+import { existsSync, readFileSync } from 'node:fs';
 import { test } from 'node:test';
 import { fileURLToPath } from 'node:url';
+import { Bench } from '../bench-core.mjs';
 import { Driver } from './driver.mjs';
 import { request } from './frames.mjs';
 
@@ -186,4 +187,19 @@ test('X0 resets the chip through AIRCR.SYSRESETREQ and the firmware answers agai
   assert.equal(r.resets, 1, 'one reset');
   await exchange(bench, request('S', 0), 'S0 A', 200);
   assert.equal(await bench.quit(), 0);
+});
+
+test('the load counts the control task\'s milliseconds: none of the boot\'s, every one after it', { skip }, () => {
+  const bench = new Bench(readFileSync(IMAGE));
+  const levels = [2048, 3000, 2048, 2048, 2048, 2048, 2048, 2048, 2048];
+  let first;
+  for (let ms = 1; ms <= 300; ms++) {
+    const before = bench.stepsTaken(bench.chip);
+    bench.step(1000, levels, []);
+    if (first === undefined && bench.stepsTaken(bench.chip) !== before) first = ms;
+  }
+  assert.ok(first > 1, `the boot restores the store before the first step (at ${first} ms)`);
+  // The first step's millisecond also holds the end of the boot.
+  assert.equal(bench.load[0][3], first + 1, 'the first millisecond counted is the one after');
+  assert.equal(bench.load.length, 300 - first, 'then every millisecond, one step each');
 });
