@@ -124,7 +124,7 @@ impl<const N: usize> App<N> {
     /// nothing, before it reports `X0 F0` (or the error it found).
     pub fn new(config: Config) -> Self {
         let () = Self::SLOTS_OK;
-        App {
+        let mut app = App {
             config,
             unit: Unit::default(),
             operation: Runner::new((RequestCode::Reset, 0), &{
@@ -152,7 +152,11 @@ impl<const N: usize> App<N> {
             settings_revision: 0,
             ledger: Ledger::default(),
             spool_end: SpoolEnd::NEW,
+        };
+        for drive in &mut app.unit.drives {
+            drive.prepare(&app.config);
         }
+        app
     }
 
     /// The settings in force.

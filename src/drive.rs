@@ -65,9 +65,8 @@ struct SpeedSchedule {
 /// [`open_loop_duty`] by the reciprocal of the setting it divides by, `full_duty_speed`: a
 /// library division (about 140 instructions on the Cortex-M0+) in the first step of every move,
 /// among the busiest milliseconds of a tool change, becomes a multiplication. Building the
-/// reciprocal takes a 64-bit division (about 500 instructions): done at compile time for the
-/// default setting, at boot for a restored one ([`SlotDrive::prepare`]), and in the first step
-/// that meets a setting changed since.
+/// reciprocal takes a 64-bit division (about 500 instructions): done at boot, once the settings
+/// are known ([`SlotDrive::prepare`]), and in the first step that meets a setting changed since.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 struct OpenLoop {
     full_duty_speed: u16,
@@ -76,10 +75,15 @@ struct OpenLoop {
 }
 
 impl OpenLoop {
-    /// For the default setting.
-    const DEFAULT: OpenLoop = OpenLoop::new(Config::DEFAULT.full_duty_speed);
+    /// Before the setting is known: all zero (a drive's initial state built by clearing memory;
+    /// the default setting's reciprocal in it made the unit's initial state a 1.4 KB image in
+    /// flash).
+    const NEW: OpenLoop = OpenLoop {
+        full_duty_speed: 0,
+        per_full_duty_speed: None,
+    };
 
-    const fn new(full_duty_speed: u16) -> Self {
+    fn new(full_duty_speed: u16) -> Self {
         OpenLoop {
             full_duty_speed,
             per_full_duty_speed: Divisor::for_dividends_below_2_31(full_duty_speed as u32),
@@ -132,7 +136,7 @@ impl SlotDrive {
     pub const NEW: SlotDrive = SlotDrive {
         command: MotorCommand::Coast,
         schedule: None,
-        open_loop: OpenLoop::DEFAULT,
+        open_loop: OpenLoop::NEW,
         lease: None,
         hard_drive_since: None,
         counting: None,
@@ -149,7 +153,7 @@ impl SlotDrive {
     }
 
     /// Computes now what a move computes from `config` (the open-loop duty's reciprocal), so that
-    /// the first move does not: at boot, once the settings are restored.
+    /// the first move does not: at boot, and once the settings are restored.
     pub fn prepare(&mut self, config: &Config) {
         self.open_loop.duty(0, config.full_duty_speed);
     }
@@ -408,7 +412,7 @@ mod tests {
 
     #[test]
     fn the_open_loop_cache_is_the_division_for_every_speed_and_setting() {
-        let mut open_loop = OpenLoop::DEFAULT;
+        let mut open_loop = OpenLoop::NEW;
         for full_duty_speed in (0..=u16::MAX)
             .step_by(97)
             .chain([1, 2, 3, 149, 150, 151, u16::MAX])
