@@ -519,6 +519,11 @@ impl<const N: usize> App<N> {
         }
         if accepted && address != registers::FSENSOR {
             self.settings_revision = self.settings_revision.wrapping_add(1);
+            // What the drives derive from the settings, now rather than in the first step of
+            // the next move (the busiest millisecond of a tool change).
+            for drive in &mut self.unit.drives {
+                drive.prepare(&self.config);
+            }
         }
         accepted
     }
@@ -576,9 +581,9 @@ impl<const N: usize> App<N> {
     }
 
     /// Take back what a previous run kept, before the first step. Settings go through the
-    /// register checks (a value out of range is dropped), and the drives compute what they derive
-    /// from them now rather than in the first move; the start-up check then compares the lanes
-    /// with what the sensors show.
+    /// register checks (a value out of range is dropped; the drives compute what they derive from
+    /// them as they come, not in the first move); the start-up check then compares the lanes with
+    /// what the sensors show.
     pub fn restore(&mut self, snapshot: &Snapshot<N>) {
         for (slot, &lane) in snapshot.lanes.iter().enumerate() {
             self.unit.set_lane(slot, lane);
@@ -591,9 +596,6 @@ impl<const N: usize> App<N> {
             for &(address, value) in &snapshot.settings {
                 self.write_register(address, value);
             }
-        }
-        for drive in &mut self.unit.drives {
-            drive.prepare(&self.config);
         }
     }
 
@@ -737,7 +739,24 @@ impl<const N: usize> Default for App<N> {
 
 #[cfg(test)]
 mod tests {
-    use super::add_centi;
+    use super::{App, Config, add_centi};
+
+    /// The open-loop duty's reciprocal is built at boot and when `full_duty_speed` (0x4b) is
+    /// written, not in the first step of a move (a 64-bit division there: about 500
+    /// instructions in the busiest millisecond).
+    #[test]
+    fn the_drives_are_prepared_at_boot_and_when_the_setting_is_written() {
+        let config = Config {
+            full_duty_speed: 200,
+            ..Config::default()
+        };
+        let mut app = App::<3>::new(config);
+        assert!(app.unit.drives.iter().all(|drive| drive.prepared_for() == 200));
+        assert!(app.write_register(0x4b, 120));
+        assert!(app.unit.drives.iter().all(|drive| drive.prepared_for() == 120));
+        assert!(!app.write_register(0x4b, 5), "out of range");
+        assert!(app.unit.drives.iter().all(|drive| drive.prepared_for() == 120));
+    }
 
     /// The fed distance as it was counted: a 64-bit sum of hundredths, divided for the register.
     fn dividing_add(total_centi: u64, more: u32) -> (u64, u32) {

@@ -65,8 +65,8 @@ struct SpeedSchedule {
 /// [`open_loop_duty`] by the reciprocal of the setting it divides by, `full_duty_speed`: a
 /// library division (about 140 instructions on the Cortex-M0+) in the first step of every move,
 /// among the busiest milliseconds of a tool change, becomes a multiplication. Building the
-/// reciprocal takes a 64-bit division (about 500 instructions): done at boot, once the settings
-/// are known ([`SlotDrive::prepare`]), and in the first step that meets a setting changed since.
+/// reciprocal takes a 64-bit division (about 500 instructions): done at boot and when the setting
+/// is written ([`SlotDrive::prepare`]), in a step only if the setting changed some other way.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 struct OpenLoop {
     full_duty_speed: u16,
@@ -153,9 +153,15 @@ impl SlotDrive {
     }
 
     /// Computes now what a move computes from `config` (the open-loop duty's reciprocal), so that
-    /// the first move does not: at boot, and once the settings are restored.
+    /// the first move does not: at boot, and when a setting is written or restored.
     pub fn prepare(&mut self, config: &Config) {
         self.open_loop.duty(0, config.full_duty_speed);
+    }
+
+    /// The `full_duty_speed` the open-loop duty's reciprocal was built for.
+    #[cfg(test)]
+    pub(crate) fn prepared_for(&self) -> u16 {
+        self.open_loop.full_duty_speed
     }
 
     /// Drive as `motion` this step, within the budget given to [`SlotDrive::begin`]. Past the

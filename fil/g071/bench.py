@@ -138,8 +138,12 @@ class Bench:
         steps = self.steps_taken()
         chip.run_until(end)
         # A millisecond of the control loop: it stepped, and had stepped before the millisecond
-        # began (the first step's millisecond also holds the end of the boot).
-        if chip.resets == resets and chip.powered and us == 1000 and steps and self.steps_taken() != steps:
+        # began (the first step's millisecond also holds the end of the boot). Forward only: a
+        # reset keeps the RAM, so a boot's millisecond starts from the last run's count and
+        # clears it.
+        after = self.steps_taken()
+        stepped = steps is not None and after is not None and 0 < steps < after
+        if chip.resets == resets and chip.powered and us == 1000 and stepped:
             wrote = chip.erases() + chip.programs() != flash_ops
             n, ms = chip.cpu.native.count() - executed, round(end / clock.us(1000))
             self.load.append((n, len(rx), ms, wrote))

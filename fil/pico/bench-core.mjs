@@ -173,7 +173,7 @@ export class Bench {
     this.nanos = end;
     // A millisecond of the control loop: it stepped, and had stepped before the millisecond began
     // (the first step's millisecond also holds the end of the boot).
-    const stepped = steps > 0 && this.stepsTaken(chip) !== steps;
+    const stepped = steps > 0 && this.stepsTaken(chip) > steps;
     if (chip && this.chip === chip && this.resets === resets && us === 1000 && stepped) {
       const wrote = this.counters.erases + this.counters.programs !== flashOps;
       this.load.push([chip.executed - executed, chip.busyCycles - cycles, rx.length, Math.round(end / 1e6), wrote]);
