@@ -153,9 +153,7 @@ impl<const N: usize> App<N> {
             ledger: Ledger::default(),
             spool_end: SpoolEnd::NEW,
         };
-        for drive in &mut app.unit.drives {
-            drive.prepare(&app.config);
-        }
+        app.prepare_for_settings();
         app
     }
 
@@ -519,13 +517,19 @@ impl<const N: usize> App<N> {
         }
         if accepted && address != registers::FSENSOR {
             self.settings_revision = self.settings_revision.wrapping_add(1);
-            // What the drives derive from the settings, now rather than in the first step of
-            // the next move (the busiest millisecond of a tool change).
-            for drive in &mut self.unit.drives {
-                drive.prepare(&self.config);
-            }
+            self.prepare_for_settings();
         }
         accepted
+    }
+
+    /// What the logic derives from the settings (the reciprocals of the speeds it divides by),
+    /// computed as they change rather than in the first millisecond of the next command or move,
+    /// the busiest of a tool change.
+    fn prepare_for_settings(&mut self) {
+        self.unit.speeds.prepare(&self.config);
+        for drive in &mut self.unit.drives {
+            drive.prepare(&self.config);
+        }
     }
 
     /// The reading of each presence sensor that sees filament where the lanes say filament is
@@ -752,8 +756,16 @@ mod tests {
         };
         let mut app = App::<3>::new(config);
         assert!(app.unit.drives.iter().all(|drive| drive.prepared_for() == 200));
+        let at_boot = app.unit.speeds;
+        assert_ne!(
+            at_boot,
+            crate::phases::SpeedDivisors::NEW,
+            "the speeds' reciprocals too"
+        );
         assert!(app.write_register(0x4b, 120));
         assert!(app.unit.drives.iter().all(|drive| drive.prepared_for() == 120));
+        assert!(app.write_register(0x14, 25), "the slow speed");
+        assert_ne!(app.unit.speeds, at_boot);
         assert!(!app.write_register(0x4b, 5), "out of range");
         assert!(app.unit.drives.iter().all(|drive| drive.prepared_for() == 120));
     }

@@ -166,6 +166,8 @@ pub struct Unit<const N: usize> {
     coasting_revolution_at: [Instant; N],
     /// Per slot: pulled back out of the merge since it was last fed towards the hub.
     pub clear_of_merge: [bool; N],
+    /// The reciprocals of the settings' phase speeds (kept by [`crate::App`] as they change).
+    pub speeds: crate::phases::SpeedDivisors,
 }
 
 impl Default for Hub {
@@ -207,6 +209,7 @@ impl<const N: usize> Unit<N> {
         moved_by_printer: [0; N],
         coasting_revolution_at: [Instant::ZERO; N],
         clear_of_merge: [false; N],
+        speeds: crate::phases::SpeedDivisors::NEW,
     };
 }
 
