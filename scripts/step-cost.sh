@@ -18,17 +18,17 @@
 # The design bar is 25 % of 1 ms (7 272 instructions at 64 MHz; 14 204 on the Pico at 125 MHz,
 # the same cycle model), and the limits below are the bar: CI fails when a millisecond goes over.
 # Measured 2026-11-27 on main (book, "Step cost on the MCU", says what brought it there):
-#   NUCLEO-G071RB: idle median 3 886 (13.4 %), worst millisecond 7 086 (24.4 %: a phase of a
-#     tool change beginning as 7 bytes arrive), worst with a flash write 6 550;
-#   Pico (the multiplexed scan by DMA, 9 wake-ups): idle median 8 968 (15.8 %), worst 12 155
-#     (21.4 %), with a flash write 11 630 (6 971 and 12 065 before a save piece's chunk was 32
-#     bytes and its erased check and record layout cheaper).
+#   NUCLEO-G071RB: idle median 3 884 (13.4 %), worst millisecond 7 078 (24.3 %: a phase of a
+#     tool change beginning as 7 bytes arrive), worst with a flash write 6 141;
+#   Pico (the multiplexed scan by DMA, 9 wake-ups): idle median 8 966 (15.8 %), worst 12 147
+#     (21.4 %), with a flash write 11 223 (6 971 and 12 065 when a save piece's chunk was 64
+#     bytes, 6 550 and 11 630 at 32; 16 now).
 # A step's answer goes to the transmit task at the next tick (G071 worst 7 191 -> 7 073 then);
 # the Pico's scan bound registered once (`tasks::bounded`: about 130 more here, about 600 fewer
 # on the emulated Pico: bench-mcu/harness's Pico scan says why), the select lines that change
 # only, and the ADC stopped in the DMA's interrupt (about 870 fewer here, 1 000 on the emulated
 # Pico). Before the previous round's step-cost work: G071 worst 8 211 (28.2 %), Pico 15 788
-# (27.8 %). The G071's margin is 186 instructions: a change that adds to the busiest millisecond
+# (27.8 %). The G071's margin is 194 instructions: a change that adds to the busiest millisecond
 # (a phase beginning while a request is taken) must pay for itself. `run.py ELF SESSION
 # --profile N --profile-at MS` lists where a millisecond goes. The stand-ins for the HAL drivers
 # cost less than the drivers: the real images on the emulated chips (`mmu fil`, each bench's

@@ -69,7 +69,7 @@ fn a_cut_during_the_first_save_after_a_cut_leaves_old_or_new_records_too() {
 /// in progress (an entry half programmed, a fresh page checked or copied but not committed). A
 /// life of 400 actions on 3 pages, the flash looked at between every two steps of every save:
 /// each record restores as it was before the action or as the action left it; no step programs
-/// more than 4 double words or erases more than one page.
+/// more than 2 double words or erases more than one page.
 #[test]
 fn the_power_going_between_two_steps_of_a_save_leaves_old_or_new_records() {
     const PAGES: usize = 3;
@@ -101,12 +101,12 @@ fn the_power_going_between_two_steps_of_a_save_leaves_old_or_new_records() {
         failures[0]
     );
     assert!(observed >= 300, "{observed} steps between");
-    // A fresh page's erased check alone takes 8 steps: some saves opened one.
+    // A fresh page's erased check alone takes 16 steps (128 bytes each): some saves opened one.
     assert!(
         worst.steps >= 12,
         "a fresh page was opened over many steps: {worst:?}"
     );
-    assert!(worst.programs_per_step <= 4, "{worst:?}");
+    assert!(worst.programs_per_step <= 2, "{worst:?}");
     assert!(worst.erases_per_step <= 1, "{worst:?}");
 }
 

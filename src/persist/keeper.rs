@@ -6,7 +6,7 @@
 //! any hour stay under [`ERASE_BURST`] + [`ERASES_PER_HOUR`] whatever happens (each erase stalls
 //! the CPU up to 40 ms on the STM32G0); a unit starts with only [`ERASES_AT_BOOT`] of them, so
 //! that a reset loop cannot renew the budget at every boot. Each call of [`Keeper::update`] does
-//! one bounded piece of a save (at most 4 double words programmed or one page erased). [`Keeper::update_after`]
+//! one bounded piece of a save (at most 2 double words programmed or one page erased). [`Keeper::update_after`]
 //! runs none after a step that was busy with the printer, so that a step and the piece after it
 //! fit a quarter of the 1 ms period together; after [`MAX_DEFERRED_STEPS`] busy steps in a row
 //! it runs one anyway (a save must end): only a printer that sends without a pause for 8 ms
@@ -454,7 +454,7 @@ mod tests {
         let mut talking = Unit::boot();
         talking.change_lanes(lanes);
         let busy = talking.steps_until_stored(true, |s| s.lanes == lanes);
-        assert_eq!(alone, 2, "laid out, then programmed");
+        assert_eq!(alone, 3, "laid out, then programmed in two chunks");
         assert_eq!(
             busy,
             alone * bound,
@@ -483,7 +483,7 @@ mod tests {
             unit.keeper.update_after(&unit.app, unit.now, true).unwrap();
             assert_ne!(unit.stored().lanes, lanes, "deferred after a busy step");
         }
-        assert_eq!(unit.steps_until_stored(false, |s| s.lanes == lanes), 2);
+        assert_eq!(unit.steps_until_stored(false, |s| s.lanes == lanes), 3);
     }
 
     /// The newest copy of a record torn (a cut before its trailer was programmed): a restart

@@ -14,10 +14,11 @@ use crate::unit::Lane;
 
 /// Page moves one save may try (each erases at most one page) before it gives up.
 const MOVES_PER_SAVE: u8 = 2;
-/// Bytes of an entry programmed per step: 4 double words, at most 0.5 ms of CPU stall on the
+/// Bytes of an entry programmed per step: 2 double words, at most 0.25 ms of CPU stall on the
 /// STM32G071 (125 µs each at most). 64 bytes made the busiest millisecond with a flash write
-/// 8 104 instructions on the emulated G071 (the chunk's CRC, erased check and programming).
-const PROGRAM_CHUNK: usize = 32;
+/// 8 104 instructions on the emulated G071 (the chunk's CRC, erased check and programming), 32
+/// bytes 7 270 - 7 294 (the bar is 7 272).
+const PROGRAM_CHUNK: usize = 16;
 /// Bytes of a fresh page checked for erased per step: 256 made a check piece about 1 900
 /// instructions on the emulated G071 (the bytes copied out of the flash, then folded), and the
 /// millisecond of a page's first check after boot the busiest of the tool-change scenarios
@@ -283,7 +284,7 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
                     return Ok(None);
                 };
                 // Laid out (encoded) in a step of its own, programmed in the next ones: a lane
-                // change takes two steps, each well within what a control step leaves.
+                // change takes three steps, each well within what a control step leaves.
                 self.prepare(page, record as u8, Some(record))?;
                 Ok(Some(Job::Append {
                     pending: pending & !bit(record),
