@@ -522,14 +522,10 @@ impl<const N: usize> App<N> {
         accepted
     }
 
-    /// What the logic derives from the settings (the reciprocals of the speeds it divides by),
-    /// computed as they change rather than in the first millisecond of the next command or move,
-    /// the busiest of a tool change.
+    /// The reciprocals of the settings the steps divide by, computed as they change rather than
+    /// in the first millisecond of the next command or move, the busiest of a tool change.
     fn prepare_for_settings(&mut self) {
-        self.unit.speeds.prepare(&self.config);
-        for drive in &mut self.unit.drives {
-            drive.prepare(&self.config);
-        }
+        self.unit.divisors.prepare(&self.config);
     }
 
     /// The reading of each presence sensor that sees filament where the lanes say filament is
@@ -585,9 +581,9 @@ impl<const N: usize> App<N> {
     }
 
     /// Take back what a previous run kept, before the first step. Settings go through the
-    /// register checks (a value out of range is dropped; the drives compute what they derive from
-    /// them as they come, not in the first move); the start-up check then compares the lanes with
-    /// what the sensors show.
+    /// register checks (a value out of range is dropped; the reciprocals of those the steps divide
+    /// by are built as they come, not in the first move); the start-up check then compares the
+    /// lanes with what the sensors show.
     pub fn restore(&mut self, snapshot: &Snapshot<N>) {
         for (slot, &lane) in snapshot.lanes.iter().enumerate() {
             self.unit.set_lane(slot, lane);
@@ -744,30 +740,32 @@ impl<const N: usize> Default for App<N> {
 #[cfg(test)]
 mod tests {
     use super::{App, Config, add_centi};
+    use crate::config::SettingDivisors;
 
-    /// The open-loop duty's reciprocal is built at boot and when `full_duty_speed` (0x4b) is
-    /// written, not in the first step of a move (a 64-bit division there: about 500
-    /// instructions in the busiest millisecond).
+    /// The reciprocals of the settings the steps divide by are built at boot and when one is
+    /// written, not in the first step of a command or a move (a 64-bit division each there:
+    /// about 500 instructions in the busiest millisecond).
     #[test]
-    fn the_drives_are_prepared_at_boot_and_when_the_setting_is_written() {
+    fn the_settings_divisors_are_prepared_at_boot_and_when_one_is_written() {
+        let prepared = |config: &Config| {
+            let mut divisors = SettingDivisors::NEW;
+            divisors.prepare(config);
+            divisors
+        };
         let config = Config {
             full_duty_speed: 200,
             ..Config::default()
         };
-        let mut app = App::<3>::new(config);
-        assert!(app.unit.drives.iter().all(|drive| drive.prepared_for() == 200));
-        let at_boot = app.unit.speeds;
-        assert_ne!(
-            at_boot,
-            crate::phases::SpeedDivisors::NEW,
-            "the speeds' reciprocals too"
-        );
-        assert!(app.write_register(0x4b, 120));
-        assert!(app.unit.drives.iter().all(|drive| drive.prepared_for() == 120));
+        let mut app = App::<3>::new(config.clone());
+        assert_eq!(app.unit.divisors, prepared(&config));
+        assert_ne!(app.unit.divisors, SettingDivisors::NEW);
+        assert!(app.write_register(0x4b, 120), "full_duty_speed");
         assert!(app.write_register(0x14, 25), "the slow speed");
-        assert_ne!(app.unit.speeds, at_boot);
+        assert_eq!(app.unit.divisors, prepared(app.config()));
+        assert_ne!(app.unit.divisors, prepared(&config));
+        let before = app.unit.divisors;
         assert!(!app.write_register(0x4b, 5), "out of range");
-        assert!(app.unit.drives.iter().all(|drive| drive.prepared_for() == 120));
+        assert_eq!(app.unit.divisors, before);
     }
 
     /// The fed distance as it was counted: a 64-bit sum of hundredths, divided for the register.

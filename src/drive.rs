@@ -9,8 +9,7 @@
 use mmu_hal_port::{Direction, Duty, MotorCommand};
 use mmu_protocol::ErrorCode;
 
-use crate::arith::Divisor;
-use crate::config::Config;
+use crate::config::{Config, SettingDivisors};
 use crate::feeder::{Feeder, distance_centi};
 use crate::time::Instant;
 
@@ -60,46 +59,10 @@ struct SpeedSchedule {
     speed: u16,
     since: Instant,
     from_centi: i32,
-}
-
-/// [`open_loop_duty`] by the reciprocal of the setting it divides by, `full_duty_speed`: a
-/// library division (about 140 instructions on the Cortex-M0+) in the first step of every move,
-/// among the busiest milliseconds of a tool change, becomes a multiplication. Building the
-/// reciprocal takes a 64-bit division (about 500 instructions): done at boot and when the setting
-/// is written ([`SlotDrive::prepare`]), in a step only if the setting changed some other way.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-struct OpenLoop {
+    /// [`open_loop_duty`] of `speed`, and the `full_duty_speed` it was computed for: computed when
+    /// the move starts (or the setting changes), not every step of it.
+    open_loop: i32,
     full_duty_speed: u16,
-    /// `None` for a `full_duty_speed` of 0 or 1 (taken as 1).
-    per_full_duty_speed: Option<Divisor>,
-}
-
-impl OpenLoop {
-    /// Before the setting is known: all zero (a drive's initial state built by clearing memory;
-    /// the default setting's reciprocal in it made the unit's initial state a 1.4 KB image in
-    /// flash).
-    const NEW: OpenLoop = OpenLoop {
-        full_duty_speed: 0,
-        per_full_duty_speed: None,
-    };
-
-    fn new(full_duty_speed: u16) -> Self {
-        OpenLoop {
-            full_duty_speed,
-            per_full_duty_speed: Divisor::for_dividends_below_2_31(full_duty_speed as u32),
-        }
-    }
-
-    /// [`open_loop_duty`]`(speed, full_duty_speed)`.
-    fn duty(&mut self, speed: u16, full_duty_speed: u16) -> i32 {
-        if full_duty_speed != self.full_duty_speed {
-            *self = OpenLoop::new(full_duty_speed);
-        }
-        // At most 65 535 000: below 2³¹.
-        let scaled = u32::from(speed) * 1000;
-        self.per_full_duty_speed
-            .map_or(scaled, |divisor| divisor.divide(scaled)) as i32
-    }
 }
 
 /// The budget of the motion in progress and where it began.
@@ -115,7 +78,6 @@ struct DriveLease {
 pub struct SlotDrive {
     command: MotorCommand,
     schedule: Option<SpeedSchedule>,
-    open_loop: OpenLoop,
     lease: Option<DriveLease>,
     /// Since when the motor has been driven at or above the stall duty.
     hard_drive_since: Option<Instant>,
@@ -136,7 +98,6 @@ impl SlotDrive {
     pub const NEW: SlotDrive = SlotDrive {
         command: MotorCommand::Coast,
         schedule: None,
-        open_loop: OpenLoop::NEW,
         lease: None,
         hard_drive_since: None,
         counting: None,
@@ -152,21 +113,10 @@ impl SlotDrive {
         });
     }
 
-    /// Computes now what a move computes from `config` (the open-loop duty's reciprocal), so that
-    /// the first move does not: at boot, and when a setting is written or restored.
-    pub fn prepare(&mut self, config: &Config) {
-        self.open_loop.duty(0, config.full_duty_speed);
-    }
-
-    /// The `full_duty_speed` the open-loop duty's reciprocal was built for.
-    #[cfg(test)]
-    pub(crate) fn prepared_for(&self) -> u16 {
-        self.open_loop.full_duty_speed
-    }
-
     /// Drive as `motion` this step, within the budget given to [`SlotDrive::begin`]. Past the
     /// budget, or stalled, the motor is braked and the error returned; without a budget the motor
-    /// is braked and [`ErrorCode::INTERNAL`] returned.
+    /// is braked and [`ErrorCode::INTERNAL`] returned. `divisors`: the reciprocals of `config`'s
+    /// settings the duty divides by.
     pub fn run(
         &mut self,
         motion: Motion,
@@ -174,18 +124,20 @@ impl SlotDrive {
         tension: Option<u16>,
         now: Instant,
         config: &Config,
+        divisors: &SettingDivisors,
     ) -> Result<(), ErrorCode> {
         let Some(lease) = self.lease else {
             self.brake(now);
             return Err(ErrorCode::INTERNAL);
         };
         match motion {
-            Motion::Run { direction, speed } => self.follow_schedule(direction, speed, feeder, now, config),
+            Motion::Run { direction, speed } => {
+                self.follow_schedule(direction, speed, feeder, now, config, divisors)
+            }
             Motion::Follow { speed } => {
                 self.schedule = None;
-                let open_loop = self.open_loop.duty(speed, config.full_duty_speed);
                 self.set(
-                    MotorCommand::forward(tension_corrected(open_loop, tension, config)),
+                    MotorCommand::forward(follow_duty(speed, tension, config, divisors)),
                     now,
                     config,
                 );
@@ -271,25 +223,32 @@ impl SlotDrive {
         feeder: &Feeder,
         now: Instant,
         config: &Config,
+        divisors: &SettingDivisors,
     ) {
         let odometry = feeder.odometry_centi();
-        let schedule = match self.schedule {
+        let mut schedule = match self.schedule {
             Some(schedule) if schedule.direction == direction && schedule.speed == speed => schedule,
             _ => SpeedSchedule {
                 direction,
                 speed,
                 since: now,
                 from_centi: odometry,
+                open_loop: open_loop_duty(speed, config.full_duty_speed, divisors),
+                full_duty_speed: config.full_duty_speed,
             },
         };
+        if schedule.full_duty_speed != config.full_duty_speed {
+            schedule.open_loop = open_loop_duty(speed, config.full_duty_speed, divisors);
+            schedule.full_duty_speed = config.full_duty_speed;
+        }
         self.schedule = Some(schedule);
-        let open_loop = self.open_loop.duty(speed, config.full_duty_speed);
         let moved_centi = match direction {
             Direction::Forward => distance_centi(schedule.from_centi, odometry),
             Direction::Reverse => distance_centi(odometry, schedule.from_centi),
         };
         let lag_mm = schedule_lag_mm(speed, now.millis_since(schedule.since), moved_centi);
-        let duty = (open_loop + CATCH_UP_GAIN * lag_mm).clamp(0, i32::from(config.max_duty.min(1000)));
+        let duty =
+            (schedule.open_loop + CATCH_UP_GAIN * lag_mm).clamp(0, i32::from(config.max_duty.min(1000)));
         self.set(
             MotorCommand::Drive {
                 direction,
@@ -359,24 +318,22 @@ fn schedule_lag_mm(speed: u16, elapsed_ms: u64, moved_centi: i32) -> i32 {
 }
 
 /// The duty that moves the filament at `speed` mm/s without feedback, per mille (not limited):
-/// `speed × 1000 / full_duty_speed`. A library division on the Cortex-M0+, except for the
-/// follower's `speed` 0, which it asks for every step (a move's steps take [`OpenLoop`]).
-fn open_loop_duty(speed: u16, full_duty_speed: u16) -> i32 {
+/// `speed × 1000 / full_duty_speed`, by the setting's reciprocal in `divisors` (a library
+/// division on the Cortex-M0+ otherwise, in the first step of every move), nothing for the
+/// follower's `speed` 0, which it asks for every step.
+fn open_loop_duty(speed: u16, full_duty_speed: u16, divisors: &SettingDivisors) -> i32 {
     if speed == 0 {
         return 0;
     }
-    i32::from(speed) * 1000 / i32::from(full_duty_speed.max(1))
+    // At most 65 535 000: below 2³¹.
+    divisors.divide(u32::from(speed) * 1000, full_duty_speed) as i32
 }
 
 /// Duty that moves the filament at `speed` while keeping the Bowden tube at rest: more when the
 /// extruder pulls it taut, less when it is compressed. Without a healthy tension sensor it is the
 /// open-loop duty for `speed`.
-pub fn follow_duty(speed: u16, tension: Option<u16>, config: &Config) -> Duty {
-    tension_corrected(open_loop_duty(speed, config.full_duty_speed), tension, config)
-}
-
-/// [`follow_duty`] from its open-loop part, `open_loop` per mille.
-fn tension_corrected(open_loop: i32, tension: Option<u16>, config: &Config) -> Duty {
+pub fn follow_duty(speed: u16, tension: Option<u16>, config: &Config, divisors: &SettingDivisors) -> Duty {
+    let open_loop = open_loop_duty(speed, config.full_duty_speed, divisors);
     let correction = tension.map_or(0, |value| {
         let deviation = i32::from(value) - i32::from(config.tension_neutral);
         let deadband = i32::from(config.tension_deadband);
@@ -413,29 +370,39 @@ mod tests {
             None,
             Instant::from_millis(now_ms),
             &config,
+            &SettingDivisors::NEW,
         )
     }
 
     #[test]
-    fn the_open_loop_cache_is_the_division_for_every_speed_and_setting() {
-        let mut open_loop = OpenLoop::NEW;
+    fn the_open_loop_duty_is_the_division_for_every_speed_and_setting() {
         for full_duty_speed in (0..=u16::MAX)
             .step_by(97)
             .chain([1, 2, 3, 149, 150, 151, u16::MAX])
         {
+            let config = Config {
+                full_duty_speed,
+                ..Config::default()
+            };
+            let mut prepared = SettingDivisors::NEW;
+            prepared.prepare(&config);
             for speed in (0..=u16::MAX).step_by(89).chain([1, 149, 150, 151, u16::MAX]) {
-                assert_eq!(
-                    open_loop.duty(speed, full_duty_speed),
-                    open_loop_duty(speed, full_duty_speed),
-                    "{speed} mm/s at {full_duty_speed}"
-                );
+                let divided = i32::from(speed) * 1000 / i32::from(full_duty_speed.max(1));
+                for divisors in [&SettingDivisors::NEW, &prepared] {
+                    assert_eq!(
+                        open_loop_duty(speed, full_duty_speed, divisors),
+                        divided,
+                        "{speed} mm/s at {full_duty_speed}, {divisors:?}"
+                    );
+                }
             }
         }
     }
 
     /// The open-loop part of the duty is `speed × 1000 / full_duty_speed` whatever came before:
-    /// a new speed, a new setting (`full_duty_speed` written by the printer mid-move), a switch
-    /// between following and a schedule. Motor still, no tension reading: the duty is that part.
+    /// a new speed, a new setting (`full_duty_speed` written by the printer mid-move, the
+    /// reciprocals still those of the default settings), a switch between following and a
+    /// schedule. Motor still, no tension reading: the duty is that part.
     #[test]
     fn the_open_loop_duty_follows_every_change_of_speed_and_setting() {
         let (mut config, feeder, mut drive) = (Config::default(), Feeder::default(), SlotDrive::NEW);
@@ -446,6 +413,8 @@ mod tests {
             error: ErrorCode::MOVE_PULLEY_FAILED,
         };
         drive.begin(budget, &feeder, Instant::ZERO);
+        let mut divisors = SettingDivisors::NEW;
+        divisors.prepare(&config);
         let follow = |speed| Motion::Follow { speed };
         let run = |speed| Motion::Run {
             direction: Direction::Forward,
@@ -469,7 +438,7 @@ mod tests {
         for (i, (motion, full_duty_speed, duty)) in steps.into_iter().enumerate() {
             config.full_duty_speed = full_duty_speed;
             drive
-                .run(motion, &feeder, None, Instant::from_millis(1), &config)
+                .run(motion, &feeder, None, Instant::from_millis(1), &config, &divisors)
                 .unwrap();
             let permille = match drive.command() {
                 MotorCommand::Drive { duty, .. } => duty.permille(),

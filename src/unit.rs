@@ -166,8 +166,9 @@ pub struct Unit<const N: usize> {
     coasting_revolution_at: [Instant; N],
     /// Per slot: pulled back out of the merge since it was last fed towards the hub.
     pub clear_of_merge: [bool; N],
-    /// The reciprocals of the settings' phase speeds (kept by [`crate::App`] as they change).
-    pub speeds: crate::phases::SpeedDivisors,
+    /// The reciprocals of the settings the steps divide by (kept by [`crate::App`] as they
+    /// change).
+    pub divisors: crate::config::SettingDivisors,
 }
 
 impl Default for Hub {
@@ -209,7 +210,7 @@ impl<const N: usize> Unit<N> {
         moved_by_printer: [0; N],
         coasting_revolution_at: [Instant::ZERO; N],
         clear_of_merge: [false; N],
-        speeds: crate::phases::SpeedDivisors::NEW,
+        divisors: crate::config::SettingDivisors::NEW,
     };
 }
 

@@ -23,8 +23,8 @@ mod unload;
 use mmu_hal_port::Direction;
 use mmu_protocol::{ErrorCode, ProgressCode};
 
-use crate::arith::{Divisor, centi_to_mm};
-use crate::config::Config;
+use crate::arith::centi_to_mm;
+use crate::config::{Config, SettingDivisors};
 use crate::drive::{Budget, Motion};
 use crate::feeder::distance_centi;
 use crate::time::Instant;
@@ -324,15 +324,15 @@ impl Bounds {
     /// than the time bound.
     ///
     /// Computed where a phase's motion begins or resumes only: [`Bounds`] itself holds no time.
-    /// Its divisions by the speeds take the settings' reciprocals in `speeds`.
-    fn budget(&self, config: &Config, speeds: &SpeedDivisors) -> Budget {
+    /// Its divisions by the speeds take the settings' reciprocals in `divisors`.
+    fn budget(&self, config: &Config, divisors: &SettingDivisors) -> Budget {
         // The slow part (at most 65 535 × 2000 / 1), and none without one.
         let slower_ms = match self.slower_mm {
             0 => 0,
-            mm => speeds.divide(u32::from(mm) * 2000, config.slow_speed),
+            mm => divisors.divide(u32::from(mm) * 2000, config.slow_speed),
         };
         // At most 65 535 × 2000 + 65 535 × 2000 + 65 535.
-        let max_ms = speeds.divide(u32::from(self.max_mm) * 2000, self.speed)
+        let max_ms = divisors.divide(u32::from(self.max_mm) * 2000, self.speed)
             + slower_ms
             + u32::from(config.phase_slack_ms);
         // Part of a phase may go at the slow speed (`Goal::DriveAt`).
@@ -342,45 +342,6 @@ impl Bounds {
             max_ms,
             max_still_ms: still_limit_ms(config.mm_per_rev_centi, slowest).min(max_ms),
             error: self.error,
-        }
-    }
-}
-
-/// The reciprocals of the settings' phase speeds (loading, unloading, slow), built at boot and
-/// when a setting is written ([`SpeedDivisors::prepare`]): a phase's budget divides a distance
-/// by its speed as the phase begins, a library division of about 130 instructions each in a
-/// command's first millisecond (two of them made one 7 400 instructions, 25.4 % of 1 ms, on the
-/// emulated G071). A speed that is none of them is divided.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct SpeedDivisors {
-    /// Each speed with its reciprocal (`None` for 0 and 1).
-    entries: [(u16, Option<Divisor>); 3],
-}
-
-impl SpeedDivisors {
-    /// Before the settings are known: every division done.
-    pub const NEW: SpeedDivisors = SpeedDivisors {
-        entries: [(0, None); 3],
-    };
-
-    /// The reciprocals of `config`'s speeds, built again for those that changed (a 64-bit
-    /// division each).
-    pub fn prepare(&mut self, config: &Config) {
-        let speeds = [config.load_speed, config.unload_speed, config.slow_speed];
-        for (entry, speed) in self.entries.iter_mut().zip(speeds) {
-            if entry.0 != speed {
-                *entry = (speed, Divisor::for_dividends_below_2_31(speed.into()));
-            }
-        }
-    }
-
-    /// `x / speed` (`speed` 0 taken as 1) for `x` below 2³¹.
-    fn divide(&self, x: u32, speed: u16) -> u32 {
-        let speed = speed.max(1);
-        match self.entries.iter().find(|(known, _)| *known == speed) {
-            Some((_, Some(divisor))) => divisor.divide(x),
-            Some((_, None)) => x,
-            None => x / u32::from(speed),
         }
     }
 }
@@ -613,7 +574,7 @@ fn step_motion<const N: usize>(
     let run = match run {
         Some(run) => run,
         None => {
-            drive.begin(bounds.budget(config, &unit.speeds), feeder, now);
+            drive.begin(bounds.budget(config, &unit.divisors), feeder, now);
             let run = PhaseRun::start(run, now, resume_goal_from.unwrap_or(odometry), odometry);
             run.retried = resume_goal_from.is_some();
             run
@@ -712,12 +673,12 @@ fn step_motion<const N: usize>(
         run.held = false;
         drive.begin(
             run.budget_use
-                .resume(bounds.budget(config, &unit.speeds), now, odometry),
+                .resume(bounds.budget(config, &unit.divisors), now, odometry),
             feeder,
             now,
         );
     }
-    match drive.run(motion, feeder, tension, now, config) {
+    match drive.run(motion, feeder, tension, now, config, &unit.divisors) {
         Ok(()) => Outcome::Continue,
         Err(error) => phase.stopped(error, unit, slot),
     }
@@ -760,27 +721,6 @@ mod tests {
                     "{mm} {slowest}"
                 );
             }
-        }
-    }
-
-    #[test]
-    fn the_settings_speeds_are_divided_by_their_reciprocals_and_others_by_division() {
-        let mut config = Config::default();
-        let mut speeds = SpeedDivisors::NEW;
-        speeds.prepare(&config);
-        for speed in [config.load_speed, config.unload_speed, config.slow_speed] {
-            let entry = speeds.entries.iter().find(|(known, _)| *known == speed);
-            assert!(matches!(entry, Some((_, Some(_)))), "{speed}: {speeds:?}");
-        }
-        config.slow_speed = 1;
-        config.load_speed = 40;
-        speeds.prepare(&config);
-        assert!(speeds.entries.contains(&(1, None)) && speeds.entries.iter().any(|e| e.0 == 40));
-        for x in [0, 1, 39, 40, 41, 131_070_000, (1 << 31) - 1] {
-            assert_eq!(speeds.divide(x, 1), x);
-            assert_eq!(speeds.divide(x, 0), x, "0 taken as 1");
-            assert_eq!(speeds.divide(x, 40), x / 40);
-            assert_eq!(speeds.divide(x, 7), x / 7, "none of the settings': divided");
         }
     }
 
@@ -835,15 +775,15 @@ mod tests {
                             };
                             // Divided, then by the reciprocals of the settings' speeds.
                             config.load_speed = speed;
-                            let mut speeds = SpeedDivisors::NEW;
+                            let mut divisors = SettingDivisors::NEW;
                             for _ in 0..2 {
-                                let budget = bounds.budget(&config, &speeds);
+                                let budget = bounds.budget(&config, &divisors);
                                 assert_eq!(
                                     (budget.max_ms, budget.max_still_ms),
                                     budget_by_division(&bounds, &config),
-                                    "{speed} {slow} {rev} {slower_mm} {max_mm} {speeds:?}"
+                                    "{speed} {slow} {rev} {slower_mm} {max_mm} {divisors:?}"
                                 );
-                                speeds.prepare(&config);
+                                divisors.prepare(&config);
                             }
                         }
                     }
