@@ -124,7 +124,7 @@ impl<const N: usize> App<N> {
     /// nothing, before it reports `X0 F0` (or the error it found).
     pub fn new(config: Config) -> Self {
         let () = Self::SLOTS_OK;
-        let mut app = App {
+        App {
             config,
             unit: Unit::default(),
             operation: Runner::new((RequestCode::Reset, 0), &{
@@ -152,9 +152,7 @@ impl<const N: usize> App<N> {
             settings_revision: 0,
             ledger: Ledger::default(),
             spool_end: SpoolEnd::NEW,
-        };
-        app.prepare_for_settings();
-        app
+        }
     }
 
     /// The settings in force.
@@ -191,6 +189,11 @@ impl<const N: usize> App<N> {
         self.started_up
     }
 
+    /// Whether the last step drove any motor (the flash must not stall the CPU under it).
+    pub fn motors_driven(&self) -> bool {
+        self.unit.drives.iter().any(|drive| drive.command().is_driving())
+    }
+
     /// The command being carried out (or the last one).
     pub fn operation(&self) -> &Runner {
         &self.operation
@@ -200,22 +203,6 @@ impl<const N: usize> App<N> {
     /// last step.
     pub fn step(&mut self, now: Instant, samples: &Samples<N>, rx: &[u8]) -> Outputs<N> {
         let mut out = Outputs::none();
-        self.step_into(now, samples, rx, &mut out);
-        out
-    }
-
-    /// [`App::step`] with its outputs written into `out` (whatever it held is replaced): the
-    /// control loop keeps them where the board reads them, rather than having them copied out
-    /// of every step (68 bytes twice a millisecond with three slots: about 180 instructions on
-    /// the Cortex-M0+).
-    // Out of line, although `ControlLoop::step` is its one caller on the board: smaller.
-    #[inline(never)]
-    pub fn step_into(&mut self, now: Instant, samples: &Samples<N>, rx: &[u8], out: &mut Outputs<N>) {
-        out.motors = drive::stopped();
-        out.tx.clear();
-        out.action = None;
-        out.status_led = false;
-        out.phase_began = false;
         self.now = now;
         // The answers of the last step have gone out: an `S2` from now on follows them.
         self.negotiation.answered_this_step = None;
@@ -255,10 +242,10 @@ impl<const N: usize> App<N> {
                 (RequestCode::FilamentSensor | RequestCode::Query, _) => self.printer.in_sync = true,
                 _ => {}
             }
-            self.handle(&request, out);
+            self.handle(&request, &mut out);
             if out.action.is_some() {
                 // The board resets: motors stay off and nothing after `X` is answered.
-                return;
+                return out;
             }
         }
         let before = self.operation.status();
@@ -272,12 +259,13 @@ impl<const N: usize> App<N> {
         self.count_fed(driving);
         let idle = matches!(self.operation.status(), Status::Finished);
         self.spool_end.watch(&self.unit, idle, now);
-        self.drive_motors(now, driving, out);
+        self.drive_motors(now, driving, &mut out);
         out.status_led = match self.operation.status() {
             Status::Running(_) => true,
             Status::Failed(_) => (now.as_millis() / ERROR_BLINK_MS).is_multiple_of(2),
             Status::Finished => false,
         };
+        out
     }
 
     /// A physical button on the unit was pressed. In an error state it is Retry / Continue; during
@@ -438,7 +426,7 @@ impl<const N: usize> App<N> {
         if superseded {
             self.operation = Runner::supersede(&self.operation, key);
         } else {
-            self.operation.start_over(key, &self.unit, &self.config);
+            self.operation = Runner::start(key, &self.unit, &self.config);
         }
         Response::bare(request.code, request.value, ParamCode::Accepted)
     }
@@ -517,15 +505,8 @@ impl<const N: usize> App<N> {
         }
         if accepted && address != registers::FSENSOR {
             self.settings_revision = self.settings_revision.wrapping_add(1);
-            self.prepare_for_settings();
         }
         accepted
-    }
-
-    /// The reciprocals of the settings the steps divide by, computed as they change rather than
-    /// in the first millisecond of the next command or move, the busiest of a tool change.
-    fn prepare_for_settings(&mut self) {
-        self.unit.divisors.prepare(&self.config);
     }
 
     /// The reading of each presence sensor that sees filament where the lanes say filament is
@@ -676,12 +657,9 @@ impl<const N: usize> App<N> {
 }
 
 /// `mm` whole millimetres and `centi` hundredths (below 100) after `more` hundredths more, the
-/// millimetres saturating at `u32::MAX`: in 32 bits, without a division (a sum kept in 64-bit
-/// hundredths took a 64-bit division every revolution).
-// Out of line: smaller (measured), and called only on a revolution.
-#[inline(never)]
+/// millimetres saturating at `u32::MAX`.
 fn add_centi(mm: u32, centi: u8, more: u32) -> (u32, u8) {
-    let more_mm = crate::arith::BY_100.divide(more);
+    let more_mm = more / 100;
     let centi = more - more_mm * 100 + u32::from(centi);
     let carry = u32::from(centi >= 100);
     // Below 100 after the carry; `more_mm + carry` is below 2³².
@@ -739,43 +717,16 @@ impl<const N: usize> Default for App<N> {
 
 #[cfg(test)]
 mod tests {
-    use super::{App, Config, add_centi};
-    use crate::config::SettingDivisors;
+    use super::add_centi;
 
-    /// The reciprocals of the settings the steps divide by are built at boot and when one is
-    /// written, not in the first step of a command or a move (a 64-bit division each there:
-    /// about 500 instructions in the busiest millisecond).
-    #[test]
-    fn the_settings_divisors_are_prepared_at_boot_and_when_one_is_written() {
-        let prepared = |config: &Config| {
-            let mut divisors = SettingDivisors::NEW;
-            divisors.prepare(config);
-            divisors
-        };
-        let config = Config {
-            full_duty_speed: 200,
-            ..Config::default()
-        };
-        let mut app = App::<3>::new(config.clone());
-        assert_eq!(app.unit.divisors, prepared(&config));
-        assert_ne!(app.unit.divisors, SettingDivisors::NEW);
-        assert!(app.write_register(0x4b, 120), "full_duty_speed");
-        assert!(app.write_register(0x14, 25), "the slow speed");
-        assert_eq!(app.unit.divisors, prepared(app.config()));
-        assert_ne!(app.unit.divisors, prepared(&config));
-        let before = app.unit.divisors;
-        assert!(!app.write_register(0x4b, 5), "out of range");
-        assert_eq!(app.unit.divisors, before);
-    }
-
-    /// The fed distance as it was counted: a 64-bit sum of hundredths, divided for the register.
+    /// The fed distance as a 64-bit sum of hundredths, divided for the register.
     fn dividing_add(total_centi: u64, more: u32) -> (u64, u32) {
         let total = total_centi + u64::from(more);
         (total, u32::try_from(total / 100).unwrap_or(u32::MAX))
     }
 
     #[test]
-    fn the_fed_millimetres_are_what_the_64_bit_sum_gave() {
+    fn the_fed_millimetres_carry_their_hundredths_as_a_64_bit_sum() {
         let steps = [0, 1, 99, 100, 101, 199, 200, 201, 65_535, 4_294_967_199, u32::MAX];
         let starts = [
             0u64,

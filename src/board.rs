@@ -8,15 +8,13 @@
 //!   `reset_cause()`, `reset()`;
 //! - `init() -> Parts<...>`: clocks, the watchdog started, every driver;
 //! - the types of the parts: `Sampler` (a [`SensorScan`](mmu_hal_port::SensorScan)), `Motors`
-//!   ([`Bridges`] over the board's TB6612 pins), `LinkRx`/`LinkTx` (embedded-io-async), `Led`,
+//!   ([`Bridges`] over the board's TB6612 pins), `LinkRx` (the UART's DMA ring, a
+//!   [`ReceiveRing`](mmu_firmware::uart::ReceiveRing)), `LinkTx` (embedded-io-async), `Led`,
 //!   `ButtonPin`, `Watchdog`, `StoreFlash` (NOR flash) and `Crc`
-//!   ([`EntryCrc`](mmu_firmware::persist::EntryCrc));
-//! - `line_error(&error)`: what a receive error of the link counts as.
+//!   ([`EntryCrc`](mmu_firmware::persist::EntryCrc)).
 //!
 //! What both boards share is here: [`Parts`], and the motors on two TB6612FNG ([`Bridges`],
-//! from mmu-hal-port, which the step-cost harness drives too).
-
-mod ring_rx;
+//! from mmu-hal-port).
 
 #[cfg(feature = "g071")]
 mod g071;
@@ -31,7 +29,6 @@ pub use pico::*;
 use core::convert::Infallible;
 
 use embedded_hal::digital::OutputPin;
-pub use mmu_firmware::tasks::LineError;
 pub use mmu_hal_port::tb6612::Bridges;
 
 /// What a board's `init` hands to `main`.

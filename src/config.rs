@@ -5,7 +5,6 @@
 //! ([`crate::registers`]); the defaults are for the reference unit (a 360 mm Bowden tube).
 
 use crate::MAX_SLOTS;
-use crate::arith::Divisor;
 use crate::sensor::Thresholds;
 
 /// The version reported through `S0`..`S3`. The printer checks major, minor and revision for
@@ -196,83 +195,5 @@ impl Config {
 impl Default for Config {
     fn default() -> Self {
         Self::DEFAULT
-    }
-}
-
-/// The reciprocals of the settings a step divides by (the loading, unloading and slow speeds, and
-/// `full_duty_speed`), built at boot and when a setting is written ([`SettingDivisors::prepare`]):
-/// a phase's budget divides a distance by its speed and a move's open-loop duty its speed by
-/// `full_duty_speed`, a library division of about 130 instructions each in a command's or a
-/// move's first millisecond, the busiest of a tool change (two of them made one 7 400
-/// instructions, 25.4 % of 1 ms, on the emulated G071). Looked up by value, so never stale: a
-/// divisor that is none of them (a setting changed since) is divided.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct SettingDivisors {
-    /// Each setting's value with its reciprocal (`None` for 0 and 1).
-    entries: [(u16, Option<Divisor>); 4],
-}
-
-impl SettingDivisors {
-    /// Before the settings are known: every division done.
-    pub const NEW: SettingDivisors = SettingDivisors {
-        entries: [(0, None); 4],
-    };
-
-    /// The reciprocals of `config`'s divisors, built again for those that changed (a 64-bit
-    /// division each).
-    pub fn prepare(&mut self, config: &Config) {
-        let settings = [
-            config.load_speed,
-            config.unload_speed,
-            config.slow_speed,
-            config.full_duty_speed,
-        ];
-        for (entry, value) in self.entries.iter_mut().zip(settings) {
-            if entry.0 != value {
-                *entry = (value, Divisor::for_dividends_below_2_31(value.into()));
-            }
-        }
-    }
-
-    /// `x / divisor` (`divisor` 0 taken as 1) for `x` below 2³¹.
-    pub fn divide(&self, x: u32, divisor: u16) -> u32 {
-        let divisor = divisor.max(1);
-        match self.entries.iter().find(|(known, _)| *known == divisor) {
-            Some((_, Some(reciprocal))) => reciprocal.divide(x),
-            Some((_, None)) => x,
-            None => x / u32::from(divisor),
-        }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn the_settings_divisors_take_their_reciprocals_and_others_are_divided() {
-        let mut config = Config::default();
-        let mut divisors = SettingDivisors::NEW;
-        divisors.prepare(&config);
-        let settings = [
-            config.load_speed,
-            config.unload_speed,
-            config.slow_speed,
-            config.full_duty_speed,
-        ];
-        for value in settings {
-            let entry = divisors.entries.iter().find(|(known, _)| *known == value);
-            assert!(matches!(entry, Some((_, Some(_)))), "{value}: {divisors:?}");
-        }
-        config.slow_speed = 1;
-        config.load_speed = 40;
-        divisors.prepare(&config);
-        assert!(divisors.entries.contains(&(1, None)) && divisors.entries.iter().any(|e| e.0 == 40));
-        for x in [0, 1, 39, 40, 41, 131_070_000, (1 << 31) - 1] {
-            assert_eq!(divisors.divide(x, 1), x);
-            assert_eq!(divisors.divide(x, 0), x, "0 taken as 1");
-            assert_eq!(divisors.divide(x, 40), x / 40);
-            assert_eq!(divisors.divide(x, 7), x / 7, "none of the settings': divided");
-        }
     }
 }

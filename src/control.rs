@@ -1,22 +1,25 @@
-//! The control loop's policy: what the board's main loop decides around each step of the
-//! [`App`], kept here so host tests run it. The board only reads its peripherals, calls
-//! [`ControlLoop::step`] every millisecond, carries out what it says, and resets through
-//! [`reset`], which fixes the order a reset happens in.
+//! The control step: the body of every millisecond, written once and run by the firmware's
+//! control task (src/tasks.rs) and by the simulator (sim/src/logic.rs) alike. Around it the board
+//! only reads its peripherals, carries out what the step says, and resets through [`reset`],
+//! which fixes the order a reset happens in.
 //!
-//! - the unit's button is debounced ([`Debounce`]) and pressed into the App;
-//! - the watchdog is fed only by a step that ran on time with fresh samples
-//!   ([`feeds_watchdog`]): a stalled control loop or sampler resets the MCU, motors off;
-//! - statistics are counted and reported every [`STATS_PERIOD_MS`];
-//! - a step decodes and answers at most [`MAX_RX_PER_STEP`] received bytes; the rest wait in the
-//!   UART's receive ring for the next steps ([`RxQueue`] is that rule for the host and the
-//!   step-cost benchmark), so a burst of requests is spread over steps instead of stretching one.
+//! A step ([`ControlLoop::step`]):
+//! - debounces the unit's button ([`Debounce`]) and presses it into the App;
+//! - takes at most [`MAX_RX_PER_STEP`] bytes from the receive ring (the rest wait there for the
+//!   next steps, so a burst of requests is spread over steps instead of stretching one), steps
+//!   the [`App`] with them and the samples, and returns its answer to send now;
+//! - feeds the watchdog only when it ran on time with fresh samples ([`feeds_watchdog`]): a
+//!   stalled control loop or sampler resets the MCU, motors off;
+//! - says whether a save piece runs after it ([`Deferral`]: not after a step busy with the printer
+//!   or beginning a phase, unless several in a row were);
+//! - counts statistics and reports them every [`STATS_PERIOD_MS`].
 
-use heapless::{Deque, Vec};
 use mmu_hal_port::Samples;
 use mmu_protocol::{ButtonCode, MAX_FRAME_LEN};
 
 use crate::app::{App, BoardAction, Outputs, TX_CAPACITY};
 use crate::time::Instant;
+use crate::uart::{ReceiveRing, RingSource};
 
 /// A step that starts later than this after its tick does not feed the watchdog, µs.
 pub const ON_TIME_US: u64 = 2_000;
@@ -55,23 +58,11 @@ const _: () = {
 };
 
 /// The receive ring a board needs so that no byte is lost while the control loop does not step
-/// for `gap_ms` (a late step, the instructions of a save) with the printer sending without pause:
-/// what arrives meanwhile plus what a step leaves waiting.
+/// for `gap_ms` (a flash stall) with the printer sending without pause: what arrives meanwhile
+/// plus what a step leaves waiting.
 pub const fn rx_ring_needed(gap_ms: usize) -> usize {
     gap_ms * LINE_BYTES_PER_MS + MAX_RX_PER_STEP
 }
-
-/// The longest the control loop may go without a step and lose no received byte, ms: far beyond
-/// a step late enough to miss the watchdog feed ([`ON_TIME_US`]) plus a save's instructions
-/// (about 1.5 ms; during a flash stall the UART interrupt stalls too, and what the receiver's
-/// own buffer cannot hold is lost whatever the ring).
-pub const RX_GAP_MS: usize = 20;
-
-/// The receive ring of the board's printer UART (`src/board.rs`), and of the [`RxQueue`] that
-/// stands for it in the step-cost benchmark.
-pub const RX_RING: usize = 256;
-
-const _: () = assert!(RX_RING >= rx_ring_needed(RX_GAP_MS));
 
 /// The longest a flash page erase stalls the NUCLEO-G071RB's CPU, ms (RM0444 / the STM32G071
 /// datasheet: page erase 40 ms at most). The UART's DMA keeps receiving meanwhile.
@@ -89,70 +80,9 @@ pub const PICO_DMA_RING: usize = 8192;
 const _: () = assert!(G071_DMA_RING >= rx_ring_needed(G071_ERASE_STALL_MS));
 const _: () = assert!(PICO_DMA_RING >= rx_ring_needed(PICO_ERASE_STALL_MS));
 
-/// The bytes received from the printer that wait for the control loop, oldest first, with the
-/// loop's rule: each step takes at most [`MAX_RX_PER_STEP`] of them. The board's UART driver
-/// ([`crate::uart`]) does the same, and its tests check that it hands out what this does; this
-/// one serves the host, the tests and the step-cost benchmark (`bench-mcu`), which must hand the
-/// App exactly what the board would.
-#[derive(Debug, Clone, Default)]
-pub struct RxQueue<const CAPACITY: usize> {
-    bytes: Deque<u8, CAPACITY>,
-    lost: u32,
-}
-
-impl<const CAPACITY: usize> RxQueue<CAPACITY> {
-    /// An empty queue.
-    pub const fn new() -> Self {
-        RxQueue {
-            bytes: Deque::new(),
-            lost: 0,
-        }
-    }
-
-    /// Bytes that arrived from the line. Those that find the queue full are lost, as a UART
-    /// overrun loses them, and counted.
-    pub fn receive(&mut self, bytes: &[u8]) {
-        for &byte in bytes {
-            if self.bytes.push_back(byte).is_err() {
-                self.lost = self.lost.saturating_add(1);
-            }
-        }
-    }
-
-    /// The bytes for the next step: at most [`MAX_RX_PER_STEP`], oldest first.
-    pub fn take_step(&mut self) -> Vec<u8, MAX_RX_PER_STEP> {
-        let mut step = Vec::new();
-        while !step.is_full() {
-            match self.bytes.pop_front() {
-                // Cannot fail: not full.
-                Some(byte) => {
-                    let _ = step.push(byte);
-                }
-                None => break,
-            }
-        }
-        step
-    }
-
-    /// Bytes waiting.
-    pub fn len(&self) -> usize {
-        self.bytes.len()
-    }
-
-    /// True when no byte waits.
-    pub fn is_empty(&self) -> bool {
-        self.bytes.is_empty()
-    }
-
-    /// Bytes lost to a full queue since it was made.
-    pub fn lost(&self) -> u32 {
-        self.lost
-    }
-}
-
-/// When the control loop steps: every period on a fixed grid, the way Embassy's `Ticker` paced it
+/// When the control loop steps: every period on a fixed grid, the way Embassy's `Ticker` paces it
 /// (a step that starts late is followed by the ones it delayed, at once), except after a flash
-/// write, whose missed ticks are dropped ([`TickSchedule::restart`]).
+/// write or an overrun, whose missed ticks are dropped ([`TickSchedule::skip_missed`]).
 #[derive(Debug, Clone, Copy)]
 pub struct TickSchedule {
     next_us: u64,
@@ -179,12 +109,6 @@ impl TickSchedule {
         let lateness = now_us.saturating_sub(self.next_us);
         self.next_us += self.period_us;
         lateness
-    }
-
-    /// The loop stalled until `now_us` (a flash write): the next step a period from now, the
-    /// ticks missed meanwhile dropped.
-    pub fn restart(&mut self, now_us: u64) {
-        self.next_us = now_us + self.period_us;
     }
 
     /// The loop stalled until `now_us` (a flash write, a late step): the ticks missed meanwhile
@@ -290,9 +214,6 @@ pub struct Tick<'a, const N: usize> {
     pub sample_age_us: u64,
     /// The latest sensor scan.
     pub samples: &'a Samples<N>,
-    /// The bytes received from the printer for this step: at most [`MAX_RX_PER_STEP`], the
-    /// oldest waiting (the rest wait for the next steps).
-    pub rx: &'a [u8],
     /// The unit's button is held down.
     pub button_down: bool,
 }
@@ -307,17 +228,33 @@ pub struct Step<const N: usize> {
     pub button_pressed: bool,
     /// A period's statistics, to log.
     pub report: Option<Stats>,
+    /// A save piece runs after this step (the firmware's store task, the simulator's keeper).
+    pub save_piece: bool,
 }
 
-impl<const N: usize> Step<N> {
-    /// Nothing to do ([`Outputs::none`]), no feed, no press, no report.
-    pub fn none() -> Self {
-        Step {
-            out: Outputs::none(),
-            feed_watchdog: false,
-            button_pressed: false,
-            report: None,
+/// Busy steps in a row after which a save piece runs anyway: a printer that never pauses delays
+/// a save by at most this many steps, ms, per piece.
+pub const MAX_DEFERRED_STEPS: u8 = 8;
+
+/// Busy steps in a row without a save piece: whether a step's piece runs ([`MAX_DEFERRED_STEPS`]).
+/// A step busy with the printer or beginning a phase is a step's busiest; the piece waits for a
+/// quieter one, but a save must end.
+#[derive(Debug, Default, Clone, Copy)]
+pub struct Deferral {
+    deferred: u8,
+}
+
+impl Deferral {
+    /// After a step that was `busy` (with the printer, or beginning a phase: the costliest
+    /// steps): true when a save piece runs after it (not busy, or [`MAX_DEFERRED_STEPS`] busy
+    /// steps in a row went without one).
+    pub fn piece_due(&mut self, busy: bool) -> bool {
+        if busy && self.deferred < MAX_DEFERRED_STEPS {
+            self.deferred += 1;
+            return false;
         }
+        self.deferred = 0;
+        true
     }
 }
 
@@ -326,6 +263,7 @@ pub struct ControlLoop<const N: usize> {
     app: App<N>,
     button: Debounce,
     stats: Stats,
+    deferral: Deferral,
 }
 
 impl<const N: usize> ControlLoop<N> {
@@ -335,6 +273,7 @@ impl<const N: usize> ControlLoop<N> {
             app,
             button: Debounce::new(now),
             stats: Stats::new(now),
+            deferral: Deferral::default(),
         }
     }
 
@@ -348,24 +287,25 @@ impl<const N: usize> ControlLoop<N> {
         &mut self.app
     }
 
-    /// One control step.
-    pub fn step(&mut self, tick: &Tick<N>) -> Step<N> {
-        let mut step = Step::none();
-        self.step_into(tick, &mut step);
-        step
-    }
-
-    /// [`ControlLoop::step`] written into `step` (whatever it held is replaced): the control
-    /// task keeps one, rather than having every step's (120 bytes with three slots) copied out.
-    pub fn step_into(&mut self, tick: &Tick<N>, step: &mut Step<N>) {
+    /// One control step at `tick`, with the oldest bytes waiting in `received` (see the module
+    /// header).
+    pub fn step<S: RingSource<R>, const R: usize>(
+        &mut self,
+        tick: &Tick<N>,
+        received: &mut ReceiveRing<S, R>,
+    ) -> Step<N> {
         let button_pressed = self.button.pressed(tick.button_down, tick.now);
         if button_pressed {
             self.app.press_button(ButtonCode::MIDDLE);
         }
-        step.button_pressed = button_pressed;
-        self.app.step_into(tick.now, tick.samples, tick.rx, &mut step.out);
-        let feed_watchdog = step.out.action.is_none() && feeds_watchdog(tick.lateness_us, tick.sample_age_us);
-        step.feed_watchdog = feed_watchdog;
+        let mut rx = [0u8; MAX_RX_PER_STEP];
+        let taken = received.take(&mut rx);
+        let out = self
+            .app
+            .step(tick.now, tick.samples, rx.get(..taken).unwrap_or_default());
+        let feed_watchdog = out.action.is_none() && feeds_watchdog(tick.lateness_us, tick.sample_age_us);
+        let busy = taken > 0 || !out.tx.is_empty() || out.phase_began;
+        let save_piece = out.action.is_none() && self.deferral.piece_due(busy);
 
         let stats = &mut self.stats;
         stats.steps += 1;
@@ -373,8 +313,15 @@ impl<const N: usize> ControlLoop<N> {
         stats.stale += u32::from(tick.sample_age_us > MAX_SAMPLE_AGE_US);
         stats.unfed += u32::from(!feed_watchdog);
         stats.max_lateness_us = stats.max_lateness_us.max(tick.lateness_us);
-        step.report = (tick.now.millis_since(stats.since) >= STATS_PERIOD_MS)
+        let report = (tick.now.millis_since(stats.since) >= STATS_PERIOD_MS)
             .then(|| core::mem::replace(stats, Stats::new(tick.now)));
+        Step {
+            out,
+            feed_watchdog,
+            button_pressed,
+            report,
+            save_piece,
+        }
     }
 
     /// The board could not queue a step's response bytes: logged, and counted in register 0x51.
@@ -414,6 +361,7 @@ pub async fn reset(board: &mut impl ResetBoard, action: BoardAction) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::uart::MemoryRing;
     use mmu_protocol::{Request, RequestCode, RequestDecoder};
 
     extern crate std;
@@ -423,24 +371,27 @@ mod tests {
     /// Mid-scale readings: every sensor healthy, no filament anywhere.
     const SAMPLES: Samples<3> = Samples::uniform(2048);
 
+    /// The printer's bytes as a board receives them, in a ring of `R` bytes.
+    type Ring<const R: usize> = ReceiveRing<MemoryRing<R>, R>;
+
     /// A unit past its start-up check, at `ms`.
     fn listening() -> (ControlLoop<3>, u64) {
         let mut control = ControlLoop::new(App::<3>::default(), Instant::ZERO);
+        let mut ring = Ring::<64>::new(MemoryRing::new());
         let mut ms = 0;
         while !control.app().is_listening() || ms < 1500 {
             ms += 1;
-            control.step(&tick(ms, &[]));
+            control.step(&tick(ms), &mut ring);
         }
         (control, ms)
     }
 
-    fn tick(ms: u64, rx: &[u8]) -> Tick<'_, 3> {
+    fn tick(ms: u64) -> Tick<'static, 3> {
         Tick {
             now: Instant::from_millis(ms),
             lateness_us: 0,
             sample_age_us: 0,
             samples: &SAMPLES,
-            rx,
             button_down: false,
         }
     }
@@ -480,23 +431,22 @@ mod tests {
             .flat_map(|r| r.encode().as_bytes().to_vec())
             .collect();
         assert!(burst.len() > 200, "{} bytes", burst.len());
-        let mut queue = RxQueue::<256>::new();
+        let mut ring = Ring::<256>::new(MemoryRing::new());
         // A printer catching up after a stall: the whole burst waits at once.
-        queue.receive(&burst);
+        ring.source_mut().receive(&burst);
         let mut sent = StdVec::new();
         let mut steps = 0;
-        while !queue.is_empty() {
-            let rx = queue.take_step();
-            assert!(rx.len() <= MAX_RX_PER_STEP);
+        while sent.iter().filter(|&&b| b == b'\n').count() < requests.len() && steps < 1000 {
             ms += 1;
             steps += 1;
-            sent.extend_from_slice(&control.step(&tick(ms, &rx)).out.tx);
+            sent.extend_from_slice(&control.step(&tick(ms), &mut ring).out.tx);
         }
+        // A step's bytes at most each step: the last request completes in the last step.
         assert_eq!(steps, burst.len().div_ceil(MAX_RX_PER_STEP));
         let expected: StdVec<String> = requests.iter().map(echo).collect();
         assert!(echoes(&sent) == expected, "answered {:?}", echoes(&sent));
         assert_eq!(control.app().read_register(0x51), Some(0), "no answer dropped");
-        assert_eq!(queue.lost(), 0);
+        assert_eq!(ring.errors().total(), 0);
     }
 
     #[test]
@@ -517,7 +467,7 @@ mod tests {
                     .collect::<StdVec<_>>()
             })
             .collect();
-        let mut queue = RxQueue::<{ rx_ring_needed(1) }>::new();
+        let mut ring = Ring::<{ rx_ring_needed(1).next_power_of_two() }>::new(MemoryRing::new());
         let mut at = 0;
         let mut answered = 0;
         let mut most_waiting = 0;
@@ -526,13 +476,12 @@ mod tests {
             // Bytes that arrived by the end of this millisecond.
             let due = usize::try_from(step + 1).unwrap_or(usize::MAX) * LINE_BYTES_PER_S / 1000;
             while at < due.min(line.len()) {
-                queue.receive(&[line[at].1]);
+                ring.source_mut().receive(&[line[at].1]);
                 at += 1;
             }
-            most_waiting = most_waiting.max(queue.len());
-            let rx = queue.take_step();
+            most_waiting = most_waiting.max(ring.waiting());
             ms += 1;
-            let out = control.step(&tick(ms, &rx)).out;
+            let out = control.step(&tick(ms), &mut ring).out;
             sent.extend_from_slice(&out.tx);
             let now_answered = answered + out.tx.iter().filter(|&&b| b == b'\n').count();
             // Every request whose last byte arrived before the previous step is answered.
@@ -552,7 +501,7 @@ mod tests {
             most_waiting <= LINE_BYTES_PER_MS + MAX_RX_PER_STEP,
             "{most_waiting} bytes waited"
         );
-        assert_eq!(queue.lost(), 0);
+        assert_eq!(ring.errors().total(), 0, "never lapped");
         assert_eq!(control.app().read_register(0x51), Some(0));
     }
 
@@ -588,10 +537,10 @@ mod tests {
         let late: StdVec<u64> = (0..3).map(|_| schedule.start(6_200)).collect();
         assert_eq!(late, [2_700, 1_700, 700]);
         assert_eq!(schedule.deadline_us(), 6_500);
-        // A flash write stalled the CPU until 50 000: no burst of late steps after it.
-        schedule.restart(50_000);
-        assert_eq!(schedule.deadline_us(), 51_000);
-        assert_eq!(schedule.start(51_000), 0);
+        // A flash write stalled the CPU until 50 200: no burst of late steps after it.
+        schedule.skip_missed(50_200);
+        assert_eq!(schedule.deadline_us(), 50_500);
+        assert_eq!(schedule.start(50_500), 0);
     }
 
     #[test]
@@ -608,17 +557,22 @@ mod tests {
         assert_eq!(schedule.deadline_us(), 43_000);
     }
 
+    /// The deferral: after busy steps, a piece every `MAX_DEFERRED_STEPS + 1`th;
+    /// a quiet step runs one and starts the count over.
     #[test]
-    fn the_queue_hands_out_at_most_a_step_s_bytes_in_order_and_counts_what_overflows() {
-        let mut queue = RxQueue::<{ MAX_RX_PER_STEP + 4 }>::new();
-        let bytes: StdVec<u8> = (0..MAX_RX_PER_STEP as u8 + 9).collect();
-        queue.receive(&bytes);
-        assert_eq!(queue.lost(), 5);
-        assert_eq!(queue.take_step().as_slice(), &bytes[..MAX_RX_PER_STEP]);
-        assert_eq!(
-            queue.take_step().as_slice(),
-            &bytes[MAX_RX_PER_STEP..MAX_RX_PER_STEP + 4]
-        );
-        assert!(queue.take_step().is_empty());
+    fn a_deferral_runs_a_piece_after_max_deferred_busy_steps() {
+        let mut deferral = Deferral::default();
+        for _ in 0..3 {
+            for _ in 0..MAX_DEFERRED_STEPS {
+                assert!(!deferral.piece_due(true));
+            }
+            assert!(deferral.piece_due(true));
+        }
+        assert!(!deferral.piece_due(true));
+        assert!(deferral.piece_due(false));
+        assert!(deferral.piece_due(false));
+        for _ in 0..MAX_DEFERRED_STEPS {
+            assert!(!deferral.piece_due(true));
+        }
     }
 }

@@ -9,7 +9,7 @@
 use mmu_hal_port::{Direction, Duty, MotorCommand};
 use mmu_protocol::ErrorCode;
 
-use crate::config::{Config, SettingDivisors};
+use crate::config::Config;
 use crate::feeder::{Feeder, distance_centi};
 use crate::time::Instant;
 
@@ -115,8 +115,7 @@ impl SlotDrive {
 
     /// Drive as `motion` this step, within the budget given to [`SlotDrive::begin`]. Past the
     /// budget, or stalled, the motor is braked and the error returned; without a budget the motor
-    /// is braked and [`ErrorCode::INTERNAL`] returned. `divisors`: the reciprocals of `config`'s
-    /// settings the duty divides by.
+    /// is braked and [`ErrorCode::INTERNAL`] returned.
     pub fn run(
         &mut self,
         motion: Motion,
@@ -124,20 +123,17 @@ impl SlotDrive {
         tension: Option<u16>,
         now: Instant,
         config: &Config,
-        divisors: &SettingDivisors,
     ) -> Result<(), ErrorCode> {
         let Some(lease) = self.lease else {
             self.brake(now);
             return Err(ErrorCode::INTERNAL);
         };
         match motion {
-            Motion::Run { direction, speed } => {
-                self.follow_schedule(direction, speed, feeder, now, config, divisors)
-            }
+            Motion::Run { direction, speed } => self.follow_schedule(direction, speed, feeder, now, config),
             Motion::Follow { speed } => {
                 self.schedule = None;
                 self.set(
-                    MotorCommand::forward(follow_duty(speed, tension, config, divisors)),
+                    MotorCommand::forward(follow_duty(speed, tension, config)),
                     now,
                     config,
                 );
@@ -146,9 +142,8 @@ impl SlotDrive {
         let still_since = lease.started.max(feeder.hall.last_revolution());
         let still_too_long = self.command.is_driving()
             && millis_u32(now.millis_since(still_since)) > lease.budget.max_still_ms;
-        // More than `max_mm` whole millimetres, without a division (`centi / 100 > max_mm`).
-        let too_far = distance_centi(lease.from_centi, feeder.odometry_centi()).unsigned_abs()
-            > u32::from(lease.budget.max_mm) * 100 + 99;
+        let too_far = distance_centi(lease.from_centi, feeder.odometry_centi()).unsigned_abs() / 100
+            > u32::from(lease.budget.max_mm);
         let too_long = millis_u32(now.millis_since(lease.started)) > lease.budget.max_ms;
         let verdict = if self.stalled(feeder, now, config) {
             Err(ErrorCode::STALLED_PULLEY)
@@ -223,7 +218,6 @@ impl SlotDrive {
         feeder: &Feeder,
         now: Instant,
         config: &Config,
-        divisors: &SettingDivisors,
     ) {
         let odometry = feeder.odometry_centi();
         let mut schedule = match self.schedule {
@@ -233,12 +227,12 @@ impl SlotDrive {
                 speed,
                 since: now,
                 from_centi: odometry,
-                open_loop: open_loop_duty(speed, config.full_duty_speed, divisors),
+                open_loop: open_loop_duty(speed, config.full_duty_speed),
                 full_duty_speed: config.full_duty_speed,
             },
         };
         if schedule.full_duty_speed != config.full_duty_speed {
-            schedule.open_loop = open_loop_duty(speed, config.full_duty_speed, divisors);
+            schedule.open_loop = open_loop_duty(speed, config.full_duty_speed);
             schedule.full_duty_speed = config.full_duty_speed;
         }
         self.schedule = Some(schedule);
@@ -295,45 +289,27 @@ pub const fn stopped<const N: usize>() -> [MotorCommand; N] {
 }
 
 /// How far the filament is behind its schedule after `elapsed_ms` at `speed` mm/s, in whole mm
-/// (truncated), within ±1000: `(speed × elapsed / 10 − moved_centi) / 100`, in 32 bits and
-/// without a library division (a 64-bit division costs a few hundred instructions on the
-/// Cortex-M0+, every step of a move). A schedule past `u32::MAX` (`speed × elapsed`, 4.29 km in
-/// tenths of a hundredth) is 1000 mm behind: exact while the filament moved at most 4.29 km along
-/// it, and a schedule lasts a few phases, each braked by its budget after at most `u16::MAX` mm.
+/// (truncated toward zero), within ±1000: `(speed × elapsed / 10 − moved_centi) / 100`.
 fn schedule_lag_mm(speed: u16, elapsed_ms: u64, moved_centi: i32) -> i32 {
-    let elapsed_ms = u32::try_from(elapsed_ms).unwrap_or(u32::MAX);
-    // Below 2¹⁶ ms the product fits without the overflow check, whose 64-bit multiplication is
-    // a library call: the first 65 s of every schedule.
-    let scheduled = if elapsed_ms < 1 << 16 {
-        elapsed_ms * u32::from(speed)
-    } else {
-        match elapsed_ms.checked_mul(u32::from(speed)) {
-            Some(scheduled) => scheduled,
-            None => return 1000,
-        }
+    // In 32 bits up to a schedule of 4.29 km: hours into a move, a metre behind is exact enough.
+    let Ok(scheduled) = u32::try_from(elapsed_ms.saturating_mul(u64::from(speed))) else {
+        return 1000;
     };
-    // Below 2²⁹.
-    let scheduled_centi = crate::arith::BY_10.divide(scheduled) as i32;
-    crate::arith::centi_to_mm(scheduled_centi.saturating_sub(moved_centi)).clamp(-1000, 1000)
+    let lag_centi = i64::from(scheduled / 10) - i64::from(moved_centi);
+    lag_centi.clamp(-100_000, 100_000) as i32 / 100
 }
 
 /// The duty that moves the filament at `speed` mm/s without feedback, per mille (not limited):
-/// `speed × 1000 / full_duty_speed`, by the setting's reciprocal in `divisors` (a library
-/// division on the Cortex-M0+ otherwise, in the first step of every move), nothing for the
-/// follower's `speed` 0, which it asks for every step.
-fn open_loop_duty(speed: u16, full_duty_speed: u16, divisors: &SettingDivisors) -> i32 {
-    if speed == 0 {
-        return 0;
-    }
-    // At most 65 535 000: below 2³¹.
-    divisors.divide(u32::from(speed) * 1000, full_duty_speed) as i32
+/// `speed × 1000 / full_duty_speed` (a setting of 0 taken as 1).
+fn open_loop_duty(speed: u16, full_duty_speed: u16) -> i32 {
+    i32::from(speed) * 1000 / i32::from(full_duty_speed.max(1))
 }
 
 /// Duty that moves the filament at `speed` while keeping the Bowden tube at rest: more when the
 /// extruder pulls it taut, less when it is compressed. Without a healthy tension sensor it is the
 /// open-loop duty for `speed`.
-pub fn follow_duty(speed: u16, tension: Option<u16>, config: &Config, divisors: &SettingDivisors) -> Duty {
-    let open_loop = open_loop_duty(speed, config.full_duty_speed, divisors);
+pub fn follow_duty(speed: u16, tension: Option<u16>, config: &Config) -> Duty {
+    let open_loop = open_loop_duty(speed, config.full_duty_speed);
     let correction = tension.map_or(0, |value| {
         let deviation = i32::from(value) - i32::from(config.tension_neutral);
         let deadband = i32::from(config.tension_deadband);
@@ -370,38 +346,11 @@ mod tests {
             None,
             Instant::from_millis(now_ms),
             &config,
-            &SettingDivisors::NEW,
         )
     }
 
-    #[test]
-    fn the_open_loop_duty_is_the_division_for_every_speed_and_setting() {
-        for full_duty_speed in (0..=u16::MAX)
-            .step_by(97)
-            .chain([1, 2, 3, 149, 150, 151, u16::MAX])
-        {
-            let config = Config {
-                full_duty_speed,
-                ..Config::default()
-            };
-            let mut prepared = SettingDivisors::NEW;
-            prepared.prepare(&config);
-            for speed in (0..=u16::MAX).step_by(89).chain([1, 149, 150, 151, u16::MAX]) {
-                let divided = i32::from(speed) * 1000 / i32::from(full_duty_speed.max(1));
-                for divisors in [&SettingDivisors::NEW, &prepared] {
-                    assert_eq!(
-                        open_loop_duty(speed, full_duty_speed, divisors),
-                        divided,
-                        "{speed} mm/s at {full_duty_speed}, {divisors:?}"
-                    );
-                }
-            }
-        }
-    }
-
     /// The open-loop part of the duty is `speed × 1000 / full_duty_speed` whatever came before:
-    /// a new speed, a new setting (`full_duty_speed` written by the printer mid-move, the
-    /// reciprocals still those of the default settings), a switch between following and a
+    /// a new speed, a new setting (`full_duty_speed` written by the printer mid-move), a switch between following and a
     /// schedule. Motor still, no tension reading: the duty is that part.
     #[test]
     fn the_open_loop_duty_follows_every_change_of_speed_and_setting() {
@@ -413,8 +362,6 @@ mod tests {
             error: ErrorCode::MOVE_PULLEY_FAILED,
         };
         drive.begin(budget, &feeder, Instant::ZERO);
-        let mut divisors = SettingDivisors::NEW;
-        divisors.prepare(&config);
         let follow = |speed| Motion::Follow { speed };
         let run = |speed| Motion::Run {
             direction: Direction::Forward,
@@ -438,7 +385,7 @@ mod tests {
         for (i, (motion, full_duty_speed, duty)) in steps.into_iter().enumerate() {
             config.full_duty_speed = full_duty_speed;
             drive
-                .run(motion, &feeder, None, Instant::from_millis(1), &config, &divisors)
+                .run(motion, &feeder, None, Instant::from_millis(1), &config)
                 .unwrap();
             let permille = match drive.command() {
                 MotorCommand::Drive { duty, .. } => duty.permille(),
@@ -469,104 +416,18 @@ mod tests {
         }
     }
 
-    /// The lag as it was computed, with 64-bit divisions.
-    fn dividing_lag_mm(speed: u16, elapsed_ms: u64, moved_centi: i64) -> i32 {
-        let elapsed_ms = i64::try_from(elapsed_ms).unwrap_or(i64::MAX / 1000);
-        let scheduled_centi = i64::from(speed).saturating_mul(elapsed_ms) / 10;
-        ((scheduled_centi - moved_centi) / 100).clamp(-1000, 1000) as i32
-    }
-
-    /// The farthest the filament may have moved along a schedule for its lag to stay exact past
-    /// 32 bits, centi (4.29 km): far beyond any schedule, which lasts a few phases, each braked by
-    /// its budget after at most `u16::MAX` mm.
-    const FARTHEST_MOVED_CENTI: i32 = 429_396_729;
-
+    /// The lag the drive catches up: whole millimetres behind the schedule, truncated toward
+    /// zero, ahead of it negative, and never more than a metre either way (hours into a move).
     #[test]
-    fn the_schedule_lag_is_what_the_divisions_gave() {
-        let speeds = [0, 1, 7, 20, 60, 100, 333, 1000, 2000, 65_535];
-        let elapsed = [
-            0,
-            1,
-            9,
-            10,
-            11,
-            999,
-            1000,
-            65_537,
-            4_294_967,
-            65_540_001,
-            131_071_000,
-            1 << 40,
-            u64::MAX,
-        ];
-        for speed in speeds {
-            for elapsed_ms in elapsed {
-                let scheduled = i64::from(speed)
-                    .saturating_mul(i64::try_from(elapsed_ms).unwrap_or(i64::MAX / 1000))
-                    / 10;
-                // Around every quotient boundary near the schedule, and far off it both ways.
-                for offset in (-101_000..=101_000).step_by(97).chain([
-                    -100_100, -100_099, -100_000, -99_999, -100, -99, -1, 0, 1, 99, 100, 99_999, 100_000,
-                    100_099, 100_100,
-                ]) {
-                    for moved_centi in [
-                        scheduled.saturating_sub(offset),
-                        -offset,
-                        i64::from(i32::MIN),
-                        i64::from(-FARTHEST_MOVED_CENTI),
-                        i64::from(FARTHEST_MOVED_CENTI),
-                    ] {
-                        // A move the drive sees: it moved at most its budget either way.
-                        let Ok(moved) = i32::try_from(moved_centi) else {
-                            continue;
-                        };
-                        if moved > FARTHEST_MOVED_CENTI {
-                            continue;
-                        }
-                        assert_eq!(
-                            schedule_lag_mm(speed, elapsed_ms, moved),
-                            dividing_lag_mm(speed, elapsed_ms, moved_centi),
-                            "speed {speed}, elapsed {elapsed_ms}, moved {moved_centi}"
-                        );
-                    }
-                }
-            }
+    fn the_schedule_lag_is_whole_millimetres_within_a_metre() {
+        // 100 mm/s for 1 s is 10 000 centi scheduled.
+        for (moved_centi, lag_mm) in [(0, 100), (9_901, 0), (9_900, 1), (10_099, 0), (10_100, -1)] {
+            assert_eq!(schedule_lag_mm(100, 1000, moved_centi), lag_mm, "{moved_centi}");
         }
-        // Every product that fits 32 bits divides exactly: lags just around the quotient.
-        for scheduled in (0..=u32::MAX).step_by(9_973).chain([u32::MAX, u32::MAX - 1]) {
-            let elapsed_ms = u64::from(scheduled);
-            for k in [-101, -100, -99, -1, 0, 1, 99, 100, 101] {
-                let moved_centi = i64::from(scheduled / 10) - k;
-                assert_eq!(
-                    schedule_lag_mm(1, elapsed_ms, moved_centi as i32),
-                    dividing_lag_mm(1, elapsed_ms, moved_centi),
-                    "elapsed {elapsed_ms}, moved {moved_centi}"
-                );
-            }
+        assert_eq!(schedule_lag_mm(0, u64::MAX, 0), 0);
+        for elapsed_ms in [1 << 40, u64::MAX] {
+            assert_eq!(schedule_lag_mm(65_535, elapsed_ms, i32::MAX), 1000);
         }
-    }
-
-    /// A schedule past 32 bits (hours into a move) is a full 1000 mm behind for any distance a
-    /// move can have covered, as the divisions had it: the drive then pushes at its full
-    /// catch-up duty.
-    #[test]
-    fn a_schedule_past_32_bits_is_a_full_metre_behind() {
-        for (speed, elapsed_ms) in [
-            (1, u64::from(u32::MAX) + 1),
-            (2, 1 << 31),
-            (1000, 4_294_968),
-            (2000, 2_147_484),
-            (65_535, 65_538),
-            (1, u64::MAX),
-        ] {
-            assert!(u64::from(speed) * elapsed_ms.min(1 << 40) > u64::from(u32::MAX));
-            for moved in (i32::MIN..=FARTHEST_MOVED_CENTI)
-                .step_by(65_521)
-                .chain([FARTHEST_MOVED_CENTI])
-            {
-                assert_eq!(schedule_lag_mm(speed, elapsed_ms, moved), 1000);
-                assert_eq!(dividing_lag_mm(speed, elapsed_ms, i64::from(moved)), 1000);
-            }
-        }
+        assert_eq!(schedule_lag_mm(1, 0, i32::MAX), -1000);
     }
 }

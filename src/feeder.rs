@@ -67,7 +67,7 @@ impl Feeder {
     /// Where the motor has moved the filament since start, mm (forward positive; wraps with the
     /// odometry, see [`Feeder::odometry_centi`]).
     pub fn odometry_mm(&self) -> i32 {
-        crate::arith::centi_to_mm(self.odometry_centi)
+        self.odometry_centi / 100
     }
 
     /// Filament speed from the motor's last revolution period, mm/s (0 when it stands still).

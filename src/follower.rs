@@ -43,7 +43,7 @@ pub fn follow<const N: usize>(
     config: &Config,
 ) -> Option<(usize, ErrorCode)> {
     let tension = unit.hub.tension.reading();
-    let assist = follow_duty(0, tension, config, &unit.divisors).permille() > 0;
+    let assist = follow_duty(0, tension, config).permille() > 0;
     let mut failed = None;
     // A slot restored as loaded is followed only once it is known to hold the path.
     let follows: [bool; N] =
@@ -59,14 +59,7 @@ pub fn follow<const N: usize>(
         if !drive.is_supervising() {
             drive.begin(BUDGET, feeder, now);
         }
-        if let Err(error) = drive.run(
-            Motion::Follow { speed: 0 },
-            feeder,
-            tension,
-            now,
-            config,
-            &unit.divisors,
-        ) {
+        if let Err(error) = drive.run(Motion::Follow { speed: 0 }, feeder, tension, now, config) {
             failed = Some((slot, error));
         }
     }

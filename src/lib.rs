@@ -9,7 +9,6 @@
 #![warn(missing_docs)]
 
 pub mod app;
-pub mod arith;
 pub mod commands;
 pub mod config;
 pub mod control;
@@ -17,7 +16,6 @@ pub mod drive;
 pub mod feeder;
 pub mod follower;
 pub mod lanes;
-pub mod link_buffer;
 pub mod persist;
 pub mod phases;
 pub mod port;

@@ -4,13 +4,13 @@
 //! One `main` for every board. The board is a module selected by feature (`src/board/g071/` for
 //! the NUCLEO-G071RB, `src/board/pico/` for the Raspberry Pi Pico): it starts the clocks and the
 //! HAL's drivers and hands over parts that implement the hal-port traits ([`SensorScan`],
-//! [`Motors`], [`Watchdog`], embedded-io-async `Read`/`Write` for the printer link, a NOR flash for
-//! the store). The tasks below are written against those traits only; each `#[task]` is a thin
+//! [`Motors`], [`Watchdog`]), the printer link (a DMA receive ring and an embedded-io-async
+//! `Write`) and a NOR flash for the store. The tasks below are written against those traits only; each `#[task]` is a thin
 //! non-generic wrapper (Embassy tasks cannot be generic) naming the board's types.
 //!
-//! The tasks' bodies are `mmu_firmware::tasks` (control, store, link_rx, link_tx, button,
-//! status_led, and what they say to each other through embassy-sync), in the library so that the
-//! step-cost benchmark runs the same code.
+//! The tasks' bodies are `mmu_firmware::tasks` (control, store, link_tx, button, status_led, and
+//! what they say to each other through embassy-sync), in the library, beside the control step
+//! they run.
 //!
 //! Safety: the board's `emergency_stop` (every bridge off through raw register writes) runs
 //! first at boot and in the HardFault handler, which then resets the MCU at once (it does not
@@ -67,16 +67,20 @@ async fn main(spawner: Spawner) {
 
     // The store task restores the logic's state first; the control task waits for it.
     spawner.spawn(unwrap!(store(parts.flash, parts.crc, logic)));
-    spawner.spawn(unwrap!(control(parts.sampler, parts.motors, logic)));
-    spawner.spawn(unwrap!(link_rx(parts.link_rx)));
+    spawner.spawn(unwrap!(control(
+        parts.sampler,
+        parts.motors,
+        parts.link_rx,
+        logic
+    )));
     spawner.spawn(unwrap!(link_tx(parts.link_tx)));
     spawner.spawn(unwrap!(button(parts.button)));
     spawner.spawn(unwrap!(status_led(parts.led)));
 }
 
-/// The unit logic, in a static. Out of line: `App::new` builds it on the stack first (about
-/// 2.5 KiB), and this frame is gone before the tasks run, whereas in `main`'s task it would stay
-/// in the frame the executor polls (the worst-case stack, `scripts/firmware-size.sh`).
+/// The unit logic, in a static. Out of line: `App::new` builds it on the stack first, and this
+/// frame is gone before the tasks run, whereas in `main`'s task it would stay in the frame the
+/// executor polls.
 #[inline(never)]
 fn new_logic() -> &'static mut Logic<SLOTS> {
     static LOGIC: StaticCell<Logic<SLOTS>> = StaticCell::new();
@@ -95,18 +99,18 @@ fn feed_watchdog() {
 }
 
 #[embassy_executor::task]
-async fn control(sampler: board::Sampler, motors: board::Motors, logic: &'static Logic<SLOTS>) {
-    tasks::run_control(sampler, motors, logic, feed_watchdog, board::reset).await
+async fn control(
+    sampler: board::Sampler,
+    motors: board::Motors,
+    received: board::LinkRx,
+    logic: &'static Logic<SLOTS>,
+) {
+    tasks::run_control(sampler, motors, received, logic, feed_watchdog, board::reset).await
 }
 
 #[embassy_executor::task]
 async fn store(flash: board::StoreFlash, crc: board::Crc, logic: &'static Logic<SLOTS>) {
     tasks::run_store(flash, crc, board::STORE_RANGE, logic, feed_watchdog).await
-}
-
-#[embassy_executor::task]
-async fn link_rx(rx: board::LinkRx) {
-    tasks::run_link_rx(rx, board::line_error).await
 }
 
 #[embassy_executor::task]

@@ -170,6 +170,7 @@ impl SampleClock {
 mod tests {
     use super::*;
     use crate::control::{ControlLoop, MAX_SAMPLE_AGE_US, Tick};
+    use crate::uart::{MemoryRing, ReceiveRing};
     use crate::{App, Instant, Samples};
     use core::sync::atomic::{AtomicU32, Ordering};
 
@@ -251,20 +252,23 @@ mod tests {
         let samples = Samples::<3>::uniform(2048);
         let mut clock = SampleClock::new(0);
         let mut fed = Vec::new();
+        let mut received = ReceiveRing::new(MemoryRing::<16>::new());
         for ms in 1..=20u64 {
             let now_us = ms * 1000;
             // The scan completes until 10 ms, then times out at every step.
             if ms <= 10 {
                 clock.fresh(now_us);
             }
-            let step = control.step(&Tick {
-                now: Instant::from_millis(ms),
-                lateness_us: 0,
-                sample_age_us: clock.age_us(now_us),
-                samples: &samples,
-                rx: &[],
-                button_down: false,
-            });
+            let step = control.step(
+                &Tick {
+                    now: Instant::from_millis(ms),
+                    lateness_us: 0,
+                    sample_age_us: clock.age_us(now_us),
+                    samples: &samples,
+                    button_down: false,
+                },
+                &mut received,
+            );
             fed.push(step.feed_watchdog);
         }
         let last_fed = fed.iter().rposition(|&f| f).map(|i| i as u64 + 1);
@@ -307,7 +311,7 @@ mod tests {
             };
             app.restore(&snapshot);
             for _ in 0..5000 {
-                keeper.update_after(&app, now, false).expect("the save goes on");
+                keeper.update(&app, now).expect("the save goes on");
                 now = now + 1;
                 if !keeper.is_saving() && keeper.snapshot(&app).lanes == snapshot.lanes {
                     break;

@@ -227,9 +227,7 @@ macro_rules! name {
 /// [`setting_field_mut`] (the same machine code, folded into one by the linker).
 macro_rules! settings {
     ($($address:literal => $field:ident,)*) => {
-        /// The field of the plain setting at `address`. Out of line, like the next, so that the
-        /// linker folds the two.
-        #[inline(never)]
+        /// The field of the plain setting at `address`.
         fn setting_field(config: &Config, address: u8) -> Option<&u16> {
             match address {
                 $($address => Some(&config.$field),)*
@@ -238,7 +236,6 @@ macro_rules! settings {
         }
 
         /// The field of the plain setting at `address`, to write.
-        #[inline(never)]
         fn setting_field_mut(config: &mut Config, address: u8) -> Option<&mut u16> {
             match address {
                 $($address => Some(&mut config.$field),)*
@@ -369,8 +366,7 @@ macro_rules! registers {
         /// `const` slice may get its own copy in the image.
         pub static REGISTERS: &[Row] = ROWS;
 
-        /// The rows, for [`ROW_OF`] to be computed from at compile time (a `static` cannot be
-        /// read there); used once, by [`REGISTERS`].
+        /// The rows; used once, by [`REGISTERS`].
         const ROWS: &[Row] = &[$($table,)*];
 
         /// The value the row of `handler` reads: the view, the row's (first) address, the index
@@ -755,34 +751,11 @@ fn set_threshold(target: &mut Target, sensor: SensorId, change: impl FnOnce(&mut
     true
 }
 
-/// No row has the address (in [`ROW_OF`]).
-const NO_ROW: u8 = u8::MAX;
-
-/// For every address, the first row of [`REGISTERS`] that has it ([`NO_ROW`]: none), computed
-/// at compile time: a register access looks its row up (256 B of flash) instead of searching
-/// the table row by row (about 200 instructions a read on the Cortex-M0+).
-static ROW_OF: [u8; 256] = {
-    assert!(ROWS.len() < NO_ROW as usize);
-    let mut table = [NO_ROW; 256];
-    let mut address = 0;
-    while address < 256 {
-        let mut row = 0;
-        while row < ROWS.len() {
-            if ROWS[row].index_of(address as u8).is_some() {
-                table[address] = row as u8;
-                break;
-            }
-            row += 1;
-        }
-        address += 1;
-    }
-    table
-};
-
 /// A register of a unit with `slots` slots: its row and, for a block register, the index.
 fn find(address: u8, slots: usize) -> Option<(&'static Row, usize)> {
-    let row = REGISTERS.get(usize::from(ROW_OF[usize::from(address)]))?;
-    let index = row.index_of(address)?;
+    let (row, index) = REGISTERS
+        .iter()
+        .find_map(|row| row.index_of(address).map(|index| (row, index)))?;
     let exists = match row.span() {
         Span::One => true,
         Span::Sensors => index < 3 + 2 * slots,

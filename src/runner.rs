@@ -105,63 +105,6 @@ impl Runner {
         }
     }
 
-    /// [`Runner::start`] written over `self` (the command it replaces is gone): no runner (224
-    /// bytes) built aside and copied in, no plan built aside and copied into it, on the
-    /// millisecond a command starts, the costliest one.
-    pub fn start_over<const N: usize>(
-        &mut self,
-        request: (RequestCode, u8),
-        unit: &Unit<N>,
-        config: &Config,
-    ) {
-        self.plan.clear();
-        let planned = match Command::of(request.0) {
-            Some(command) => command.plan(request.1, unit, config, &mut self.plan),
-            None => Err(ErrorCode::INTERNAL),
-        };
-        if planned.is_err() {
-            self.plan.clear();
-        }
-        self.reset(request);
-        if let Err(error) = planned {
-            self.status = Status::Failed(error);
-        }
-    }
-
-    /// `self` as [`Runner::new`]`(request, &plan)` makes it, `plan` being the phases `self`
-    /// already holds.
-    fn reset(&mut self, request: (RequestCode, u8)) {
-        // Every field, named: a field added later must be reset here too.
-        let Runner {
-            request: own_request,
-            command,
-            plan,
-            index,
-            run,
-            status,
-            notes,
-            resume_goal_from,
-            failed_fed_centi,
-            then_plan,
-            inherited,
-            failed_after_finish,
-        } = self;
-        *status = match plan.first() {
-            Some(phase) => Status::Running(phase.progress()),
-            None => Status::Finished,
-        };
-        *own_request = request;
-        *command = Command::of(request.0);
-        *index = 0;
-        *run = None;
-        *notes = Notes::default();
-        *resume_goal_from = None;
-        *failed_fed_centi = None;
-        *then_plan = false;
-        *inherited = None;
-        *failed_after_finish = false;
-    }
-
     /// A command that failed before it moved anything. Retry plans it again.
     pub fn failed(request: (RequestCode, u8), error: ErrorCode) -> Self {
         let mut runner = Self::new(request, &[]);
@@ -455,49 +398,6 @@ impl Runner {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn start_over_leaves_the_runner_start_makes() {
-        extern crate std;
-        let unit = Unit::<3>::default();
-        let config = Config::default();
-        let requests = [
-            (RequestCode::Tool, 0),
-            (RequestCode::Tool, 2),
-            (RequestCode::Tool, 7),
-            (RequestCode::Load, 1),
-            (RequestCode::Unload, 0),
-            (RequestCode::Eject, 1),
-            (RequestCode::Cut, 2),
-            (RequestCode::Home, 0),
-            (RequestCode::Mode, 1),
-            (RequestCode::Query, 0),
-        ];
-        let plan = [
-            Phase::CheckSensors,
-            Phase::FeedToHub { slot: 1, max_mm: 100 },
-            Phase::FeedThroughBowden { slot: 1 },
-        ];
-        for request in requests {
-            // A runner in the middle of something, every field away from its start.
-            let mut runner = Runner::new((RequestCode::Load, 1), &plan);
-            runner.advance();
-            runner.clear_merge_first(0b101);
-            runner.status = Status::Failed(ErrorCode::INTERNAL);
-            runner.resume_goal_from = Some(5);
-            runner.failed_fed_centi = Some(7);
-            runner.then_plan = true;
-            runner.inherited = Some(Command::ToolChange);
-            runner.failed_after_finish = true;
-            runner.notes.trust_sensors = true;
-            runner.start_over(request, &unit, &config);
-            assert_eq!(
-                std::format!("{runner:?}"),
-                std::format!("{:?}", Runner::start(request, &unit, &config)),
-                "{request:?}"
-            );
-        }
-    }
 
     #[test]
     fn merge_clearances_run_in_slot_order_before_the_blocked_phase() {

@@ -6,32 +6,11 @@
 //! so a reading near one of them cannot flicker. A reading stuck at a supply rail means a
 //! disconnected or shorted sensor: it is never fed to the filter, and after a short time the
 //! sensor is reported faulty instead of being believed.
-//!
-//! Every sensor is filtered in every 1 ms step on a core without a divider (Cortex-M0+), where
-//! a division is a library call of about a hundred instructions, so a sample costs as little as
-//! the pipeline allows: medians of 3 and 5 by a few comparisons (a window still filling, or of
-//! another length, by counting), the average from a running sum divided by a shift or a
-//! reciprocal (`divide_small`), the smoothing in whole counts and thousandths (`Decay`: shifts
-//! for the usual weights, [`div1000`] for the others), and the two filters' settings
-//! ([`FilterKind`]) as constants the compiler folds. The results are exactly those of the sort
-//! and divisions they replace (see the tests).
 
-use crate::arith::{div1000, mul_high};
 use crate::time::Instant;
 
 /// The longest median or average window.
-pub const MAX_WINDOW: usize = 9;
-
-/// Window sizes and smoothing of one filter pipeline.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct FilterConfig {
-    /// Sliding median window, samples (1 = off), clamped to `1..=MAX_WINDOW`.
-    pub median: u8,
-    /// Moving average window, samples (1 = off), clamped to `1..=MAX_WINDOW`.
-    pub average: u8,
-    /// Weight of the newest value in the exponential smoothing, per mille (1000 = off).
-    pub smoothing_permille: u16,
-}
+pub const MAX_WINDOW: usize = 5;
 
 /// A pair of thresholds with hysteresis: a reading turns a sensor on at or above `on` and off at
 /// or below `off`, and keeps its state in between.
@@ -59,11 +38,12 @@ impl Thresholds {
     }
 }
 
-/// A fixed-capacity ring of the last samples.
+/// The last samples of a sliding window of `LEN` samples (at most [`MAX_WINDOW`]), which its
+/// first sample fills: a window is always full.
 #[derive(Debug, Clone, Copy)]
 struct Window {
     values: [u16; MAX_WINDOW],
-    len: usize,
+    /// Where the next sample goes.
     next: usize,
 }
 
@@ -71,315 +51,71 @@ impl Window {
     const fn new() -> Self {
         Window {
             values: [0; MAX_WINDOW],
-            len: 0,
             next: 0,
         }
     }
 
-    /// Stores `value` in place of the oldest sample of a window of `capacity`; returns the
-    /// sample it replaced, if that one was part of the window before.
-    // The per-sample helpers are `inline(always)`: the firmware is built with `opt-level = "z"`,
-    // which would call each of them for every sample of every sensor (frame setup included).
-    #[inline(always)]
-    fn push(&mut self, value: u16, capacity: usize) -> Option<u16> {
-        let capacity = capacity.clamp(1, MAX_WINDOW);
-        if self.next >= capacity {
-            self.next = 0;
+    /// Every place of the window holds `value`.
+    fn fill(&mut self, value: u16) {
+        self.values = [value; MAX_WINDOW];
+        self.next = 0;
+    }
+
+    /// Stores `value` in place of the oldest sample.
+    fn push<const LEN: usize>(&mut self, value: u16) {
+        if let Some(oldest) = self.values.get_mut(self.next) {
+            *oldest = value;
         }
-        let replaced = self
-            .values
-            .get_mut(self.next)
-            .map(|slot| core::mem::replace(slot, value))
-            .filter(|_| self.next < self.len);
-        self.next += 1;
-        self.len = (self.len + 1).min(capacity);
-        replaced
+        self.next = if self.next + 1 >= LEN { 0 } else { self.next + 1 };
     }
 
-    fn filled(&self) -> &[u16] {
-        self.values.get(..self.len).unwrap_or(&[])
+    fn samples<const LEN: usize>(&self) -> &[u16] {
+        self.values.get(..LEN).unwrap_or(&self.values)
     }
 
-    /// The median by copying and sorting: the reference for [`MedianWindow`].
-    #[cfg(test)]
-    fn median(&self) -> u16 {
+    /// The middle sample (the upper one of an even count).
+    fn median<const LEN: usize>(&self) -> u16 {
+        // An insertion sort of a copy: a window is a handful of samples.
         let mut sorted = [0u16; MAX_WINDOW];
-        let values = self.filled();
-        let sorted = &mut sorted[..values.len()];
-        sorted.copy_from_slice(values);
-        sorted.sort_unstable();
-        sorted.get(sorted.len() / 2).copied().unwrap_or(0)
-    }
-}
-
-/// A [`Window`] for the sliding median. The lengths the default filters use, 3 and 5, take their
-/// median from the ring directly with a few comparisons ([`median_of_3`], [`median_of_5`]); any
-/// other length (a window filling up, other settings) counts ([`MedianWindow::counted_median`]).
-#[derive(Debug, Clone, Copy)]
-struct MedianWindow {
-    ring: Window,
-}
-
-impl MedianWindow {
-    const fn new() -> Self {
-        MedianWindow { ring: Window::new() }
-    }
-
-    /// Adds a sample to a window of `capacity`; returns the new median (the upper one of an even
-    /// count).
-    #[inline(always)]
-    fn push(&mut self, value: u16, capacity: usize) -> u16 {
-        self.ring.push(value, capacity);
-        let [a, b, c, d, e, ..] = self.ring.values;
-        match self.ring.len {
-            1 => value,
-            3 => median_of_3(a, b, c),
-            5 => median_of_5(a, b, c, d, e),
-            _ => self.counted_median(),
-        }
-    }
-
-    /// The median of the window by counting, for each sample, the samples below it and those
-    /// not above it: no sorted copy, no sort routine in the image, nothing indexed (a window of
-    /// at most [`MAX_WINDOW`] samples takes at most 162 comparisons, and only while a window
-    /// fills or for settings other than the sensors' own).
-    #[inline(never)]
-    fn counted_median(&self) -> u16 {
-        let filled = self.ring.filled();
-        let middle = filled.len() / 2;
-        filled
-            .iter()
-            .copied()
-            .find(|&x| {
-                let below = filled.iter().filter(|&&v| v < x).count();
-                let not_above = filled.iter().filter(|&&v| v <= x).count();
-                below <= middle && middle < not_above
-            })
-            .unwrap_or(0)
-    }
-}
-
-/// The median of three values.
-#[inline(always)]
-fn median_of_3(a: u16, b: u16, c: u16) -> u16 {
-    let (low, high) = if a < b { (a, b) } else { (b, a) };
-    low.max(high.min(c))
-}
-
-/// The median of five values in six comparisons: the smaller of two ordered pairs' lows is below
-/// three others, so it is not the median, which is then the second lowest of the other four.
-#[inline(always)]
-fn median_of_5(a: u16, b: u16, c: u16, d: u16, e: u16) -> u16 {
-    let (a, b) = if a < b { (a, b) } else { (b, a) };
-    let (c, d) = if c < d { (c, d) } else { (d, c) };
-    // Drop the lowest of a, b, c, d; the other pair's low joins e.
-    let (low, high, x) = if a < c { (c, d, b) } else { (a, b, d) };
-    let (x, y) = if x < e { (x, e) } else { (e, x) };
-    // The second lowest of the ordered pairs (low, high) and (x, y).
-    if low < x { high.min(x) } else { low.min(y) }
-}
-
-/// A [`Window`] with the running sum of its samples, for the moving average: a sample adds
-/// itself and takes off the one it replaced, instead of the window being summed every sample.
-#[derive(Debug, Clone, Copy)]
-struct AverageWindow {
-    ring: Window,
-    /// The sum of `ring.filled()`.
-    sum: u32,
-}
-
-impl AverageWindow {
-    const fn new() -> Self {
-        AverageWindow {
-            ring: Window::new(),
-            sum: 0,
-        }
-    }
-
-    /// Adds a sample to a window of `capacity`; returns the new mean, rounded down.
-    #[inline(always)]
-    fn push(&mut self, value: u16, capacity: usize) -> u16 {
-        if capacity <= 1 {
-            // A window of one sample (the motor sensors'): the state the ring's bookkeeping
-            // would reach, set directly.
-            self.ring.values[0] = value;
-            self.ring.len = 1;
-            self.ring.next = 1;
-            self.sum = value.into();
-            return value;
-        }
-        let len_before = self.ring.len;
-        let replaced = self.ring.push(value, capacity);
-        let len = self.ring.len;
-        self.sum = match replaced {
-            // The same window with one sample replaced (a window that changed length may have
-            // lost several: summed again).
-            Some(old) if len == len_before => self.sum.wrapping_sub(old.into()).wrapping_add(value.into()),
-            _ => self.ring.filled().iter().map(|&v| u32::from(v)).sum(),
-        };
-        divide_small(self.sum, len) as u16
-    }
-}
-
-/// `⌈2³² / d⌉` for every window length `d` from 2 to [`MAX_WINDOW`] (index `d`).
-const RECIPROCALS: [u32; MAX_WINDOW + 1] = {
-    let mut table = [0; MAX_WINDOW + 1];
-    let mut d = 2;
-    while d <= MAX_WINDOW {
-        table[d] = u32::MAX / d as u32 + 1;
-        d += 1;
-    }
-    table
-};
-
-/// `sum / len` for a sum of at most [`MAX_WINDOW`] `u16` values, without a division: a shift for
-/// the lengths that are powers of two, else exact for `sum < 2³² / MAX_WINDOW`, which such a sum
-/// always is (`len` 0 counts as 1).
-#[inline(always)]
-fn divide_small(sum: u32, len: usize) -> u32 {
-    match len {
-        0 | 1 => sum,
-        2 => sum >> 1,
-        4 => sum >> 2,
-        8 => sum >> 3,
-        _ => RECIPROCALS
-            .get(len)
-            .map_or(sum, |&reciprocal| mul_high(sum, reciprocal)),
-    }
-}
-
-/// One step of the exponential smoothing for one weight `w`, prepared once per weight:
-/// `next = ⌊(previous × (1000 − w) + mean × 1000 × w) / 1000⌋` in 1/1000 counts, as the
-/// divisions computed it. A smoothed value is kept as whole counts and thousandths
-/// ([`Smoothed`]). When `1000 − w` is a multiple of 125 (w = 500 keeps four eighths) the step
-/// needs no division at all (see [`Decay::next`]); other weights take two [`div1000`].
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-struct Decay {
-    /// The weight prepared for, per mille (0: none yet).
-    weight: u16,
-    /// `1000 − weight`.
-    keep: u32,
-    /// `keep / 125`, when that divides evenly: `keep / 1000` is this many eighths.
-    eighths: Option<u32>,
-}
-
-/// A smoothed value `counts + thousandths / 1000`, `thousandths < 1000` (a smoothed value is
-/// never above the largest sample).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-struct Smoothed {
-    counts: u16,
-    thousandths: u16,
-}
-
-impl Decay {
-    /// Prepared for `weight`, taken as `1..=1000`.
-    const fn new(weight: u16) -> Self {
-        let weight = if weight > 1000 {
-            1000
-        } else if weight < 1 {
-            1
-        } else {
-            weight
-        };
-        let keep = 1000 - weight as u32;
-        // Without a division: other weights prepare it every sample.
-        let mut eighths = None;
-        let mut k = 0;
-        while k < 8 {
-            if k * 125 == keep {
-                eighths = Some(k);
+        for (filled, &value) in self.samples::<LEN>().iter().enumerate() {
+            let mut at = filled;
+            while at > 0 && sorted[at - 1] > value {
+                sorted[at] = sorted[at - 1];
+                at -= 1;
             }
-            k += 1;
+            sorted[at] = value;
         }
-        Decay {
-            weight,
-            keep,
-            eighths,
-        }
+        sorted[LEN / 2]
     }
 
-    /// The smoothed value after `previous` took in `mean`, for values of samples up to
-    /// [`mmu_hal_port::ADC_MAX`].
-    ///
-    /// With `keep = 125 k` and `previous = 1000 q + r`: `⌊previous × k / 8⌋ = 125 k q + ⌊r k / 8⌋`
-    /// and `mean × w = 1000 mean − 125 k mean`, so with `d = k (q − mean)` the next value is
-    /// `1000 (mean + ⌊d / 8⌋) + 125 (d mod 8) + ⌊r k / 8⌋`, whose last two terms are below 2000:
-    /// shifts, masks and at most one carry.
-    #[inline(always)]
-    fn next(&self, previous: Smoothed, mean: u16) -> Smoothed {
-        let (counts, thousandths) = (u32::from(previous.counts), u32::from(previous.thousandths));
-        let mean = u32::from(mean);
-        let (counts, thousandths) = match self.eighths {
-            Some(k) => {
-                let d = (counts.wrapping_sub(mean) as i32).wrapping_mul(k as i32);
-                let counts = mean.wrapping_add((d >> 3) as u32);
-                let thousandths = 125 * (d & 7) as u32 + ((thousandths * k) >> 3);
-                if thousandths >= 1000 {
-                    (counts + 1, thousandths - 1000)
-                } else {
-                    (counts, thousandths)
-                }
-            }
-            None => {
-                let previous = counts * 1000 + thousandths;
-                let next = mean * u32::from(self.weight) + div1000(previous.wrapping_mul(self.keep));
-                let counts = div1000(next);
-                (counts, next - counts * 1000)
-            }
-        };
-        // Below the largest sample, so within 16 bits.
-        Smoothed {
-            counts: counts as u16,
-            thousandths: thousandths as u16,
-        }
+    /// The mean of the samples, rounded down.
+    fn mean<const LEN: usize>(&self) -> u16 {
+        let sum: u32 = self.samples::<LEN>().iter().map(|&v| u32::from(v)).sum();
+        (sum / LEN as u32) as u16
     }
 }
-
-/// The filter of the filament presence, tension and cutter sensors.
-const PRESENCE_FILTER: FilterConfig = FilterConfig {
-    median: 5,
-    average: 4,
-    smoothing_permille: 500,
-};
-const PRESENCE_DECAY: Decay = Decay::new(PRESENCE_FILTER.smoothing_permille);
-/// The filter of the motor Hall sensors: a revolution's edges need little delay.
-const MOTOR_FILTER: FilterConfig = FilterConfig {
-    median: 3,
-    average: 1,
-    smoothing_permille: 1000,
-};
-const MOTOR_DECAY: Decay = Decay::new(MOTOR_FILTER.smoothing_permille);
 
 /// Which of the unit's two filters a sensor takes. Their settings are fixed at build time (no
-/// register changes them), so the compiler folds them into the pipeline: its clamps, window
-/// dispatch and smoothing preparation, a fifth of a sample's instructions, and no general copy
-/// of the pipeline for other settings.
+/// register changes them).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum FilterKind {
-    /// Filament presence, tension and cutter sensors ([`FilterKind::config`]: median of 5,
-    /// average of 4, smoothing 500 ‰).
+    /// Filament presence, tension and cutter sensors: median of 5, average of 4, smoothing that
+    /// weighs the newest average 1/2.
     Presence,
-    /// Motor Hall sensors (median of 3, no average, no smoothing).
+    /// Motor Hall sensors, whose revolution edges need little delay: median of 3 only.
     Motor,
 }
 
-impl FilterKind {
-    /// The settings of this filter.
-    pub const fn config(self) -> FilterConfig {
-        match self {
-            FilterKind::Presence => PRESENCE_FILTER,
-            FilterKind::Motor => MOTOR_FILTER,
-        }
-    }
-}
+/// Fractional bits of a smoothed value.
+const FRACTION_BITS: u32 = 8;
 
 /// Sliding median, then moving average, then exponential smoothing.
 #[derive(Debug, Clone, Copy)]
 pub struct Filter {
-    medians: MedianWindow,
-    averages: AverageWindow,
-    /// The smoothed value (`None` before the first sample).
-    smoothed: Option<Smoothed>,
+    medians: Window,
+    averages: Window,
+    /// The smoothed value in 1/2^[`FRACTION_BITS`] counts (`None` before the first sample).
+    smoothed: Option<u32>,
     /// The smoothed value rounded to counts (0 before the first sample).
     value: u16,
 }
@@ -391,51 +127,53 @@ impl Default for Filter {
 }
 
 impl Filter {
-    /// An empty filter. Out of line: inlined into the per-sample code (for the reset after a
-    /// fault) it cost every idle step 12 instructions.
-    #[inline(never)]
+    /// An empty filter.
     pub const fn new() -> Self {
         Filter {
-            medians: MedianWindow::new(),
-            averages: AverageWindow::new(),
+            medians: Window::new(),
+            averages: Window::new(),
             smoothed: None,
             value: 0,
         }
     }
 
     /// Feed one raw sample through the filter `kind`; returns the filtered value.
-    #[inline(always)]
     pub fn push(&mut self, raw: u16, kind: FilterKind) -> u16 {
         match kind {
-            FilterKind::Presence => self.push_with(raw, PRESENCE_FILTER, PRESENCE_DECAY),
-            FilterKind::Motor => self.push_with(raw, MOTOR_FILTER, MOTOR_DECAY),
+            FilterKind::Presence => self.push_with::<5, 4, 1>(raw),
+            FilterKind::Motor => self.push_with::<3, 1, 0>(raw),
         }
     }
 
-    /// [`Self::push`] with any settings: the same pipeline, for the tests to reach every window
-    /// length and weight.
-    #[cfg(test)]
-    fn push_config(&mut self, raw: u16, config: &FilterConfig) -> u16 {
-        self.push_with(raw, *config, Decay::new(config.smoothing_permille))
-    }
-
-    /// [`Self::push`] with the settings `config`; `decay` is its smoothing prepared.
-    #[inline(always)]
-    fn push_with(&mut self, raw: u16, config: FilterConfig, decay: Decay) -> u16 {
-        let median = self.medians.push(raw, config.median.into());
-        let mean = self.averages.push(median, config.average.into());
-        let weight = config.smoothing_permille.clamp(1, 1000);
-        // At w = 1000 (or on the first sample) the smoothed value is the mean itself.
+    /// The pipeline with a median of `MEDIAN` samples, an average of `AVERAGE` medians, and
+    /// smoothing that weighs the newest average 1/2^`SMOOTHING`.
+    fn push_with<const MEDIAN: usize, const AVERAGE: usize, const SMOOTHING: u32>(
+        &mut self,
+        raw: u16,
+    ) -> u16 {
+        const { assert!(MEDIAN >= 1 && MEDIAN <= MAX_WINDOW && AVERAGE >= 1 && AVERAGE <= MAX_WINDOW) };
+        let raw = raw.min(mmu_hal_port::ADC_MAX);
+        let first = self.smoothed.is_none();
+        if first {
+            self.medians.fill(raw);
+        } else {
+            self.medians.push::<MEDIAN>(raw);
+        }
+        let median = self.medians.median::<MEDIAN>();
+        if first {
+            self.averages.fill(median);
+        } else {
+            self.averages.push::<AVERAGE>(median);
+        }
+        let mean = u32::from(self.averages.mean::<AVERAGE>()) << FRACTION_BITS;
         let smoothed = match self.smoothed {
-            Some(previous) if weight < 1000 => decay.next(previous, mean),
-            _ => Smoothed {
-                counts: mean,
-                thousandths: 0,
-            },
+            // Moves 1/2^SMOOTHING of the way to the mean.
+            Some(previous) => previous + (mean >> SMOOTHING) - (previous >> SMOOTHING),
+            None => mean,
         };
         self.smoothed = Some(smoothed);
         // Rounded half up.
-        self.value = smoothed.counts + u16::from(smoothed.thousandths >= 500);
+        self.value = ((smoothed + (1 << (FRACTION_BITS - 1))) >> FRACTION_BITS) as u16;
         self.value
     }
 
@@ -450,15 +188,14 @@ impl Filter {
     }
 }
 
-/// Which rail a faulty sensor is stuck at. Counted from 1, so that `Option::<Rail>::None` is a
-/// zero byte (see [`crate::unit::Unit::default`]).
+/// Which rail a faulty sensor is stuck at.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Rail {
     /// Ground: typically a disconnected signal or supply.
-    Low = 1,
+    Low,
     /// Supply: typically a short or a disconnected ground.
-    High = 2,
+    High,
 }
 
 /// A raw reading at or below this is a sensor stuck at the low rail. The rail limits are the
@@ -480,8 +217,9 @@ pub struct AnalogSensor {
     fault: Option<Rail>,
 }
 
-/// Samples a filter needs before its output means anything.
-const WARM_UP_SAMPLES: u16 = MAX_WINDOW as u16 * 2;
+/// Samples a filter needs before its output means anything: twice the presence filter's median
+/// and average windows together.
+const WARM_UP_SAMPLES: u16 = 2 * (5 + 4);
 
 impl Default for AnalogSensor {
     fn default() -> Self {
@@ -552,13 +290,6 @@ impl AnalogSensor {
 
     /// The filtered value, if the sensor is healthy and has seen enough samples to mean it.
     pub fn reading(&self) -> Option<u16> {
-        self.fresh_reading()
-    }
-
-    /// [`Self::reading`], inlined into the per-sample updates below (a call per sensor and step
-    /// otherwise).
-    #[inline(always)]
-    fn fresh_reading(&self) -> Option<u16> {
         (self.fault.is_none() && self.samples >= WARM_UP_SAMPLES).then(|| self.filter.value())
     }
 }
@@ -587,7 +318,7 @@ impl PresenceSensor {
     /// Take a new raw sample at `now` and decide presence.
     pub fn update(&mut self, raw: u16, now: Instant, filter: FilterKind, thresholds: Thresholds) {
         self.analog.update(raw, now, filter);
-        if let Some(value) = self.analog.fresh_reading() {
+        if let Some(value) = self.analog.reading() {
             self.present = thresholds.decide(self.present, value);
         }
     }
@@ -630,7 +361,7 @@ impl RevolutionCounter {
     /// Take a new raw sample at `now`; returns true when it completed a revolution.
     pub fn update(&mut self, raw: u16, now: Instant, filter: FilterKind, edges: Thresholds) -> bool {
         self.analog.update(raw, now, filter);
-        let Some(value) = self.analog.fresh_reading() else {
+        let Some(value) = self.analog.reading() else {
             return false;
         };
         let was_high = self.high;
@@ -687,276 +418,59 @@ mod tests {
     const THRESHOLDS: Thresholds = Thresholds { on: 2600, off: 2400 };
 
     #[test]
-    fn median_removes_a_single_spike() {
+    fn the_motor_filter_removes_a_single_spike_and_follows_a_step_at_once() {
         let mut filter = Filter::new();
-        let config = FilterConfig {
-            median: 5,
-            average: 1,
-            smoothing_permille: 1000,
-        };
-        for _ in 0..5 {
-            filter.push_config(2000, &config);
+        for _ in 0..3 {
+            filter.push(2000, FilterKind::Motor);
         }
-        assert_eq!(filter.push_config(4000, &config), 2000);
-        assert_eq!(filter.push_config(2000, &config), 2000);
+        assert_eq!(filter.push(4000, FilterKind::Motor), 2000);
+        assert_eq!(filter.push(2000, FilterKind::Motor), 2000);
+        filter.push(3000, FilterKind::Motor);
+        assert_eq!(filter.push(3000, FilterKind::Motor), 3000, "two of three");
     }
 
     #[test]
-    fn smoothing_converges_to_a_step() {
+    fn the_presence_filter_removes_spikes_and_converges_to_a_step() {
         let mut filter = Filter::new();
-        let config = FilterConfig {
-            median: 1,
-            average: 1,
-            smoothing_permille: 500,
-        };
-        filter.push_config(1000, &config);
-        assert_eq!(filter.push_config(3000, &config), 2000);
-        for _ in 0..20 {
-            filter.push_config(3000, &config);
+        for _ in 0..10 {
+            filter.push(1000, FilterKind::Presence);
         }
-        assert_eq!(filter.value(), 3000);
-    }
-
-    #[test]
-    fn reciprocal_divisions_equal_the_divisions_they_replace() {
-        // Every sum a window of up to MAX_WINDOW u16 samples can have, by every length.
-        for len in 0..=MAX_WINDOW {
-            for sum in 0..=MAX_WINDOW as u32 * u32::from(u16::MAX) {
-                assert_eq!(divide_small(sum, len), sum / len.max(1) as u32, "{sum} / {len}");
-            }
+        assert_eq!(filter.value(), 1000);
+        // Two spikes in five samples are no step.
+        for raw in [4000, 1000, 4000, 1000, 1000] {
+            assert_eq!(filter.push(raw, FilterKind::Presence), 1000, "spike {raw}");
         }
-        // Every u32 near the multiples of 1000 and the ends, and a dense sweep of the rest.
-        let mut x: u32 = 0;
-        loop {
-            for probe in [x, x.saturating_add(1), x.saturating_sub(1)] {
-                assert_eq!(div1000(probe), probe / 1000, "{probe} / 1000");
-            }
-            match x.checked_add(997) {
-                Some(next) => x = next,
-                None => break,
-            }
-        }
-        for probe in [u32::MAX, u32::MAX - 1, 4_294_967_000, 4_294_966_999] {
-            assert_eq!(div1000(probe), probe / 1000);
-        }
-    }
-
-    /// The next number of a linear congruential sequence (noise for the equivalence tests).
-    fn next_random(seed: u32) -> u32 {
-        seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223)
-    }
-
-    /// The pipeline as it was, with divisions: the reference for the division-free one.
-    struct DividingFilter {
-        medians: Window,
-        averages: Window,
-        smoothed: Option<u32>,
-    }
-
-    impl DividingFilter {
-        fn new() -> Self {
-            DividingFilter {
-                medians: Window::new(),
-                averages: Window::new(),
-                smoothed: None,
-            }
-        }
-
-        fn push(&mut self, raw: u16, config: &FilterConfig) -> u16 {
-            self.medians.push(raw, config.median.into());
-            self.averages.push(self.medians.median(), config.average.into());
-            let values = self.averages.filled();
-            let sum: u32 = values.iter().map(|&v| u32::from(v)).sum();
-            let averaged = sum / values.len().max(1) as u32 * 1000;
-            let weight = u32::from(config.smoothing_permille.clamp(1, 1000));
-            let next = match self.smoothed {
-                None => averaged,
-                Some(previous) => (previous * (1000 - weight) + averaged * weight) / 1000,
-            };
-            self.smoothed = Some(next);
-            ((next + 500) / 1000) as u16
-        }
-    }
-
-    /// The division-free filter and its dividing reference, fed the same samples.
-    struct Twins {
-        filter: Filter,
-        reference: DividingFilter,
-    }
-
-    impl Twins {
-        fn new() -> Self {
-            Twins {
-                filter: Filter::new(),
-                reference: DividingFilter::new(),
-            }
-        }
-
-        /// Push `raw` (sample `i`) through both; they must agree.
-        fn push(&mut self, raw: u16, config: &FilterConfig, i: u32) {
-            assert_eq!(
-                self.filter.push_config(raw, config),
-                self.reference.push(raw, config),
-                "{config:?} at {i}"
+        let mut last = 1000;
+        let mut steps = 0;
+        while filter.push(3000, FilterKind::Presence) != 3000 {
+            assert!(
+                (last..=3000).contains(&filter.value()),
+                "{last} then {}",
+                filter.value()
             );
+            last = filter.value();
+            steps += 1;
+            assert!(steps < 30, "converges");
         }
-
-        /// Push `raw` (sample `i`) through the filter `kind`, as the sensors do, and through the
-        /// reference with that filter's settings; they must agree.
-        fn push_kind(&mut self, raw: u16, kind: FilterKind, i: u32) {
-            assert_eq!(
-                self.filter.push(raw, kind),
-                self.reference.push(raw, &kind.config()),
-                "{kind:?} at {i}"
-            );
-        }
-
-        fn clear(&mut self) {
-            self.filter.clear();
-            self.reference = DividingFilter::new();
-        }
+        assert!(steps >= 3, "the median and the average hold a step back: {steps}");
     }
 
     #[test]
-    fn the_filter_computes_what_the_divisions_did() {
-        for (median, average, permille) in [(5, 4, 500), (3, 1, 1000), (1, 1, 1), (9, 9, 333), (2, 7, 999)] {
-            let config = FilterConfig {
-                median,
-                average,
-                smoothing_permille: permille,
-            };
-            let mut twins = Twins::new();
-            // Noisy levels switching between off and on, over the 12-bit ADC range.
-            let mut seed: u32 = 7;
-            for i in 0..4000u32 {
-                seed = next_random(seed);
-                let noise = (seed >> 20) as u16 % 400;
-                let raw = if i % 500 < 250 { 1800 + noise } else { 3600 + noise };
-                twins.push(raw, &config, i);
-            }
+    fn a_filter_takes_any_sample_without_overflow() {
+        let mut filter = Filter::new();
+        for raw in [
+            u16::MAX,
+            0,
+            u16::MAX,
+            u16::MAX,
+            u16::MAX,
+            u16::MAX,
+            u16::MAX,
+            u16::MAX,
+        ] {
+            filter.push(raw, FilterKind::Presence);
         }
-    }
-
-    #[test]
-    fn the_filter_follows_window_changes_as_the_divisions_did() {
-        // Window lengths changing between samples (a `set` of the filter registers), growing and
-        // shrinking while the windows are partly and fully filled, and a clear in between.
-        let mut twins = Twins::new();
-        let mut seed: u32 = 11;
-        for i in 0..6000u32 {
-            seed = next_random(seed);
-            let raw = (seed >> 20) as u16; // 0..4096, every value possible
-            let config = FilterConfig {
-                median: [5, 9, 1, 3, 9, 2, 0, 12][(i / 37 % 8) as usize],
-                average: [4, 1, 9, 2][(i / 53 % 4) as usize],
-                smoothing_permille: 400,
-            };
-            if i % 1000 == 999 {
-                twins.clear();
-            }
-            twins.push(raw, &config, i);
-        }
-    }
-
-    #[test]
-    fn medians_of_3_and_5_are_the_middle_of_the_sorted_values() {
-        // Every tuple over six levels: all orders, and every pattern of ties.
-        let levels = [0, 1, 2, 3, 2048, u16::MAX];
-        for &a in &levels {
-            for &b in &levels {
-                for &c in &levels {
-                    let mut sorted = [a, b, c];
-                    sorted.sort_unstable();
-                    assert_eq!(median_of_3(a, b, c), sorted[1], "{a} {b} {c}");
-                    for &d in &levels {
-                        for &e in &levels {
-                            let mut sorted = [a, b, c, d, e];
-                            sorted.sort_unstable();
-                            assert_eq!(median_of_5(a, b, c, d, e), sorted[2], "{a} {b} {c} {d} {e}");
-                        }
-                    }
-                }
-            }
-        }
-    }
-
-    #[test]
-    fn every_window_and_weight_filters_as_the_divisions_did() {
-        // The weights whose kept part is a multiple of 125 (a shift) and some that are not, over
-        // every median and average length.
-        let weights = [0, 1, 125, 250, 375, 400, 500, 625, 750, 875, 999, 1000, 1001];
-        for median in 1..=MAX_WINDOW as u8 {
-            for average in 1..=MAX_WINDOW as u8 {
-                for permille in weights {
-                    let config = FilterConfig {
-                        median,
-                        average,
-                        smoothing_permille: permille,
-                    };
-                    let mut twins = Twins::new();
-                    let mut seed = u32::from(median) * 31 + u32::from(average);
-                    for i in 0..300u32 {
-                        seed = next_random(seed);
-                        let raw = if i % 100 < 50 {
-                            40 + (seed >> 28) as u16
-                        } else {
-                            (seed >> 20) as u16
-                        };
-                        twins.push(raw, &config, i);
-                    }
-                }
-            }
-        }
-    }
-
-    #[test]
-    fn the_sensors_filters_filter_as_the_divisions_did() {
-        // The sensors' two filters take their settings folded in (`Filter::push`): each gives
-        // what the divisions gave with its settings, over noisy levels switching off and on.
-        for kind in [FilterKind::Presence, FilterKind::Motor] {
-            let mut twins = Twins::new();
-            let mut seed: u32 = 3;
-            for i in 0..4000u32 {
-                seed = next_random(seed);
-                let noise = (seed >> 20) as u16 % 400;
-                let raw = if i % 500 < 250 { 1800 + noise } else { 3600 + noise };
-                twins.push_kind(raw, kind, i);
-            }
-        }
-    }
-
-    #[test]
-    fn switching_between_the_sensors_filters_and_others_filters_as_the_divisions_did() {
-        // The folded filters and the general pipeline share one state: switching between them
-        // mid-stream, with partly and fully filled windows, gives what the divisions gave.
-        let others = [
-            FilterConfig {
-                median: 5,
-                average: 4,
-                smoothing_permille: 400,
-            },
-            FilterConfig {
-                median: 9,
-                average: 2,
-                smoothing_permille: 500,
-            },
-            FilterConfig {
-                median: 3,
-                average: 1,
-                smoothing_permille: 250,
-            },
-        ];
-        let mut twins = Twins::new();
-        let mut seed: u32 = 5;
-        for i in 0..5000u32 {
-            seed = next_random(seed);
-            let raw = (seed >> 20) as u16;
-            match (i / 29) as usize % 6 {
-                0 | 3 => twins.push_kind(raw, FilterKind::Presence, i),
-                1 | 5 => twins.push_kind(raw, FilterKind::Motor, i),
-                k => twins.push(raw, &others[k % others.len()], i),
-            }
-        }
+        assert!(filter.value() <= mmu_hal_port::ADC_MAX);
     }
 
     #[test]

@@ -29,7 +29,6 @@
 //! Reported, the slot is no longer followed (its drive grips nothing), and the report lasts until
 //! the printer's next command (its `U0`) or a restart.
 
-use crate::arith::BY_100;
 use crate::lanes::left_mm;
 use crate::time::Instant;
 use crate::unit::{Lane, Unit};
@@ -125,8 +124,8 @@ impl SpoolEnd {
 /// uncertainty, 3 % of the metres used plus 1 m (book: "Filament left and lane health"). Worked
 /// out only when the follower finds a motor stopped.
 pub fn fastened_end(spool_m: u16, used_centi: i32) -> bool {
-    let used_mm = BY_100.divide(used_centi.max(0).unsigned_abs());
-    let uncertainty_mm = BY_100.divide(used_mm).saturating_mul(3).saturating_add(1000);
+    let used_mm = used_centi.max(0).unsigned_abs() / 100;
+    let uncertainty_mm = (used_mm / 100).saturating_mul(3).saturating_add(1000);
     left_mm(spool_m, used_centi) <= uncertainty_mm
 }
 

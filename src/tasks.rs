@@ -1,20 +1,15 @@
 //! The firmware's tasks, written against the hal-port traits only, so that every board runs the
 //! same ones (src/main.rs spawns them, each behind a thin non-generic `#[task]` wrapper that names
-//! the board's types: Embassy tasks cannot be generic) and the step-cost benchmark
-//! (bench-mcu/harness) polls the same code on Embassy's raw executor.
+//! the board's types: Embassy tasks cannot be generic).
 //!
 //! - [`run_control`], every millisecond on an embassy-time [`Ticker`] (1 MHz ticks: the period is
-//!   exact): scans the sensors (the wait bounded by the next tick), takes at most
-//!   [`control::MAX_RX_PER_STEP`] bytes from [`RX_BUFFER`], steps the [`ControlLoop`], applies the
-//!   motor commands, queues the answer in [`TX_BUFFER`], feeds the watchdog when the step was on
-//!   time with fresh samples, and signals [`STEPPED`] when a save piece is due after the step
-//!   ([`Deferral`]: not after a step busy with the printer or beginning a phase, unless several
-//!   in a row were);
+//!   exact): scans the sensors (the wait bounded by the next tick), runs the control step
+//!   ([`ControlLoop::step`], which takes the printer's bytes from the UART's DMA ring itself),
+//!   applies the motor commands, queues the answer in [`TX_PIPE`], feeds the watchdog when the
+//!   step says so, and signals [`STEPPED`] when a save piece runs after the step;
 //! - [`run_store`]: restores what the flash holds (then [`BOOTED`]); woken by [`STEPPED`], writes
 //!   what changed, one bounded piece after a step; on [`RESET`] the whole save before a reset;
-//! - [`run_link_rx`] / [`run_link_tx`]: the printer UART (received by DMA into a ring, so no byte
-//!   is lost while a flash erase stalls the CPU) to and from [`RX_BUFFER`] / [`TX_BUFFER`]
-//!   ([`LinkBuffer`]s: why not embassy-sync's `Pipe`, see there);
+//! - [`run_link_tx`]: sends what waits in [`TX_PIPE`] on the printer UART;
 //! - [`run_button`]: the button's level, at each edge, in [`BUTTON`] (the control loop debounces);
 //! - [`run_status_led`]: the LED, from [`LED`].
 //!
@@ -28,8 +23,8 @@ use core::pin::{Pin, pin};
 use core::task::Poll;
 
 use embassy_futures::select::{Either, select};
-use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+use embassy_sync::pipe::Pipe;
 use embassy_sync::signal::Signal;
 use embassy_sync::watch::Watch;
 use embassy_time::{Duration, Ticker, Timer, with_timeout};
@@ -38,14 +33,13 @@ use mmu_hal_port::{Button, Motors, SensorScan, StatusLed};
 use portable_atomic::{AtomicBool, AtomicU32, Ordering};
 
 use crate::control::{self, ControlLoop, ResetBoard, Tick, TickSchedule};
-use crate::link_buffer::LinkBuffer;
-use crate::persist::{Boot, Deferral, EntryCrc, Keeper, Store};
+use crate::persist::{Boot, EntryCrc, Keeper, Store};
 use crate::port::{CheckedCrc, SampleClock, WatchedFlash};
-use crate::uart::LineErrors;
+use crate::uart::{LineErrors, ReceiveRing, RingSource};
 use crate::{App, BoardAction, Instant, Samples, drive};
 
-/// defmt's logging macros when the crate logs (feature `defmt`), nothing otherwise (the
-/// step-cost harness).
+/// defmt's logging macros when the crate logs (feature `defmt`), nothing otherwise (the tasks'
+/// host test).
 macro_rules! log {
     ($level:ident, $($arg:tt)*) => {{
         #[cfg(feature = "defmt")]
@@ -67,27 +61,16 @@ pub const WHOLE_JOB_FEEDS: u32 = 6;
 /// (`crate::TX_CAPACITY` = 48).
 pub const TX_QUEUE: usize = 256;
 
-/// A [`LinkBuffer`] shared by two tasks of the one thread executor.
-pub type SharedBuffer<const N: usize> = Mutex<CriticalSectionRawMutex, RefCell<LinkBuffer<N>>>;
-
-/// Bytes from the printer waiting for the control task (it takes at most
-/// `control::MAX_RX_PER_STEP` a step); the UART's DMA ring holds what does not fit yet.
-pub static RX_BUFFER: SharedBuffer<{ control::RX_RING }> = Mutex::new(RefCell::new(LinkBuffer::new()));
-/// Responses waiting for the UART.
-pub static TX_BUFFER: SharedBuffer<TX_QUEUE> = Mutex::new(RefCell::new(LinkBuffer::new()));
-/// [`TX_BUFFER`] has bytes for the link's transmit task: signalled by the control task at the
-/// tick after the step that queued them (see [`run_control`]), or before a reset.
-pub static TX_READY: Signal<CriticalSectionRawMutex, ()> = Signal::new();
-/// The control task has stepped: signalled at the end of every step, for the boards' receive
-/// rings, which look at their DMA ring once a step (`board::ring_rx`).
-pub static TICKED: Signal<CriticalSectionRawMutex, ()> = Signal::new();
+/// Responses waiting for the UART: the control task writes a whole answer or none, the transmit
+/// task sends what waits.
+pub static TX_PIPE: Pipe<CriticalSectionRawMutex, TX_QUEUE> = Pipe::new();
 /// True while the link's transmit task has bytes in flight.
 pub static TX_BUSY: AtomicBool = AtomicBool::new(false);
 /// The button's level (true: held down).
 pub static BUTTON: Watch<CriticalSectionRawMutex, bool, 1> = Watch::new();
 /// The status LED's state, sent when it changes.
 pub static LED: Signal<CriticalSectionRawMutex, bool> = Signal::new();
-/// A control step is done and a save piece is due after it ([`Deferral`]).
+/// A control step is done and a save piece runs after it ([`control::Deferral`]).
 pub static STEPPED: Signal<CriticalSectionRawMutex, ()> = Signal::new();
 /// The store has restored the logic's state: the control task may step.
 pub static BOOTED: Signal<CriticalSectionRawMutex, ()> = Signal::new();
@@ -104,22 +87,9 @@ pub static STORE_WROTE: AtomicBool = AtomicBool::new(false);
 /// its repair after a power cut).
 #[unsafe(no_mangle)]
 pub static MMU_CONTROL_STEPS: AtomicU32 = AtomicU32::new(0);
-/// Overruns the link reported.
-pub static OVERRUNS: AtomicU32 = AtomicU32::new(0);
-/// Garbled frames the link reported.
-pub static GARBLED: AtomicU32 = AtomicU32::new(0);
-
 /// The unit logic, shared by the control task (which steps it) and the store task (which saves
 /// what it holds). Both run on the one thread executor and never hold it across an `.await`.
 pub type Logic<const N: usize> = RefCell<ControlLoop<N>>;
-
-/// What a receive error of the printer link counts as.
-pub enum LineError {
-    /// Bytes lost: the ring or the USART overran.
-    Overrun,
-    /// A frame with a framing, noise or parity error.
-    Garbled,
-}
 
 /// The uptime, µs.
 pub fn now_us() -> u64 {
@@ -132,15 +102,21 @@ pub fn now() -> Instant {
 }
 
 /// The control task: a step every [`PERIOD`] (see the module header), once the store has
-/// restored the logic's state. `feed` reloads the board's watchdog; `restart` stops the motors
-/// and restarts the MCU.
-pub async fn run_control<const N: usize, S: SensorScan<N>, M: Motors<N>>(
+/// restored the logic's state. `received` is the printer UART's DMA ring; `feed` reloads the
+/// board's watchdog; `restart` stops the motors and restarts the MCU.
+pub async fn run_control<const N: usize, S, M, R, const RING: usize>(
     mut sampler: S,
     mut motors: M,
+    mut received: ReceiveRing<R, RING>,
     logic: &Logic<N>,
     feed: fn(),
     restart: fn() -> !,
-) -> ! {
+) -> !
+where
+    S: SensorScan<N>,
+    M: Motors<N>,
+    R: RingSource<RING>,
+{
     BOOTED.wait().await;
     let mut ticker = Ticker::every(PERIOD);
     // The first tick on the grid of whole periods: a period before it, the schedule starts.
@@ -152,34 +128,15 @@ pub async fn run_control<const N: usize, S: SensorScan<N>, M: Motors<N>>(
     let mut samples = Samples::<N>::uniform(mmu_hal_port::ADC_MAX / 2);
     let mut sample_clock = SampleClock::new(now_us());
     let mut button = BUTTON.receiver();
-    let mut rx = [0u8; control::MAX_RX_PER_STEP];
     let mut led = None;
     let mut line_errors = LineErrors::default();
-    // Every step is written here (`ControlLoop::step_into`), not copied out of the step.
-    let mut step = control::Step::<N>::none();
-    let mut deferral = Deferral::default();
-    // A step's answer goes out at the next tick, not in the millisecond of the step that made
-    // it: the transmit task's run (about 700 instructions on the emulated G071: the UART's DMA
-    // set up, its two completions) then falls in a millisecond of its own instead of the
-    // busiest, the one that answered a request or began a phase. The printer waits up to 2 s.
-    let mut answer_queued = false;
     loop {
         ticker.next().await;
-        let sending = core::mem::take(&mut answer_queued);
-        if sending {
-            TX_READY.signal(());
-        }
         let started_us = now_us();
         let lateness_us = schedule.start(started_us);
-        // The scan (the G071's takes the ADC ring's newest whole scan at once; the Pico's takes
-        // about 270 µs) is waited for until the next tick at most, or [`LATE_SCAN`] in a step
-        // that starts so late (after a flash write) that the next tick is near or past; past it
-        // the step runs on the previous samples, and neither a late step nor old samples feed the watchdog
-        // (`control::feeds_watchdog`). A bound of its own in every step cost the time driver an
-        // alarm and this task a wake-up every period, and the Pico a timer re-armed at each of its
-        // nine conversions' wake-ups: about 400 instructions a millisecond on the emulated G071,
-        // 600 on the emulated Pico. [`bounded`], not `with_deadline`: it registers the bound with
-        // the time driver once, not again at each of the Pico's wake-ups.
+        // The scan is waited for until the next tick at most, or [`LATE_SCAN`] in a step that
+        // starts so late (after a flash write) that the next tick is near or past; past it the
+        // step runs on the previous samples, which then grow old and stop the watchdog's feed.
         let bound_us = schedule.deadline_us().max(started_us + LATE_SCAN.as_micros());
         let scan = pin!(sampler.scan());
         if let Some(Ok(scan)) = bounded(embassy_time::Instant::from_micros(bound_us), scan).await {
@@ -187,35 +144,27 @@ pub async fn run_control<const N: usize, S: SensorScan<N>, M: Motors<N>>(
             sample_clock.fresh(now_us());
         }
         let at_us = now_us();
-        let received = take_received(&mut rx);
         let button_down = button.as_mut().and_then(|b| b.try_get()).unwrap_or(false);
         // The step, in a block of its own: the logic is never borrowed across an `.await`.
-        let (action, busy) = {
+        let action = {
             let Ok(mut control) = logic.try_borrow_mut() else {
                 continue;
             };
-            control.step_into(
-                &Tick {
-                    now: Instant::from_micros(at_us),
-                    lateness_us,
-                    sample_age_us: sample_clock.age_us(at_us),
-                    samples: &samples,
-                    rx: rx.get(..received).unwrap_or_default(),
-                    button_down,
-                },
-                &mut step,
-            );
+            let tick = Tick {
+                now: Instant::from_micros(at_us),
+                lateness_us,
+                sample_age_us: sample_clock.age_us(at_us),
+                samples: &samples,
+                button_down,
+            };
+            let step = control.step(&tick, &mut received);
             motors.apply(&step.out.motors);
             if led != Some(step.out.status_led) {
                 led = Some(step.out.status_led);
                 LED.signal(step.out.status_led);
             }
-            if !step.out.tx.is_empty() {
-                if queue_answer(&step.out.tx) {
-                    answer_queued = true;
-                } else {
-                    control.tx_dropped();
-                }
+            if !step.out.tx.is_empty() && !queue_answer(&step.out.tx) {
+                control.tx_dropped();
             }
             if step.button_pressed {
                 log!(info, "button: Middle");
@@ -224,14 +173,14 @@ pub async fn run_control<const N: usize, S: SensorScan<N>, M: Motors<N>>(
                 feed();
             }
             if let Some(stats) = step.report {
-                let now_errors = line_errors_now();
+                let now_errors = received.errors();
                 log_stats(&stats, &now_errors.since(&line_errors));
                 line_errors = now_errors;
             }
-            (
-                step.out.action,
-                received > 0 || sending || !step.out.tx.is_empty() || step.out.phase_began,
-            )
+            if step.save_piece {
+                STEPPED.signal(());
+            }
+            step.out.action
         };
         if let Some(action) = action {
             let mut resetting = Resetting::<M, N> {
@@ -240,10 +189,6 @@ pub async fn run_control<const N: usize, S: SensorScan<N>, M: Motors<N>>(
             };
             control::reset(&mut resetting, action).await;
         }
-        if deferral.piece_due(busy) {
-            STEPPED.signal(());
-        }
-        TICKED.signal(());
         let steps = MMU_CONTROL_STEPS.load(Ordering::Relaxed);
         MMU_CONTROL_STEPS.store(steps.wrapping_add(1), Ordering::Relaxed);
         // A flash write stalled the CPU (or the step overran): the ticks missed are dropped
@@ -261,7 +206,7 @@ pub async fn run_control<const N: usize, S: SensorScan<N>, M: Motors<N>>(
 ///
 /// `with_deadline` polls its `Timer` after every pending poll of `fut`, and each poll registers
 /// the deadline again (`schedule_wake`); the timer queue of embassy-time-queue-utils 0.3 (both
-/// boards' time drivers and the step-cost harness use it) takes a deadline at or before the
+/// boards' time drivers use it) takes a deadline at or before the
 /// task's registered one as a change, so the driver walks the queue and sets its alarm again,
 /// the same alarm, every time. Here the first pending poll registers `deadline`, the later ones
 /// `deadline` + 1 tick: a registration still standing at or before it makes that a no-op in the
@@ -296,18 +241,7 @@ pub fn bounded<F: Future>(
     })
 }
 
-/// `f` on the buffer `shared`, under its lock (never held across an `.await`, so never
-/// borrowed twice: `None` would be a bug, and is treated as a buffer that takes nothing).
-fn with_buffer<const N: usize, R>(
-    shared: &SharedBuffer<N>,
-    f: impl FnOnce(&mut LinkBuffer<N>) -> R,
-) -> Option<R> {
-    shared.lock(|cell| cell.try_borrow_mut().ok().map(|mut buffer| f(&mut buffer)))
-}
-
-/// The control task's first tick after `now_us`: the ticks fall on whole periods of the uptime
-/// (other tasks that look at something every tick wait for [`TICKED`] instead, on no alarm of
-/// their own).
+/// The control task's first tick after `now_us`: the ticks fall on whole periods of the uptime.
 pub fn next_tick_us(now_us: u64) -> u64 {
     let period_us = PERIOD.as_micros();
     (now_us / period_us + 1) * period_us
@@ -322,32 +256,9 @@ fn align(ticker: &mut Ticker, schedule: &TickSchedule) {
     ticker.reset_at(deadline.checked_sub(PERIOD).unwrap_or(deadline));
 }
 
-/// Moves the oldest bytes waiting in [`RX_BUFFER`] into `rx`, as many as wait and fit; returns
-/// how many.
-fn take_received(rx: &mut [u8]) -> usize {
-    with_buffer(&RX_BUFFER, |buffer| buffer.take(rx)).unwrap_or(0)
-}
-
 /// Queues a whole response for the printer, or nothing when it does not fit; true if queued.
-/// The transmit task sends it once [`TX_READY`] is signalled.
 pub fn queue_answer(bytes: &[u8]) -> bool {
-    with_buffer(&TX_BUFFER, |buffer| {
-        buffer.room() >= bytes.len() && buffer.push(bytes) == bytes.len()
-    }) == Some(true)
-}
-
-/// Whether responses wait for the UART.
-fn tx_waiting() -> bool {
-    with_buffer(&TX_BUFFER, |buffer| !buffer.is_empty()).unwrap_or(false)
-}
-
-/// The receive errors so far.
-pub fn line_errors_now() -> LineErrors {
-    LineErrors {
-        overruns: OVERRUNS.load(Ordering::Relaxed),
-        garbled: GARBLED.load(Ordering::Relaxed),
-        dropped: 0,
-    }
+    TX_PIPE.free_capacity() >= bytes.len() && TX_PIPE.try_write(bytes) == Ok(bytes.len())
 }
 
 /// The board's side of a reset ([`control::reset`] fixes the order): motors off, the answer
@@ -363,10 +274,8 @@ impl<M: Motors<N>, const N: usize> ResetBoard for Resetting<'_, M, N> {
     }
 
     async fn flush(&mut self) {
-        // The last step's answer, queued for the next tick, goes now.
-        TX_READY.signal(());
         let sent = async {
-            while tx_waiting() || TX_BUSY.load(Ordering::Relaxed) {
+            while !TX_PIPE.is_empty() || TX_BUSY.load(Ordering::Relaxed) {
                 Timer::after_micros(200).await;
             }
         };
@@ -492,53 +401,15 @@ fn log_restored<const N: usize, F: NorFlash, C: EntryCrc>(_keeper: &Keeper<F, N,
     }
 }
 
-/// The link's receive task: moves what the UART's DMA ring received into [`RX_BUFFER`], waiting
-/// for room when the control task is behind (the ring holds the rest), and counts the receive
-/// errors; `classify` tells what an error of the board's UART counts as.
-pub async fn run_link_rx<R: embedded_io_async::Read>(mut rx: R, classify: fn(&R::Error) -> LineError) -> ! {
-    let mut buf = [0u8; 32];
-    loop {
-        match rx.read(&mut buf).await {
-            Ok(count) => {
-                let mut rest = buf.get(..count).unwrap_or_default();
-                loop {
-                    let pushed = with_buffer(&RX_BUFFER, |buffer| buffer.push(rest)).unwrap_or(0);
-                    rest = rest.get(pushed..).unwrap_or_default();
-                    if rest.is_empty() {
-                        break;
-                    }
-                    // The control task takes a step's worth a period; the UART's ring holds
-                    // what arrives meanwhile.
-                    Timer::after(PERIOD).await;
-                }
-            }
-            Err(e) => {
-                let counter = match classify(&e) {
-                    LineError::Overrun => &OVERRUNS,
-                    LineError::Garbled => &GARBLED,
-                };
-                counter.fetch_add(1, Ordering::Relaxed);
-            }
-        }
-    }
-}
-
-/// The link's transmit task: sends what the control task queued in [`TX_BUFFER`], woken by
-/// [`TX_READY`].
+/// The link's transmit task: sends what the control task queued in [`TX_PIPE`].
 pub async fn run_link_tx<W: embedded_io_async::Write>(mut tx: W) -> ! {
     let mut buf = [0u8; 64];
     loop {
-        TX_READY.wait().await;
-        loop {
-            let count = with_buffer(&TX_BUFFER, |buffer| buffer.take(&mut buf)).unwrap_or(0);
-            if count == 0 {
-                break;
-            }
-            TX_BUSY.store(true, Ordering::Relaxed);
-            // A write error leaves nothing to retry: the printer asks again.
-            let _ = tx.write_all(buf.get(..count).unwrap_or_default()).await;
-            let _ = tx.flush().await;
-        }
+        let count = TX_PIPE.read(&mut buf).await;
+        TX_BUSY.store(true, Ordering::Relaxed);
+        // A write error leaves nothing to retry: the printer asks again.
+        let _ = tx.write_all(buf.get(..count).unwrap_or_default()).await;
+        let _ = tx.flush().await;
         TX_BUSY.store(false, Ordering::Relaxed);
     }
 }

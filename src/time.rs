@@ -17,19 +17,9 @@ impl Instant {
         Instant(ms)
     }
 
-    /// The whole milliseconds in an uptime of `us` microseconds: `us / 1000` without the 64-bit
-    /// division, a library call of about 200 instructions on a core without a divider (two of
-    /// them every control step). The high word is folded into the low one (2³² = 4 294 967 ×
-    /// 1000 + 296) until it is gone, which takes no round at all for the first 71 minutes of
-    /// uptime and at most four after them; the low word takes [`crate::arith::div1000`].
-    pub fn from_micros(us: u64) -> Self {
-        let (mut x, mut ms) = (us, 0u64);
-        while x >> 32 != 0 {
-            let high = x >> 32;
-            ms += high * 4_294_967;
-            x = high * 296 + (x & 0xffff_ffff);
-        }
-        Instant(ms + u64::from(crate::arith::div1000(x as u32)))
+    /// The whole milliseconds in an uptime of `us` microseconds.
+    pub const fn from_micros(us: u64) -> Self {
+        Instant(us / 1000)
     }
 
     /// Milliseconds since the start.
@@ -38,9 +28,6 @@ impl Instant {
     }
 
     /// Milliseconds from `earlier` to `self`, 0 if `earlier` is later.
-    // Inlined: a dozen calls a step, each a call's overhead around four instructions (the
-    // step-cost benchmark: about 100 instructions a millisecond, for about 0.2 KiB of flash).
-    #[inline(always)]
     pub const fn millis_since(self, earlier: Instant) -> u64 {
         self.0.saturating_sub(earlier.0)
     }
@@ -52,38 +39,5 @@ impl Add<u64> for Instant {
     /// `ms` milliseconds later.
     fn add(self, ms: u64) -> Instant {
         Instant(self.0.saturating_add(ms))
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use proptest::prelude::*;
-
-    #[test]
-    fn from_micros_at_the_word_boundaries() {
-        for us in [
-            0,
-            999,
-            1000,
-            u64::from(u32::MAX),
-            u64::from(u32::MAX) + 1,
-            (1 << 32) + 703,
-            (1 << 32) + 704,
-            (1 << 41) - 1,
-            (1 << 41) + 999,
-            u64::MAX - 1000,
-            u64::MAX,
-        ] {
-            assert_eq!(Instant::from_micros(us).as_millis(), us / 1000, "{us}");
-        }
-    }
-
-    proptest! {
-        #[test]
-        fn from_micros_divides_by_1000(us: u64, small in 0u64..1 << 40) {
-            prop_assert_eq!(Instant::from_micros(us).as_millis(), us / 1000);
-            prop_assert_eq!(Instant::from_micros(small).as_millis(), small / 1000);
-        }
     }
 }

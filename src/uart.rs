@@ -1,22 +1,142 @@
 //! The printer UART's receive side as the boards run it: a DMA channel writes every received byte
-//! into a ring in RAM, whatever the CPU does, and the firmware takes them out when it runs.
+//! into a ring in RAM, whatever the CPU does, and the control step takes them out when it runs.
 //!
 //! Why DMA: a flash page erase stalls the CPU (the G071 fetches its code from the flash being
 //! erased, up to 40 ms; the RP2040's flash driver runs with interrupts off while the QSPI flash
 //! erases a 4 KiB sector, up to 400 ms), and an interrupt-driven driver loses every byte past the
 //! USART's own FIFO meanwhile. A DMA transfer needs no CPU, so the ring keeps filling.
 //!
-//! - NUCLEO-G071RB: embassy-stm32's DMA channel in a circular transfer (src/board/g071/uart_ring.rs;
-//!   its own `RingBufferedUartRx` divides once per byte read, too dear on the M0+).
-//! - Pico: embassy-rp 0.10 has no ring-buffered UART receiver, so the board runs one DMA channel
-//!   in ring mode itself (src/board/pico/uart_ring.rs).
-//!
-//! [`DmaRing`] here is both boards' reader (src/board/ring_rx.rs), the part with decisions,
-//! tested below against a model of the DMA.
-//!
-//! The tests also hold the ring sizes to the longest stall of each board
-//! ([`crate::control::G071_DMA_RING`], [`crate::control::PICO_DMA_RING`]): a page erase while the
-//! printer sends without pause loses no byte.
+//! A board says what its DMA has written and what its UART saw go wrong ([`RingSource`]: the
+//! G071's circular transfer in src/board/g071/uart_ring.rs, the Pico's ring-mode channel in
+//! src/board/pico/uart_ring.rs); the simulator models the same ring. [`ReceiveRing`] reads any of
+//! them for the control step ([`crate::control::ControlLoop::step`]), and [`DmaRing`] is its
+//! decisions, tested below against a model of the DMA, which also holds the ring sizes to the
+//! longest stall of each board ([`crate::control::G071_DMA_RING`],
+//! [`crate::control::PICO_DMA_RING`]): a page erase while the printer sends without pause loses
+//! no byte.
+
+/// What a receive error of the printer link counts as.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LineError {
+    /// Bytes lost: the USART overran.
+    Overrun,
+    /// A frame with a framing, noise or parity error (or a break).
+    Garbled,
+}
+
+/// A receive ring a DMA channel fills: what the board's hardware (or the simulator's model of
+/// it) tells.
+pub trait RingSource<const N: usize> {
+    /// Bytes the DMA has written since the start, wrapping.
+    fn written(&mut self) -> u32;
+    /// A receive error of the UART since the last look, if any (cleared by the look).
+    fn line_error(&mut self) -> Option<LineError>;
+    /// The ring's byte `index` (`index < N`), read as the DMA writes it.
+    fn byte(&self, index: usize) -> u8;
+}
+
+/// The bytes the printer sent, waiting in a board's DMA ring for the control step.
+pub struct ReceiveRing<S, const N: usize> {
+    source: S,
+    reader: DmaRing<N>,
+    /// USART overruns and garbled frames seen.
+    line: LineErrors,
+}
+
+impl<S: RingSource<N>, const N: usize> ReceiveRing<S, N> {
+    /// The reader of `source`'s ring, from the DMA's start.
+    pub const fn new(source: S) -> Self {
+        ReceiveRing {
+            source,
+            reader: DmaRing::new(),
+            line: LineErrors {
+                overruns: 0,
+                garbled: 0,
+            },
+        }
+    }
+
+    /// Moves the oldest bytes waiting into `out`, as many as wait and fit; returns how many.
+    pub fn take(&mut self, out: &mut [u8]) -> usize {
+        match self.source.line_error() {
+            Some(LineError::Overrun) => self.line.overruns = self.line.overruns.wrapping_add(1),
+            Some(LineError::Garbled) => self.line.garbled = self.line.garbled.wrapping_add(1),
+            None => {}
+        }
+        let written = self.source.written();
+        let source = &self.source;
+        self.reader.take(written, |i| source.byte(i), out)
+    }
+
+    /// Bytes waiting.
+    pub fn waiting(&mut self) -> usize {
+        let written = self.source.written();
+        self.reader.waiting(written)
+    }
+
+    /// What went wrong on the line since start-up: the USART's overruns plus the bytes the DMA
+    /// overwrote before they were taken, and the garbled frames.
+    pub fn errors(&self) -> LineErrors {
+        LineErrors {
+            overruns: self.line.overruns.wrapping_add(self.reader.lost()),
+            garbled: self.line.garbled,
+        }
+    }
+
+    /// The ring's source (the simulator writes into its model of the DMA through it).
+    pub fn source_mut(&mut self) -> &mut S {
+        &mut self.source
+    }
+}
+
+/// A DMA ring in memory, written as a board's DMA writes its ring: the simulator's and the
+/// tests' receive hardware.
+#[derive(Debug, Clone)]
+pub struct MemoryRing<const N: usize> {
+    ring: [u8; N],
+    written: u32,
+}
+
+impl<const N: usize> MemoryRing<N> {
+    /// An empty ring.
+    pub const fn new() -> Self {
+        MemoryRing {
+            ring: [0; N],
+            written: 0,
+        }
+    }
+
+    /// Bytes that arrived from the line, each written at once (overwriting the oldest when the
+    /// reader is a lap behind, as the DMA does).
+    pub fn receive(&mut self, bytes: &[u8]) {
+        for &byte in bytes {
+            if let Some(slot) = self.ring.get_mut(self.written as usize % N) {
+                *slot = byte;
+            }
+            self.written = self.written.wrapping_add(1);
+        }
+    }
+}
+
+impl<const N: usize> Default for MemoryRing<N> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl<const N: usize> RingSource<N> for MemoryRing<N> {
+    fn written(&mut self) -> u32 {
+        self.written
+    }
+
+    fn line_error(&mut self) -> Option<LineError> {
+        None
+    }
+
+    fn byte(&self, index: usize) -> u8 {
+        self.ring.get(index).copied().unwrap_or(0)
+    }
+}
 
 /// What went wrong on the receive line since start-up: counts that only grow (wrapping), so that
 /// the reader takes differences.
@@ -27,8 +147,6 @@ pub struct LineErrors {
     pub overruns: u32,
     /// Frames with a framing, noise or parity error.
     pub garbled: u32,
-    /// Bytes lost because the control loop's queue was full (the control loop did not take them).
-    pub dropped: u32,
 }
 
 impl LineErrors {
@@ -37,15 +155,12 @@ impl LineErrors {
         LineErrors {
             overruns: self.overruns.wrapping_sub(earlier.overruns),
             garbled: self.garbled.wrapping_sub(earlier.garbled),
-            dropped: self.dropped.wrapping_sub(earlier.dropped),
         }
     }
 
     /// Every byte lost or garbled.
     pub const fn total(&self) -> u32 {
-        self.overruns
-            .wrapping_add(self.garbled)
-            .wrapping_add(self.dropped)
+        self.overruns.wrapping_add(self.garbled)
     }
 }
 
@@ -163,8 +278,7 @@ mod tests {
             }
             let stalled = (stall_at..stall_at + stall_ms).contains(&step);
             if !stalled {
-                // After a stall the link task drains the ring as fast as the control loop's
-                // queue takes it; a step's worth is the slowest it ever goes.
+                // A step's worth each millisecond, also after a stall.
                 let mut out = [0u8; MAX_RX_PER_STEP];
                 let n = reader.take(dma.written, |i| dma.ring[i], &mut out);
                 received.extend_from_slice(&out[..n]);

@@ -166,9 +166,6 @@ pub struct Unit<const N: usize> {
     coasting_revolution_at: [Instant; N],
     /// Per slot: pulled back out of the merge since it was last fed towards the hub.
     pub clear_of_merge: [bool; N],
-    /// The reciprocals of the settings the steps divide by (kept by [`crate::App`] as they
-    /// change).
-    pub divisors: crate::config::SettingDivisors,
 }
 
 impl Default for Hub {
@@ -187,18 +184,13 @@ impl Hub {
 }
 
 impl<const N: usize> Default for Unit<N> {
-    // Out of line: built once, at boot (inlined into the App's construction it took more).
-    #[inline(never)]
     fn default() -> Self {
         Self::NEW
     }
 }
 
 impl<const N: usize> Unit<N> {
-    /// A unit that has seen no sample, every lane unknown. Every byte of it is zero (the enums
-    /// under its `None`s and `Coast`, `Rail` and `Direction`, count from 1), so building it
-    /// clears memory: 14 B of code where building it field by field took 256 B. A field whose
-    /// start is not zero bytes would put a copy of the whole unit (1.3 KiB) in flash instead.
+    /// A unit that has seen no sample, every lane unknown.
     const NEW: Unit<N> = Unit {
         feeders: [Feeder::NEW; N],
         drives: [SlotDrive::NEW; N],
@@ -210,7 +202,6 @@ impl<const N: usize> Unit<N> {
         moved_by_printer: [0; N],
         coasting_revolution_at: [Instant::ZERO; N],
         clear_of_merge: [false; N],
-        divisors: crate::config::SettingDivisors::NEW,
     };
 }
 

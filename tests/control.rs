@@ -5,7 +5,15 @@ use std::cell::RefCell;
 
 use embassy_futures::block_on;
 use mmu_firmware::control::{self, ControlLoop, Debounce, ResetBoard, Tick, feeds_watchdog};
+use mmu_firmware::uart::{MemoryRing, ReceiveRing};
 use mmu_firmware::{App, BoardAction, Instant, Samples};
+
+/// The printer's bytes as the board receives them.
+type Received = ReceiveRing<MemoryRing<64>, 64>;
+
+fn received() -> Received {
+    ReceiveRing::new(MemoryRing::new())
+}
 
 fn at(ms: u64) -> Instant {
     Instant::from_millis(ms)
@@ -39,13 +47,12 @@ fn only_a_step_on_time_with_fresh_samples_feeds_the_watchdog() {
 /// Mid-scale readings: every sensor healthy, no filament anywhere.
 const SAMPLES: Samples<3> = Samples::uniform(2048);
 
-fn tick(now: u64, lateness_us: u64, rx: &[u8]) -> Tick<'_, 3> {
+fn tick(now: u64, lateness_us: u64) -> Tick<'static, 3> {
     Tick {
         now: at(now),
         lateness_us,
         sample_age_us: 0,
         samples: &SAMPLES,
-        rx,
         button_down: false,
     }
 }
@@ -54,9 +61,10 @@ fn tick(now: u64, lateness_us: u64, rx: &[u8]) -> Tick<'_, 3> {
 fn the_loop_counts_late_steps_and_reports_once_a_period() {
     let mut control = ControlLoop::new(App::<3>::default(), at(0));
     let mut reports = Vec::new();
+    let mut received = received();
     for ms in 0..=control::STATS_PERIOD_MS {
         let late = if ms == 10 { 3_000 } else { 0 };
-        let step = control.step(&tick(ms, late, &[]));
+        let step = control.step(&tick(ms, late), &mut received);
         assert_eq!(step.feed_watchdog, late == 0, "step {ms}");
         reports.extend(step.report);
     }
@@ -72,10 +80,12 @@ fn a_reset_request_does_not_feed_the_watchdog() {
     let mut control = ControlLoop::new(App::<3>::default(), at(0));
     // The unit hears nothing during its start-up check (at most about a second); then the
     // line has been quiet: the request is a whole frame.
+    let mut received = received();
     for ms in 1..1500 {
-        control.step(&tick(ms, 0, &[]));
+        control.step(&tick(ms, 0), &mut received);
     }
-    let step = control.step(&tick(1500, 0, b"X0*4c\n"));
+    received.source_mut().receive(b"X0*4c\n");
+    let step = control.step(&tick(1500, 0), &mut received);
     assert_eq!(step.out.action, Some(BoardAction::Reset));
     assert!(!step.feed_watchdog);
 }

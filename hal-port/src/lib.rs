@@ -14,16 +14,14 @@ pub mod tb6612;
 /// Largest raw analog sample: every board scales its ADC readings to 12 bits.
 pub const ADC_MAX: u16 = 4095;
 
-/// Which way a slot motor turns the filament. Counted from 1, so that [`MotorCommand::Coast`]
-/// and `Option::<Direction>::None` are zero bytes: state that starts coasting is built by
-/// clearing memory.
+/// Which way a slot motor turns the filament.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Direction {
     /// Towards the hub and the printer.
-    Forward = 1,
+    Forward,
     /// Back towards the spool.
-    Reverse = 2,
+    Reverse,
 }
 
 /// A PWM duty cycle in per mille (0 = off, 1000 = always on).
@@ -193,13 +191,8 @@ pub struct HubSamples {
 }
 
 /// One sampling round of every analog sensor of a unit with `N` slots.
-///
-/// Word-aligned: a round is copied a few times a millisecond (from the scan to the control task,
-/// into the step), and a copy of 2-byte-aligned bytes is compiler-builtins' byte loop on the
-/// Cortex-M0+ (about 200 instructions for three slots' 18 bytes), of words a few loads and stores.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-#[repr(align(4))]
 pub struct Samples<const N: usize> {
     /// Per slot, in slot order.
     pub slots: [SlotSamples; N],

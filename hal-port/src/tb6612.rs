@@ -411,38 +411,7 @@ where
 /// A driver error: nothing to do about it here (see [`Bridges`]'s `apply`).
 fn ignore<E>(_: Result<(), Error<E, Infallible>>) {}
 
-/// Sets `pwm` to `duty` of its full scale: `permille × max_duty_cycle() / 1000`, the value
-/// [`SetDutyCycle::set_duty_cycle_fraction`]`(permille, 1000)` sets (the trait's own and both
-/// HALs' compute it so), with a multiplication by `⌈2³⁶ / 1000⌉` instead of the division, a
-/// library call of about 140 instructions on the Cortex-M0+, whenever a motor's duty changes.
-/// Exact for every product up to `1000 × u16::MAX` (a [`Duty`] is at most 1000 per mille).
+/// Sets `pwm` to `duty` of its full scale.
 fn set_duty<P: SetDutyCycle>(pwm: &mut P, duty: Duty) -> Result<(), P::Error> {
-    pwm.set_duty_cycle(scale_permille(duty.permille(), pwm.max_duty_cycle()))
-}
-
-/// `permille × max / 1000` for `permille` up to 1000, without a division.
-const fn scale_permille(permille: u16, max: u16) -> u16 {
-    let product = permille as u64 * max as u64;
-    ((product * 68_719_477) >> 36) as u16
-}
-
-#[cfg(test)]
-mod scale_tests {
-    use super::*;
-
-    #[test]
-    fn scale_permille_is_the_division() {
-        for max in (0..=u16::MAX)
-            .step_by(7)
-            .chain([1, 999, 1000, 1001, 3199, 6399, u16::MAX])
-        {
-            for permille in 0..=1000u16 {
-                assert_eq!(
-                    u32::from(scale_permille(permille, max)),
-                    u32::from(permille) * u32::from(max) / 1000,
-                    "{permille} of {max}"
-                );
-            }
-        }
-    }
+    pwm.set_duty_cycle_fraction(duty.permille(), 1000)
 }

@@ -4,11 +4,16 @@
 //! (the benches in `fil/`), wired to the simulated unit and driven by the simulated printer; the
 //! scenarios are the ones the host-built logic passes in `cargo test`
 //! ([`mmu_sim::scenarios`]). Boards run side by side, one thread each. One line per scenario,
-//! then a summary line per board; exit status 1 when one failed.
+//! then a summary line per board and its real-time contract: the busiest millisecond of the
+//! control loop within [`BUSIEST_PERCENT`] of the period (on the Pico not counting those that
+//! program the flash, the documented exception), no erase while a motor was driven, and at most
+//! [`UNCOMMANDED_UM`] of filament moved uncommanded by one step's flash operations at the chip's
+//! longest stalls. Exit status 1 when a scenario failed or the contract did not hold.
 
 use std::error::Error;
 use std::fs::File;
 use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
 use std::thread;
 use std::time::Instant;
 
@@ -16,6 +21,7 @@ use clap::Args;
 use mmu_firmware::Config;
 use mmu_sim::Sim;
 use mmu_sim::firmware::{Board, FirmwareUnit, default_fil_dir};
+use mmu_sim::flash::FlashWear;
 use mmu_sim::scenarios::{SCENARIOS, run_all};
 
 use crate::usage::usage;
@@ -45,6 +51,11 @@ pub struct FilArgs {
     #[arg(long)]
     pub list: bool,
 }
+
+/// The busiest millisecond of the control loop may take this much of the period, %.
+pub const BUSIEST_PERCENT: f64 = 50.0;
+/// The most filament a step's flash operations may move uncommanded, µm.
+pub const UNCOMMANDED_UM: u64 = 1_000;
 
 /// A board by name, for clap.
 pub fn parse_board(name: &str) -> Result<Board, String> {
@@ -123,7 +134,8 @@ pub fn run(args: &FilArgs) -> Result<(), Box<dyn Error>> {
     }
 }
 
-/// Every scenario on `board`'s `image`: its summary line, and whether all passed.
+/// Every scenario on `board`'s `image`: its summary lines, and whether all passed within the
+/// real-time contract.
 fn run_board(board: Board, image: &Path, fil_dir: &Path, log: &Path, only: Option<&str>) -> (String, bool) {
     let log_file = match File::create(log) {
         Ok(file) => file,
@@ -138,11 +150,12 @@ fn run_board(board: Board, image: &Path, fil_dir: &Path, log: &Path, only: Optio
             );
         }
     };
+    let wear = Arc::new(Mutex::new(FlashWear::default()));
     let mut new_unit = |options: mmu_sim::SimOptions| {
         let bench_log = log_file
             .try_clone()
             .map_err(|e| format!("{}: {e}", log.display()))?;
-        let unit = FirmwareUnit::start(board, image, fil_dir, Config::default(), bench_log.into())?;
+        let mut unit = FirmwareUnit::start(board, image, fil_dir, Config::default(), bench_log.into())?;
         if unit.slots() != options.slots {
             return Err(format!(
                 "the image has {} slots, the scenario {}",
@@ -150,11 +163,13 @@ fn run_board(board: Board, image: &Path, fil_dir: &Path, log: &Path, only: Optio
                 options.slots
             ));
         }
+        unit.report_wear(Arc::clone(&wear));
         Ok(Sim::with_unit(options, Box::new(unit)))
     };
     let started = Instant::now();
     let name = board.name();
     let mut loads_seen = 0;
+    let mut busiest = Busiest::default();
     let verdicts = run_all(&mut new_unit, only, &mut |verdict| {
         let took = verdict.took.as_secs_f64();
         // The bench's `load:` line, written when the scenario's unit quit (fil/*/README).
@@ -163,6 +178,9 @@ fn run_board(board: Board, image: &Path, fil_dir: &Path, log: &Path, only: Optio
             .then(|| loads.last().cloned())
             .flatten();
         loads_seen = loads.len();
+        if let Some(load) = &load {
+            busiest.take(load);
+        }
         match &verdict.result {
             Ok(()) => {
                 println!("  ok    {name}: {} ({took:.1} s)", verdict.name);
@@ -179,12 +197,79 @@ fn run_board(board: Board, image: &Path, fil_dir: &Path, log: &Path, only: Optio
         }
     });
     let passed = verdicts.iter().filter(|v| v.result.is_ok()).count();
+    let wear = wear.lock().map(|wear| *wear).unwrap_or_default();
+    let (contract, kept) = contract(board, &busiest, &wear);
     let summary = format!(
-        "firmware-in-the-loop ({name}): {passed}/{} scenarios passed in {:.0} s",
+        "firmware-in-the-loop ({name}): {passed}/{} scenarios passed in {:.0} s\n  {contract}",
         verdicts.len(),
         started.elapsed().as_secs_f64()
     );
-    (summary, passed == verdicts.len())
+    (summary, passed == verdicts.len() && kept)
+}
+
+/// The busiest milliseconds of the control loop over the scenarios, % of the period.
+#[derive(Debug, Default, Clone, Copy, PartialEq)]
+struct Busiest {
+    /// Without a flash operation.
+    plain: Option<f64>,
+    /// With one.
+    writing: Option<f64>,
+}
+
+impl Busiest {
+    /// Takes a bench's `load:` line: `... busiest N (P % ...` for the milliseconds without a
+    /// flash write, then `; K ms with one, busiest N (P %)` when there were such.
+    fn take(&mut self, load: &str) {
+        let (plain, writing) = load.split_once(" ms with one,").unwrap_or((load, ""));
+        let most = |a: Option<f64>, b: Option<f64>| match (a, b) {
+            (Some(a), Some(b)) => Some(a.max(b)),
+            (a, b) => a.or(b),
+        };
+        self.plain = most(self.plain, busiest_percent(plain));
+        self.writing = most(self.writing, busiest_percent(writing));
+    }
+}
+
+/// The percentage after the last `busiest N (` of `text`.
+fn busiest_percent(text: &str) -> Option<f64> {
+    let after = &text[text.rfind("busiest ")? + "busiest ".len()..];
+    let inside = &after[after.find('(')? + 1..];
+    inside[..inside.find(" %")?].trim().parse().ok()
+}
+
+/// The real-time contract's line for `board` and whether it held (see the module header).
+fn contract(board: Board, busiest: &Busiest, wear: &FlashWear) -> (String, bool) {
+    let percent = |p: Option<f64>| p.map_or_else(|| String::from("-"), |p| format!("{p:.1} %"));
+    // The Pico's milliseconds that program its flash run the boot ROM with interrupts off: the
+    // contract's one exception, bounded by the flash's program time instead.
+    let counted = match board {
+        Board::G071 => [busiest.plain, busiest.writing],
+        Board::Pico => [busiest.plain, None],
+    };
+    let within = counted.iter().flatten().all(|&p| p <= BUSIEST_PERCENT) && busiest.plain.is_some();
+    let uncommanded_ok = wear.erases_while_driven == 0 && wear.most_uncommanded_um <= UNCOMMANDED_UM;
+    let line = format!(
+        "contract: busiest control millisecond {} without a flash operation, {} with one \
+         (bound {BUSIEST_PERCENT:.0} %{}); {} erases, {} while a motor was driven; most filament \
+         a flash operation could move uncommanded {:.3} mm (bound {:.1} mm): {}",
+        percent(busiest.plain),
+        percent(busiest.writing),
+        if board == Board::Pico {
+            ", not counting a flash program"
+        } else {
+            ""
+        },
+        wear.erases,
+        wear.erases_while_driven,
+        wear.most_uncommanded_um as f64 / 1000.0,
+        UNCOMMANDED_UM as f64 / 1000.0,
+        if within && uncommanded_ok {
+            "kept"
+        } else {
+            "BROKEN"
+        }
+    );
+    (line, within && uncommanded_ok)
 }
 
 /// The `load:` lines of the bench log at `path`: what each scenario's milliseconds cost the
@@ -205,4 +290,83 @@ fn last_lines(path: &Path, n: usize) -> Vec<String> {
         .iter()
         .map(|l| l.to_string())
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const G071_LOAD: &str = "load: 5123 ms without a flash write, instructions a millisecond: median 4516 (15.5 %), \
+        99 % 5722 (19.7 %), 99.9 % 6000 (20.6 %), busiest 7250 (24.9 % of 1 ms at 64 MHz, 2.2 cycles an \
+        instruction) at 1234 ms, 12 bytes received; 40 ms with one, busiest 6865 (23.6 %) at 999 ms";
+    const PICO_LOAD: &str = "load: 5000 ms without a flash write, cycles a millisecond: median 23235 (18.6 %, \
+        14107 instructions), 99 % 26000 (20.8 %, 15000 instructions), 99.9 % 27000 (21.6 %, 16000 \
+        instructions), busiest 60000 (51.2 % of 1 ms at 125 MHz, 17573 instructions) at 88 ms, 0 bytes \
+        received; 12 ms with one, busiest 74120 (59.3 %) at 77 ms";
+
+    #[test]
+    fn the_busiest_milliseconds_are_read_from_both_benches_load_lines() {
+        let mut busiest = Busiest::default();
+        busiest.take(G071_LOAD);
+        assert_eq!((busiest.plain, busiest.writing), (Some(24.9), Some(23.6)));
+        busiest.take("load: 10 ms without a flash write, ... busiest 8112 (27.9 % of 1 ms) at 5 ms");
+        assert_eq!((busiest.plain, busiest.writing), (Some(27.9), Some(23.6)));
+        let mut pico = Busiest::default();
+        pico.take(PICO_LOAD);
+        assert_eq!((pico.plain, pico.writing), (Some(51.2), Some(59.3)));
+    }
+
+    #[test]
+    fn the_contract_breaks_on_a_busy_millisecond_an_erase_under_motion_or_too_much_motion() {
+        let wear = FlashWear {
+            erases: 3,
+            most_uncommanded_um: 450,
+            ..FlashWear::default()
+        };
+        let within = Busiest {
+            plain: Some(24.9),
+            writing: Some(23.6),
+        };
+        assert!(contract(Board::G071, &within, &wear).1);
+        let (line, kept) = contract(
+            Board::G071,
+            &Busiest {
+                writing: Some(50.1),
+                ..within
+            },
+            &wear,
+        );
+        assert!(!kept && line.ends_with("BROKEN"), "{line}");
+        // The Pico's flash programs are the exception; its other milliseconds are not.
+        let programming = Busiest {
+            plain: Some(22.0),
+            writing: Some(59.3),
+        };
+        assert!(contract(Board::Pico, &programming, &wear).1);
+        assert!(
+            !contract(
+                Board::Pico,
+                &Busiest {
+                    plain: Some(51.2),
+                    ..programming
+                },
+                &wear
+            )
+            .1
+        );
+        let driven = FlashWear {
+            erases_while_driven: 1,
+            ..wear
+        };
+        assert!(!contract(Board::G071, &within, &driven).1);
+        let moved = FlashWear {
+            most_uncommanded_um: 1_001,
+            ..wear
+        };
+        assert!(!contract(Board::G071, &within, &moved).1);
+        assert!(
+            !contract(Board::G071, &Busiest::default(), &wear).1,
+            "nothing measured"
+        );
+    }
 }

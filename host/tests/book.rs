@@ -343,7 +343,6 @@ const COMMANDS: &[(&str, Check)] = &[
     ),
     ("mdbook build book", Check::InCi),
     // Firmware and contributors.
-    ("bash scripts/step-cost.sh", Check::InCi),
     ("npm ci --prefix fil/pico", Check::InCi),
     ("bash scripts/build-firmware.sh g071 dist", Check::InCi),
     ("bash scripts/build-firmware.sh pico dist", Check::InCi),

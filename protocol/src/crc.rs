@@ -1,9 +1,7 @@
 //! The protocol's CRC-8: polynomial 0x07, initial value 0, no reflection, no final XOR
 //! (the CRC-8/SMBUS catalogue entry), computed over the binary form of a message, never its text.
 //!
-//! The `crc` crate's, with its 256-byte table: one lookup a byte. A nibble table of 16 bytes
-//! took two, and a request and its answer (11 bytes) cost about 75 instructions more in the
-//! busiest millisecond on the Cortex-M0+ (`bash scripts/step-cost.sh`).
+//! The `crc` crate's, with its 256-byte table.
 
 use crc::{CRC_8_SMBUS, Crc, Table};
 

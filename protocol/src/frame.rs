@@ -34,8 +34,6 @@ impl Frame {
         core::str::from_utf8(text).unwrap_or("")
     }
 
-    // Out of line: every byte of every encoder, one copy.
-    #[inline(never)]
     pub(crate) fn push(&mut self, byte: u8) {
         // Every frame the encoders build fits; a longer one would be a bug, so it is cut, not a panic.
         if let Some(slot) = self.bytes.get_mut(self.len) {
@@ -46,9 +44,7 @@ impl Frame {
 
     /// Lowercase hex without leading zeros (`0` for zero).
     pub(crate) fn push_hex(&mut self, value: u16) {
-        // The digits written from the last, straight into the buffer: a frame's few numbers
-        // are most of its encoding's instructions (a call per digit and a test per nibble
-        // before).
+        // The digits written from the last, straight into the buffer.
         let digits = match value {
             0x1000.. => 4,
             0x100.. => 3,

@@ -12,13 +12,14 @@ use std::fmt::Write as _;
 use std::io::{BufRead, BufReader, Write};
 use std::path::{Path, PathBuf};
 use std::process::{Child, ChildStdin, ChildStdout, Command, Stdio};
+use std::sync::{Arc, Mutex};
 
 use mmu_firmware::runner::Status;
 use mmu_firmware::{BoardAction, Config, Direction, Duty, Instant, MotorCommand};
 use mmu_model::Model;
 use mmu_protocol::{ButtonCode, ErrorCode, ParamCode, ProgressCode, RequestCode, ResponseDecoder};
 
-use crate::flash::FlashWear;
+use crate::flash::{FlashWear, G0_ERASE_STALL_US, G0_PROGRAM_STALL_US, uncommanded_um};
 use crate::logic::UnitLogic;
 
 /// A board whose firmware image a bench can run.
@@ -52,6 +53,16 @@ impl Board {
         match self {
             Board::G071 => 8,
             Board::Pico => 256,
+        }
+    }
+
+    /// The longest the board's flash stalls its CPU for one erase and for one program, µs: the
+    /// G071's page erase and double-word program, the Pico's W25Q16JV sector erase and page
+    /// program (datasheet maxima: 400 ms, and 3 ms plus embassy-rp's driver with interrupts off).
+    pub const fn stall_us(self) -> (u64, u64) {
+        match self {
+            Board::G071 => (G0_ERASE_STALL_US, G0_PROGRAM_STALL_US),
+            Board::Pico => (400_000, 3_400),
         }
     }
 
@@ -93,6 +104,12 @@ pub struct FirmwareUnit {
     resets: u64,
     erases: u64,
     programs: u64,
+    /// Erases in steps that ended with a motor driven ([`FlashWear::erases_while_driven`]).
+    erases_while_driven: u64,
+    /// [`FlashWear::most_uncommanded_um`] at the board's longest stalls.
+    most_uncommanded_um: u64,
+    /// Where the unit's flash wear goes when it is dropped ([`FirmwareUnit::report_wear`]).
+    wear_sink: Option<Arc<Mutex<FlashWear>>>,
     failure: Option<String>,
     line: String,
 }
@@ -130,6 +147,9 @@ impl FirmwareUnit {
             resets: 0,
             erases: 0,
             programs: 0,
+            erases_while_driven: 0,
+            most_uncommanded_um: 0,
+            wear_sink: None,
             failure: None,
             line: String::new(),
         };
@@ -142,6 +162,11 @@ impl FirmwareUnit {
         }
         unit.motors = vec![MotorCommand::Coast; unit.slots];
         Ok(unit)
+    }
+
+    /// Add this unit's flash wear to `sink` when it is dropped (at the end of a scenario).
+    pub fn report_wear(&mut self, sink: Arc<Mutex<FlashWear>>) {
+        self.wear_sink = Some(sink);
     }
 
     /// Slots of the board the image runs on.
@@ -204,8 +229,21 @@ impl FirmwareUnit {
             self.wire = WireWatch::default();
         }
         self.resets = resets;
-        self.erases = number(counts[2])?;
-        self.programs = number(counts[3])?;
+        let erases = number(counts[2])?;
+        let programs = number(counts[3])?;
+        // The image writes its flash after a step, with the motors as that step left them.
+        let (new_erases, new_programs) = (
+            erases.saturating_sub(self.erases),
+            programs.saturating_sub(self.programs),
+        );
+        if self.motors.iter().any(|motor| motor.is_driving()) {
+            self.erases_while_driven += new_erases;
+        }
+        let (erase_us, program_us) = self.board.stall_us();
+        let stall_us = new_erases * erase_us + new_programs * program_us;
+        let motion = uncommanded_um(&self.motors, self.config.full_duty_speed, stall_us);
+        self.most_uncommanded_um = self.most_uncommanded_um.max(motion);
+        (self.erases, self.programs) = (erases, programs);
         self.wire.watch(&sent);
         tx.extend_from_slice(&sent);
         Ok(())
@@ -215,6 +253,11 @@ impl FirmwareUnit {
 impl Drop for FirmwareUnit {
     /// `quit`, and a bench that has not ended a second later is killed.
     fn drop(&mut self) {
+        if let Some(sink) = self.wear_sink.take()
+            && let Ok(mut total) = sink.lock()
+        {
+            *total = total.combined(self.flash_wear());
+        }
         let _ = writeln!(self.to_bench, "quit").and_then(|()| self.to_bench.flush());
         for _ in 0..100 {
             if !matches!(self.child.try_wait(), Ok(None)) {
@@ -292,6 +335,8 @@ impl UnitLogic for FirmwareUnit {
             bytes_written: self.programs * self.board.program_bytes(),
             erases: self.erases,
             max_page_erases: self.erases,
+            erases_while_driven: self.erases_while_driven,
+            most_uncommanded_um: self.most_uncommanded_um,
         }
     }
 

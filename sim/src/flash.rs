@@ -18,6 +18,25 @@ use mmu_model::Rng;
 pub const WRITE_SIZE: usize = 8;
 /// Page size of the STM32G0, bytes.
 pub const G0_PAGE: usize = 2048;
+/// The longest a page erase stalls the STM32G071's CPU, µs (datasheet: 40 ms at most).
+pub const G0_ERASE_STALL_US: u64 = 40_000;
+/// The longest a double-word program stalls it, µs (datasheet: 125 µs at most).
+pub const G0_PROGRAM_STALL_US: u64 = 125;
+
+/// The filament the fastest of `motors` moves while the CPU stalls `stall_us` with them running
+/// on, µm: a driven motor's duty at `full_duty_speed` mm/s for the whole duty.
+pub fn uncommanded_um(motors: &[mmu_firmware::MotorCommand], full_duty_speed: u16, stall_us: u64) -> u64 {
+    let fastest_permille = motors
+        .iter()
+        .filter_map(|motor| match motor {
+            mmu_firmware::MotorCommand::Drive { duty, .. } => Some(u64::from(duty.permille())),
+            _ => None,
+        })
+        .max()
+        .unwrap_or(0);
+    // mm/s × µs = 10⁻³ µm.
+    fastest_permille * u64::from(full_duty_speed) * stall_us / 1_000_000
+}
 
 /// Why an operation failed.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -68,6 +87,12 @@ pub struct FlashWear {
     pub erases: u64,
     /// The most erases one page has seen.
     pub max_page_erases: u64,
+    /// Page erases while a motor was driven: each would have stalled the CPU with the motor
+    /// running on, moving filament nobody commanded. Counted by the simulated unit.
+    pub erases_while_driven: u64,
+    /// The most filament one step's flash operations could have moved uncommanded at the
+    /// chip's longest stall ([`uncommanded_um`]), µm.
+    pub most_uncommanded_um: u64,
 }
 
 impl FlashWear {
@@ -77,6 +102,8 @@ impl FlashWear {
             bytes_written: self.bytes_written + other.bytes_written,
             erases: self.erases + other.erases,
             max_page_erases: self.max_page_erases.max(other.max_page_erases),
+            erases_while_driven: self.erases_while_driven + other.erases_while_driven,
+            most_uncommanded_um: self.most_uncommanded_um.max(other.most_uncommanded_um),
         }
     }
 }
@@ -165,6 +192,8 @@ impl<const PAGE: usize> MemFlash<PAGE> {
             bytes_written: self.bytes_written,
             erases: self.erases.iter().sum(),
             max_page_erases: self.max_erases(),
+            erases_while_driven: 0,
+            most_uncommanded_um: 0,
         }
     }
 

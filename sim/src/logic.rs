@@ -5,18 +5,20 @@
 //! [`Store`] that [`new_logic`] builds for any supported count. The flash outlives the logic: a
 //! restart takes it back with [`UnitLogic::take_flash`] and boots a new logic on it.
 //!
-//! Received bytes reach the App as they reach it on the board: they wait in a receive ring of
-//! [`RX_RING`] bytes (what finds it full is lost, as in a UART overrun) and each step
-//! takes at most [`MAX_RX_PER_STEP`](mmu_firmware::control::MAX_RX_PER_STEP) of them ([`RxQueue`]).
+//! Each step is the firmware's control step ([`ControlLoop::step`]), run as the board's control
+//! task runs it: received bytes wait in a model of the NUCLEO-G071RB's DMA ring
+//! ([`MemoryRing`] of [`G071_DMA_RING`] bytes: what laps the reader is lost, as on the board),
+//! the step takes its share, and a save piece runs after the steps the control step says.
 
-use mmu_firmware::control::{RX_RING, RxQueue};
+use mmu_firmware::control::{ControlLoop, G071_DMA_RING, Tick};
 use mmu_firmware::persist::{Keeper, Store};
 use mmu_firmware::runner::Status;
+use mmu_firmware::uart::{MemoryRing, ReceiveRing};
 use mmu_firmware::{App, BoardAction, Config, Instant, MAX_SLOTS, MotorCommand};
 use mmu_model::Model;
 use mmu_protocol::{ButtonCode, RequestCode};
 
-use crate::flash::{FlashWear, G0_PAGE, MemFlash};
+use crate::flash::{FlashWear, G0_ERASE_STALL_US, G0_PAGE, G0_PROGRAM_STALL_US, MemFlash, uncommanded_um};
 
 /// The simulated unit's flash for persisted state: 16 pages of the STM32G0 (32 KiB).
 pub type UnitFlash = MemFlash<G0_PAGE>;
@@ -80,16 +82,21 @@ pub trait UnitLogic: Send {
 /// the NUCLEO-G071RB's `WATCHDOG_TIMEOUT_US` (the Pico's is the same).
 pub const WATCHDOG_MS: u32 = 100;
 
-/// An App with its store, kept by the firmware's own policy ([`Keeper`]).
+/// An App in the firmware's control loop, with its store kept by the firmware's own policy
+/// ([`Keeper`]).
 struct PersistentApp<const N: usize> {
-    app: App<N>,
+    control: ControlLoop<N>,
     keeper: Keeper<UnitFlash, N>,
     motors: [MotorCommand; N],
-    received: RxQueue<RX_RING>,
+    received: ReceiveRing<MemoryRing<G071_DMA_RING>, G071_DMA_RING>,
     /// Since the loop hung, ms; `None` while it runs.
     hung_ms: Option<u32>,
     /// What it booted with: a watchdog reset boots with it again.
     boot_config: Config,
+    /// Page erases after a step that drove a motor, over every boot.
+    erases_while_driven: u64,
+    /// [`FlashWear::most_uncommanded_um`], over every boot.
+    most_uncommanded_um: u64,
 }
 
 impl<const N: usize> PersistentApp<N> {
@@ -100,19 +107,23 @@ impl<const N: usize> PersistentApp<N> {
         let mut app = App::new(config.clone());
         let (keeper, _) = Keeper::boot(store, &mut app);
         PersistentApp {
-            app,
+            control: ControlLoop::new(app, Instant::ZERO),
             keeper,
             motors: mmu_firmware::drive::stopped(),
-            received: RxQueue::new(),
+            received: ReceiveRing::new(MemoryRing::new()),
             hung_ms: None,
             boot_config: config,
+            erases_while_driven: 0,
+            most_uncommanded_um: 0,
         }
     }
 
     /// The flash goes to a fresh App booted on it; this one is left with a blank store.
     fn reboot(&mut self, config: Config) {
         let flash = std::mem::replace(self.keeper.store().flash(), blank_flash());
+        let (erases, motion) = (self.erases_while_driven, self.most_uncommanded_um);
         *self = PersistentApp::boot(config, flash);
+        (self.erases_while_driven, self.most_uncommanded_um) = (erases, motion);
     }
 }
 
@@ -135,39 +146,54 @@ impl<const N: usize> UnitLogic for PersistentApp<N> {
             return None;
         }
         let samples = model.samples::<N>();
-        self.received.receive(rx);
-        let taken = self.received.take_step();
-        let out = self.app.step(now, &samples, &taken);
-        tx.extend_from_slice(&out.tx);
-        // As the firmware's control loop: no save piece after a step busy with the printer (up
-        // to `persist::MAX_DEFERRED_STEPS` in a row). A failed write leaves the old record; the
-        // keeper tries again.
-        let busy = !taken.is_empty() || !out.tx.is_empty();
-        let _ = match out.action {
-            None => self.keeper.update_after(&self.app, now, busy).map(drop),
-            Some(action) => self.keeper.before(action, &self.app),
+        self.received.source_mut().receive(rx);
+        let tick = Tick {
+            now,
+            lateness_us: 0,
+            sample_age_us: 0,
+            samples: &samples,
+            button_down: false,
         };
-        let motors = if out.action.is_some() {
+        let step = self.control.step(&tick, &mut self.received);
+        tx.extend_from_slice(&step.out.tx);
+        // A failed write leaves the old record; the keeper tries again.
+        let app = self.control.app();
+        let before = self.keeper.store().flash().wear();
+        let _ = match step.out.action {
+            Some(action) => self.keeper.before(action, app),
+            None if step.save_piece => self.keeper.update(app, now).map(drop),
+            None => Ok(()),
+        };
+        let motors = if step.out.action.is_some() {
             [MotorCommand::Coast; N]
         } else {
-            out.motors
+            step.out.motors
         };
+        let after = self.keeper.store().flash().wear();
+        let erases = after.erases - before.erases;
+        let programs = (after.bytes_written - before.bytes_written) / 8;
+        if motors.iter().any(|motor| motor.is_driving()) {
+            self.erases_while_driven += erases;
+        }
+        let stall_us = erases * G0_ERASE_STALL_US + programs * G0_PROGRAM_STALL_US;
+        let motion = uncommanded_um(&motors, self.control.app().config().full_duty_speed, stall_us);
+        self.most_uncommanded_um = self.most_uncommanded_um.max(motion);
         model.step(dt_ms, &motors);
         self.motors = motors;
-        out.action
+        step.out.action
     }
 
     fn command(&self) -> ((RequestCode, u8), Status) {
-        let operation = self.app.operation();
+        let operation = self.control.app().operation();
         (operation.request, operation.status())
     }
 
     fn press_button(&mut self, button: ButtonCode) {
-        self.app.press_button(button);
+        self.control.app_mut().press_button(button);
     }
 
     fn config(&self) -> &Config {
-        self.app.config()
+        self.control.app().config()
     }
 
     fn power_on(&mut self, config: &Config) {
@@ -179,7 +205,11 @@ impl<const N: usize> UnitLogic for PersistentApp<N> {
     }
 
     fn flash_wear(&mut self) -> FlashWear {
-        self.keeper.store().flash().wear()
+        FlashWear {
+            erases_while_driven: self.erases_while_driven,
+            most_uncommanded_um: self.most_uncommanded_um,
+            ..self.keeper.store().flash().wear()
+        }
     }
 
     fn motors(&self) -> Vec<MotorCommand> {

@@ -1,8 +1,9 @@
 //! The simulated unit takes received bytes as the board does: at most
-//! `control::MAX_RX_PER_STEP` a step, the rest waiting in a ring of `control::RX_RING`, so what
-//! the simulator shows of a burst is what the firmware does with it.
+//! `control::MAX_RX_PER_STEP` a step, the rest waiting in the NUCLEO-G071RB's DMA ring of
+//! `control::G071_DMA_RING` bytes, so what the simulator shows of a burst is what the firmware
+//! does with it.
 
-use mmu_firmware::control::{MAX_RX_PER_STEP, RX_RING};
+use mmu_firmware::control::{G071_DMA_RING as RX_RING, MAX_RX_PER_STEP};
 use mmu_protocol::{Request, RequestCode, ResponseDecoder};
 use mmu_sim::{Sim, SimOptions};
 
@@ -67,7 +68,7 @@ fn a_burst_of_requests_is_answered_over_several_steps_as_on_the_board() {
 }
 
 #[test]
-fn bytes_beyond_the_receive_ring_are_lost_as_in_a_uart_overrun() {
+fn bytes_that_lap_the_receive_ring_are_lost_as_on_the_board() {
     let mut sim = listening_unit();
     // Twice what the ring holds, in one millisecond: no printer sends this.
     let count = 2 * RX_RING / 6;
@@ -78,7 +79,7 @@ fn bytes_beyond_the_receive_ring_are_lost_as_in_a_uart_overrun() {
     assert!(answered < count, "some lost: {answered} of {count} answered");
     assert!(
         answered >= RX_RING / 6 - 1,
-        "what the ring held is answered: {answered}"
+        "what the ring held last is answered: {answered}"
     );
     // The unit still answers afterwards.
     let per_step = answers_per_step(&mut sim, &[Request::new(RequestCode::Query, 0)]);

@@ -12,8 +12,6 @@ use crate::config::Config;
 use crate::phases::Phase;
 
 /// Feed `slot`'s filament from before the hub (at most `hub_search_mm` away) into the extruder.
-// Out of line: smaller in flash (measured with scripts/firmware-size.sh).
-#[inline(never)]
 pub const fn phases(slot: usize, hub_search_mm: u16) -> [Phase; 4] {
     [
         Phase::FeedToHub {

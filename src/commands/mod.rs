@@ -158,8 +158,6 @@ const MOTION: &[Recovery] = &[
 
 impl Command {
     /// The command a request starts, if it is one.
-    // Out of line: smaller in flash (measured with scripts/firmware-size.sh).
-    #[inline(never)]
     pub const fn of(code: RequestCode) -> Option<Command> {
         Some(match code {
             RequestCode::Tool => Command::ToolChange,

@@ -21,7 +21,6 @@ pub use figures::{LaneFigures, WINDOW, roll, roll_signed};
 
 use mmu_protocol::{ErrorCode, RequestCode};
 
-use crate::arith::{BY_100, BY_1000, centi_to_mm};
 use crate::config::Config;
 use crate::drive::millis_u32;
 use crate::feeder::distance_centi;
@@ -98,10 +97,7 @@ impl<const N: usize> Default for Ledger<N> {
 
 /// The whole metres of `used_centi` (none below 0).
 fn used_m(used_centi: i32) -> u16 {
-    // By 100, then by 1000: 100 000 has no exact 32-bit reciprocal (`crate::arith`).
-    BY_1000
-        .divide(BY_100.divide(used_centi.max(0).unsigned_abs()))
-        .min(u32::from(u16::MAX)) as u16
+    (used_centi.max(0).unsigned_abs() / 100_000).min(u32::from(u16::MAX)) as u16
 }
 
 /// The warning bits of register 0x5e: bit k, slot k's last load distance drifted (`drifted`);
@@ -120,7 +116,7 @@ pub fn warnings(drifted: u8, used_centi: &[i32], spool_m: &[u16]) -> u16 {
 /// Filament left of a spool of `spool_m` metres once `used_centi` left it, mm (never below 0).
 pub fn left_mm(spool_m: u16, used_centi: i32) -> u32 {
     // At most 65.5 km less 21.5 km or more: no overflow in 32 bits.
-    let left = i32::from(spool_m) * 1000 - centi_to_mm(used_centi);
+    let left = i32::from(spool_m) * 1000 - used_centi / 100;
     left.max(0) as u32
 }
 
@@ -209,9 +205,7 @@ impl<const N: usize> Ledger<N> {
             self.lanes_seen(&unit.lanes, figures);
         }
         let driving = driving.filter(|&slot| slot < N);
-        // A move that ended in the last step is folded first: the step that ends a move usually
-        // starts the next phase, whose budget divides too (a fold divides twice; the step-cost
-        // benchmark's busiest millisecond had both).
+        // A move that ended in the last step is folded first.
         if self.ended != 0 {
             for (slot, (tally, lane)) in self.motions.iter_mut().zip(figures.iter_mut()).enumerate() {
                 if self.ended & (1 << slot) != 0 {
@@ -269,7 +263,7 @@ impl<const N: usize> Ledger<N> {
         let Some(at_hub) = change.at_hub_centi.take() else {
             return;
         };
-        let Ok(mm) = u16::try_from(centi_to_mm(distance_centi(at_hub, odometry))) else {
+        let Ok(mm) = u16::try_from(distance_centi(at_hub, odometry) / 100) else {
             return;
         };
         let Some(lane) = figures.get_mut(change.slot) else {
@@ -349,9 +343,7 @@ impl<const N: usize> Ledger<N> {
                 {
                     lane.record_outcome(change.clean);
                     if change.clean {
-                        // Tenths of a second, by the reciprocal (a 64-bit division is a
-                        // library call of a few hundred instructions on the Cortex-M0+).
-                        let ds = BY_100.divide(millis_u32(now.millis_since(change.started)));
+                        let ds = millis_u32(now.millis_since(change.started)) / 100;
                         lane.load_ds = roll(lane.load_ds, ds.min(u32::from(u16::MAX)) as u16);
                     }
                 }

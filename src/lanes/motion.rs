@@ -63,7 +63,6 @@ impl MotionTally {
 
     /// The move ended (or none runs): fold what it did into `lane`, and start again.
     pub(super) fn fold(&mut self, lane: &mut LaneFigures, config: &Config) {
-        // In 32 bits: a 64-bit division costs a few hundred instructions on the Cortex-M0+.
         let mut tally = core::mem::take(self);
         let (mut commanded, mut counted) = (tally.commanded_mm_ms / 10, tally.counted_centi);
         if commanded >= MIN_COMMANDED_CENTI {

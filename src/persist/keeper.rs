@@ -6,12 +6,8 @@
 //! any hour stay under [`ERASE_BURST`] + [`ERASES_PER_HOUR`] whatever happens (each erase stalls
 //! the CPU up to 40 ms on the STM32G0); a unit starts with only [`ERASES_AT_BOOT`] of them, so
 //! that a reset loop cannot renew the budget at every boot. Each call of [`Keeper::update`] does
-//! one bounded piece of a save (at most 2 double words programmed or one page erased). [`Keeper::update_after`]
-//! runs none after a step that was busy with the printer, so that a step and the piece after it
-//! fit a quarter of the 1 ms period together; after [`MAX_DEFERRED_STEPS`] busy steps in a row
-//! it runs one anyway (a save must end): only a printer that sends without a pause for 8 ms
-//! (Prusa's waits for each answer) makes that millisecond the costliest step plus the costliest
-//! piece (README, "Step cost on the MCU").
+//! one bounded piece of a save (at most 2 double words programmed or one page erased); the
+//! control step says after which steps a piece runs ([`crate::control::Deferral`]).
 
 use embedded_storage::nor_flash::NorFlash;
 
@@ -41,33 +37,6 @@ const ERASES_BEFORE_RESET: u32 = 2;
 /// erases at most this many pages plus one per minute it runs, whatever the loop (and two more
 /// when it ends on the printer's `X0` or `X42`: a reset's save may always move its pages).
 pub const ERASES_AT_BOOT: u32 = 2;
-/// Busy steps in a row after which [`Keeper::update_after`] does its piece anyway: a printer
-/// that never pauses delays a save by at most this many steps, ms, per piece.
-pub const MAX_DEFERRED_STEPS: u8 = 8;
-
-/// Busy steps in a row without a save piece: whether a step's piece runs ([`MAX_DEFERRED_STEPS`]).
-/// [`Keeper::update_after`] counts with one; the control task (src/tasks.rs) with its own, so that
-/// it wakes the store task only for a piece that runs (a wake that only counted cost the busiest
-/// millisecond about 250 instructions of executor glue on the M0+).
-#[derive(Debug, Default, Clone, Copy)]
-pub struct Deferral {
-    deferred: u8,
-}
-
-impl Deferral {
-    /// After a step that was `busy` (with the printer, or beginning a phase: the costliest
-    /// steps): true when a save piece runs after it (not busy, or [`MAX_DEFERRED_STEPS`] busy
-    /// steps in a row went without one).
-    pub fn piece_due(&mut self, busy: bool) -> bool {
-        if busy && self.deferred < MAX_DEFERRED_STEPS {
-            self.deferred += 1;
-            return false;
-        }
-        self.deferred = 0;
-        true
-    }
-}
-
 /// What [`Keeper::boot`] found in the flash.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Boot {
@@ -105,8 +74,6 @@ pub struct Keeper<F: NorFlash, const N: usize, C: EntryCrc = SoftwareCrc> {
     defaults: Defaults,
     /// The comparison of the settings in progress, a register per call.
     scan: Option<Scan>,
-    /// Busy steps in a row after which no piece ran.
-    deferred: Deferral,
     /// When counters and settings were last compared.
     checked_at: Option<Instant>,
     /// Erases allowed now, and when the budget was last topped up.
@@ -139,7 +106,6 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Keeper<F, N, C> {
             settings_seen: None,
             defaults,
             scan: None,
-            deferred: Deferral::default(),
             checked_at: None,
             // Not a full burst: see ERASES_AT_BOOT.
             erase_credit: ERASES_AT_BOOT,
@@ -166,18 +132,10 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Keeper<F, N, C> {
     /// (the flash stalled the CPU); a failed save leaves the previous records and is tried again
     /// after a pause (1 s, doubling up to [`RETRY_MAX_MS`]).
     pub fn update(&mut self, app: &App<N>, now: Instant) -> Result<bool, StoreError> {
-        self.update_after(app, now, false)
-    }
-
-    /// [`Keeper::update`] after a step that was `busy` with the printer (it took received bytes
-    /// or answered): such a step leaves too little of the millisecond for a save piece, so none
-    /// runs after it, unless [`MAX_DEFERRED_STEPS`] busy steps in a row went without one. So a
-    /// printer that never pauses delays each piece by at most that many steps.
-    pub fn update_after(&mut self, app: &App<N>, now: Instant, busy: bool) -> Result<bool, StoreError> {
-        if !self.deferred.piece_due(busy) {
-            return Ok(false);
-        }
         self.top_up(now);
+        // A motor the step drives keeps its duty through an erase's stall: none now.
+        let resting = !app.motors_driven();
+        self.store.hold_erases(!resting);
         if self.store.is_saving() {
             return self.advance(now);
         }
@@ -192,7 +150,11 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Keeper<F, N, C> {
                     .checked_at
                     .is_none_or(|at| now.millis_since(at) >= FULL_CHECK_MS));
         if lanes == self.lanes && !full_check && self.scan.is_none() {
-            return Ok(false);
+            return if resting {
+                self.prepare_fresh_page(now)
+            } else {
+                Ok(false)
+            };
         }
         self.lanes = lanes;
         self.store.set_erase_allowance(self.erase_credit);
@@ -212,6 +174,21 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Keeper<F, N, C> {
             return self.advance(now);
         }
         Ok(self.scan_settings(app, now))
+    }
+
+    /// Between saves, at rest: a piece of readying the page the next page move opens, so that a
+    /// save during motion finds it erased. `Ok(true)` when it erased.
+    fn prepare_fresh_page(&mut self, now: Instant) -> Result<bool, StoreError> {
+        self.store.set_erase_allowance(self.erase_credit);
+        match self.store.prepare_fresh_page() {
+            Ok(progress) => {
+                self.count_erases();
+                Ok(progress.wrote)
+            }
+            // Ready once the budget allows.
+            Err(StoreError::EraseBudget) => Ok(false),
+            Err(error) => self.settle(Err(error), now).map(|()| true),
+        }
     }
 
     /// Compare the next few settings; once all are, start saving them with the lanes and the
@@ -253,8 +230,9 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Keeper<F, N, C> {
     /// (`X0`), or forget all but the identity (`X42`), whole: the reset follows.
     pub fn before(&mut self, action: BoardAction, app: &App<N>) -> Result<(), StoreError> {
         let now = self.refilled_at.unwrap_or(Instant::ZERO);
-        // The whole snapshot is saved below.
+        // The whole snapshot is saved below, the motors stopped first (`control::reset`).
         self.scan = None;
+        self.store.hold_erases(false);
         if self.store.is_saving() {
             let finished = self.store.finish();
             let _ = self.settle(finished, now);
@@ -284,12 +262,17 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Keeper<F, N, C> {
         self.scan.is_some() || self.store.is_saving()
     }
 
-    /// Account for a save's erases and outcome.
-    fn settle(&mut self, result: Result<(), StoreError>, now: Instant) -> Result<(), StoreError> {
+    /// Take the store's erases since the last count off the budget.
+    fn count_erases(&mut self) {
         let erases = self.store.erases();
         let used = erases.saturating_sub(self.health.erases);
         self.health.erases = erases;
         self.erase_credit = self.erase_credit.saturating_sub(used);
+    }
+
+    /// Account for a save's erases and outcome.
+    fn settle(&mut self, result: Result<(), StoreError>, now: Instant) -> Result<(), StoreError> {
+        self.count_erases();
         match result {
             Ok(()) => {
                 if self.health.failing {
@@ -362,6 +345,7 @@ mod tests {
     extern crate std;
 
     use crate::config::Config;
+    use crate::control::{Deferral, MAX_DEFERRED_STEPS};
     use std::vec::Vec;
 
     use embedded_storage::nor_flash::{ErrorType, NorFlashErrorKind, ReadNorFlash};
@@ -373,6 +357,7 @@ mod tests {
         app: App<3>,
         keeper: Keeper<RamFlash, 3>,
         now: Instant,
+        deferral: Deferral,
     }
 
     impl Unit {
@@ -385,6 +370,7 @@ mod tests {
                 app,
                 keeper,
                 now: Instant::ZERO,
+                deferral: Deferral::default(),
             };
             // The first save (it opens a page: the flash is blank), then quiet.
             let lanes = [Lane::Empty; 3];
@@ -403,7 +389,9 @@ mod tests {
         /// progress: how many.
         fn steps_until_stored(&mut self, busy: bool, done: impl Fn(&Snapshot<3>) -> bool) -> usize {
             for steps in 1..=5000 {
-                self.keeper.update_after(&self.app, self.now, busy).unwrap();
+                if self.deferral.piece_due(busy) {
+                    self.keeper.update(&self.app, self.now).unwrap();
+                }
                 self.now = self.now + 1;
                 if !self.keeper.is_saving() && done(&self.stored()) {
                     return steps;
@@ -418,25 +406,6 @@ mod tests {
                 ..self.app.snapshot()
             };
             self.app.restore(&snapshot);
-        }
-    }
-
-    /// The control task's deferral: after busy steps, a piece every `MAX_DEFERRED_STEPS + 1`th;
-    /// a quiet step runs one and starts the count over.
-    #[test]
-    fn a_deferral_runs_a_piece_after_max_deferred_busy_steps() {
-        let mut deferral = Deferral::default();
-        for _ in 0..3 {
-            for _ in 0..MAX_DEFERRED_STEPS {
-                assert!(!deferral.piece_due(true));
-            }
-            assert!(deferral.piece_due(true));
-        }
-        assert!(!deferral.piece_due(true));
-        assert!(deferral.piece_due(false));
-        assert!(deferral.piece_due(false));
-        for _ in 0..MAX_DEFERRED_STEPS {
-            assert!(!deferral.piece_due(true));
         }
     }
 
@@ -480,7 +449,7 @@ mod tests {
         let mut unit = Unit::boot();
         unit.change_lanes(lanes);
         for _ in 0..3 {
-            unit.keeper.update_after(&unit.app, unit.now, true).unwrap();
+            assert!(!unit.deferral.piece_due(true));
             assert_ne!(unit.stored().lanes, lanes, "deferred after a busy step");
         }
         assert_eq!(unit.steps_until_stored(false, |s| s.lanes == lanes), 3);
@@ -527,6 +496,7 @@ mod tests {
             app,
             keeper,
             now: Instant::ZERO,
+            deferral: Deferral::default(),
         };
         unit.change_lanes(second);
         unit.steps_until_stored(false, |s| s.lanes == second);

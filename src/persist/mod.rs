@@ -28,8 +28,7 @@ use crate::unit::Lane;
 
 pub use crc::{BitwiseCrc, EntryCrc, SoftwareCrc, iso_hdlc};
 pub use keeper::{
-    Boot, Deferral, ERASE_BURST, ERASES_AT_BOOT, ERASES_PER_HOUR, FULL_CHECK_MS, Health, Keeper,
-    MAX_DEFERRED_STEPS, RETRY_MAX_MS,
+    Boot, ERASE_BURST, ERASES_AT_BOOT, ERASES_PER_HOUR, FULL_CHECK_MS, Health, Keeper, RETRY_MAX_MS,
 };
 pub use store::{Damage, Progress, SLOW_RECORD_PERIOD_MS, Store};
 

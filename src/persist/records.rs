@@ -119,8 +119,7 @@ impl<'a> Writer<'a> {
     }
 
     /// Append the `width` (at most 4) low bytes of `value`, little endian; nothing if they do
-    /// not fit. One bounds check a field, not one a byte: a save piece laying out the counters
-    /// (about 120 bytes) cost about 1 160 instructions on the emulated G071.
+    /// not fit.
     fn field(&mut self, value: u32, width: usize) {
         debug_assert!(width <= 4, "a field of {width} bytes");
         let end = self.len + width;

@@ -1,7 +1,7 @@
 //! The settings part of a snapshot, gathered a register per call. [`App::snapshot`] reads every
-//! setting register of the unit and of a default configuration at once (5,946
-//! instructions on the M0+ measured by `scripts/step-cost.sh`, more than a control step leaves); the keeper instead compares the
-//! registers one per call against defaults read once at boot, and gets the same list. Both take
+//! setting register of the unit and of a default configuration at once, a bounded but long job
+//! for one control step; the keeper instead compares the registers one per call against defaults
+//! read once at boot, and gets the same list. Both take
 //! the settings from `registers::settings`; a test holds the two lists equal.
 
 use heapless::Vec;
@@ -11,8 +11,7 @@ use crate::app::App;
 use crate::config::Config;
 use crate::registers;
 
-/// Setting registers compared per call: one [`App::read_register`] costs up to about 1,000
-/// instructions on the M0+ (the register table is searched by address).
+/// Setting registers compared per call.
 pub(super) const REGISTERS_PER_CALL: usize = 1;
 
 /// Every setting register of a unit with `N` slots and its value in the default configuration,

@@ -18,6 +18,12 @@
 //! it fits a control step, and a power loss between two pieces is no different from one during a
 //! program. The store is synchronous over blocking NOR flash: the G0's flash stalls the CPU while
 //! it programs or erases anyway.
+//!
+//! An erase stalls the CPU for tens to hundreds of milliseconds while the motors keep their last
+//! duty, so no page is erased while a motor is driven ([`Store::hold_erases`]): a save that needs
+//! a fresh page then waits at its erase until the motors stop. So that a save during a tool
+//! change rarely waits, the next fresh page is found erased, or erased, while the unit rests
+//! ([`Store::prepare_fresh_page`]).
 
 mod save;
 
@@ -57,7 +63,6 @@ pub struct Damage {
 
 impl Damage {
     /// One more entry whose checks failed.
-    #[inline(never)]
     fn note_torn(&mut self) {
         self.torn = self.torn.saturating_add(1);
     }
@@ -106,6 +111,12 @@ pub struct Store<F: NorFlash, const N: usize, C: EntryCrc = SoftwareCrc> {
     slow_due: Option<Option<Instant>>,
     /// Whether the current step programmed or erased (and so stalled the CPU).
     flash_work: bool,
+    /// A motor is driven: no page is erased now ([`Store::hold_erases`]).
+    erases_held: bool,
+    /// A page found to read erased, for the next page move ([`Store::prepare_fresh_page`]),
+    /// and the page being checked, with how far.
+    ready: Option<u32>,
+    checking: Option<(u32, u32)>,
 }
 
 /// An entry of the save in progress, programmed a chunk per step.
@@ -168,6 +179,9 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
             placed: [None; 4],
             slow_due: None,
             flash_work: false,
+            erases_held: false,
+            ready: None,
+            checking: None,
         })
     }
 
@@ -211,6 +225,8 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
         self.damage = Damage::default();
         self.job = None;
         self.writing = None;
+        self.ready = None;
+        self.checking = None;
         let (mut newest_header, mut newest_commit) = (None::<u32>, None::<u32>);
         for page in 0..self.pages {
             let scan = self.scan_page(page);

@@ -7,7 +7,6 @@ use mmu_hal_port::Direction;
 use mmu_protocol::{ErrorCode, ProgressCode};
 
 use super::{Bounds, Decision, Goal, PhaseRun, Sight, sensor_fault_error};
-use crate::arith::quotient_below;
 use crate::config::Config;
 use crate::time::Instant;
 use crate::unit::{Lane, SensorId};
@@ -167,14 +166,10 @@ fn push_into_gears(
     if !run.pushed {
         return Ok(Goal::Drive);
     }
-    // Past the printer's push (`(extra_load_mm + 2) × 1000 / slow_speed` ms, plus the margin):
-    // compared without the division, which this millisecond of every hold would otherwise pay.
-    let push_distance_mm_1000 = u32::from(config.extra_load_mm.saturating_add(2)) * 1000;
-    let beyond_margin_ms = now
-        .millis_since(run.started)
-        .saturating_sub(PRINTER_PUSH_MARGIN_MS);
-    let beyond_margin_ms = u32::try_from(beyond_margin_ms).unwrap_or(u32::MAX);
-    if quotient_below(push_distance_mm_1000, config.slow_speed.into(), beyond_margin_ms) {
+    // Past the printer's push: `extra_load_mm + 2` mm at the slow speed, plus the margin.
+    let push_ms =
+        u32::from(config.extra_load_mm.saturating_add(2)) * 1000 / u32::from(config.slow_speed.max(1));
+    if now.millis_since(run.started) > u64::from(push_ms) + PRINTER_PUSH_MARGIN_MS {
         Err(ErrorCode::FSENSOR_DIDNT_SWITCH_ON)
     } else {
         Ok(Goal::Hold)
@@ -183,8 +178,6 @@ fn push_into_gears(
 
 /// How long the Bowden tube has read taut past the follower's deadband (pulled from the
 /// extruder's side), ms. A reading at the supply rail is a loose wire, not a pull.
-// Out of line: smaller in flash (measured with scripts/firmware-size.sh).
-#[inline(never)]
 fn taut_for(run: &mut PhaseRun, tension: u16, now: Instant, config: &Config) -> u64 {
     let taut = u32::from(tension) > u32::from(config.tension_neutral) + u32::from(config.tension_deadband)
         && tension < crate::sensor::RAIL_HIGH;

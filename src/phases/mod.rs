@@ -23,8 +23,7 @@ mod unload;
 use mmu_hal_port::Direction;
 use mmu_protocol::{ErrorCode, ProgressCode};
 
-use crate::arith::centi_to_mm;
-use crate::config::{Config, SettingDivisors};
+use crate::config::Config;
 use crate::drive::{Budget, Motion};
 use crate::feeder::distance_centi;
 use crate::time::Instant;
@@ -150,8 +149,7 @@ pub enum Phase {
 }
 
 impl Phase {
-    /// The progress code the printer sees while this phase runs. Out of line: a dozen callers.
-    #[inline(never)]
+    /// The progress code the printer sees while this phase runs.
     pub const fn progress(self) -> ProgressCode {
         match self.family() {
             Family::Feed(phase) => phase.progress(),
@@ -162,8 +160,6 @@ impl Phase {
     }
 
     /// The slot whose motor this phase drives.
-    // Out of line: smaller in flash (measured with scripts/firmware-size.sh).
-    #[inline(never)]
     pub const fn slot(self) -> Option<usize> {
         match self {
             Phase::FeedToHub { slot, .. }
@@ -182,9 +178,6 @@ impl Phase {
     }
 
     /// The family module that holds this phase's goal, bounds, progress and errors.
-    // Inlined: the questions below then switch on the phase once, as one table (measured with
-    // scripts/firmware-size.sh).
-    #[inline(always)]
     const fn family(self) -> Family {
         match self {
             Phase::FeedToHub { max_mm, .. } => Family::Feed(Feed::ToHub { max_mm }),
@@ -216,8 +209,6 @@ enum Family {
 /// The catalogue's questions about a phase, each answered by its family's module.
 impl Phase {
     /// How the phase moves; `None` for a check.
-    // Out of line: the table of bounds is one function rather than code inside the step.
-    #[inline(never)]
     fn bounds(self, config: &Config) -> Option<Bounds> {
         match self.family() {
             Family::Feed(phase) => Some(phase.bounds(config)),
@@ -238,8 +229,6 @@ impl Phase {
     }
 
     /// Where the slot's filament is once the phase is done.
-    // Out of line: smaller in flash (measured with scripts/firmware-size.sh).
-    #[inline(never)]
     fn arrival(self) -> Option<Lane> {
         match self.family() {
             Family::Feed(phase) => phase.arrival(),
@@ -324,39 +313,21 @@ impl Bounds {
     /// than the time bound.
     ///
     /// Computed where a phase's motion begins or resumes only: [`Bounds`] itself holds no time.
-    /// Its divisions by the speeds take the settings' reciprocals in `divisors`.
-    fn budget(&self, config: &Config, divisors: &SettingDivisors) -> Budget {
-        // The slow part (at most 65 535 × 2000 / 1), and none without one.
-        let slower_ms = match self.slower_mm {
-            0 => 0,
-            mm => divisors.divide(u32::from(mm) * 2000, config.slow_speed),
-        };
+    fn budget(&self, config: &Config) -> Budget {
+        let twice_the_time_ms = |mm: u16, speed: u16| u32::from(mm) * 2000 / u32::from(speed.max(1));
         // At most 65 535 × 2000 + 65 535 × 2000 + 65 535.
-        let max_ms = divisors.divide(u32::from(self.max_mm) * 2000, self.speed)
-            + slower_ms
+        let max_ms = twice_the_time_ms(self.max_mm, self.speed)
+            + twice_the_time_ms(self.slower_mm, config.slow_speed)
             + u32::from(config.phase_slack_ms);
         // Part of a phase may go at the slow speed (`Goal::DriveAt`).
         let slowest = u32::from(self.speed.min(config.slow_speed).max(1));
+        let three_revolutions_ms = 3 * u32::from(config.mm_per_rev_centi) * 10 / slowest;
         Budget {
             max_mm: self.max_mm,
             max_ms,
-            max_still_ms: still_limit_ms(config.mm_per_rev_centi, slowest).min(max_ms),
+            max_still_ms: STILL_MS.max(three_revolutions_ms).min(max_ms),
             error: self.error,
         }
-    }
-}
-
-/// The still limit before the time bound: [`STILL_MS`], or three revolutions at `slowest` mm/s
-/// (1..=65 535) when they take longer. `3 × 10 × mm_per_rev_centi / slowest` is at most
-/// [`STILL_MS`] exactly when `3 × 10 × mm_per_rev_centi < (STILL_MS + 1) × slowest` (a floor
-/// `⌊a / s⌋ ≤ S` is `a < (S + 1) s`): a multiplication, and the division only past it.
-fn still_limit_ms(mm_per_rev_centi: u16, slowest: u32) -> u32 {
-    // At most 3 × 65 535 × 10 and 3001 × 65 535: both within u32.
-    let three_revolutions = 3 * u32::from(mm_per_rev_centi) * 10;
-    if three_revolutions < (STILL_MS + 1) * slowest {
-        STILL_MS
-    } else {
-        three_revolutions / slowest
     }
 }
 
@@ -435,9 +406,6 @@ enum Milestone {
 
 /// Write what the phase on `slot` learned into the unit and the command's notes: the one place
 /// where phases change what the unit knows (besides the sensor check's lanes).
-// Inlined: each caller passes only some milestones, and its copy keeps only those (out of
-// line it took 150 B more flash, measured with scripts/firmware-size.sh).
-#[inline(always)]
 fn learn<const N: usize>(milestone: Milestone, slot: usize, notes: &mut Notes, unit: &mut Unit<N>) {
     match milestone {
         Milestone::LeavingPark => {
@@ -469,8 +437,6 @@ fn learn<const N: usize>(milestone: Milestone, slot: usize, notes: &mut Notes, u
 
 /// The error a faulty sensor raises: the hub's sensors show INSPECT FINDA, a slot's sensors
 /// show PULLEY CANNOT MOVE (the slot's drive needs a look).
-// Out of line: smaller in flash (measured with scripts/firmware-size.sh).
-#[inline(never)]
 pub const fn sensor_fault_error(sensor: SensorId) -> ErrorCode {
     match sensor {
         SensorId::HubFilament | SensorId::HubTension | SensorId::HubCutter => ErrorCode::FINDA_FLICKERS,
@@ -574,15 +540,15 @@ fn step_motion<const N: usize>(
     let run = match run {
         Some(run) => run,
         None => {
-            drive.begin(bounds.budget(config, &unit.divisors), feeder, now);
+            drive.begin(bounds.budget(config), feeder, now);
             let run = PhaseRun::start(run, now, resume_goal_from.unwrap_or(odometry), odometry);
             run.retried = resume_goal_from.is_some();
             run
         }
     };
     let toward_goal_mm = match bounds.direction {
-        Direction::Forward => centi_to_mm(distance_centi(run.goal_from_centi, odometry)),
-        Direction::Reverse => centi_to_mm(distance_centi(odometry, run.goal_from_centi)),
+        Direction::Forward => distance_centi(run.goal_from_centi, odometry) / 100,
+        Direction::Reverse => distance_centi(odometry, run.goal_from_centi) / 100,
     };
     if let Some(fault) = [
         SensorId::MotorHall(slot),
@@ -672,13 +638,12 @@ fn step_motion<const N: usize>(
     if run.held {
         run.held = false;
         drive.begin(
-            run.budget_use
-                .resume(bounds.budget(config, &unit.divisors), now, odometry),
+            run.budget_use.resume(bounds.budget(config), now, odometry),
             feeder,
             now,
         );
     }
-    match drive.run(motion, feeder, tension, now, config, &unit.divisors) {
+    match drive.run(motion, feeder, tension, now, config) {
         Ok(()) => Outcome::Continue,
         Err(error) => phase.stopped(error, unit, slot),
     }
@@ -688,107 +653,34 @@ fn step_motion<const N: usize>(
 mod tests {
     use super::*;
 
-    /// The still limit as it was written: `STILL_MS.max(3 × 10 × mm_per_rev_centi / slowest)`.
-    fn still_limit_by_division(mm_per_rev_centi: u16, slowest: u32) -> u32 {
-        STILL_MS.max(3 * u32::from(mm_per_rev_centi) * 10 / slowest)
-    }
-
-    /// The comparison in place of the division: every divisor, each with the lengths around its
-    /// boundary (where three revolutions reach STILL_MS + 1 ms) and spread over the whole range;
-    /// every length with the small divisors.
+    /// A phase may take twice its nominal time plus the slack, its slow part at the slow speed,
+    /// and stand still for [`STILL_MS`] or three revolutions at its slowest speed, whichever is
+    /// longer, never longer than it may take. A speed of 0 counts as 1 mm/s.
     #[test]
-    fn the_still_limit_equals_the_division() {
-        for slowest in 1..=u32::from(u16::MAX) {
-            let boundary = (STILL_MS + 1) * slowest / 30;
-            let near = boundary.saturating_sub(2)..=boundary + 2;
-            let spread = (0..=u32::from(u16::MAX))
-                .step_by(997)
-                .chain([u32::from(u16::MAX)]);
-            for mm in near.chain(spread).filter(|&mm| mm <= u32::from(u16::MAX)) {
-                let mm = mm as u16;
-                assert_eq!(
-                    still_limit_ms(mm, slowest),
-                    still_limit_by_division(mm, slowest),
-                    "{mm} {slowest}"
-                );
-            }
-        }
-        for slowest in 1..=64 {
-            for mm in 0..=u16::MAX {
-                assert_eq!(
-                    still_limit_ms(mm, slowest),
-                    still_limit_by_division(mm, slowest),
-                    "{mm} {slowest}"
-                );
-            }
-        }
-    }
-
-    /// The budget as it was written, the slow part's time in the bounds.
-    fn budget_by_division(bounds: &Bounds, config: &Config) -> (u32, u32) {
-        let speed = u32::from(bounds.speed.max(1));
-        let slower_ms = u32::from(bounds.slower_mm) * 2000 / u32::from(config.slow_speed.max(1));
-        let max_ms = u32::from(bounds.max_mm) * 2000 / speed + slower_ms + u32::from(config.phase_slack_ms);
-        let slowest = u32::from(bounds.speed.min(config.slow_speed).max(1));
-        let three_revolutions_ms = 3 * u32::from(config.mm_per_rev_centi) * 10 / slowest;
-        (max_ms, STILL_MS.max(three_revolutions_ms).min(max_ms))
-    }
-
-    /// Every phase's budget, over speeds, lengths and revolutions from the smallest to the
-    /// largest, equals the formula with the divisions.
-    #[test]
-    fn every_budget_equals_the_divisions() {
-        let values = [
-            0u16,
-            1,
-            2,
-            3,
-            19,
-            20,
-            21,
-            95,
-            100,
-            199,
-            200,
-            201,
-            999,
-            1000,
-            30_001,
-            u16::MAX,
-        ];
-        let mut config = Config::default();
-        for &speed in &values {
-            for &slow in &values {
-                for &rev in &values {
-                    for &slower_mm in &[0u16, 20, u16::MAX] {
-                        for &max_mm in &values {
-                            config.slow_speed = slow;
-                            config.mm_per_rev_centi = rev;
-                            let bounds = Bounds {
-                                slower_mm,
-                                ..Bounds::new(
-                                    Direction::Forward,
-                                    speed,
-                                    max_mm,
-                                    ErrorCode::MOVE_PULLEY_FAILED,
-                                )
-                            };
-                            // Divided, then by the reciprocals of the settings' speeds.
-                            config.load_speed = speed;
-                            let mut divisors = SettingDivisors::NEW;
-                            for _ in 0..2 {
-                                let budget = bounds.budget(&config, &divisors);
-                                assert_eq!(
-                                    (budget.max_ms, budget.max_still_ms),
-                                    budget_by_division(&bounds, &config),
-                                    "{speed} {slow} {rev} {slower_mm} {max_mm} {divisors:?}"
-                                );
-                                divisors.prepare(&config);
-                            }
-                        }
-                    }
-                }
-            }
-        }
+    fn a_budget_is_twice_the_nominal_time_and_three_revolutions_still() {
+        let config = Config {
+            slow_speed: 20,
+            mm_per_rev_centi: 1000,
+            phase_slack_ms: 500,
+            ..Config::default()
+        };
+        let bounds = |speed, max_mm, slower_mm| Bounds {
+            slower_mm,
+            ..Bounds::new(Direction::Forward, speed, max_mm, ErrorCode::MOVE_PULLEY_FAILED)
+        };
+        // 100 mm at 50 mm/s, 20 of them at 20 mm/s: 4000 + 2000 + 500 ms.
+        let budget = bounds(50, 100, 20).budget(&config);
+        assert_eq!((budget.max_mm, budget.max_ms), (100, 6500));
+        // Three 10 mm revolutions at 20 mm/s take 1500 ms.
+        assert_eq!(budget.max_still_ms, STILL_MS.max(1500));
+        let budget = bounds(0, 1, 0).budget(&config);
+        assert_eq!((budget.max_ms, budget.max_still_ms), (2500, 2500));
+        let slowest = bounds(u16::MAX, u16::MAX, u16::MAX).budget(&Config {
+            slow_speed: 0,
+            mm_per_rev_centi: u16::MAX,
+            ..config
+        });
+        assert_eq!(slowest.max_still_ms, 3 * 65_535 * 10);
+        assert_eq!(slowest.error, ErrorCode::MOVE_PULLEY_FAILED);
     }
 }

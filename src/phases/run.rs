@@ -2,7 +2,6 @@
 //! and how much of its budget the drive's leases have used. Kept apart from the phases so their
 //! goals read as decisions, and the budget arithmetic sits in one place.
 
-use crate::arith::BY_100;
 use crate::drive::{Budget, millis_u32};
 use crate::feeder::distance_centi;
 use crate::time::Instant;
@@ -54,7 +53,7 @@ impl PhaseBudgetUse {
 
     /// End the lease in progress at `now`, counting what it used.
     pub(super) fn end(&mut self, now: Instant, odometry_centi: i32) {
-        let mm = BY_100.divide(distance_centi(self.from_centi, odometry_centi).unsigned_abs());
+        let mm = distance_centi(self.from_centi, odometry_centi).unsigned_abs() / 100;
         self.used_mm = self.used_mm.saturating_add(u16::try_from(mm).unwrap_or(u16::MAX));
         self.used_ms = self
             .used_ms
@@ -83,12 +82,6 @@ impl PhaseRun {
 
     /// A phase attempt starting at `now`, its distance goal counting from `goal_from_centi`, with
     /// the filament at `odometry_centi`, written into `slot` (whatever it held is replaced).
-    ///
-    /// Built in place: a `PhaseRun` returned and then moved into the slot was built on the stack
-    /// and copied (96 bytes: about 130 instructions on the Cortex-M0+, in the millisecond a
-    /// command starts).
-    // Out of line: two callers in the step (measured smaller).
-    #[inline(never)]
     pub(super) fn start(
         slot: &mut Option<PhaseRun>,
         now: Instant,

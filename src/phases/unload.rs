@@ -7,7 +7,6 @@ use mmu_hal_port::Direction;
 use mmu_protocol::{ErrorCode, ProgressCode};
 
 use super::{Bounds, Decision, Goal, Milestone, Notes, PhaseRun, Sight};
-use crate::arith::centi_to_mm;
 use crate::config::{Config, Contract};
 use crate::feeder::distance_centi;
 use crate::time::Instant;
@@ -113,7 +112,7 @@ impl Unload {
                     })
                 }
                 (false, Some(mark))
-                    if centi_to_mm(distance_centi(at.odometry, mark)) >= i32::from(at.config.park_mm) =>
+                    if distance_centi(at.odometry, mark) / 100 >= i32::from(at.config.park_mm) =>
                 {
                     Goal::Reached.into()
                 }
@@ -226,7 +225,7 @@ fn still_gripped(
 /// printer that accepted 3.0.4 gets the first [`RELEASE_SLOW_MM`] at the slow speed.
 fn pull_out_of_printer<const N: usize>(run: &PhaseRun, at: &Sight<'_, N>) -> Result<Goal, ErrorCode> {
     let config = at.config;
-    let pulled_mm = centi_to_mm(distance_centi(at.odometry, run.goal_from_centi));
+    let pulled_mm = distance_centi(at.odometry, run.goal_from_centi) / 100;
     let stuck = pulled_mm >= i32::from(config.unload_check_mm) || !at.hub;
     Ok(match (at.unit.fsensor_triggered(), at.hub) {
         (true, _) if stuck => return Err(ErrorCode::FSENSOR_DIDNT_SWITCH_OFF),

@@ -223,6 +223,7 @@ impl SoakReport {
             && self.spool_ends.false_total() == 0
             && self.spool_ends.fastened_handled == self.spool_ends.fastened
             && self.aborted.is_none()
+            && self.flash.erases_while_driven == 0
     }
 
     /// Simulated seconds per wall-clock second (0 if no wall time passed).
@@ -274,8 +275,8 @@ impl fmt::Display for SoakReport {
         if flash.bytes_written > 0 {
             write!(
                 f,
-                "\nflash: {} B written, {} page erases (at most {} of one page)",
-                flash.bytes_written, flash.erases, flash.max_page_erases
+                "\nflash: {} B written, {} page erases (at most {} of one page, {} while a motor was driven)",
+                flash.bytes_written, flash.erases, flash.max_page_erases, flash.erases_while_driven
             )?;
             if flash.max_page_erases > 0 {
                 let lifetime =

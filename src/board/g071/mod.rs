@@ -38,7 +38,7 @@ use mmu_firmware::persist::EntryCrc;
 use mmu_hal_port::tb6612::Tb6612;
 use mmu_hal_port::{HubSamples, Samples, SensorScan, SlotSamples};
 
-use super::{Bridges, LineError, NotConnected};
+use super::{Bridges, NotConnected};
 use uart_ring::G071Ring;
 
 /// The board, as the boot log names it.
@@ -328,8 +328,7 @@ impl EntryCrc for HardwareCrc {
     /// A 32-bit write of the data register per four bytes, the rest one 8-bit write each. With
     /// the input bit-reversed by byte the unit takes a word's bytes from its most significant
     /// (RM0444, CRC: "the data ... processed MSB first"), so a word is the bytes in big-endian
-    /// order. A byte a write cost a save piece about 460 instructions for its 64 bytes on the
-    /// emulated G071; `CheckedCrc` checks the unit this way at boot.
+    /// order; `CheckedCrc` checks the unit this way at boot.
     fn add(&mut self, bytes: &[u8]) {
         let (words, rest) = bytes.as_chunks::<4>();
         for &word in words {
@@ -441,22 +440,13 @@ pub type Motors = Bridges<
     Tb6612<Pwm, Output<'static>, Output<'static>, Pwm, NotConnected, NotConnected, Output<'static>>,
 >;
 /// The printer UART's receive side.
-pub type LinkRx = super::ring_rx::RingRx<G071Ring, { mmu_firmware::control::G071_DMA_RING }>;
+pub type LinkRx = mmu_firmware::uart::ReceiveRing<G071Ring, { mmu_firmware::control::G071_DMA_RING }>;
 /// The printer UART's transmit side.
 pub type LinkTx = UartTx<'static, embassy_stm32::mode::Async>;
 /// LD4.
 pub type Led = Output<'static>;
 /// B1.
 pub type ButtonPin = ExtiInput<'static, embassy_stm32::mode::Async>;
-
-/// What a receive error of the USART counts as.
-pub fn line_error(error: &usart::Error) -> LineError {
-    match error {
-        usart::Error::Framing | usart::Error::Noise | usart::Error::Parity => LineError::Garbled,
-        // Overrun (the DMA ring or the USART), and any error a later HAL adds.
-        _ => LineError::Overrun,
-    }
-}
 
 /// The independent watchdog, as the hal-port trait.
 pub struct Watchdog(IndependentWatchdog<'static, peripherals::IWDG>);
@@ -493,10 +483,8 @@ static ADC_RING_BUFFER: AdcRing = AdcRing(UnsafeCell::new([0; ADC_RING]));
 /// takes the newest whole one.
 ///
 /// Why: a DMA `read` per step reconfigured the sequence and the DMA channel and woke the control
-/// task at its end (about 1 100 instructions a millisecond on the emulated G071), and embassy-stm32
-/// 0.6's own reader of the ring, `RingBufferedAdc::read_latest`, computes `(pos + i) % cap` for
-/// every element (`src/dma/ringbuffer/mod.rs`, `DmaIndex::as_index`: a library division each on
-/// the M0+; about 800 instructions a step). So the driver configures the ADC and starts the
+/// task at its end, and the samples of one scan are what a step wants, whenever it runs. So the
+/// driver configures the ADC and starts the
 /// circular transfer (`into_ring_buffered`, `start`) and is then forgotten, the DMA running on;
 /// the scan reads the DMA channel's count (CNDTR) and the ring itself, in this one place.
 pub struct Sampler {

@@ -1,16 +1,12 @@
 //! The printer UART's receive ring on the NUCLEO-G071RB: DMA1 channel 2 copies every byte USART1
-//! receives into a 512-byte ring in RAM, circularly, whatever the CPU does; `board::ring_rx::
-//! RingRx` reads it at each control tick.
+//! receives into a 512-byte ring in RAM, circularly, whatever the CPU does; the control step
+//! reads it ([`mmu_firmware::uart::ReceiveRing`]).
 //!
-//! In this one place instead of embassy-stm32 0.6's `RingBufferedUartRx`, for its cost, measured
-//! on the emulated G071 (`FIL_G071_PROFILE`, fil/g071/README.md): woken by USART1's idle-line
-//! interrupt after each message, its read found the bytes through `ReadableDmaRingBuffer`, which
-//! computes `(pos + i) % cap` for every byte (`src/dma/ringbuffer/mod.rs`, `DmaIndex::as_index`:
-//! a library division on the M0+, which has no divide instruction), about 2 400 instructions in
-//! a millisecond in which a message arrived. The channel is still embassy-stm32's (`dma::Channel`,
-//! a circular `Transfer`: DMAMUX request, addresses, CCR); this module adds USART1's receiver
-//! (CR1.RE, CR3.DMAR: RM0444, USART, "Reception using DMA") and reads CNDTR through the
-//! transfer.
+//! Not embassy-stm32 0.6's `RingBufferedUartRx`: that one wakes a task on USART1's idle line,
+//! while the control step looks at the ring itself once a millisecond. The channel is still
+//! embassy-stm32's (`dma::Channel`, a circular `Transfer`: DMAMUX request, addresses, CCR); this
+//! module adds USART1's receiver (CR1.RE, CR3.DMAR: RM0444, USART, "Reception using DMA") and
+//! reads CNDTR through the transfer.
 //!
 //! The DMA's count of written bytes comes from CNDTR's moves between two looks: fewer than the
 //! ring's 512 bytes arrive between two (`control::G071_DMA_RING` holds the longest flash stall's
@@ -28,9 +24,9 @@ use embassy_stm32::peripherals::{DMA1_CH2, PB7, USART1};
 use embassy_stm32::usart;
 use embassy_stm32::{Peri, pac};
 use mmu_firmware::control::G071_DMA_RING;
+use mmu_firmware::uart::{LineError, ReceiveRing, RingSource};
 use static_cell::StaticCell;
 
-use super::super::ring_rx::{RingRx, RingSource};
 use super::Irqs;
 
 /// The ring. Written only by the DMA, read only through volatile reads of the one [`G071Ring`].
@@ -63,7 +59,7 @@ impl G071Ring {
     pub fn start(
         rx: Peri<'static, PB7>,
         channel: Peri<'static, DMA1_CH2>,
-    ) -> RingRx<G071Ring, G071_DMA_RING> {
+    ) -> ReceiveRing<G071Ring, G071_DMA_RING> {
         let af = usart::RxPin::<USART1>::af_num(&*rx);
         let mut pin = Flex::new(rx);
         pin.set_as_af_unchecked(af, AfType::input(Pull::Up));
@@ -87,7 +83,7 @@ impl G071Ring {
         };
         pac::USART1.cr3().modify(|w| w.set_dmar(true));
         pac::USART1.cr1().modify(|w| w.set_re(true));
-        RingRx::new(G071Ring {
+        ReceiveRing::new(G071Ring {
             transfer,
             _rx: pin,
             written: 0,
@@ -97,9 +93,6 @@ impl G071Ring {
 }
 
 impl RingSource<G071_DMA_RING> for G071Ring {
-    type Error = usart::Error;
-    const LOST: usart::Error = usart::Error::Overrun;
-
     fn written(&mut self) -> u32 {
         let position = position(self.transfer.get_remaining_transfers());
         let moved = position.wrapping_sub(self.position) & (G071_DMA_RING as u32 - 1);
@@ -109,7 +102,7 @@ impl RingSource<G071_DMA_RING> for G071Ring {
     }
 
     /// USART1's receive errors since the last look (ISR PE, FE, NE, ORE; cleared through ICR).
-    fn line_error(&mut self) -> Option<usart::Error> {
+    fn line_error(&mut self) -> Option<LineError> {
         let isr = pac::USART1.isr().read();
         if !(isr.pe() || isr.fe() || isr.ne() || isr.ore()) {
             return None;
@@ -121,13 +114,9 @@ impl RingSource<G071_DMA_RING> for G071Ring {
             w.set_ore(true);
         });
         Some(if isr.ore() {
-            usart::Error::Overrun
-        } else if isr.pe() {
-            usart::Error::Parity
-        } else if isr.ne() {
-            usart::Error::Noise
+            LineError::Overrun
         } else {
-            usart::Error::Framing
+            LineError::Garbled
         })
     }
 

@@ -12,32 +12,15 @@
 //! four select lines pick one sensor at a time onto ADC0, in Gray-code order ([`MUX_CHANNEL`]:
 //! one select line changes per step, so no intermediate channel is ever selected in passing), at
 //! the start of each control tick, before the step. Per sensor: the select lines, then one
-//! embassy-rp `Adc::read_many` of [`CONVERSIONS`] free-running conversions (ADC clock divider 0:
-//! back to back, 2 µs each at 48 MHz) that the ADC's FIFO hands to a DMA channel (DMA_CH3): the
-//! first [`SETTLE_CONVERSIONS`] are discarded and ARE the settling time (the first kept one
-//! samples [`SETTLE_US`] after the select lines changed, at the earliest), the last
-//! [`OVERSAMPLE`] are averaged. The CPU sets the transfer up, sleeps, and is woken once per
-//! sensor by the DMA's completion interrupt: 9 x 18 µs of conversions, about 270 µs with the
-//! set-ups and wake-ups (measured on the emulated Pico, fil/pico), the CPU free during the
-//! conversions. Why: the scan was an embassy-time timer of 10 µs per sensor to settle (a wake-up
-//! through the executor, about 370 instructions) and then four blocking conversions (polling,
-//! 114 instructions each at the step-cost cycle model), about 7 600 instructions a millisecond;
-//! now a sensor costs one wake-up and the set-up's register writes (the DMA's completion
-//! interrupt stops the ADC, [`StopConversions`], so `read_many`'s stop finds it stopped rather
-//! than polling up to 2 µs for the conversion under way). The step-cost harness (bench-mcu,
-//! `scripts/step-cost.sh`, which models this scan) measured the Pico's idle median 11 529 ->
-//! 9 792 instructions and its worst millisecond 15 788 -> 14 051 (27.8 % -> 24.7 % of 1 ms at
-//! 125 MHz; the bar is 25 %); the real images on the emulated Pico (fil/pico) spend 1 764 fewer
-//! a millisecond. Since, on the real image (idle: `node fil/pico/profile.mjs
-//! dist/mmu-firmware-pico.elf`, instructions / rp2040js cycles a millisecond, 16 616 / 27 983
-//! before): the scan's bound registered once a scan, not at each wake-up (`tasks::bounded`),
-//! 15 908 / 26 671; only the select lines that change written ([`Sampler::select`]) and no
-//! buffer zeroed per sensor, 15 409 / 26 184; the ADC stopped in the DMA's interrupt,
-//! 14 398 / 23 766 (`read_many`'s poll for READY about 900 -> 27). The twelve scenarios'
-//! busiest milliseconds without a flash write (`mmu fil --board pico`): 31 719 - 35 064 ->
-//! 27 615 - 30 959 cycles, at most 24.8 % of 1 ms (the bar: 31 250).
-//! A conversion error anywhere in a sensor's free run (the settling conversions included) fails
-//! the scan: `read_many` reports the ADC's sticky error flag.
+//! embassy-rp `Adc::read_many` of [`CONVERSIONS`] free-running conversions (2 µs each at 48 MHz)
+//! that the ADC's FIFO hands to a DMA channel (DMA_CH3): the first [`SETTLE_CONVERSIONS`] are
+//! discarded and are the settling time (the first kept one samples [`SETTLE_US`] after the
+//! select lines changed, at the earliest), the last [`OVERSAMPLE`] are averaged. The CPU sleeps
+//! during the conversions and is woken once per sensor by the DMA's completion interrupt, which
+//! also stops the ADC ([`StopConversions`]). A conversion error anywhere in a sensor's free run
+//! (the settling conversions included) fails the scan: `read_many` reports the ADC's sticky
+//! error flag.
+//!
 //! Settling, reasoned (not measured on hardware): the CD74HC4067's on-resistance at 3.3 V is a
 //! few hundred ohms and its common output about 50-90 pF, with a Hall sensor's output of a few
 //! hundred ohms a time constant well under 0.1 µs; 12-bit settling needs about 9 of them, so
@@ -62,7 +45,7 @@ use mmu_firmware::persist::SoftwareCrc;
 use mmu_hal_port::tb6612::Tb6612;
 use mmu_hal_port::{HubSamples, Samples, SensorScan, SlotSamples};
 
-use super::{Bridges, LineError};
+use super::Bridges;
 pub use uart_ring::{PicoRing, RingRx};
 
 /// The board, as the boot log names it.
@@ -127,9 +110,8 @@ const SENSOR_DMA: usize = 3;
 ///
 /// `read_many` stops the ADC only once its task is woken (it clears CS.START_MANY, then polls
 /// CS.READY until the conversion under way ends, up to 2 µs); by then the ADC has started more
-/// conversions nobody keeps, and the polling was about 900 instructions a millisecond on the
-/// emulated Pico (nine sensors; more or less as the wake-up's length falls against the 2 µs
-/// conversions). Cleared here, START_MANY lets the conversion under way end and starts no other
+/// conversions nobody keeps, and the task polls for the one under way at every sensor. Cleared
+/// here, START_MANY lets the conversion under way end and starts no other
 /// while the task wakes, so the guard mostly finds READY set. The channel idle is the condition
 /// (not its interrupt flag, which `dma::InterruptHandler` clears: the order of the handlers does
 /// not matter): while a transfer runs it is busy, and `read_many` arms it before it sets
@@ -369,14 +351,6 @@ pub type LinkRx = RingRx;
 pub type Led = Output<'static>;
 /// The unit's button.
 pub type ButtonPin = Input<'static>;
-
-/// What a receive error of UART0 counts as.
-pub fn line_error(error: &uart::Error) -> LineError {
-    match error {
-        uart::Error::Overrun => LineError::Overrun,
-        _ => LineError::Garbled,
-    }
-}
 
 /// The printer UART's transmit side: embassy-rp's DMA transmit, as embedded-io-async.
 pub struct LinkTx(UartTx<'static, uart::Async>);

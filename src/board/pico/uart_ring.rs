@@ -1,5 +1,6 @@
 //! The printer UART's receive ring on the Pico: one DMA channel copies every byte UART0 receives
-//! into an 8 KiB ring in RAM, whatever the CPU does; `board::ring_rx::RingRx` reads it.
+//! into an 8 KiB ring in RAM, whatever the CPU does; the control step reads it
+//! ([`mmu_firmware::uart::ReceiveRing`]).
 //!
 //! Hand-written, in this one place, because embassy-rp 0.10 has no ring-buffered UART receiver
 //! (its `UartRx::read` fills a buffer of a given length, its `BufferedUart` is interrupt-driven)
@@ -17,17 +18,16 @@ use embassy_rp::Peri;
 use embassy_rp::pac;
 use embassy_rp::pac::dma::vals::{DataSize, TreqSel};
 use embassy_rp::peripherals::DMA_CH2;
-use embassy_rp::uart::{self, Async, UartRx};
+use embassy_rp::uart::{Async, UartRx};
 use mmu_firmware::control::PICO_DMA_RING;
-
-use super::super::ring_rx::RingSource;
+use mmu_firmware::uart::{LineError, ReceiveRing, RingSource};
 
 /// The DMA channel of the ring (DMA_CH0 and DMA_CH1 are embassy-rp's, for the UART).
 const CHANNEL: usize = 2;
 /// log2 of the ring's size, CTRL.RING_SIZE.
 const RING_BITS: u8 = PICO_DMA_RING.trailing_zeros() as u8;
 /// The transfer count a start loads: the channel stops after this many bytes (4.3 days of a
-/// line that never pauses) and is started again by [`RingRx::written`].
+/// line that never pauses) and is started again by [`PicoRing::written`].
 const TRANSFER: u32 = u32::MAX;
 
 /// The ring, aligned to its size as the DMA's address wrap requires. Written only by the DMA,
@@ -53,8 +53,8 @@ pub struct PicoRing {
     base: u32,
 }
 
-/// The receive side, as `tasks::run_link_rx` reads it.
-pub type RingRx = super::super::ring_rx::RingRx<PicoRing, PICO_DMA_RING>;
+/// The receive side, as the control step reads it.
+pub type RingRx = ReceiveRing<PicoRing, PICO_DMA_RING>;
 
 impl PicoRing {
     /// Starts the channel: UART0's data register into the ring, paced by its RX request.
@@ -92,9 +92,6 @@ impl PicoRing {
 }
 
 impl RingSource<PICO_DMA_RING> for PicoRing {
-    type Error = uart::Error;
-    const LOST: uart::Error = uart::Error::Overrun;
-
     /// Bytes the DMA has written since the start, wrapping; restarts a finished transfer.
     fn written(&mut self) -> u32 {
         let ch = pac::DMA.ch(CHANNEL);
@@ -109,20 +106,16 @@ impl RingSource<PICO_DMA_RING> for PicoRing {
     }
 
     /// UART0's receive errors since the last look (UARTRSR, cleared by a write).
-    fn line_error(&mut self) -> Option<uart::Error> {
+    fn line_error(&mut self) -> Option<LineError> {
         let rsr = pac::UART0.uartrsr().read();
         if !(rsr.oe() || rsr.be() || rsr.pe() || rsr.fe()) {
             return None;
         }
         pac::UART0.uartrsr().write_value(Default::default());
         Some(if rsr.oe() {
-            uart::Error::Overrun
-        } else if rsr.be() {
-            uart::Error::Break
-        } else if rsr.pe() {
-            uart::Error::Parity
+            LineError::Overrun
         } else {
-            uart::Error::Framing
+            LineError::Garbled
         })
     }
 

@@ -15,14 +15,10 @@ use crate::unit::Lane;
 /// Page moves one save may try (each erases at most one page) before it gives up.
 const MOVES_PER_SAVE: u8 = 2;
 /// Bytes of an entry programmed per step: 2 double words, at most 0.25 ms of CPU stall on the
-/// STM32G071 (125 µs each at most). 64 bytes made the busiest millisecond with a flash write
-/// 8 104 instructions on the emulated G071 (the chunk's CRC, erased check and programming), 32
-/// bytes 7 270 - 7 294 (the bar is 7 272).
+/// STM32G071 (125 µs each at most), so a piece under a running motor moves a fraction of a
+/// millimetre uncommanded.
 const PROGRAM_CHUNK: usize = 16;
-/// Bytes of a fresh page checked for erased per step: 256 made a check piece about 1 900
-/// instructions on the emulated G071 (the bytes copied out of the flash, then folded), and the
-/// millisecond of a page's first check after boot the busiest of the tool-change scenarios
-/// (7 346, 25.3 %).
+/// Bytes of a fresh page checked for erased per step.
 const CHECK_CHUNK: usize = 128;
 /// Steps of the largest entry: its layout, then its chunks.
 const ENTRY_STEPS: usize = 1 + super::MAX_ENTRY.div_ceil(PROGRAM_CHUNK);
@@ -54,6 +50,16 @@ pub(super) enum Stage {
     },
 }
 
+/// What a slice of a page's erased check found.
+enum Slice {
+    /// Something in it is not erased.
+    Written,
+    /// It reads erased, and it was the page's last.
+    Erased,
+    /// It reads erased; the next slice starts here.
+    More(u32),
+}
+
 /// What one [`Store::step`] did.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Progress {
@@ -63,17 +69,14 @@ pub struct Progress {
     pub wrote: bool,
 }
 
-/// Whether the `len` bytes (at most `MAX`) at `address` of `flash` read erased. `MAX` is the
-/// caller's chunk: a program chunk's check zeroed a page check's 256-byte buffer, about 260
-/// instructions of a save piece on the emulated G071.
+/// Whether the `len` bytes (at most `MAX`, the caller's chunk) at `address` of `flash` read
+/// erased.
 fn reads_erased<F: NorFlash, const MAX: usize>(flash: &mut F, address: u32, len: usize) -> bool {
     let mut bytes = [0u8; MAX];
     let Some(bytes) = bytes.get_mut(..len) else {
         return false;
     };
-    // A fold, not `any`: no branch per byte (a third of the instructions on the M0+). (A fold by
-    // words measured dearer: the words are put together from bytes.)
-    flash.read(address, bytes).is_ok() && bytes.iter().fold(0xff, |all, &b| all & b) == 0xff
+    flash.read(address, bytes).is_ok() && bytes.iter().all(|&b| b == 0xff)
 }
 
 fn bit(record: Record) -> u8 {
@@ -237,6 +240,7 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
     /// [`Store::forget`], a cut during it can lose every record.
     pub fn wipe(&mut self) -> Result<(), StoreError> {
         self.job = None;
+        self.ready = None;
         for page in 0..self.pages {
             self.erase(page)?;
         }
@@ -291,35 +295,22 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
                 }))
             }
             Job::Move { tries } => {
-                // The page after the head that holds no record's newest copy.
-                let after = self.head.map_or(self.pages - 1, |(page, _)| page);
-                let mut page = after;
-                let page = loop {
-                    page = if page + 1 < self.pages { page + 1 } else { 0 };
-                    if page == after {
-                        return Err(StoreError::Flash);
-                    }
-                    if self
-                        .newest
-                        .iter()
-                        .flatten()
-                        .all(|newest| u32::from(newest.page) != page)
-                    {
-                        break page;
-                    }
-                };
+                let page = self.fresh_page().ok_or(StoreError::Flash)?;
                 // Whatever happens next, the page after this one is tried next.
                 self.head = Some((page, None));
                 self.placed = [None; 4];
-                Ok(Some(Job::Open {
-                    page,
-                    tries,
-                    stage: Stage::Check { offset: 0 },
-                }))
+                let stage = if self.ready.take() == Some(page) {
+                    self.head = Some((page, Some(0)));
+                    Stage::Copy { next: 0 }
+                } else {
+                    Stage::Check { offset: 0 }
+                };
+                Ok(Some(Job::Open { page, tries, stage }))
             }
             Job::Open { page, tries, stage } => {
                 let stage = match stage {
                     Stage::Check { offset } => self.check_erased(page, offset),
+                    Stage::Erase if self.erases_held => Stage::Erase,
                     Stage::Erase => {
                         self.erase(page)?;
                         self.head = Some((page, Some(0)));
@@ -332,6 +323,84 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
                     }
                 };
                 Ok(Some(Job::Open { page, tries, stage }))
+            }
+        }
+    }
+
+    /// The page the next page move opens: the page after the head that holds no record's
+    /// newest copy (`None`: there is none).
+    fn fresh_page(&self) -> Option<u32> {
+        let after = self.head.map_or(self.pages - 1, |(page, _)| page);
+        let mut page = after;
+        loop {
+            page = if page + 1 < self.pages { page + 1 } else { 0 };
+            if page == after {
+                return None;
+            }
+            if self
+                .newest
+                .iter()
+                .flatten()
+                .all(|newest| u32::from(newest.page) != page)
+            {
+                return Some(page);
+            }
+        }
+    }
+
+    /// No page is erased while `held` (a motor is driven): a save that needs an erase waits at
+    /// it, and so does [`Store::prepare_fresh_page`].
+    pub fn hold_erases(&mut self, held: bool) {
+        self.erases_held = held;
+    }
+
+    /// Whether the page the next page move opens is known to read erased.
+    pub fn fresh_page_ready(&self) -> bool {
+        self.ready.is_some() && self.ready == self.fresh_page()
+    }
+
+    /// One bounded piece of readying the page the next page move opens, between saves: a slice
+    /// of its erased check, or its erase (none while erases are held). `wrote` when it erased;
+    /// `done` once the page is ready.
+    pub fn prepare_fresh_page(&mut self) -> Result<Progress, StoreError> {
+        let (done, idle) = (
+            Progress {
+                done: true,
+                wrote: false,
+            },
+            Progress {
+                done: false,
+                wrote: false,
+            },
+        );
+        if self.job.is_some() || self.fresh_page_ready() {
+            return Ok(done);
+        }
+        let Some(page) = self.fresh_page() else {
+            return Err(StoreError::Flash);
+        };
+        let offset = match self.checking {
+            Some((checked, offset)) if checked == page => offset,
+            _ => 0,
+        };
+        self.checking = None;
+        match self.check_slice(page, offset) {
+            Slice::Erased => {
+                self.ready = Some(page);
+                Ok(done)
+            }
+            Slice::More(next) => {
+                self.checking = Some((page, next));
+                Ok(idle)
+            }
+            Slice::Written if self.erases_held => Ok(idle),
+            Slice::Written => {
+                self.erase(page)?;
+                self.ready = Some(page);
+                Ok(Progress {
+                    done: true,
+                    wrote: true,
+                })
             }
         }
     }
@@ -352,18 +421,27 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
 
     /// Check the next slice of `page` from `offset`: the stage that follows.
     fn check_erased(&mut self, page: u32, offset: u32) -> Stage {
+        match self.check_slice(page, offset) {
+            Slice::Written => Stage::Erase,
+            Slice::Erased => {
+                self.head = Some((page, Some(0)));
+                Stage::Copy { next: 0 }
+            }
+            Slice::More(offset) => Stage::Check { offset },
+        }
+    }
+
+    /// Read the slice of `page` from `offset` for anything not erased.
+    fn check_slice(&mut self, page: u32, offset: u32) -> Slice {
         let size = page_size::<F>();
-        let len = CHECK_CHUNK.min((size - offset) as usize);
+        let len = CHECK_CHUNK.min(size.saturating_sub(offset) as usize);
         let start = self.page_address(page) + offset;
         if !reads_erased::<F, CHECK_CHUNK>(&mut self.flash, start, len) {
-            return Stage::Erase;
-        }
-        if offset + len as u32 >= size {
-            self.head = Some((page, Some(0)));
-            return Stage::Copy { next: 0 };
-        }
-        Stage::Check {
-            offset: offset + len as u32,
+            Slice::Written
+        } else if offset + len as u32 >= size {
+            Slice::Erased
+        } else {
+            Slice::More(offset + len as u32)
         }
     }
 
@@ -466,5 +544,98 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
             },
             Job::Move { .. } => Some(job),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    //! No page is erased while a motor is driven, and a page readied at rest lets a save under
+    //! motion move pages without one.
+
+    use super::*;
+    use crate::persist::ram_flash::{PAGE, RamFlash};
+    use crate::persist::{Counters, Settings};
+
+    type TestStore = Store<RamFlash, 3>;
+
+    fn snapshot(round: usize) -> Snapshot<3> {
+        let lane = [Lane::Parked, Lane::Empty, Lane::Loaded][round % 3];
+        Snapshot {
+            lanes: [lane; 3],
+            counters: Counters::default(),
+            settings: Settings::new(),
+        }
+    }
+
+    /// A store of three pages that has erased one (every page has been written): the next page
+    /// move needs an erase, unless a page is readied first.
+    fn worn_store() -> (TestStore, usize) {
+        let mut store = TestStore::new(RamFlash::erased(3), 0..3 * PAGE as u32).unwrap();
+        store.load();
+        let mut round = 0;
+        while store.erases() == 0 {
+            store.save(&snapshot(round), None).unwrap();
+            round += 1;
+        }
+        (store, round)
+    }
+
+    /// Saves of `round` on, erases held, until one does not complete within a save's steps:
+    /// returns how many completed, and whether one was left waiting.
+    fn save_while_held(store: &mut TestStore, round: &mut usize, saves: usize) -> (usize, bool) {
+        store.hold_erases(true);
+        for completed in 0..saves {
+            store.begin_save(&snapshot(*round), None);
+            *round += 1;
+            let done = (0..TestStore::max_steps_per_save()).any(|_| store.step().unwrap().done);
+            if !done {
+                return (completed, true);
+            }
+        }
+        (saves, false)
+    }
+
+    #[test]
+    fn a_save_that_needs_an_erase_waits_while_a_motor_is_driven() {
+        let (mut store, mut round) = worn_store();
+        let erases = store.erases();
+        // A page holds a few dozen lane entries: the head fills well within 500 saves.
+        let (_, waiting) = save_while_held(&mut store, &mut round, 500);
+        assert!(waiting, "a save reached a page move");
+        assert_eq!(store.erases(), erases, "nothing erased while held");
+        assert!(store.is_saving());
+        store.hold_erases(false);
+        store.finish().unwrap();
+        assert_eq!(store.erases(), erases + 1);
+        assert_eq!(store.load(), snapshot(round - 1));
+    }
+
+    #[test]
+    fn a_page_readied_at_rest_lets_saves_under_motion_move_pages_without_an_erase() {
+        let (mut store, mut round) = worn_store();
+        assert!(!store.fresh_page_ready());
+        store.hold_erases(true);
+        for _ in 0..100 {
+            assert!(!store.prepare_fresh_page().unwrap().done, "no erase while held");
+        }
+        store.hold_erases(false);
+        let mut pieces = 0;
+        while !store.prepare_fresh_page().unwrap().done {
+            pieces += 1;
+            assert!(pieces < PAGE, "readied in bounded pieces");
+        }
+        assert!(store.fresh_page_ready());
+        let erases = store.erases();
+        // Saves under motion until the readied page is taken: each completes, none erases.
+        let mut saves = 0;
+        while store.fresh_page_ready() {
+            let (completed, waiting) = save_while_held(&mut store, &mut round, 1);
+            assert!(!waiting && completed == 1, "save {saves} completed");
+            saves += 1;
+            assert!(saves < 500);
+        }
+        assert!(saves > 1, "{saves} saves");
+        assert_eq!(store.erases(), erases);
+        assert_eq!(store.load(), snapshot(round - 1));
     }
 }
