@@ -16,6 +16,45 @@
 //! What both boards share is here: [`Parts`], and the motors on two TB6612FNG ([`Bridges`],
 //! from mmu-hal-port).
 
+/// Declares a board's pin map once and derives from it the `Parts` struct that takes every used
+/// singleton out of the HAL's `Peripherals`, and the constants `STOP_STBY` and `STOP_OFF`: the
+/// pins of the rows marked `stby` and of the rows marked `off`, as `$stop` makes them of their
+/// names, for the board's `emergency_stop` to drive low in that order.
+///
+/// Row layout: `field: PIN, "function", "header pin", "wired to", safe-state;` where safe-state is
+/// `stby` (standby pins, forced low first), `off` (PWM and IN pins, forced low next) or `-` (not
+/// touched by the emergency stop). `scripts/check-pinmap.sh` holds the book's wiring tables to
+/// the rows.
+macro_rules! pin_map {
+    (
+        hal $hal:ident;
+        stop $stop_ty:ty = $stop:path;
+        peripherals { $( $pfield:ident : $periph:ident, $pdoc:literal; )* }
+        pins { $( $field:ident : $pin:ident, $func:literal, $header:literal, $to:literal, $safe:tt; )* }
+    ) => {
+        /// Every singleton this board uses, named by role.
+        struct Parts {
+            $( #[doc = $pdoc] $pfield: $hal::Peri<'static, $hal::peripherals::$periph>, )*
+            $( #[doc = concat!(stringify!($pin), " (", $func, ", ", $header, "): ", $to)]
+               $field: $hal::Peri<'static, $hal::peripherals::$pin>, )*
+        }
+
+        impl Parts {
+            fn take(p: $hal::Peripherals) -> Self {
+                Parts { $( $pfield: p.$periph, )* $( $field: p.$pin, )* }
+            }
+        }
+
+        /// The TB6612 standby pins, forced low first (see `emergency_stop`).
+        const STOP_STBY: $stop_ty = $stop(&[$( pin_map!(@stop stby $safe $pin) ),*]);
+        /// The PWM and IN pins, forced low next.
+        const STOP_OFF: $stop_ty = $stop(&[$( pin_map!(@stop off $safe $pin) ),*]);
+    };
+    (@stop stby stby $pin:ident) => { Some(stringify!($pin)) };
+    (@stop off off $pin:ident) => { Some(stringify!($pin)) };
+    (@stop $pass:ident $safe:tt $pin:ident) => { None };
+}
+
 #[cfg(feature = "g071")]
 mod g071;
 #[cfg(feature = "g071")]

@@ -9,6 +9,7 @@
 #![warn(missing_docs)]
 
 pub mod app;
+pub mod arbiter;
 pub mod commands;
 pub mod config;
 pub mod control;
@@ -22,7 +23,9 @@ pub mod port;
 pub mod registers;
 pub mod runner;
 pub mod sensor;
+pub mod session;
 pub mod spool_end;
+pub mod tally;
 #[cfg(feature = "tasks")]
 pub mod tasks;
 pub mod time;

@@ -45,12 +45,19 @@ CONTROL_STEPS = "MMU_CONTROL_STEPS"
 # With FIL_G071_PROFILE=K in the environment, the bench profiles every millisecond it measures
 # by function and logs the K busiest ones' profiles at the end (slower: a Unicorn block hook).
 PROFILE_ENV = "FIL_G071_PROFILE"
+# With FIL_WORN_STORE=1 the store's pages (STORE_RANGE in src/board/g071/mod.rs) start written,
+# as on a unit that has saved for a while: every page the store opens must be erased first.
+WORN_STORE_ENV = "FIL_WORN_STORE"
+STORE = (0x0801_8000, 0x8000)
 # Functions listed for each profiled millisecond.
 PROFILE_TOP = 25
 
 class Bench:
     def __init__(self, image, rtt=None):
         segments, self.symbols = elf.load(image)
+        if os.environ.get(WORN_STORE_ENV, "0") not in ("", "0"):
+            address, size = STORE
+            segments = list(segments) + [(address, b"\x00" * size)]
         self.chip = Chip(segments)
         self.rtt = open(rtt, "ab") if rtt else None
         self.rtt_block = self.symbols.get("_SEGGER_RTT")

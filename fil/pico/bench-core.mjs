@@ -14,7 +14,7 @@ export const BYTE_NANOS = 86_806;
 const FLASH_BASE = 0x10000000;
 
 /** The flash contents an ELF image programs: its PT_LOAD segments at their load addresses. */
-export function flashFromElf(elfBytes) {
+export function flashFromElf(elfBytes, { wornStore = false } = {}) {
   const flash = new Uint8Array(FLASH_BYTES).fill(0xff);
   for (const { address, data } of parseElf(elfBytes).segments) {
     if (address < FLASH_BASE || address + data.length > FLASH_BASE + FLASH_BYTES) {
@@ -22,8 +22,18 @@ export function flashFromElf(elfBytes) {
     }
     flash.set(data, address - FLASH_BASE);
   }
+  if (wornStore) flash.fill(0, STORE_OFFSET, STORE_OFFSET + STORE_BYTES);
   return flash;
 }
+
+/**
+ * The store's sectors (STORE_RANGE in src/board/pico/mod.rs, offsets in the flash). With
+ * FIL_WORN_STORE=1 they start written, as on a unit that has saved for a while: every sector the
+ * store opens must be erased first.
+ */
+const STORE_OFFSET = 0x1f0000;
+const STORE_BYTES = 0x10000;
+export const WORN_STORE_ENV = 'FIL_WORN_STORE';
 
 /**
  * The firmware's count of control steps (src/tasks.rs): the load counts the milliseconds in
@@ -54,7 +64,8 @@ export class Bench {
     this.sensors = new Array(9).fill(0);
     this.load = []; // [instructions, cycles, bytes received, ms, wrote] of each control millisecond
     this.controlSteps = parseElf(elfBytes).symbols.get(CONTROL_STEPS);
-    this.chip = this.newChip(flashFromElf(elfBytes), null);
+    const wornStore = !['', '0', undefined].includes(process.env[WORN_STORE_ENV]);
+    this.chip = this.newChip(flashFromElf(elfBytes, { wornStore }), null);
   }
 
   /**

@@ -100,15 +100,6 @@ pub trait MotorChannel {
     fn apply(&mut self, command: MotorCommand) -> Result<(), Self::Error>;
 }
 
-/// One analog input, read as a raw 12-bit sample (`0..=ADC_MAX`).
-pub trait AnalogInput {
-    /// The converter's error.
-    type Error;
-
-    /// Take one raw sample.
-    fn read_raw(&mut self) -> Result<u16, Self::Error>;
-}
-
 /// The unit's status LED.
 pub trait StatusLed {
     /// The pin's error.

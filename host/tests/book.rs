@@ -348,6 +348,7 @@ const COMMANDS: &[(&str, Check)] = &[
     ("bash scripts/build-firmware.sh pico dist", Check::InCi),
     ("python3 -m pip install -r fil/g071/requirements.txt", Check::InCi),
     ("mmu fil", Check::InCi),
+    ("FIL_WORN_STORE=1 mmu fil --only T1", Check::InCi),
     (
         "mmu sim --pty --firmware dist/mmu-firmware-pico.elf --board pico",
         Check::NotRun("serves until killed; host/tests/fil.rs serves both images with --stdio in CI"),

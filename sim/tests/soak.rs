@@ -1,7 +1,8 @@
 //! Soak runs end to end: fault-free tool changes close to the physical minimum, random faults
 //! counted consistently, and the summary line in its exact format.
 //!
-//! `soak_from_environment` is a developer's tool, ignored by default: in release,
+//! `soak_from_environment` is a developer's tool, ignored by default, that fails when the soak
+//! does not pass: in release,
 //! `SOAK_CHANGES=300 SOAK_SEED=7 cargo test --release -p mmu-sim --test soak -- --ignored --nocapture`
 //! runs a random-fault soak and prints its report and notes (`SOAK_PRINTER=buddy-6.5` plays
 //! another printer; `SOAK_POWER_LOSSES=1 SOAK_FAULTS=0` cuts the power once in every change).
@@ -265,6 +266,7 @@ fn soak_from_environment() {
             println!("  {line}");
         }
     }
+    assert!(report.passed(), "seed {}: {report}", options.seed);
 }
 
 #[test]

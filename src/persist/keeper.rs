@@ -162,7 +162,7 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Keeper<F, N, C> {
         if full_check {
             self.checked_at = Some(now);
             if self.settings_seen == Some(app.settings_revision()) {
-                counters = Some(&app.counters);
+                counters = Some(&app.tally.counters);
             } else {
                 // Changed settings: compared in this call and the following ones (after a lane
                 // change's save), then saved with the counters.
@@ -208,7 +208,7 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Keeper<F, N, C> {
         }
         self.store.set_erase_allowance(self.erase_credit);
         self.store
-            .begin_save_of(&self.lanes, &app.counters, scan.settings(), Some(now));
+            .begin_save_of(&self.lanes, &app.tally.counters, scan.settings(), Some(now));
         self.scan = None;
         false
     }
@@ -251,7 +251,7 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Keeper<F, N, C> {
     pub fn snapshot(&self, app: &App<N>) -> Snapshot<N> {
         Snapshot {
             lanes: app.lanes(),
-            counters: app.counters,
+            counters: app.tally.counters,
             settings: Scan::all(app, &self.defaults),
         }
     }
@@ -645,7 +645,7 @@ mod tests {
         let mut unit = Unit::boot();
         assert_eq!(unit.keeper.snapshot(&unit.app), unit.app.snapshot());
         unit.change_lanes([Lane::Parked, Lane::Loaded, Lane::Empty]);
-        unit.app.counters.tool_changes[1] = 7;
+        unit.app.tally.counters.tool_changes[1] = 7;
         for (address, value) in [(0x22, 777), (0x52, 2)] {
             assert!(unit.app.write_register(address, value), "{address:#04x}");
         }

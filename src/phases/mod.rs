@@ -514,138 +514,204 @@ pub fn step<const N: usize>(
             unit.lanes = lanes;
             outcome
         }
-        (_, Some(slot)) => step_motion(phase, slot, run, resume_goal_from, notes, unit, now, config),
+        (_, Some(slot)) => {
+            let Some(bounds) = phase.bounds(config) else {
+                return Outcome::Fail(ErrorCode::INTERNAL);
+            };
+            let mut step = MotionStep {
+                phase,
+                slot,
+                bounds,
+                notes,
+                unit,
+                now,
+                config,
+            };
+            step.run(run, resume_goal_from)
+        }
         (_, None) => Outcome::Fail(ErrorCode::INTERNAL),
     }
 }
 
-#[allow(clippy::too_many_arguments)]
-fn step_motion<const N: usize>(
+/// A motion phase's step: the phase, its slot, and what it works on.
+struct MotionStep<'a, const N: usize> {
     phase: Phase,
     slot: usize,
-    run: &mut Option<PhaseRun>,
-    resume_goal_from: Option<i32>,
-    notes: &mut Notes,
-    unit: &mut Unit<N>,
+    bounds: Bounds,
+    notes: &'a mut Notes,
+    unit: &'a mut Unit<N>,
     now: Instant,
-    config: &Config,
-) -> Outcome {
-    let Some(bounds) = phase.bounds(config) else {
-        return Outcome::Fail(ErrorCode::INTERNAL);
-    };
-    let (Some(feeder), Some(drive)) = (unit.feeders.get(slot), unit.drives.get_mut(slot)) else {
-        return Outcome::Fail(ErrorCode::INVALID_TOOL);
-    };
-    let odometry = feeder.odometry_centi();
-    let run = match run {
-        Some(run) => run,
-        None => {
-            drive.begin(bounds.budget(config), feeder, now);
-            let run = PhaseRun::start(run, now, resume_goal_from.unwrap_or(odometry), odometry);
-            run.retried = resume_goal_from.is_some();
-            run
+    config: &'a Config,
+}
+
+impl<const N: usize> MotionStep<'_, N> {
+    /// One step of the phase attempt `run` (see [`step`]).
+    fn run(&mut self, run: &mut Option<PhaseRun>, resume_goal_from: Option<i32>) -> Outcome {
+        let Some(run) = self.attempt(run, resume_goal_from) else {
+            return Outcome::Fail(ErrorCode::INVALID_TOOL);
+        };
+        let goal = match self.decide(run) {
+            Ok(goal) => goal,
+            Err(outcome) => return outcome,
+        };
+        match self.motion(goal, run) {
+            Ok(motion) => self.drive(motion, run),
+            Err(outcome) => outcome,
         }
-    };
-    let toward_goal_mm = match bounds.direction {
-        Direction::Forward => distance_centi(run.goal_from_centi, odometry) / 100,
-        Direction::Reverse => distance_centi(odometry, run.goal_from_centi) / 100,
-    };
-    if let Some(fault) = [
-        SensorId::MotorHall(slot),
-        SensorId::HubFilament,
-        SensorId::SlotFilament(slot),
-    ]
-    .into_iter()
-    .find(|&id| unit.sensor(id).is_some_and(|s| s.fault().is_some()))
-    {
-        return Outcome::Fail(sensor_fault_error(fault));
     }
-    let Some(hub) = unit.hub_present() else {
-        return Outcome::Continue;
-    };
-    let Some(slot_sees) = unit.feeders.get(slot).and_then(|f| f.filament.present()) else {
-        return Outcome::Continue;
-    };
 
-    let sight = Sight {
-        slot,
-        hub,
-        slot_sees,
-        odometry,
-        toward_goal_mm,
-        bounds,
-        unit,
-        notes,
-        now,
-        config,
-    };
-    let goal = match phase.goal(run, &sight) {
-        Ok(Decision { goal, learned }) => {
-            if let Some(milestone) = learned {
-                learn(milestone, slot, notes, unit);
-            }
-            goal
-        }
-        Err(error) => return Outcome::Fail(error),
-    };
-
-    let tension = unit.hub.tension.reading();
-    let (Some(feeder), Some(drive)) = (unit.feeders.get(slot), unit.drives.get_mut(slot)) else {
-        return Outcome::Fail(ErrorCode::INTERNAL);
-    };
-    let motion = match goal {
-        Goal::Reached => {
-            drive.brake(now);
-            if let Some(lane) = phase.arrival() {
-                learn(Milestone::Arrived(lane), slot, notes, unit);
-            }
-            return Outcome::Done;
-        }
-        Goal::Drive | Goal::DriveAt(_)
-            if bounds.direction == Direction::Reverse && !slot_sees && !phase.past_slot_sensor() =>
-        {
-            drive.brake(now);
-            if let Some(lane) = phase.stopped_at_gear(hub) {
-                learn(Milestone::Arrived(lane), slot, notes, unit);
-                return Outcome::Done;
-            }
-            // Still filament in the hub with this tip at its gear: the hub sensor is wrong, or
-            // another filament is there. Not parked.
-            return Outcome::Fail(phase.at_gear_error(bounds.error));
-        }
-        Goal::Drive if !(phase.paced_by_printer() && notes.printer.in_doubt(now)) => Motion::Run {
-            direction: bounds.direction,
-            speed: bounds.speed,
-        },
-        Goal::DriveAt(speed) => Motion::Run {
-            direction: bounds.direction,
-            speed,
-        },
-        Goal::Yield => {
-            // Let the motor turn freely while the phase waits.
-            run.pause(now, odometry);
-            drive.release(now);
-            return Outcome::Continue;
-        }
-        Goal::Drive | Goal::Hold => {
-            // Hold: the phase waits, or the printer's `f` may be lost and its co-feed has
-            // stopped.
-            run.pause(now, odometry);
-            drive.brake(now);
-            return Outcome::Continue;
-        }
-    };
-    if run.held {
-        run.held = false;
-        drive.begin(
-            run.budget_use.resume(bounds.budget(config), now, odometry),
-            feeder,
-            now,
+    /// The phase attempt under way, or a new one (its drive's budget begun) whose distance goal
+    /// counts from `resume_goal_from` or from here; `None` for a slot the unit lacks.
+    fn attempt<'r>(
+        &mut self,
+        run: &'r mut Option<PhaseRun>,
+        resume_goal_from: Option<i32>,
+    ) -> Option<&'r mut PhaseRun> {
+        let (feeder, drive) = (
+            self.unit.feeders.get(self.slot)?,
+            self.unit.drives.get_mut(self.slot)?,
         );
+        let odometry = feeder.odometry_centi();
+        Some(match run {
+            Some(run) => run,
+            None => {
+                drive.begin(self.bounds.budget(self.config), feeder, self.now);
+                let run = PhaseRun::start(run, self.now, resume_goal_from.unwrap_or(odometry), odometry);
+                run.retried = resume_goal_from.is_some();
+                run
+            }
+        })
     }
-    match drive.run(motion, feeder, tension, now, config) {
-        Ok(()) => Outcome::Continue,
-        Err(error) => phase.stopped(error, unit, slot),
+
+    fn odometry(&self) -> i32 {
+        self.unit
+            .feeders
+            .get(self.slot)
+            .map_or(0, |feeder| feeder.odometry_centi())
+    }
+
+    /// Where the phase stands against its goal, what it learned written down; `Err` when the
+    /// step ends here (a faulty sensor fails it; a sensor warming up waits).
+    fn decide(&mut self, run: &mut PhaseRun) -> Result<Goal, Outcome> {
+        let slot = self.slot;
+        let sensors = [
+            SensorId::MotorHall(slot),
+            SensorId::HubFilament,
+            SensorId::SlotFilament(slot),
+        ];
+        if let Some(fault) = sensors
+            .into_iter()
+            .find(|&id| self.unit.sensor(id).is_some_and(|s| s.fault().is_some()))
+        {
+            return Err(Outcome::Fail(sensor_fault_error(fault)));
+        }
+        let hub = self.unit.hub_present().ok_or(Outcome::Continue)?;
+        let slot_sees = self
+            .unit
+            .feeders
+            .get(slot)
+            .and_then(|f| f.filament.present())
+            .ok_or(Outcome::Continue)?;
+        let odometry = self.odometry();
+        let toward_goal_mm = match self.bounds.direction {
+            Direction::Forward => distance_centi(run.goal_from_centi, odometry) / 100,
+            Direction::Reverse => distance_centi(odometry, run.goal_from_centi) / 100,
+        };
+        let sight = Sight {
+            slot,
+            hub,
+            slot_sees,
+            odometry,
+            toward_goal_mm,
+            bounds: self.bounds,
+            unit: self.unit,
+            notes: self.notes,
+            now: self.now,
+            config: self.config,
+        };
+        let Decision { goal, learned } = self.phase.goal(run, &sight).map_err(Outcome::Fail)?;
+        if let Some(milestone) = learned {
+            learn(milestone, slot, self.notes, self.unit);
+        }
+        Ok(goal)
+    }
+
+    /// How the motor moves toward `goal`; `Err` when the phase ends or waits this step (the
+    /// motor braked or freed).
+    fn motion(&mut self, goal: Goal, run: &mut PhaseRun) -> Result<Motion, Outcome> {
+        let (phase, slot, now, direction) = (self.phase, self.slot, self.now, self.bounds.direction);
+        let slot_sees = self.unit.feeders.get(slot).and_then(|f| f.filament.present()) == Some(true);
+        let odometry = self.odometry();
+        let Some(drive) = self.unit.drives.get_mut(slot) else {
+            return Err(Outcome::Fail(ErrorCode::INTERNAL));
+        };
+        match goal {
+            Goal::Reached => {
+                drive.brake(now);
+                if let Some(lane) = phase.arrival() {
+                    learn(Milestone::Arrived(lane), slot, self.notes, self.unit);
+                }
+                Err(Outcome::Done)
+            }
+            Goal::Drive | Goal::DriveAt(_)
+                if direction == Direction::Reverse && !slot_sees && !phase.past_slot_sensor() =>
+            {
+                drive.brake(now);
+                let hub = self.unit.hub_present() == Some(true);
+                match phase.stopped_at_gear(hub) {
+                    Some(lane) => {
+                        learn(Milestone::Arrived(lane), slot, self.notes, self.unit);
+                        Err(Outcome::Done)
+                    }
+                    // Still filament in the hub with this tip at its gear: the hub sensor is
+                    // wrong, or another filament is there. Not parked.
+                    None => Err(Outcome::Fail(phase.at_gear_error(self.bounds.error))),
+                }
+            }
+            Goal::Drive if !(phase.paced_by_printer() && self.notes.printer.in_doubt(now)) => {
+                Ok(Motion::Run {
+                    direction,
+                    speed: self.bounds.speed,
+                })
+            }
+            Goal::DriveAt(speed) => Ok(Motion::Run { direction, speed }),
+            Goal::Yield => {
+                // Let the motor turn freely while the phase waits.
+                run.pause(now, odometry);
+                drive.release(now);
+                Err(Outcome::Continue)
+            }
+            Goal::Drive | Goal::Hold => {
+                // Hold: the phase waits, or the printer's `f` may be lost and its co-feed has
+                // stopped.
+                run.pause(now, odometry);
+                drive.brake(now);
+                Err(Outcome::Continue)
+            }
+        }
+    }
+
+    /// Drive `motion` under the drive's budget, begun again after a hold.
+    fn drive(&mut self, motion: Motion, run: &mut PhaseRun) -> Outcome {
+        let (slot, now, config) = (self.slot, self.now, self.config);
+        let tension = self.unit.hub.tension.reading();
+        let (Some(feeder), Some(drive)) = (self.unit.feeders.get(slot), self.unit.drives.get_mut(slot))
+        else {
+            return Outcome::Fail(ErrorCode::INTERNAL);
+        };
+        if run.held {
+            run.held = false;
+            let odometry = feeder.odometry_centi();
+            drive.begin(
+                run.budget_use.resume(self.bounds.budget(config), now, odometry),
+                feeder,
+                now,
+            );
+        }
+        match drive.run(motion, feeder, tension, now, config) {
+            Ok(()) => Outcome::Continue,
+            Err(error) => self.phase.stopped(error, self.unit, slot),
+        }
     }
 }
 

@@ -63,42 +63,6 @@ bind_interrupts!(struct Irqs {
     EXTI4_15 => exti::InterruptHandler<interrupt::typelevel::EXTI4_15>;
 });
 
-/// Declares the board's pin map once and derives from it: the [`Parts`] struct that takes every
-/// used singleton out of the HAL's `Peripherals`, and the constants [`STOP_STBY`] and [`STOP_OFF`]:
-/// the pins of the rows marked `stby` and of the rows marked `off`, for [`emergency_stop`] to
-/// drive low in that order.
-///
-/// Row layout: `field: PIN, "function", "NUCLEO header", "wired to", safe-state;`
-/// where safe-state is `stby` (standby pins, forced low first), `off` (PWM and IN pins, forced low
-/// next) or `-` (not touched by the emergency stop).
-macro_rules! pin_map {
-    (
-        peripherals { $( $pfield:ident : $periph:ident, $pdoc:literal; )* }
-        pins { $( $field:ident : $pin:ident, $func:literal, $header:literal, $to:literal, $safe:tt; )* }
-    ) => {
-        /// Every singleton this board uses, named by role.
-        struct Parts {
-            $( #[doc = $pdoc] $pfield: Peri<'static, peripherals::$periph>, )*
-            $( #[doc = concat!(stringify!($pin), " (", $func, ", ", $header, "): ", $to)]
-               $field: Peri<'static, peripherals::$pin>, )*
-        }
-
-        impl Parts {
-            fn take(p: embassy_stm32::Peripherals) -> Self {
-                Parts { $( $pfield: p.$periph, )* $( $field: p.$pin, )* }
-            }
-        }
-
-        /// The TB6612 standby pins, forced low first (see [`emergency_stop`]).
-        const STOP_STBY: StopPins = StopPins::of(&[$( pin_map!(@stop stby $safe $pin) ),*]);
-        /// The PWM and IN pins, forced low next.
-        const STOP_OFF: StopPins = StopPins::of(&[$( pin_map!(@stop off $safe $pin) ),*]);
-    };
-    (@stop stby stby $pin:ident) => { Some(stringify!($pin)) };
-    (@stop off off $pin:ident) => { Some(stringify!($pin)) };
-    (@stop $pass:ident $safe:tt $pin:ident) => { None };
-}
-
 // ================================ PIN MAP (single source of truth) ================================
 //
 // TB6612 #1 drives slots 0 (bridge A) and 1 (bridge B); TB6612 #2 drives slot 2 (bridge A, bridge
@@ -114,6 +78,8 @@ macro_rules! pin_map {
 // shifter or a divider (the book's wiring page), whatever the pin's tolerance. ADC pins are NOT
 // 5 V tolerant (analog pins of the G0 are 3.6 V tolerant): power the Hall sensors from 3.3 V.
 pin_map! {
+    hal embassy_stm32;
+    stop StopPins = StopPins::of;
     peripherals {
         pwm_timer: TIM3, "Motor PWM, 20 kHz, channels 1-3 (TIM2 is embassy-time's driver)";
         adc: ADC1, "All nine Hall sensors, scanned continuously (a scan about every 210 µs)";

@@ -145,39 +145,6 @@ impl Handler<interrupt::typelevel::DMA_IRQ_0> for StopConversions {
 /// The offset of a peripheral register's atomic bit-clear alias (RP2040 datasheet 2.1.2).
 const ATOMIC_CLEAR: usize = 0x3000;
 
-/// Declares the board's pin map once and derives from it the [`Parts`] struct that takes every
-/// used singleton out of the HAL's `Peripherals`, and the masks [`STOP_STBY`] and [`STOP_OFF`]
-/// of the rows marked `stby` and `off`, for [`emergency_stop`].
-///
-/// Row layout: `field: PIN_n, "function", "Pico pin", "wired to", safe-state;`.
-macro_rules! pin_map {
-    (
-        peripherals { $( $pfield:ident : $periph:ident, $pdoc:literal; )* }
-        pins { $( $field:ident : $pin:ident, $func:literal, $header:literal, $to:literal, $safe:tt; )* }
-    ) => {
-        /// Every singleton this board uses, named by role.
-        struct Parts {
-            $( #[doc = $pdoc] $pfield: Peri<'static, peripherals::$periph>, )*
-            $( #[doc = concat!(stringify!($pin), " (", $func, ", ", $header, "): ", $to)]
-               $field: Peri<'static, peripherals::$pin>, )*
-        }
-
-        impl Parts {
-            fn take(p: embassy_rp::Peripherals) -> Self {
-                Parts { $( $pfield: p.$periph, )* $( $field: p.$pin, )* }
-            }
-        }
-
-        /// The TB6612 standby pins, forced low first (see [`emergency_stop`]).
-        const STOP_STBY: u32 = 0 $( | pin_map!(@stop stby $safe $pin) )*;
-        /// The PWM and IN pins, forced low next.
-        const STOP_OFF: u32 = 0 $( | pin_map!(@stop off $safe $pin) )*;
-    };
-    (@stop stby stby $pin:ident) => { gpio_bit(stringify!($pin)) };
-    (@stop off off $pin:ident) => { gpio_bit(stringify!($pin)) };
-    (@stop $pass:ident $safe:tt $pin:ident) => { 0 };
-}
-
 // ================================ PIN MAP (single source of truth) ================================
 //
 // TB6612 #1 drives slots 0 (bridge A) and 1 (bridge B), its PWM inputs on PWM slice 3 (A and B);
@@ -186,6 +153,8 @@ macro_rules! pin_map {
 // 5 V printer port needs a level shifter on the unit's RX (GP1; the book's wiring page). The
 // ADC input (GP26) takes at most 3.3 V: power the Hall sensors and the multiplexer from 3V3(OUT).
 pin_map! {
+    hal embassy_rp;
+    stop u32 = gpio_mask;
     peripherals {
         adc: ADC, "The ADC: ADC0 (GP26) behind the multiplexer";
         printer_uart: UART0, "Printer MMU port, 115200 8N1";
@@ -237,6 +206,19 @@ const fn gpio_bit(name: &str) -> u32 {
     }
     assert!(pin < 30);
     1 << pin
+}
+
+/// The mask of the pins named (`"PIN_6"`), for [`pin_map!`].
+const fn gpio_mask(names: &[Option<&str>]) -> u32 {
+    let mut mask = 0;
+    let mut i = 0;
+    while i < names.len() {
+        if let Some(name) = names[i] {
+            mask |= gpio_bit(name);
+        }
+        i += 1;
+    }
+    mask
 }
 
 /// Drives the pins of `mask` low as SIO outputs through raw register writes: IO_BANK0 and
