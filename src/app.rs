@@ -265,7 +265,23 @@ impl<const N: usize> App<N> {
             self.config.version.revision = accepted;
             self.settings_revision = self.settings_revision.wrapping_add(1);
         }
-        let response = match request.code {
+        let response = self.respond(request, asks_revision, &mut out.action);
+        if !asks_revision {
+            self.session.other_request(request);
+        }
+        if let Some(response) = response {
+            self.session.send(response, &mut out.tx);
+        }
+    }
+
+    /// What `request` does and its answer, if it has one; a reset sets `action`.
+    fn respond(
+        &mut self,
+        request: &Request,
+        asks_revision: bool,
+        action: &mut Option<BoardAction>,
+    ) -> Option<Response> {
+        match request.code {
             RequestCode::Version if asks_revision => Some(Response::read(
                 request,
                 self.session.offer_revision(self.config.version.revision).into(),
@@ -273,7 +289,7 @@ impl<const N: usize> App<N> {
             RequestCode::Query => Some(self.query_answer()),
             code if code.is_command() => Some(self.start_command(request)),
             RequestCode::Reset => {
-                out.action = Some(if request.value == ERASE_AND_RESET {
+                *action = Some(if request.value == ERASE_AND_RESET {
                     BoardAction::EraseAndReset
                 } else {
                     BoardAction::Reset
@@ -306,12 +322,6 @@ impl<const N: usize> App<N> {
             }
             // MMU 3.0.3 answers neither the filament type nor the motor mode.
             _ => None,
-        };
-        if !asks_revision {
-            self.session.other_request(request);
-        }
-        if let Some(response) = response {
-            self.session.send(response, &mut out.tx);
         }
     }
 

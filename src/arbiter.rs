@@ -109,7 +109,8 @@ mod tests {
         prepare(&mut unit);
         let mut tally = Tally::new();
         let now = Instant::from_millis(40);
-        let motors = MotorArbiter::NEW.drive(&mut unit, operation, &mut tally, &config, now, None);
+        let mut arbiter = MotorArbiter::NEW;
+        let motors = arbiter.drive(&mut unit, operation, &mut tally, &config, now, None);
         (motors, tally)
     }
 
@@ -148,7 +149,7 @@ mod tests {
             error: ErrorCode::MOVE_PULLEY_FAILED,
         };
         let (motors, tally) = motors_of(&mut operation, |unit| {
-            let feeder = unit.feeders[0].clone();
+            let feeder = unit.feeders[0];
             unit.drives[0].begin(spent, &feeder, Instant::ZERO);
         });
         assert!(!motors[0].is_driving(), "{motors:?}");

@@ -2,19 +2,10 @@
 //! reference board, a NUCLEO-G071RB with embassy-stm32, `cargo fw`) or `pico` (a Raspberry Pi
 //! Pico with embassy-rp, `cargo fw-pico`). Only these modules touch HAL types.
 //!
-//! Every board module provides the same names, which `main` uses:
-//! - `NAME`, `SLOTS`, `STORE_RANGE` (the store's region of the flash, as offsets);
-//! - `emergency_stop()` (every bridge off by raw register writes, usable in the fault handler),
-//!   `reset_cause()`, `reset()`;
-//! - `init() -> Parts<...>`: clocks, the watchdog started, every driver;
-//! - the types of the parts: `Sampler` (a [`SensorScan`](mmu_hal_port::SensorScan)), `Motors`
-//!   ([`Bridges`] over the board's TB6612 pins), `LinkRx` (the UART's DMA ring, a
-//!   [`ReceiveRing`](mmu_firmware::uart::ReceiveRing)), `LinkTx` (embedded-io-async), `Led`,
-//!   `ButtonPin`, `Watchdog`, `StoreFlash` (NOR flash) and `Crc`
-//!   ([`EntryCrc`](mmu_firmware::persist::EntryCrc)).
-//!
-//! What both boards share is here: [`Parts`], and the motors on two TB6612FNG ([`Bridges`],
-//! from mmu-hal-port).
+//! Every board module implements [`Board`], the contract `main` and the tasks see a board
+//! through (its `SLOTS` beside it), and the feature's board is [`ThisBoard`]. What both boards
+//! share is here too: [`Parts`], the one `pin_map!`, and the motors on two TB6612FNG
+//! ([`Bridges`], from mmu-hal-port).
 
 /// Declares a board's pin map once and derives from it the `Parts` struct that takes every used
 /// singleton out of the HAL's `Peripherals`, and the constants `STOP_STBY` and `STOP_OFF`: the
@@ -58,38 +49,81 @@ macro_rules! pin_map {
 #[cfg(feature = "g071")]
 mod g071;
 #[cfg(feature = "g071")]
-pub use g071::*;
+pub use g071::{G071 as ThisBoard, SLOTS};
 
 #[cfg(feature = "pico")]
 mod pico;
 #[cfg(feature = "pico")]
-pub use pico::*;
+pub use pico::{Pico as ThisBoard, SLOTS};
 
 use core::convert::Infallible;
+use core::ops::Range;
 
 use embedded_hal::digital::OutputPin;
+use embedded_storage::nor_flash::NorFlash;
+use mmu_firmware::persist::EntryCrc;
+use mmu_firmware::uart::Received;
 pub use mmu_hal_port::tb6612::Bridges;
+use mmu_hal_port::{Button, Motors, SensorScan, StatusLed};
+
+/// What a board gives the firmware, checked by the compiler.
+pub trait Board {
+    /// The board, as the boot log names it.
+    const NAME: &'static str;
+    /// The store's region of the flash, as offsets from its base.
+    const STORE_RANGE: Range<u32>;
+    /// Why the MCU last started, for the boot log.
+    type ResetCause: defmt::Format;
+    /// The sensor scan.
+    type Sampler: SensorScan<SLOTS>;
+    /// The slot motors.
+    type Motors: Motors<SLOTS>;
+    /// The printer UART's receive side: its DMA ring.
+    type LinkRx: Received;
+    /// The printer UART's transmit side.
+    type LinkTx: embedded_io_async::Write;
+    /// The status LED.
+    type Led: StatusLed;
+    /// The unit's button, with its edges.
+    type ButtonPin: Button + embedded_hal_async::digital::Wait;
+    /// The watchdog.
+    type Watchdog: mmu_hal_port::Watchdog;
+    /// The flash holding the store.
+    type StoreFlash: NorFlash;
+    /// The CRC the store's entries are checked with.
+    type Crc: EntryCrc;
+
+    /// Every bridge off by raw register writes: at boot before anything else, and in the fault
+    /// handler.
+    fn emergency_stop();
+    /// Why the MCU last started (read once, at boot).
+    fn reset_cause() -> Self::ResetCause;
+    /// Clocks, the watchdog started, every driver.
+    fn init() -> Parts<Self>;
+    /// Every bridge off, then the MCU restarted.
+    fn reset() -> !;
+}
 
 /// What a board's `init` hands to `main`.
-pub struct Parts<Sampler, Motors, LinkRx, LinkTx, Led, ButtonPin, Watchdog, StoreFlash, Crc> {
+pub struct Parts<B: Board + ?Sized> {
     /// The sensor scan.
-    pub sampler: Sampler,
+    pub sampler: B::Sampler,
     /// The slot motors.
-    pub motors: Motors,
+    pub motors: B::Motors,
     /// The printer UART's receive side (DMA ring).
-    pub link_rx: LinkRx,
+    pub link_rx: B::LinkRx,
     /// The printer UART's transmit side.
-    pub link_tx: LinkTx,
+    pub link_tx: B::LinkTx,
     /// The status LED.
-    pub led: Led,
+    pub led: B::Led,
     /// The unit's button.
-    pub button: ButtonPin,
+    pub button: B::ButtonPin,
     /// The watchdog, already running.
-    pub watchdog: Watchdog,
-    /// The flash holding the store ([`STORE_RANGE`]).
-    pub flash: StoreFlash,
+    pub watchdog: B::Watchdog,
+    /// The flash holding the store ([`Board::STORE_RANGE`]).
+    pub flash: B::StoreFlash,
     /// The CRC the store's entries are checked with.
-    pub crc: Crc,
+    pub crc: B::Crc,
 }
 
 /// An IN input of the unused bridge: not wired to the MCU.

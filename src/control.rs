@@ -19,7 +19,7 @@ use mmu_protocol::{ButtonCode, MAX_FRAME_LEN};
 
 use crate::app::{App, BoardAction, Outputs, TX_CAPACITY};
 use crate::time::Instant;
-use crate::uart::{ReceiveRing, RingSource};
+use crate::uart::Received;
 
 /// A step that starts later than this after its tick does not feed the watchdog, µs.
 pub const ON_TIME_US: u64 = 2_000;
@@ -56,29 +56,6 @@ const _: () = {
     // room for its answer in the step's transmit buffer, so none is dropped for lack of room.
     assert!((1 + (MAX_RX_PER_STEP - 1) / MIN_REQUEST_LEN) * MAX_FRAME_LEN <= TX_CAPACITY);
 };
-
-/// The receive ring a board needs so that no byte is lost while the control loop does not step
-/// for `gap_ms` (a flash stall) with the printer sending without pause: what arrives meanwhile
-/// plus what a step leaves waiting.
-pub const fn rx_ring_needed(gap_ms: usize) -> usize {
-    gap_ms * LINE_BYTES_PER_MS + MAX_RX_PER_STEP
-}
-
-/// The longest a flash page erase stalls the NUCLEO-G071RB's CPU, ms (RM0444 / the STM32G071
-/// datasheet: page erase 40 ms at most). The UART's DMA keeps receiving meanwhile.
-pub const G071_ERASE_STALL_MS: usize = 40;
-/// The printer UART's DMA receive ring on the NUCLEO-G071RB: what arrives during the longest
-/// erase with the printer sending without pause, plus a step's worth (`crate::uart` tests it).
-pub const G071_DMA_RING: usize = 512;
-/// The longest a 4 KiB sector erase of the Pico's QSPI flash stalls its CPU, ms (W25Q16JV
-/// datasheet, sector erase: 45 ms typical, 400 ms at most; embassy-rp's flash driver runs it
-/// with interrupts off).
-pub const PICO_ERASE_STALL_MS: usize = 400;
-/// The printer UART's DMA receive ring on the Pico, as [`G071_DMA_RING`].
-pub const PICO_DMA_RING: usize = 8192;
-
-const _: () = assert!(G071_DMA_RING >= rx_ring_needed(G071_ERASE_STALL_MS));
-const _: () = assert!(PICO_DMA_RING >= rx_ring_needed(PICO_ERASE_STALL_MS));
 
 /// When the control loop steps: every period on a fixed grid, the way Embassy's `Ticker` paces it
 /// (a step that starts late is followed by the ones it delayed, at once), except after a flash
@@ -289,11 +266,7 @@ impl<const N: usize> ControlLoop<N> {
 
     /// One control step at `tick`, with the oldest bytes waiting in `received` (see the module
     /// header).
-    pub fn step<S: RingSource<R>, const R: usize>(
-        &mut self,
-        tick: &Tick<N>,
-        received: &mut ReceiveRing<S, R>,
-    ) -> Step<N> {
+    pub fn step(&mut self, tick: &Tick<N>, received: &mut impl Received) -> Step<N> {
         let button_pressed = self.button.pressed(tick.button_down, tick.now);
         if button_pressed {
             self.app.press_button(ButtonCode::MIDDLE);
@@ -361,7 +334,7 @@ pub async fn reset(board: &mut impl ResetBoard, action: BoardAction) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::uart::MemoryRing;
+    use crate::uart::{MemoryRing, ReceiveRing};
     use mmu_protocol::{Request, RequestCode, RequestDecoder};
 
     extern crate std;
@@ -467,7 +440,7 @@ mod tests {
                     .collect::<StdVec<_>>()
             })
             .collect();
-        let mut ring = Ring::<{ rx_ring_needed(1).next_power_of_two() }>::new(MemoryRing::new());
+        let mut ring = Ring::<{ crate::uart::rx_ring_needed(1).next_power_of_two() }>::new(MemoryRing::new());
         let mut at = 0;
         let mut answered = 0;
         let mut most_waiting = 0;

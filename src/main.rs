@@ -2,8 +2,9 @@
 //! [`ControlLoop`]) on a board, with the same code the host tests and the simulator step.
 //!
 //! One `main` for every board. The board is a module selected by feature (`src/board/g071/` for
-//! the NUCLEO-G071RB, `src/board/pico/` for the Raspberry Pi Pico): it starts the clocks and the
-//! HAL's drivers and hands over parts that implement the hal-port traits ([`SensorScan`],
+//! the NUCLEO-G071RB, `src/board/pico/` for the Raspberry Pi Pico), seen only through its
+//! `board::Board` contract: it starts the clocks and the HAL's drivers and hands over parts that
+//! implement the hal-port traits ([`SensorScan`],
 //! [`Motors`], [`Watchdog`]), the printer link (a DMA receive ring and an embedded-io-async
 //! `Write`) and a NOR flash for the store. The tasks below are written against those traits only; each `#[task]` is a thin
 //! non-generic wrapper (Embassy tasks cannot be generic) naming the board's types.
@@ -17,7 +18,7 @@
 //! wait for a watchdog that may not be running yet). A panic goes through panic-probe: it logs
 //! the message over defmt and raises a HardFault (`udf`), so the same handler stops the motors
 //! and resets (with a probe attached, probe-rs stops there and prints the backtrace instead). The
-//! watchdog starts in `board::init`, right after the clocks; only the control task feeds it, and
+//! watchdog starts in the board's `init`, right after the clocks; only the control task feeds it, and
 //! the store's flash only within an allowance (`mmu_firmware::port::WatchedFlash`).
 
 #![no_std]
@@ -40,27 +41,37 @@ use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
 use mmu_firmware::control::ControlLoop;
 use mmu_firmware::tasks::{self, Logic};
 use mmu_firmware::{App, Config};
-use mmu_hal_port::Watchdog;
+use mmu_hal_port::Watchdog as _;
 use panic_probe as _;
 use static_cell::StaticCell;
 
-use board::SLOTS;
+use board::{Board, SLOTS, ThisBoard};
 
-/// The watchdog, once `board::init` started it.
-static WATCHDOG: Mutex<CriticalSectionRawMutex, RefCell<Option<board::Watchdog>>> =
-    Mutex::new(RefCell::new(None));
+/// The board's parts, by role.
+type Sampler = <ThisBoard as Board>::Sampler;
+type Motors = <ThisBoard as Board>::Motors;
+type LinkRx = <ThisBoard as Board>::LinkRx;
+type LinkTx = <ThisBoard as Board>::LinkTx;
+type ButtonPin = <ThisBoard as Board>::ButtonPin;
+type Led = <ThisBoard as Board>::Led;
+type StoreFlash = <ThisBoard as Board>::StoreFlash;
+type Crc = <ThisBoard as Board>::Crc;
+type Watchdog = <ThisBoard as Board>::Watchdog;
+
+/// The watchdog, once the board's `init` started it.
+static WATCHDOG: Mutex<CriticalSectionRawMutex, RefCell<Option<Watchdog>>> = Mutex::new(RefCell::new(None));
 
 #[embassy_executor::main]
 async fn main(spawner: Spawner) {
     // Before anything else: every bridge off, whatever state a reset left the pins in.
-    board::emergency_stop();
+    ThisBoard::emergency_stop();
     info!(
         "mmu-firmware {=str} on {=str} starting, reset cause: {}",
         env!("CARGO_PKG_VERSION"),
-        board::NAME,
-        board::reset_cause()
+        ThisBoard::NAME,
+        ThisBoard::reset_cause()
     );
-    let parts = board::init();
+    let parts = ThisBoard::init();
     WATCHDOG.lock(|watchdog| watchdog.replace(Some(parts.watchdog)));
 
     let logic: &'static Logic<SLOTS> = new_logic();
@@ -87,7 +98,7 @@ fn new_logic() -> &'static mut Logic<SLOTS> {
     LOGIC.init_with(|| RefCell::new(ControlLoop::new(App::new(Config::default()), tasks::now())))
 }
 
-/// Reloads the watchdog (once `board::init` has started it).
+/// Reloads the watchdog (once the board's `init` has started it).
 fn feed_watchdog() {
     WATCHDOG.lock(|watchdog| {
         if let Ok(mut watchdog) = watchdog.try_borrow_mut()
@@ -99,32 +110,27 @@ fn feed_watchdog() {
 }
 
 #[embassy_executor::task]
-async fn control(
-    sampler: board::Sampler,
-    motors: board::Motors,
-    received: board::LinkRx,
-    logic: &'static Logic<SLOTS>,
-) {
-    tasks::run_control(sampler, motors, received, logic, feed_watchdog, board::reset).await
+async fn control(sampler: Sampler, motors: Motors, received: LinkRx, logic: &'static Logic<SLOTS>) {
+    tasks::run_control(sampler, motors, received, logic, feed_watchdog, ThisBoard::reset).await
 }
 
 #[embassy_executor::task]
-async fn store(flash: board::StoreFlash, crc: board::Crc, logic: &'static Logic<SLOTS>) {
-    tasks::run_store(flash, crc, board::STORE_RANGE, logic, feed_watchdog).await
+async fn store(flash: StoreFlash, crc: Crc, logic: &'static Logic<SLOTS>) {
+    tasks::run_store(flash, crc, ThisBoard::STORE_RANGE, logic, feed_watchdog).await
 }
 
 #[embassy_executor::task]
-async fn link_tx(tx: board::LinkTx) {
+async fn link_tx(tx: LinkTx) {
     tasks::run_link_tx(tx).await
 }
 
 #[embassy_executor::task]
-async fn button(button: board::ButtonPin) {
+async fn button(button: ButtonPin) {
     tasks::run_button(button).await
 }
 
 #[embassy_executor::task]
-async fn status_led(led: board::Led) {
+async fn status_led(led: Led) {
     tasks::run_status_led(led).await
 }
 
@@ -132,6 +138,6 @@ async fn status_led(led: board::Led) {
 /// fault before the watchdog runs does not leave the unit silent until a power cycle.
 #[cortex_m_rt::exception]
 unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
-    board::emergency_stop();
+    ThisBoard::emergency_stop();
     cortex_m::peripheral::SCB::sys_reset()
 }

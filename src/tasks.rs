@@ -35,7 +35,7 @@ use portable_atomic::{AtomicBool, AtomicU32, Ordering};
 use crate::control::{self, ControlLoop, ResetBoard, Tick, TickSchedule};
 use crate::persist::{Boot, EntryCrc, Keeper, Store};
 use crate::port::{CheckedCrc, SampleClock, WatchedFlash};
-use crate::uart::{LineErrors, ReceiveRing, RingSource};
+use crate::uart::{LineErrors, Received};
 use crate::{App, BoardAction, Instant, Samples, drive};
 
 /// defmt's logging macros when the crate logs (feature `defmt`), nothing otherwise (the tasks'
@@ -104,10 +104,10 @@ pub fn now() -> Instant {
 /// The control task: a step every [`PERIOD`] (see the module header), once the store has
 /// restored the logic's state. `received` is the printer UART's DMA ring; `feed` reloads the
 /// board's watchdog; `restart` stops the motors and restarts the MCU.
-pub async fn run_control<const N: usize, S, M, R, const RING: usize>(
+pub async fn run_control<const N: usize, S, M, R>(
     mut sampler: S,
     mut motors: M,
-    mut received: ReceiveRing<R, RING>,
+    mut received: R,
     logic: &Logic<N>,
     feed: fn(),
     restart: fn() -> !,
@@ -115,7 +115,7 @@ pub async fn run_control<const N: usize, S, M, R, const RING: usize>(
 where
     S: SensorScan<N>,
     M: Motors<N>,
-    R: RingSource<RING>,
+    R: Received,
 {
     BOOTED.wait().await;
     let mut ticker = Ticker::every(PERIOD);

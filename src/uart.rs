@@ -11,9 +11,33 @@
 //! src/board/pico/uart_ring.rs); the simulator models the same ring. [`ReceiveRing`] reads any of
 //! them for the control step ([`crate::control::ControlLoop::step`]), and [`DmaRing`] is its
 //! decisions, tested below against a model of the DMA, which also holds the ring sizes to the
-//! longest stall of each board ([`crate::control::G071_DMA_RING`],
-//! [`crate::control::PICO_DMA_RING`]): a page erase while the printer sends without pause loses
+//! longest stall of each board ([`G071_DMA_RING`], [`PICO_DMA_RING`]): a page erase while the printer sends without pause loses
 //! no byte.
+
+use crate::control::{LINE_BYTES_PER_MS, MAX_RX_PER_STEP};
+
+/// The receive ring a board needs so that no byte is lost while the control loop does not step
+/// for `gap_ms` (a flash stall) with the printer sending without pause: what arrives meanwhile
+/// plus what a step leaves waiting.
+pub const fn rx_ring_needed(gap_ms: usize) -> usize {
+    gap_ms * LINE_BYTES_PER_MS + MAX_RX_PER_STEP
+}
+
+/// The longest a flash page erase stalls the NUCLEO-G071RB's CPU, ms (RM0444 / the STM32G071
+/// datasheet: page erase 40 ms at most). The UART's DMA keeps receiving meanwhile.
+pub const G071_ERASE_STALL_MS: usize = 40;
+/// The printer UART's DMA receive ring on the NUCLEO-G071RB: what arrives during the longest
+/// erase with the printer sending without pause, plus a step's worth (`crate::uart` tests it).
+pub const G071_DMA_RING: usize = 512;
+/// The longest a 4 KiB sector erase of the Pico's QSPI flash stalls its CPU, ms (W25Q16JV
+/// datasheet, sector erase: 45 ms typical, 400 ms at most; embassy-rp's flash driver runs it
+/// with interrupts off).
+pub const PICO_ERASE_STALL_MS: usize = 400;
+/// The printer UART's DMA receive ring on the Pico, as [`G071_DMA_RING`].
+pub const PICO_DMA_RING: usize = 8192;
+
+const _: () = assert!(G071_DMA_RING >= rx_ring_needed(G071_ERASE_STALL_MS));
+const _: () = assert!(PICO_DMA_RING >= rx_ring_needed(PICO_ERASE_STALL_MS));
 
 /// What a receive error of the printer link counts as.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -33,6 +57,14 @@ pub trait RingSource<const N: usize> {
     fn line_error(&mut self) -> Option<LineError>;
     /// The ring's byte `index` (`index < N`), read as the DMA writes it.
     fn byte(&self, index: usize) -> u8;
+}
+
+/// The bytes the printer sent, waiting for the control step.
+pub trait Received {
+    /// Moves the oldest bytes waiting into `out`, as many as wait and fit; returns how many.
+    fn take(&mut self, out: &mut [u8]) -> usize;
+    /// What went wrong on the line since start-up.
+    fn errors(&self) -> LineErrors;
 }
 
 /// The bytes the printer sent, waiting in a board's DMA ring for the control step.
@@ -56,8 +88,20 @@ impl<S: RingSource<N>, const N: usize> ReceiveRing<S, N> {
         }
     }
 
-    /// Moves the oldest bytes waiting into `out`, as many as wait and fit; returns how many.
-    pub fn take(&mut self, out: &mut [u8]) -> usize {
+    /// Bytes waiting.
+    pub fn waiting(&mut self) -> usize {
+        let written = self.source.written();
+        self.reader.waiting(written)
+    }
+
+    /// The ring's source (the simulator writes into its model of the DMA through it).
+    pub fn source_mut(&mut self) -> &mut S {
+        &mut self.source
+    }
+}
+
+impl<S: RingSource<N>, const N: usize> Received for ReceiveRing<S, N> {
+    fn take(&mut self, out: &mut [u8]) -> usize {
         match self.source.line_error() {
             Some(LineError::Overrun) => self.line.overruns = self.line.overruns.wrapping_add(1),
             Some(LineError::Garbled) => self.line.garbled = self.line.garbled.wrapping_add(1),
@@ -68,24 +112,13 @@ impl<S: RingSource<N>, const N: usize> ReceiveRing<S, N> {
         self.reader.take(written, |i| source.byte(i), out)
     }
 
-    /// Bytes waiting.
-    pub fn waiting(&mut self) -> usize {
-        let written = self.source.written();
-        self.reader.waiting(written)
-    }
-
-    /// What went wrong on the line since start-up: the USART's overruns plus the bytes the DMA
-    /// overwrote before they were taken, and the garbled frames.
-    pub fn errors(&self) -> LineErrors {
+    /// The USART's overruns plus the bytes the DMA overwrote before they were taken, and the
+    /// garbled frames.
+    fn errors(&self) -> LineErrors {
         LineErrors {
             overruns: self.line.overruns.wrapping_add(self.reader.lost()),
             garbled: self.line.garbled,
         }
-    }
-
-    /// The ring's source (the simulator writes into its model of the DMA through it).
-    pub fn source_mut(&mut self) -> &mut S {
-        &mut self.source
     }
 }
 
@@ -224,10 +257,7 @@ mod tests {
     //! bytes only when it runs (not while a flash erase stalls it).
 
     use super::*;
-    use crate::control::{
-        G071_DMA_RING, G071_ERASE_STALL_MS, LINE_BYTES_PER_S, MAX_RX_PER_STEP, PICO_DMA_RING,
-        PICO_ERASE_STALL_MS,
-    };
+    use crate::control::LINE_BYTES_PER_S;
 
     extern crate std;
     use std::vec::Vec;

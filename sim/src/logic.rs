@@ -10,10 +10,10 @@
 //! ([`MemoryRing`] of [`G071_DMA_RING`] bytes: what laps the reader is lost, as on the board),
 //! the step takes its share, and a save piece runs after the steps the control step says.
 
-use mmu_firmware::control::{ControlLoop, G071_DMA_RING, Tick};
+use mmu_firmware::control::{ControlLoop, Tick};
 use mmu_firmware::persist::{Keeper, Store};
 use mmu_firmware::runner::Status;
-use mmu_firmware::uart::{MemoryRing, ReceiveRing};
+use mmu_firmware::uart::{G071_DMA_RING, MemoryRing, ReceiveRing};
 use mmu_firmware::{App, BoardAction, Config, Instant, MAX_SLOTS, MotorCommand};
 use mmu_model::Model;
 use mmu_protocol::{ButtonCode, RequestCode};

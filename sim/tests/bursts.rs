@@ -1,9 +1,10 @@
 //! The simulated unit takes received bytes as the board does: at most
 //! `control::MAX_RX_PER_STEP` a step, the rest waiting in the NUCLEO-G071RB's DMA ring of
-//! `control::G071_DMA_RING` bytes, so what the simulator shows of a burst is what the firmware
+//! `uart::G071_DMA_RING` bytes, so what the simulator shows of a burst is what the firmware
 //! does with it.
 
-use mmu_firmware::control::{G071_DMA_RING as RX_RING, MAX_RX_PER_STEP};
+use mmu_firmware::control::MAX_RX_PER_STEP;
+use mmu_firmware::uart::G071_DMA_RING as RX_RING;
 use mmu_protocol::{Request, RequestCode, ResponseDecoder};
 use mmu_sim::{Sim, SimOptions};
 

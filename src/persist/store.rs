@@ -328,26 +328,32 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
             }
             offset += entry;
         }
-        if !scan.committed {
+        if scan.committed {
+            self.note_newest(&newest_headers, &complete);
+        } else {
             self.damage = damage_before;
-            return scan;
         }
-        for index in 0..self.newest.len() {
-            let known = self.newest[index].map(|known| known.sequence);
-            if newest_headers[index] <= known {
+        scan
+    }
+
+    /// A committed page's records: per record the newest sequence number of its headers and its
+    /// newest complete copy. A copy newer than the one known is the newest; a header newer than
+    /// the page's complete copy is a torn entry.
+    fn note_newest(&mut self, newest_headers: &[Option<u32>; 4], complete: &[Option<Newest>; 4]) {
+        for ((newest, &header), &complete) in self.newest.iter_mut().zip(newest_headers).zip(complete) {
+            let known = newest.map(|known| known.sequence);
+            if header <= known {
                 continue;
             }
-            let complete = complete[index];
-            if complete.map(|c| c.sequence) != newest_headers[index] {
+            if complete.map(|c| c.sequence) != header {
                 self.damage.note_torn();
             }
             if let Some(complete) = complete
                 && Some(complete.sequence) > known
             {
-                self.newest[index] = Some(complete);
+                *newest = Some(complete);
             }
         }
-        scan
     }
 
     /// Read `record`'s newest entry into the buffer: its payload's length.

@@ -406,7 +406,7 @@ pub type Motors = Bridges<
     Tb6612<Pwm, Output<'static>, Output<'static>, Pwm, NotConnected, NotConnected, Output<'static>>,
 >;
 /// The printer UART's receive side.
-pub type LinkRx = mmu_firmware::uart::ReceiveRing<G071Ring, { mmu_firmware::control::G071_DMA_RING }>;
+pub type LinkRx = mmu_firmware::uart::ReceiveRing<G071Ring, { mmu_firmware::uart::G071_DMA_RING }>;
 /// The printer UART's transmit side.
 pub type LinkTx = UartTx<'static, embassy_stm32::mode::Async>;
 /// LD4.
@@ -584,13 +584,43 @@ fn low(pin: Peri<'static, impl Pin>) -> Output<'static> {
     Output::new(pin, Level::Low, Speed::Low)
 }
 
-/// The board's parts, as `main` takes them.
-pub type BoardParts =
-    super::Parts<Sampler, Motors, LinkRx, LinkTx, Led, ButtonPin, Watchdog, StoreFlash, Crc>;
+/// This board's contract.
+pub struct G071;
+
+impl super::Board for G071 {
+    const NAME: &'static str = NAME;
+    const STORE_RANGE: Range<u32> = STORE_RANGE;
+    type ResetCause = ResetCause;
+    type Sampler = Sampler;
+    type Motors = Motors;
+    type LinkRx = LinkRx;
+    type LinkTx = LinkTx;
+    type Led = Led;
+    type ButtonPin = ButtonPin;
+    type Watchdog = Watchdog;
+    type StoreFlash = StoreFlash;
+    type Crc = Crc;
+
+    fn emergency_stop() {
+        emergency_stop();
+    }
+
+    fn reset_cause() -> ResetCause {
+        reset_cause()
+    }
+
+    fn init() -> super::Parts<Self> {
+        init()
+    }
+
+    fn reset() -> ! {
+        reset()
+    }
+}
 
 /// Starts the clocks and every peripheral of the board. The watchdog first, right after the
 /// clocks; the bridges come up in standby with both inputs low and duty 0.
-pub fn init() -> BoardParts {
+fn init() -> super::Parts<G071> {
     let mut config = embassy_stm32::Config::default();
     // 64 MHz from the internal 16 MHz oscillator: VCO 16 x 8 = 128 MHz, R / 2.
     config.rcc.pll = Some(Pll {

@@ -9,7 +9,7 @@
 //! reads CNDTR through the transfer.
 //!
 //! The DMA's count of written bytes comes from CNDTR's moves between two looks: fewer than the
-//! ring's 512 bytes arrive between two (`control::G071_DMA_RING` holds the longest flash stall's
+//! ring's 512 bytes arrive between two (`uart::G071_DMA_RING` holds the longest flash stall's
 //! bytes, 40 ms, plus a step's: the tests of `mmu_firmware::uart`), so a move is never a whole
 //! lap. Before the first step the store's boot may erase more than one page (a repair) with no
 //! look: a printer that sends more than 512 bytes meanwhile loses the oldest unreported (the
@@ -23,7 +23,7 @@ use embassy_stm32::gpio::{AfType, Flex, Pull};
 use embassy_stm32::peripherals::{DMA1_CH2, PB7, USART1};
 use embassy_stm32::usart;
 use embassy_stm32::{Peri, pac};
-use mmu_firmware::control::G071_DMA_RING;
+use mmu_firmware::uart::G071_DMA_RING;
 use mmu_firmware::uart::{LineError, ReceiveRing, RingSource};
 use static_cell::StaticCell;
 

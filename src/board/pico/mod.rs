@@ -458,13 +458,43 @@ fn low(pin: Peri<'static, impl embassy_rp::gpio::Pin>) -> Output<'static> {
     Output::new(pin, Level::Low)
 }
 
-/// The board's parts, as `main` takes them.
-pub type BoardParts =
-    super::Parts<Sampler, Motors, LinkRx, LinkTx, Led, ButtonPin, Watchdog, StoreFlash, Crc>;
+/// This board's contract.
+pub struct Pico;
+
+impl super::Board for Pico {
+    const NAME: &'static str = NAME;
+    const STORE_RANGE: Range<u32> = STORE_RANGE;
+    type ResetCause = ResetCause;
+    type Sampler = Sampler;
+    type Motors = Motors;
+    type LinkRx = LinkRx;
+    type LinkTx = LinkTx;
+    type Led = Led;
+    type ButtonPin = ButtonPin;
+    type Watchdog = Watchdog;
+    type StoreFlash = StoreFlash;
+    type Crc = Crc;
+
+    fn emergency_stop() {
+        emergency_stop();
+    }
+
+    fn reset_cause() -> ResetCause {
+        reset_cause()
+    }
+
+    fn init() -> super::Parts<Self> {
+        init()
+    }
+
+    fn reset() -> ! {
+        reset()
+    }
+}
 
 /// Starts the clocks (125 MHz) and every peripheral of the board. The watchdog first; the
 /// bridges come up in standby with both inputs low and duty 0.
-pub fn init() -> BoardParts {
+fn init() -> super::Parts<Pico> {
     let parts = Parts::take(embassy_rp::init(Default::default()));
 
     let mut watchdog = RpWatchdog::new(parts.watchdog);

@@ -19,7 +19,7 @@ use embassy_rp::pac;
 use embassy_rp::pac::dma::vals::{DataSize, TreqSel};
 use embassy_rp::peripherals::DMA_CH2;
 use embassy_rp::uart::{Async, UartRx};
-use mmu_firmware::control::PICO_DMA_RING;
+use mmu_firmware::uart::PICO_DMA_RING;
 use mmu_firmware::uart::{LineError, ReceiveRing, RingSource};
 
 /// The DMA channel of the ring (DMA_CH0 and DMA_CH1 are embassy-rp's, for the UART).
