@@ -7,14 +7,14 @@ use mmu_hal_port::Direction;
 use mmu_protocol::{ErrorCode, ProgressCode};
 
 use super::load::{MET_CONFIRM_MS, compressed_for};
-use super::{Bounds, Decision, Goal, Milestone, Outcome, PhaseRun, Sight, SlotSet};
+use super::{Bounds, Decision, Goal, Milestone, MotionPhase, Outcome, PhaseRun, Sight, SlotSet};
 use crate::config::{Config, Contract};
 use crate::unit::{Lane, Unit};
 
 /// How far a slot whose tip nobody knows is fed to find out whether the slot sensor sees it, mm
 /// (the sensor sits just after the drive gear).
 const SLOT_PROBE_MM: i32 = 10;
-/// How far [`Feed::PushProof`] pushes, mm: less than a parked tip's distance to the merge (the
+/// How far [`PushProof`] pushes, mm: less than a parked tip's distance to the merge (the
 /// park position, 15 mm before the hub sensor, is 7 mm from the merge on the reference unit), so a
 /// slot that does not hold the path stays in its own path; more than the printer's sensor's
 /// distance to its gears (4 mm on an MK3S), so a tip resting between them meets the gears.
@@ -23,100 +23,124 @@ const PUSH_PROOF_MM: u16 = 5;
 /// wait (MMU 3.0.4 `unload_to_finda.cpp`, 4000 ms).
 const PUSH_PROOF_WAIT_MS: u64 = 4000;
 
-/// The feed phases.
+/// `P5` ([`super::Phase::FeedToHub`]): feed until the hub sensor sees the tip, at most `max_mm`.
 #[derive(Debug, Clone, Copy)]
-pub(super) enum Feed {
-    /// [`super::Phase::FeedToHub`].
-    ToHub { max_mm: u16 },
-    /// [`super::Phase::ClearMerge`].
-    ClearMerge,
-    /// [`super::Phase::PushProof`].
-    PushProof,
+pub(super) struct ToHub {
+    pub(super) max_mm: u16,
 }
 
-impl Feed {
-    pub(super) const fn progress(self) -> ProgressCode {
-        match self {
-            Feed::ToHub { .. } => ProgressCode::FEEDING_TO_FINDA,
-            Feed::ClearMerge => ProgressCode::RETRACTING_FROM_FINDA,
-            Feed::PushProof => ProgressCode::UNLOADING_TO_FINDA,
+impl MotionPhase for ToHub {
+    fn progress(self) -> ProgressCode {
+        ProgressCode::FEEDING_TO_FINDA
+    }
+
+    fn bounds(self, config: &Config) -> Bounds {
+        Bounds::new(
+            Direction::Forward,
+            config.load_speed,
+            self.max_mm,
+            ErrorCode::FINDA_DIDNT_SWITCH_ON,
+        )
+    }
+
+    fn goal<const N: usize>(self, _run: &mut PhaseRun, at: &Sight<'_, N>) -> Result<Decision, ErrorCode> {
+        let known_or_probed = at.unit.lane(at.slot) != Lane::Unknown || at.toward_goal_mm >= SLOT_PROBE_MM;
+        if at.hub {
+            Ok(Goal::Reached.into())
+        } else if !at.slot_sees && known_or_probed {
+            // An empty slot: nothing to feed (a tip of unknown position may rest between the
+            // drive gear and the slot sensor: a short feed first shows it).
+            Err(ErrorCode::FINDA_DIDNT_SWITCH_ON)
+        } else if !at.slot_sees {
+            Ok(Goal::Drive.into())
+        } else {
+            Ok(Goal::Drive.learning(Milestone::LeavingPark))
         }
     }
 
-    pub(super) fn bounds(self, config: &Config) -> Bounds {
-        match self {
-            Feed::ToHub { max_mm } => Bounds::new(
-                Direction::Forward,
-                config.load_speed,
-                max_mm,
-                ErrorCode::FINDA_DIDNT_SWITCH_ON,
-            ),
-            Feed::ClearMerge => Bounds::new(
-                Direction::Reverse,
-                config.load_speed,
-                config.park_mm,
-                ErrorCode::MOVE_PULLEY_FAILED,
-            ),
-            // Waits first: the bound counts only the push.
-            Feed::PushProof => Bounds::new(
-                Direction::Forward,
-                config.slow_speed,
-                PUSH_PROOF_MM,
-                ErrorCode::FINDA_VS_EEPROM_DISREPANCY,
-            ),
-        }
-    }
-
-    /// The merge clearance pulls the tip out of the merge, back to its drive gear.
-    pub(super) const fn past_slot_sensor(self) -> bool {
-        matches!(self, Feed::ClearMerge)
-    }
-
-    pub(super) fn goal<const N: usize>(
-        self,
-        run: &mut PhaseRun,
-        at: &Sight<'_, N>,
-    ) -> Result<Decision, ErrorCode> {
-        Ok(match self {
-            Feed::PushProof => return push_proof(run, at),
-            Feed::ToHub { .. } if at.hub => Goal::Reached.into(),
-            Feed::ToHub { .. }
-                if !at.slot_sees
-                    && (at.unit.lane(at.slot) != Lane::Unknown || at.toward_goal_mm >= SLOT_PROBE_MM) =>
-            {
-                // An empty slot: nothing to feed (a tip of unknown position may rest between the
-                // drive gear and the slot sensor: a short feed first shows it).
-                return Err(ErrorCode::FINDA_DIDNT_SWITCH_ON);
-            }
-            Feed::ToHub { .. } if !at.slot_sees => Goal::Drive.into(),
-            Feed::ToHub { .. } => Goal::Drive.learning(Milestone::LeavingPark),
-            Feed::ClearMerge if !at.slot_sees || at.toward_goal_mm >= i32::from(at.config.park_mm) => {
-                Goal::Reached.learning(Milestone::MergeCleared)
-            }
-            Feed::ClearMerge => Goal::Drive.into(),
-        })
-    }
-
-    pub(super) const fn arrival(self) -> Option<Lane> {
-        match self {
-            Feed::ToHub { .. } => Some(Lane::InHub),
-            Feed::ClearMerge | Feed::PushProof => None,
-        }
+    fn arrival(self) -> Option<Lane> {
+        Some(Lane::InHub)
     }
 
     /// A feed to the hub that stalls may have met another slot's tip where the slot paths join.
-    pub(super) fn stopped<const N: usize>(self, error: ErrorCode, unit: &Unit<N>, slot: usize) -> Outcome {
-        match (self, error) {
-            // Blocked at once: not by the printer's gears, which compress the tube first.
-            (Feed::PushProof, ErrorCode::STALLED_PULLEY) => {
-                Outcome::Fail(ErrorCode::FINDA_VS_EEPROM_DISREPANCY)
-            }
-            (Feed::ToHub { .. }, ErrorCode::STALLED_PULLEY) => match merge_suspects(unit, slot) {
-                0 => Outcome::Fail(ErrorCode::STALLED_PULLEY),
-                suspects => Outcome::Blocked(suspects),
-            },
-            _ => Outcome::Fail(error),
+    fn stopped<const N: usize>(self, error: ErrorCode, unit: &Unit<N>, slot: usize) -> Outcome {
+        if error != ErrorCode::STALLED_PULLEY {
+            return Outcome::Fail(error);
         }
+        match merge_suspects(unit, slot) {
+            0 => Outcome::Fail(error),
+            suspects => Outcome::Blocked(suspects),
+        }
+    }
+}
+
+/// `P19` ([`super::Phase::ClearMerge`]), for a parked slot or one whose tip nobody knows, when
+/// another slot's feed stalls where the slot paths join: pull back the park distance (less if
+/// the slot sensor clears: the tip is at the drive gear), so a tip resting in the merge cannot
+/// block it.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct ClearMerge;
+
+impl MotionPhase for ClearMerge {
+    fn progress(self) -> ProgressCode {
+        ProgressCode::RETRACTING_FROM_FINDA
+    }
+
+    fn bounds(self, config: &Config) -> Bounds {
+        Bounds::new(
+            Direction::Reverse,
+            config.load_speed,
+            config.park_mm,
+            ErrorCode::MOVE_PULLEY_FAILED,
+        )
+    }
+
+    /// It pulls the tip out of the merge, back to its drive gear.
+    fn past_slot_sensor(self) -> bool {
+        true
+    }
+
+    fn goal<const N: usize>(self, _run: &mut PhaseRun, at: &Sight<'_, N>) -> Result<Decision, ErrorCode> {
+        Ok(
+            if !at.slot_sees || at.toward_goal_mm >= i32::from(at.config.park_mm) {
+                Goal::Reached.learning(Milestone::MergeCleared)
+            } else {
+                Goal::Drive.into()
+            },
+        )
+    }
+}
+
+/// `P3` ([`super::Phase::PushProof`]), before the proof of a stored owner while the printer's
+/// sensor reads filament: see [`push_proof`].
+#[derive(Debug, Clone, Copy)]
+pub(super) struct PushProof;
+
+impl MotionPhase for PushProof {
+    fn progress(self) -> ProgressCode {
+        ProgressCode::UNLOADING_TO_FINDA
+    }
+
+    /// It waits first: the bound counts only the push.
+    fn bounds(self, config: &Config) -> Bounds {
+        Bounds::new(
+            Direction::Forward,
+            config.slow_speed,
+            PUSH_PROOF_MM,
+            ErrorCode::FINDA_VS_EEPROM_DISREPANCY,
+        )
+    }
+
+    fn goal<const N: usize>(self, run: &mut PhaseRun, at: &Sight<'_, N>) -> Result<Decision, ErrorCode> {
+        push_proof(run, at)
+    }
+
+    /// Blocked at once: not by the printer's gears, which compress the tube first.
+    fn stopped<const N: usize>(self, error: ErrorCode, _unit: &Unit<N>, _slot: usize) -> Outcome {
+        Outcome::Fail(match error {
+            ErrorCode::STALLED_PULLEY => ErrorCode::FINDA_VS_EEPROM_DISREPANCY,
+            error => error,
+        })
     }
 }
 
@@ -132,7 +156,7 @@ fn merge_suspects<const N: usize>(unit: &Unit<N>, slot: usize) -> SlotSet {
         .fold(0, |set, other| set | (1 << other))
 }
 
-/// [`Feed::PushProof`]: nothing to do with the printer's sensor off (the pull back proves the
+/// [`PushProof`]: nothing to do with the printer's sensor off (the pull back proves the
 /// belief, [`super::Phase::ProveOwner`]). With it on, wait (the motor free) for the printer to
 /// report it off: its retract before `U0` may be on the way. Still on, a printer that accepted
 /// 3.0.3 or older (which pull at once) gets the push: the tube reading compressed proves that the

@@ -6,10 +6,10 @@
 use mmu_hal_port::Direction;
 use mmu_protocol::{ErrorCode, ProgressCode};
 
-use super::{Bounds, Decision, Goal, PhaseRun, Sight, sensor_fault_error};
+use super::{Bounds, Decision, Goal, MotionPhase, Outcome, PhaseRun, Sight, sensor_fault_error};
 use crate::config::Config;
 use crate::time::Instant;
-use crate::unit::{Lane, SensorId};
+use crate::unit::{Lane, SensorId, Unit};
 
 /// How long the Bowden tube must read compressed before the push into the extruder stops, ms:
 /// the tip has met something (the gears, turning or idle, or a jam), and the push must stop
@@ -27,116 +27,160 @@ const NOZZLE_PUSH_MARGIN_MM: u16 = 10;
 /// sees its sensor and `P1c` together, the unit when it hears both, within a few ms.
 const PRINTER_PUSH_MARGIN_MS: u64 = 600;
 
-/// The phases of the load into the printer.
-#[derive(Debug, Clone, Copy)]
-pub(super) enum Load {
-    /// [`super::Phase::FeedThroughBowden`].
-    ThroughBowden,
-    /// [`super::Phase::FeedToFsensor`].
-    ToFsensor,
-    /// [`super::Phase::SearchFsensor`].
-    SearchFsensor,
-    /// [`super::Phase::FeedToNozzle`].
-    ToNozzle,
+/// A feed at `speed` for at most `max_mm`, failing with `error`.
+const fn forward(speed: u16, max_mm: u16, error: ErrorCode) -> Bounds {
+    Bounds::new(Direction::Forward, speed, max_mm, error)
 }
 
-impl Load {
-    pub(super) const fn progress(self) -> ProgressCode {
-        match self {
-            Load::ThroughBowden => ProgressCode::FEEDING_TO_BONDTECH,
-            Load::ToFsensor | Load::SearchFsensor => ProgressCode::FEEDING_TO_FSENSOR,
-            Load::ToNozzle => ProgressCode::FEEDING_TO_NOZZLE,
+/// A motor stopped on its way to the printer's sensor (`P6`, `P1c`) stopped because the
+/// filament did not get there: a jam in the Bowden tube, or the tip pressed into the printer's
+/// idle extruder because its sensor never triggered (or was never heard). That is FSENSOR DIDNT
+/// TRIGG. (`8003`), whose screen sends the user to the tube and the printer's sensor; PULLEY
+/// CANNOT MOVE (`8047`) would send them to the slot motor, which moved the filament all the way
+/// from the hub. MMU 3.0.3 reports `8003` here too: it has no pulley stall detection and runs out
+/// its planned distance (`feed_to_bondtech.cpp`).
+fn short_of_fsensor(error: ErrorCode) -> Outcome {
+    Outcome::Fail(match error {
+        ErrorCode::STALLED_PULLEY => ErrorCode::FSENSOR_DIDNT_SWITCH_ON,
+        error => error,
+    })
+}
+
+/// `P6` ([`super::Phase::FeedThroughBowden`]): fast feed through most of the Bowden tube; the
+/// printer's sensor must stay off.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct ThroughBowden;
+
+impl MotionPhase for ThroughBowden {
+    fn progress(self) -> ProgressCode {
+        ProgressCode::FEEDING_TO_BONDTECH
+    }
+
+    fn bounds(self, config: &Config) -> Bounds {
+        forward(
+            config.load_speed,
+            config.bowden_mm.saturating_sub(config.bowden_slowdown_mm),
+            ErrorCode::FSENSOR_DIDNT_SWITCH_ON,
+        )
+    }
+
+    fn goal<const N: usize>(self, _run: &mut PhaseRun, at: &Sight<'_, N>) -> Result<Decision, ErrorCode> {
+        if at.unit.fsensor_triggered() {
+            Err(ErrorCode::FSENSOR_TOO_EARLY)
+        } else if at.toward_goal_mm >= i32::from(at.bounds.max_mm) {
+            Ok(Goal::Reached.into())
+        } else {
+            Ok(Goal::Drive.into())
         }
     }
 
-    pub(super) fn bounds(self, config: &Config) -> Bounds {
-        let forward = |speed, max_mm, error| Bounds::new(Direction::Forward, speed, max_mm, error);
-        match self {
-            Load::ThroughBowden => forward(
-                config.load_speed,
-                config.bowden_mm.saturating_sub(config.bowden_slowdown_mm),
-                ErrorCode::FSENSOR_DIDNT_SWITCH_ON,
-            ),
-            Load::ToFsensor => forward(
-                config.slow_speed,
-                config.bowden_slowdown_mm.saturating_add(config.fsensor_search_mm),
-                ErrorCode::FSENSOR_DIDNT_SWITCH_ON,
-            ),
-            Load::SearchFsensor => forward(
-                config.slow_speed,
-                config.bowden_mm.saturating_add(config.fsensor_search_mm),
-                ErrorCode::FSENSOR_DIDNT_SWITCH_ON,
-            ),
-            // Faster than the printer's push (its slow feed), so a tip its turning gears hold
-            // compresses the tube at once and the push stops while they still pull.
-            Load::ToNozzle => forward(
-                config.slow_speed.saturating_mul(2),
-                config
-                    .extra_load_mm
-                    .saturating_mul(2)
-                    .saturating_add(NOZZLE_PUSH_MARGIN_MM),
-                ErrorCode::MOVE_PULLEY_FAILED,
-            ),
-        }
+    fn arrival(self) -> Option<Lane> {
+        Some(Lane::InHub)
     }
 
-    /// `P1c` ends on the printer's `f1` while it co-feeds, `P7` pushes into its extruder as it
-    /// takes the filament.
-    pub(super) const fn paced_by_printer(self) -> bool {
-        !matches!(self, Load::ThroughBowden)
+    fn stopped<const N: usize>(self, error: ErrorCode, _unit: &Unit<N>, _slot: usize) -> Outcome {
+        short_of_fsensor(error)
+    }
+}
+
+/// `P1c` ([`super::Phase::FeedToFsensor`]): slow feed until the printer's sensor triggers; the
+/// printer co-feeds. As a `search` after Retry of `8003` ([`super::Phase::SearchFsensor`]), the
+/// same feed from wherever the tip is past the hub sensor, at most the whole Bowden length plus
+/// the search distance (the tip may be anywhere in the tube).
+#[derive(Debug, Clone, Copy)]
+pub(super) struct ToFsensor {
+    pub(super) search: bool,
+}
+
+impl MotionPhase for ToFsensor {
+    fn progress(self) -> ProgressCode {
+        ProgressCode::FEEDING_TO_FSENSOR
     }
 
-    pub(super) fn goal<const N: usize>(
-        self,
-        run: &mut PhaseRun,
-        at: &Sight<'_, N>,
-    ) -> Result<Decision, ErrorCode> {
-        let fsensor = at.unit.fsensor_triggered();
-        Ok(match self {
-            Load::ThroughBowden if fsensor => return Err(ErrorCode::FSENSOR_TOO_EARLY),
-            Load::ThroughBowden if at.toward_goal_mm >= i32::from(at.bounds.max_mm) => Goal::Reached,
-            Load::ThroughBowden => Goal::Drive,
-            Load::ToFsensor | Load::SearchFsensor if !fsensor => Goal::Drive,
-            Load::ToFsensor | Load::SearchFsensor if at.notes.printer.polled > run.started => Goal::Reached,
+    fn bounds(self, config: &Config) -> Bounds {
+        let before_search = if self.search {
+            config.bowden_mm
+        } else {
+            config.bowden_slowdown_mm
+        };
+        forward(
+            config.slow_speed,
+            before_search.saturating_add(config.fsensor_search_mm),
+            ErrorCode::FSENSOR_DIDNT_SWITCH_ON,
+        )
+    }
+
+    /// It ends on the printer's `f1` while the printer co-feeds.
+    fn paced_by_printer(self) -> bool {
+        true
+    }
+
+    /// The slow feed ends at the printer's sensor, once the printer's `Q0` has seen this phase.
+    fn goal<const N: usize>(self, run: &mut PhaseRun, at: &Sight<'_, N>) -> Result<Decision, ErrorCode> {
+        Ok(if !at.unit.fsensor_triggered() {
+            Goal::Drive
+        } else if at.notes.printer.polled > run.started {
+            Goal::Reached
+        } else {
             // The printer pushes its extruder for the load only once it has seen `P1c` with its
             // sensor triggered (`OnMMUProgressMsgSame`, printer-truth §8): until its next `Q0`
             // has seen this phase, the tip waits at the sensor.
-            Load::ToFsensor | Load::SearchFsensor => Goal::Hold,
-            Load::ToNozzle => match at.unit.hub.tension.reading() {
-                Some(tension) => push_into_gears(run, tension, at.toward_goal_mm, at.now, at.config)?,
-                // Nothing else shows the gears holding the tip: no load is reported done blind.
-                None if at.unit.hub.tension.fault().is_some() => {
-                    return Err(sensor_fault_error(SensorId::HubTension));
-                }
-                None => Goal::Hold,
-            },
+            Goal::Hold
         }
         .into())
     }
 
-    pub(super) const fn arrival(self) -> Option<Lane> {
-        Some(match self {
-            Load::ThroughBowden => Lane::InHub,
-            Load::ToFsensor | Load::SearchFsensor => Lane::AtFsensor,
-            Load::ToNozzle => Lane::Loaded,
-        })
+    fn arrival(self) -> Option<Lane> {
+        Some(Lane::AtFsensor)
     }
 
-    /// The error that names what the user must look at. A motor stopped on its way to the
-    /// printer's sensor (`P6`, `P1c`) stopped because the filament did not get there: a jam in
-    /// the Bowden tube, or the tip pressed into the printer's idle extruder because its sensor
-    /// never triggered (or was never heard). That is FSENSOR DIDNT TRIGG. (`8003`), whose screen
-    /// sends the user to the tube and the printer's sensor; PULLEY CANNOT MOVE (`8047`) would send
-    /// them to the slot motor, which moved the filament all the way from the hub. MMU 3.0.3
-    /// reports `8003` here too: it has no pulley stall detection and runs out its planned
-    /// distance (`feed_to_bondtech.cpp`).
-    pub(super) const fn first_cause(self, error: ErrorCode) -> ErrorCode {
-        match (self, error) {
-            (Load::ThroughBowden | Load::ToFsensor | Load::SearchFsensor, ErrorCode::STALLED_PULLEY) => {
-                ErrorCode::FSENSOR_DIDNT_SWITCH_ON
+    fn stopped<const N: usize>(self, error: ErrorCode, _unit: &Unit<N>, _slot: usize) -> Outcome {
+        short_of_fsensor(error)
+    }
+}
+
+/// `P7` ([`super::Phase::FeedToNozzle`]): push into the extruder's gears while the printer
+/// pushes with its own extruder, then hold and see the gears pull the filament on.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct ToNozzle;
+
+impl MotionPhase for ToNozzle {
+    fn progress(self) -> ProgressCode {
+        ProgressCode::FEEDING_TO_NOZZLE
+    }
+
+    /// Faster than the printer's push (its slow feed), so a tip its turning gears hold
+    /// compresses the tube at once and the push stops while they still pull.
+    fn bounds(self, config: &Config) -> Bounds {
+        forward(
+            config.slow_speed.saturating_mul(2),
+            config
+                .extra_load_mm
+                .saturating_mul(2)
+                .saturating_add(NOZZLE_PUSH_MARGIN_MM),
+            ErrorCode::MOVE_PULLEY_FAILED,
+        )
+    }
+
+    /// It pushes into the printer's extruder as the printer takes the filament.
+    fn paced_by_printer(self) -> bool {
+        true
+    }
+
+    fn goal<const N: usize>(self, run: &mut PhaseRun, at: &Sight<'_, N>) -> Result<Decision, ErrorCode> {
+        let goal = match at.unit.hub.tension.reading() {
+            Some(tension) => push_into_gears(run, tension, at.toward_goal_mm, at.now, at.config)?,
+            // Nothing else shows the gears holding the tip: no load is reported done blind.
+            None if at.unit.hub.tension.fault().is_some() => {
+                return Err(sensor_fault_error(SensorId::HubTension));
             }
-            _ => error,
-        }
+            None => Goal::Hold,
+        };
+        Ok(goal.into())
+    }
+
+    fn arrival(self) -> Option<Lane> {
+        Some(Lane::Loaded)
     }
 }
 

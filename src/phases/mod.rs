@@ -7,12 +7,14 @@
 //! error). Commands ([`crate::commands`]) arrange phases into plans; the runner
 //! ([`crate::runner`]) steps them.
 //!
-//! A phase's goal, bounds, progress code and errors live together in its family's module, as
-//! Prusa keeps `feed_to_finda.cpp` and `unload_to_finda.cpp` apart: `feed.rs` (slot to hub),
+//! Each motion phase is one type with one block, its goal, bounds, progress code, what it
+//! learns and the error its stop means together ([`MotionPhase`]), as Prusa keeps a
+//! sub-automaton a file; the types sit in their family's module: `feed.rs` (slot to hub),
 //! `unload.rs` (back to the hub, the park position, out of the slot), `load.rs` (through the
-//! Bowden tube into the printer's extruder) and `check.rs`. This module holds what they share:
-//! the motion driver (sensor faults, the guard at the slot sensor, hold and yield, the drive)
-//! and the one place where what a phase learned (a `Milestone`) is written into the unit.
+//! Bowden tube into the printer's extruder), and the checks in `check.rs`. This module holds
+//! what they share: the motion step (sensor faults, the guard at the slot sensor, hold and
+//! yield, the drive), the one place a [`Phase`] meets its type (`motion!`), and the one place
+//! where what a phase learned (a `Milestone`) is written into the unit.
 
 mod check;
 mod feed;
@@ -32,9 +34,6 @@ use crate::unit::{Lane, SensorId, Unit};
 pub use run::PhaseRun;
 
 use check::Check;
-use feed::Feed;
-use load::Load;
-use unload::Unload;
 
 /// How long the printer may stay silent before a phase that depends on it holds its motor, ms.
 /// While a command runs, Prusa's printer sends `Q0` one heartbeat (1 s, `heartBeatPeriod` in
@@ -59,7 +58,7 @@ pub const STILL_MS: u32 = 3000;
 
 /// One bounded step of a command. Its slot is a `u8` (a unit has at most [`crate::MAX_SLOTS`]):
 /// a phase takes 4 bytes, and every plan, copied whole when a command starts, half the room.
-/// Each variant's goal, bounds and errors are in its family's module (named below).
+/// Each motion variant's goal, bounds and errors are its type's, in the module named below.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Phase {
@@ -148,15 +147,64 @@ pub enum Phase {
     AwaitContinue,
 }
 
+/// Runs `$body` with `$p` bound to the motion type of `$phase` (in its family's module), or
+/// `$check` for a check: the one place a phase meets its type.
+macro_rules! motion {
+    ($phase:expr, $p:ident => $body:expr, check => $check:expr) => {
+        match $phase {
+            Phase::FeedToHub { max_mm, .. } => {
+                let $p = feed::ToHub { max_mm };
+                $body
+            }
+            Phase::ClearMerge { .. } => {
+                let $p = feed::ClearMerge;
+                $body
+            }
+            Phase::PushProof { .. } => {
+                let $p = feed::PushProof;
+                $body
+            }
+            Phase::UnloadToHub { await_release, .. } => {
+                let $p = unload::ToHub { await_release };
+                $body
+            }
+            Phase::ProveOwner { .. } => {
+                let $p = unload::ProveOwner;
+                $body
+            }
+            Phase::RetractToPark { .. } => {
+                let $p = unload::ToPark;
+                $body
+            }
+            Phase::EjectFromSlot { .. } => {
+                let $p = unload::FromSlot;
+                $body
+            }
+            Phase::FeedThroughBowden { .. } => {
+                let $p = load::ThroughBowden;
+                $body
+            }
+            Phase::FeedToFsensor { .. } => {
+                let $p = load::ToFsensor { search: false };
+                $body
+            }
+            Phase::SearchFsensor { .. } => {
+                let $p = load::ToFsensor { search: true };
+                $body
+            }
+            Phase::FeedToNozzle { .. } => {
+                let $p = load::ToNozzle;
+                $body
+            }
+            Phase::CheckSensors | Phase::AwaitContinue => $check,
+        }
+    };
+}
+
 impl Phase {
     /// The progress code the printer sees while this phase runs.
-    pub const fn progress(self) -> ProgressCode {
-        match self.family() {
-            Family::Feed(phase) => phase.progress(),
-            Family::Unload(phase) => phase.progress(),
-            Family::Load(phase) => phase.progress(),
-            Family::Check(phase) => phase.progress(),
-        }
+    pub fn progress(self) -> ProgressCode {
+        motion!(self, phase => phase.progress(), check => self.check().map_or(ProgressCode::HOMING, Check::progress))
     }
 
     /// The slot whose motor this phase drives.
@@ -177,109 +225,61 @@ impl Phase {
         }
     }
 
-    /// The family module that holds this phase's goal, bounds, progress and errors.
-    const fn family(self) -> Family {
+    /// The check this phase is, if it moves nothing.
+    const fn check(self) -> Option<Check> {
         match self {
-            Phase::FeedToHub { max_mm, .. } => Family::Feed(Feed::ToHub { max_mm }),
-            Phase::ClearMerge { .. } => Family::Feed(Feed::ClearMerge),
-            Phase::PushProof { .. } => Family::Feed(Feed::PushProof),
-            Phase::UnloadToHub { await_release, .. } => Family::Unload(Unload::ToHub { await_release }),
-            Phase::ProveOwner { .. } => Family::Unload(Unload::ProveOwner),
-            Phase::RetractToPark { .. } => Family::Unload(Unload::ToPark),
-            Phase::EjectFromSlot { .. } => Family::Unload(Unload::FromSlot),
-            Phase::FeedThroughBowden { .. } => Family::Load(Load::ThroughBowden),
-            Phase::FeedToFsensor { .. } => Family::Load(Load::ToFsensor),
-            Phase::SearchFsensor { .. } => Family::Load(Load::SearchFsensor),
-            Phase::FeedToNozzle { .. } => Family::Load(Load::ToNozzle),
-            Phase::CheckSensors => Family::Check(Check::Sensors),
-            Phase::AwaitContinue => Family::Check(Check::AwaitContinue),
+            Phase::CheckSensors => Some(Check::Sensors),
+            Phase::AwaitContinue => Some(Check::AwaitContinue),
+            _ => None,
         }
     }
 }
 
-/// A phase as its family's module knows it (the slot aside).
-#[derive(Debug, Clone, Copy)]
-enum Family {
-    Feed(Feed),
-    Unload(Unload),
-    Load(Load),
-    Check(Check),
-}
+/// A motion phase: its progress code, how it moves, where it stands against its goal, and what
+/// its end means. Each is a type in its family's module, one block a phase: a new phase is that
+/// block, a variant of [`Phase`] and its line in `motion!`.
+trait MotionPhase: Copy {
+    /// The progress code the printer sees while the phase runs.
+    fn progress(self) -> ProgressCode;
 
-/// The catalogue's questions about a phase, each answered by its family's module.
-impl Phase {
-    /// How the phase moves; `None` for a check.
-    fn bounds(self, config: &Config) -> Option<Bounds> {
-        match self.family() {
-            Family::Feed(phase) => Some(phase.bounds(config)),
-            Family::Unload(phase) => Some(phase.bounds(config)),
-            Family::Load(phase) => Some(phase.bounds(config)),
-            Family::Check(_) => None,
-        }
-    }
+    /// How the phase moves.
+    fn bounds(self, config: &Config) -> Bounds;
 
     /// Where the phase stands against its goal, and what it learned on the way.
-    fn goal<const N: usize>(self, run: &mut PhaseRun, sight: &Sight<'_, N>) -> Result<Decision, ErrorCode> {
-        match self.family() {
-            Family::Feed(phase) => phase.goal(run, sight),
-            Family::Unload(phase) => phase.goal(run, sight),
-            Family::Load(phase) => phase.goal(run, sight),
-            Family::Check(_) => Ok(Goal::Reached.into()),
-        }
-    }
+    fn goal<const N: usize>(self, run: &mut PhaseRun, at: &Sight<'_, N>) -> Result<Decision, ErrorCode>;
 
     /// Where the slot's filament is once the phase is done.
     fn arrival(self) -> Option<Lane> {
-        match self.family() {
-            Family::Feed(phase) => phase.arrival(),
-            Family::Unload(phase) => phase.arrival(),
-            Family::Load(phase) => phase.arrival(),
-            Family::Check(_) => None,
-        }
-    }
-
-    /// The phase pulled its tip back to the slot sensor, which sits just after the drive gear:
-    /// the tip is about to leave the gear. Where that still counts as done, the lane it leaves.
-    fn stopped_at_gear(self, hub: bool) -> Option<Lane> {
-        match self.family() {
-            Family::Unload(phase) => phase.stopped_at_gear(hub),
-            Family::Feed(_) | Family::Load(_) | Family::Check(_) => None,
-        }
-    }
-
-    /// The error of a pull back stopped at the slot sensor with the hub still seeing filament:
-    /// for a belief being proven, another slot holds the path (`8008`); else the phase's own.
-    const fn at_gear_error(self, error: ErrorCode) -> ErrorCode {
-        match self {
-            Phase::ProveOwner { .. } => ErrorCode::FINDA_VS_EEPROM_DISREPANCY,
-            _ => error,
-        }
+        None
     }
 
     /// May pull the tip back past the slot sensor, out of the drive gear's reach (an eject, a
     /// merge clearance); any other pull back stops there.
-    const fn past_slot_sensor(self) -> bool {
-        match self.family() {
-            Family::Feed(phase) => phase.past_slot_sensor(),
-            Family::Unload(phase) => phase.past_slot_sensor(),
-            Family::Load(_) | Family::Check(_) => false,
-        }
+    fn past_slot_sensor(self) -> bool {
+        false
     }
 
     /// Progress rests on the printer: the motor holds while the link to it is in doubt
     /// ([`PrinterLink::in_doubt`]).
-    const fn paced_by_printer(self) -> bool {
-        matches!(self.family(), Family::Load(phase) if phase.paced_by_printer())
+    fn paced_by_printer(self) -> bool {
+        false
     }
 
-    /// What the drive stopping on `error` means for the phase.
-    fn stopped<const N: usize>(self, error: ErrorCode, unit: &Unit<N>, slot: usize) -> Outcome {
-        match self.family() {
-            Family::Feed(phase) => phase.stopped(error, unit, slot),
-            Family::Unload(phase) => Outcome::Fail(phase.first_cause(error, unit.fsensor_triggered())),
-            Family::Load(phase) => Outcome::Fail(phase.first_cause(error)),
-            Family::Check(_) => Outcome::Fail(error),
-        }
+    /// The phase pulled its tip back to the slot sensor, which sits just after the drive gear:
+    /// where that still counts as done, the lane it leaves.
+    fn stopped_at_gear(self, _hub: bool) -> Option<Lane> {
+        None
+    }
+
+    /// The error of a pull back stopped at the slot sensor with the hub still seeing filament.
+    fn at_gear_error(self, error: ErrorCode) -> ErrorCode {
+        error
+    }
+
+    /// What the drive stopping on `error` means for the phase: the error that names what the
+    /// user must look at.
+    fn stopped<const N: usize>(self, error: ErrorCode, _unit: &Unit<N>, _slot: usize) -> Outcome {
+        Outcome::Fail(error)
     }
 }
 
@@ -507,35 +507,32 @@ pub fn step<const N: usize>(
     now: Instant,
     config: &Config,
 ) -> Outcome {
-    match (phase.family(), phase.slot()) {
-        (Family::Check(check), _) => {
-            let (outcome, lanes) = check.step(run, notes, unit, now);
-            // The check's verdict on the lanes holds whatever its outcome.
-            unit.lanes = lanes;
-            outcome
-        }
-        (_, Some(slot)) => {
-            let Some(bounds) = phase.bounds(config) else {
-                return Outcome::Fail(ErrorCode::INTERNAL);
-            };
-            let mut step = MotionStep {
-                phase,
-                slot,
-                bounds,
-                notes,
-                unit,
-                now,
-                config,
-            };
-            step.run(run, resume_goal_from)
-        }
-        (_, None) => Outcome::Fail(ErrorCode::INTERNAL),
-    }
+    let Some(slot) = phase.slot() else {
+        let Some(check) = phase.check() else {
+            return Outcome::Fail(ErrorCode::INTERNAL);
+        };
+        let (outcome, lanes) = check.step(run, notes, unit, now);
+        // The check's verdict on the lanes holds whatever its outcome.
+        unit.lanes = lanes;
+        return outcome;
+    };
+    motion!(phase, motion => {
+        let mut step = MotionStep {
+            motion,
+            slot,
+            bounds: motion.bounds(config),
+            notes,
+            unit,
+            now,
+            config,
+        };
+        step.run(run, resume_goal_from)
+    }, check => Outcome::Fail(ErrorCode::INTERNAL))
 }
 
 /// A motion phase's step: the phase, its slot, and what it works on.
-struct MotionStep<'a, const N: usize> {
-    phase: Phase,
+struct MotionStep<'a, P, const N: usize> {
+    motion: P,
     slot: usize,
     bounds: Bounds,
     notes: &'a mut Notes,
@@ -544,7 +541,7 @@ struct MotionStep<'a, const N: usize> {
     config: &'a Config,
 }
 
-impl<const N: usize> MotionStep<'_, N> {
+impl<P: MotionPhase, const N: usize> MotionStep<'_, P, N> {
     /// One step of the phase attempt `run` (see [`step`]).
     fn run(&mut self, run: &mut Option<PhaseRun>, resume_goal_from: Option<i32>) -> Outcome {
         let Some(run) = self.attempt(run, resume_goal_from) else {
@@ -629,7 +626,7 @@ impl<const N: usize> MotionStep<'_, N> {
             now: self.now,
             config: self.config,
         };
-        let Decision { goal, learned } = self.phase.goal(run, &sight).map_err(Outcome::Fail)?;
+        let Decision { goal, learned } = self.motion.goal(run, &sight).map_err(Outcome::Fail)?;
         if let Some(milestone) = learned {
             learn(milestone, slot, self.notes, self.unit);
         }
@@ -639,7 +636,7 @@ impl<const N: usize> MotionStep<'_, N> {
     /// How the motor moves toward `goal`; `Err` when the phase ends or waits this step (the
     /// motor braked or freed).
     fn motion(&mut self, goal: Goal, run: &mut PhaseRun) -> Result<Motion, Outcome> {
-        let (phase, slot, now, direction) = (self.phase, self.slot, self.now, self.bounds.direction);
+        let (phase, slot, now, direction) = (self.motion, self.slot, self.now, self.bounds.direction);
         let slot_sees = self.unit.feeders.get(slot).and_then(|f| f.filament.present()) == Some(true);
         let odometry = self.odometry();
         let Some(drive) = self.unit.drives.get_mut(slot) else {
@@ -710,7 +707,7 @@ impl<const N: usize> MotionStep<'_, N> {
         }
         match drive.run(motion, feeder, tension, now, config) {
             Ok(()) => Outcome::Continue,
-            Err(error) => self.phase.stopped(error, self.unit, slot),
+            Err(error) => self.motion.stopped(error, self.unit, slot),
         }
     }
 }

@@ -6,11 +6,11 @@
 use mmu_hal_port::Direction;
 use mmu_protocol::{ErrorCode, ProgressCode};
 
-use super::{Bounds, Decision, Goal, Milestone, Notes, PhaseRun, Sight};
+use super::{Bounds, Decision, Goal, Milestone, MotionPhase, Notes, Outcome, PhaseRun, Sight};
 use crate::config::{Config, Contract};
 use crate::feeder::distance_centi;
 use crate::time::Instant;
-use crate::unit::Lane;
+use crate::unit::{Lane, Unit};
 
 /// How long an unload waits for the printer to release the filament (its sensor off), ms, before
 /// it fails with `8004` having pulled nothing: MMU 3.0.4's limit (`unload_to_finda.cpp`, 4000 ms
@@ -27,131 +27,177 @@ const RELEASE_SLOW_MM: u16 = 20;
 /// half a second for its planner to start the move.
 const PRINTER_HELP_MS: u64 = 1500;
 
-/// The phases that pull back.
-#[derive(Debug, Clone, Copy)]
-pub(super) enum Unload {
-    /// [`super::Phase::UnloadToHub`].
-    ToHub { await_release: bool },
-    /// [`super::Phase::ProveOwner`].
-    ProveOwner,
-    /// [`super::Phase::RetractToPark`].
-    ToPark,
-    /// [`super::Phase::EjectFromSlot`].
-    FromSlot,
+/// A pull back at `speed` for at most `max_mm`, failing with `error`.
+const fn reverse(speed: u16, max_mm: u16, error: ErrorCode) -> Bounds {
+    Bounds::new(Direction::Reverse, speed, max_mm, error)
 }
 
-impl Unload {
-    pub(super) const fn progress(self) -> ProgressCode {
-        match self {
-            Unload::ToHub { .. } | Unload::ProveOwner => ProgressCode::UNLOADING_TO_FINDA,
-            Unload::ToPark => ProgressCode::RETRACTING_FROM_FINDA,
-            Unload::FromSlot => ProgressCode::EJECTING_FILAMENT,
+/// The longest way from the printer's sensor back to the hub sensor, mm.
+const fn printer_to_hub_mm(config: &Config) -> u16 {
+    config
+        .bowden_mm
+        .saturating_add(config.fsensor_search_mm)
+        .saturating_add(config.hub_search_mm)
+}
+
+/// `P3` ([`super::Phase::UnloadToHub`]): pull back until the printer's sensor and then the hub
+/// sensor clear; with `await_release`, first wait, the motor free to turn, while the printer's
+/// gears may still grip the filament.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct ToHub {
+    pub(super) await_release: bool,
+}
+
+impl MotionPhase for ToHub {
+    fn progress(self) -> ProgressCode {
+        ProgressCode::UNLOADING_TO_FINDA
+    }
+
+    fn bounds(self, config: &Config) -> Bounds {
+        Bounds {
+            // The slow start, twice its nominal duration as every bound.
+            slower_mm: RELEASE_SLOW_MM,
+            ..reverse(
+                config.unload_speed,
+                printer_to_hub_mm(config),
+                ErrorCode::FINDA_DIDNT_SWITCH_OFF,
+            )
         }
     }
 
-    pub(super) fn bounds(self, config: &Config) -> Bounds {
-        let reverse = |speed, max_mm, error| Bounds::new(Direction::Reverse, speed, max_mm, error);
-        match self {
-            Unload::ToHub { .. } => Bounds {
-                // The slow start, twice its nominal duration as every bound.
-                slower_mm: RELEASE_SLOW_MM,
-                ..reverse(
-                    config.unload_speed,
-                    config
-                        .bowden_mm
-                        .saturating_add(config.fsensor_search_mm)
-                        .saturating_add(config.hub_search_mm),
-                    ErrorCode::FINDA_DIDNT_SWITCH_OFF,
-                )
-            },
-            // Past the proof, an unload: as far as one from the printer's sensor.
-            Unload::ProveOwner => reverse(
-                config.load_speed,
-                config
-                    .bowden_mm
-                    .saturating_add(config.fsensor_search_mm)
-                    .saturating_add(config.hub_search_mm),
-                ErrorCode::FINDA_DIDNT_SWITCH_OFF,
-            ),
-            Unload::ToPark => reverse(
-                config.load_speed,
-                config.hub_search_mm.saturating_add(config.park_mm),
-                ErrorCode::FINDA_DIDNT_SWITCH_OFF,
-            ),
-            Unload::FromSlot => reverse(
-                config.load_speed,
-                config.eject_max_mm,
-                ErrorCode::MOVE_PULLEY_FAILED,
-            ),
-        }
+    fn goal<const N: usize>(self, run: &mut PhaseRun, at: &Sight<'_, N>) -> Result<Decision, ErrorCode> {
+        unload_to_hub(self.await_release, run, at)
     }
 
-    /// Only the eject means to pull the tip out of its drive gear.
-    pub(super) const fn past_slot_sensor(self) -> bool {
-        matches!(self, Unload::FromSlot)
+    fn arrival(self) -> Option<Lane> {
+        Some(Lane::InHub)
     }
 
-    pub(super) fn goal<const N: usize>(
-        self,
-        run: &mut PhaseRun,
-        at: &Sight<'_, N>,
-    ) -> Result<Decision, ErrorCode> {
-        Ok(match self {
-            Unload::ToHub { await_release } => return unload_to_hub(await_release, run, at),
-            Unload::ProveOwner => return prove_owner(run, at),
-            Unload::ToPark => match (at.hub, run.mark_centi.or(hub_mark(at.notes, at.slot))) {
-                (true, _) => Goal::Drive.into(),
-                (false, None) => {
-                    // Where the hub cleared: the park distance counts from here, also after a
-                    // Retry. A retract that starts with the hub already clear (after a Retry) did
-                    // not see where: the tip ends somewhere behind its park position.
-                    run.mark_centi = Some(at.odometry);
-                    Goal::Drive.learning(Milestone::HubCleared {
-                        at_centi: at.odometry,
-                        unsure: run.started == at.now,
-                    })
-                }
-                (false, Some(mark))
-                    if distance_centi(at.odometry, mark) / 100 >= i32::from(at.config.park_mm) =>
-                {
-                    Goal::Reached.into()
-                }
-                (false, Some(_)) => Goal::Drive.into(),
-            },
-            Unload::FromSlot if at.slot_sees => Goal::Drive.into(),
-            Unload::FromSlot => Goal::Reached.into(),
+    /// An unload stopped while the printer's sensor still reads filament stopped against the
+    /// printer's gears: FSENSOR DIDNT CLEAR (`8004`), as MMU 3.0.3 reports it after the check
+    /// distance, and whose Retry makes the printer help with its own extruder (Buddy
+    /// `mmu2_mk4.cpp` `CheckUserInput`: `HelpUnloadToFinda` on `FSENSOR_DIDNT_SWITCH_OFF`).
+    fn stopped<const N: usize>(self, error: ErrorCode, unit: &Unit<N>, _slot: usize) -> Outcome {
+        Outcome::Fail(match error {
+            ErrorCode::STALLED_PULLEY if unit.fsensor_triggered() => ErrorCode::FSENSOR_DIDNT_SWITCH_OFF,
+            error => error,
         })
     }
+}
 
-    pub(super) const fn arrival(self) -> Option<Lane> {
-        Some(match self {
-            Unload::ToHub { .. } | Unload::ProveOwner => Lane::InHub,
-            Unload::ToPark => Lane::Parked,
-            Unload::FromSlot => Lane::Empty,
-        })
+/// `P3` ([`super::Phase::ProveOwner`]), for a slot only believed to hold the hub path: see
+/// [`prove_owner`].
+#[derive(Debug, Clone, Copy)]
+pub(super) struct ProveOwner;
+
+impl MotionPhase for ProveOwner {
+    fn progress(self) -> ProgressCode {
+        ProgressCode::UNLOADING_TO_FINDA
     }
 
-    /// A retract to the park position that reaches the drive gear with the hub clear is done,
-    /// behind its park position: where exactly, nobody knows.
-    pub(super) const fn stopped_at_gear(self, hub: bool) -> Option<Lane> {
-        match (self, hub) {
-            (Unload::ToPark, false) => Some(Lane::Unknown),
-            _ => None,
-        }
+    /// Past the proof, an unload: as far as one from the printer's sensor.
+    fn bounds(self, config: &Config) -> Bounds {
+        reverse(
+            config.load_speed,
+            printer_to_hub_mm(config),
+            ErrorCode::FINDA_DIDNT_SWITCH_OFF,
+        )
     }
 
-    /// The error that names what the user must look at. An unload stopped while the printer's
-    /// sensor still reads filament stopped against the printer's gears: FSENSOR DIDNT CLEAR
-    /// (`8004`), as MMU 3.0.3 reports it after the check distance, and whose Retry makes the
-    /// printer help with its own extruder (Buddy `mmu2_mk4.cpp` `CheckUserInput`:
-    /// `HelpUnloadToFinda` on `FSENSOR_DIDNT_SWITCH_OFF`).
-    pub(super) const fn first_cause(self, error: ErrorCode, fsensor: bool) -> ErrorCode {
-        match (self, error) {
-            (Unload::ToHub { .. }, ErrorCode::STALLED_PULLEY) if fsensor => {
-                ErrorCode::FSENSOR_DIDNT_SWITCH_OFF
+    fn goal<const N: usize>(self, run: &mut PhaseRun, at: &Sight<'_, N>) -> Result<Decision, ErrorCode> {
+        prove_owner(run, at)
+    }
+
+    fn arrival(self) -> Option<Lane> {
+        Some(Lane::InHub)
+    }
+
+    /// Stopped at the slot sensor with the hub still seeing filament: another slot holds the
+    /// path (`8008`).
+    fn at_gear_error(self, _error: ErrorCode) -> ErrorCode {
+        ErrorCode::FINDA_VS_EEPROM_DISREPANCY
+    }
+}
+
+/// `P19` ([`super::Phase::RetractToPark`]): pull back until the hub sensor clears, then the park
+/// distance.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct ToPark;
+
+impl MotionPhase for ToPark {
+    fn progress(self) -> ProgressCode {
+        ProgressCode::RETRACTING_FROM_FINDA
+    }
+
+    fn bounds(self, config: &Config) -> Bounds {
+        reverse(
+            config.load_speed,
+            config.hub_search_mm.saturating_add(config.park_mm),
+            ErrorCode::FINDA_DIDNT_SWITCH_OFF,
+        )
+    }
+
+    fn goal<const N: usize>(self, run: &mut PhaseRun, at: &Sight<'_, N>) -> Result<Decision, ErrorCode> {
+        Ok(match (at.hub, run.mark_centi.or(hub_mark(at.notes, at.slot))) {
+            (true, _) => Goal::Drive.into(),
+            (false, None) => {
+                // Where the hub cleared: the park distance counts from here, also after a
+                // Retry. A retract that starts with the hub already clear (after a Retry) did
+                // not see where: the tip ends somewhere behind its park position.
+                run.mark_centi = Some(at.odometry);
+                Goal::Drive.learning(Milestone::HubCleared {
+                    at_centi: at.odometry,
+                    unsure: run.started == at.now,
+                })
             }
-            _ => error,
-        }
+            (false, Some(mark))
+                if distance_centi(at.odometry, mark) / 100 >= i32::from(at.config.park_mm) =>
+            {
+                Goal::Reached.into()
+            }
+            (false, Some(_)) => Goal::Drive.into(),
+        })
+    }
+
+    fn arrival(self) -> Option<Lane> {
+        Some(Lane::Parked)
+    }
+
+    /// A retract that reaches the drive gear with the hub clear is done, behind its park
+    /// position: where exactly, nobody knows.
+    fn stopped_at_gear(self, hub: bool) -> Option<Lane> {
+        (!hub).then_some(Lane::Unknown)
+    }
+}
+
+/// `P18` ([`super::Phase::EjectFromSlot`]): pull back until the slot sensor clears.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct FromSlot;
+
+impl MotionPhase for FromSlot {
+    fn progress(self) -> ProgressCode {
+        ProgressCode::EJECTING_FILAMENT
+    }
+
+    fn bounds(self, config: &Config) -> Bounds {
+        reverse(
+            config.load_speed,
+            config.eject_max_mm,
+            ErrorCode::MOVE_PULLEY_FAILED,
+        )
+    }
+
+    /// The eject means to pull the tip out of its drive gear.
+    fn past_slot_sensor(self) -> bool {
+        true
+    }
+
+    fn goal<const N: usize>(self, _run: &mut PhaseRun, at: &Sight<'_, N>) -> Result<Decision, ErrorCode> {
+        Ok(if at.slot_sees { Goal::Drive } else { Goal::Reached }.into())
+    }
+
+    fn arrival(self) -> Option<Lane> {
+        Some(Lane::Empty)
     }
 }
 
