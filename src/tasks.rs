@@ -128,8 +128,11 @@ where
     let mut samples = Samples::<N>::uniform(mmu_hal_port::ADC_MAX / 2);
     let mut sample_clock = SampleClock::new(now_us());
     let mut button = BUTTON.receiver();
-    let mut led = None;
-    let mut line_errors = LineErrors::default();
+    let mut outlets = Outlets {
+        led: None,
+        line_errors: LineErrors::default(),
+        feed,
+    };
     loop {
         ticker.next().await;
         let started_us = now_us();
@@ -138,8 +141,7 @@ where
         // starts so late (after a flash write) that the next tick is near or past; past it the
         // step runs on the previous samples, which then grow old and stop the watchdog's feed.
         let bound_us = schedule.deadline_us().max(started_us + LATE_SCAN.as_micros());
-        let scan = pin!(sampler.scan());
-        if let Some(Ok(scan)) = bounded(embassy_time::Instant::from_micros(bound_us), scan).await {
+        if let Some(scan) = scan_until(&mut sampler, bound_us).await {
             samples = scan;
             sample_clock.fresh(now_us());
         }
@@ -159,27 +161,7 @@ where
             };
             let step = control.step(&tick, &mut received);
             motors.apply(&step.out.motors);
-            if led != Some(step.out.status_led) {
-                led = Some(step.out.status_led);
-                LED.signal(step.out.status_led);
-            }
-            if !step.out.tx.is_empty() && !queue_answer(&step.out.tx) {
-                control.tx_dropped();
-            }
-            if step.button_pressed {
-                log!(info, "button: Middle");
-            }
-            if step.feed_watchdog {
-                feed();
-            }
-            if let Some(stats) = step.report {
-                let now_errors = received.errors();
-                log_stats(&stats, &now_errors.since(&line_errors));
-                line_errors = now_errors;
-            }
-            if step.save_piece {
-                STEPPED.signal(());
-            }
+            outlets.carry_out(&step, &mut control, &received);
             step.out.action
         };
         if let Some(action) = action {
@@ -197,6 +179,58 @@ where
         if STORE_WROTE.swap(false, Ordering::Relaxed) || lateness_us > control::ON_TIME_US {
             schedule.skip_missed(now_us());
             align(&mut ticker, &schedule);
+        }
+    }
+}
+
+/// The sensors' scan, waited for until `bound_us` at most.
+async fn scan_until<const N: usize>(sampler: &mut impl SensorScan<N>, bound_us: u64) -> Option<Samples<N>> {
+    let scan = pin!(sampler.scan());
+    match bounded(embassy_time::Instant::from_micros(bound_us), scan).await {
+        Some(Ok(samples)) => Some(samples),
+        _ => None,
+    }
+}
+
+/// Where a step's outputs go besides the motors and a reset: the LED, the answer, the log, the
+/// watchdog and the store task.
+struct Outlets {
+    /// The LED as last signalled.
+    led: Option<bool>,
+    /// The line's errors as of the last statistics report.
+    line_errors: LineErrors,
+    /// Reloads the board's watchdog.
+    feed: fn(),
+}
+
+impl Outlets {
+    /// Carry out what `step` of `control` says, `received` the step's receive side.
+    fn carry_out<const N: usize>(
+        &mut self,
+        step: &control::Step<N>,
+        control: &mut ControlLoop<N>,
+        received: &impl Received,
+    ) {
+        if self.led != Some(step.out.status_led) {
+            self.led = Some(step.out.status_led);
+            LED.signal(step.out.status_led);
+        }
+        if !step.out.tx.is_empty() && !queue_answer(&step.out.tx) {
+            control.tx_dropped();
+        }
+        if step.button_pressed {
+            log!(info, "button: Middle");
+        }
+        if step.feed_watchdog {
+            (self.feed)();
+        }
+        if let Some(stats) = step.report {
+            let now_errors = received.errors();
+            log_stats(&stats, &now_errors.since(&self.line_errors));
+            self.line_errors = now_errors;
+        }
+        if step.save_piece {
+            STEPPED.signal(());
         }
     }
 }
