@@ -46,6 +46,47 @@ macro_rules! pin_map {
     (@stop $pass:ident $safe:tt $pin:ident) => { None };
 }
 
+/// Declares the board's type, `$board`, and its [`Board`] contract from the names every board
+/// module defines: `NAME`, `STORE_RANGE`, `ResetCause` and the parts' types, `emergency_stop`,
+/// `reset_cause`, `init` and `reset`.
+macro_rules! board_contract {
+    ($board:ident) => {
+        /// This board's contract.
+        pub struct $board;
+
+        impl super::Board for $board {
+            const NAME: &'static str = NAME;
+            const STORE_RANGE: Range<u32> = STORE_RANGE;
+            type ResetCause = ResetCause;
+            type Sampler = Sampler;
+            type Motors = Motors;
+            type LinkRx = LinkRx;
+            type LinkTx = LinkTx;
+            type Led = Led;
+            type ButtonPin = ButtonPin;
+            type Watchdog = Watchdog;
+            type StoreFlash = StoreFlash;
+            type Crc = Crc;
+
+            fn emergency_stop() {
+                emergency_stop();
+            }
+
+            fn reset_cause() -> ResetCause {
+                reset_cause()
+            }
+
+            fn init() -> super::Parts<Self> {
+                init()
+            }
+
+            fn reset() -> ! {
+                reset()
+            }
+        }
+    };
+}
+
 #[cfg(feature = "g071")]
 mod g071;
 #[cfg(feature = "g071")]

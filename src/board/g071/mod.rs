@@ -584,39 +584,7 @@ fn low(pin: Peri<'static, impl Pin>) -> Output<'static> {
     Output::new(pin, Level::Low, Speed::Low)
 }
 
-/// This board's contract.
-pub struct G071;
-
-impl super::Board for G071 {
-    const NAME: &'static str = NAME;
-    const STORE_RANGE: Range<u32> = STORE_RANGE;
-    type ResetCause = ResetCause;
-    type Sampler = Sampler;
-    type Motors = Motors;
-    type LinkRx = LinkRx;
-    type LinkTx = LinkTx;
-    type Led = Led;
-    type ButtonPin = ButtonPin;
-    type Watchdog = Watchdog;
-    type StoreFlash = StoreFlash;
-    type Crc = Crc;
-
-    fn emergency_stop() {
-        emergency_stop();
-    }
-
-    fn reset_cause() -> ResetCause {
-        reset_cause()
-    }
-
-    fn init() -> super::Parts<Self> {
-        init()
-    }
-
-    fn reset() -> ! {
-        reset()
-    }
-}
+board_contract!(G071);
 
 /// Starts the clocks and every peripheral of the board. The watchdog first, right after the
 /// clocks; the bridges come up in standby with both inputs low and duty 0.

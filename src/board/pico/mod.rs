@@ -458,39 +458,7 @@ fn low(pin: Peri<'static, impl embassy_rp::gpio::Pin>) -> Output<'static> {
     Output::new(pin, Level::Low)
 }
 
-/// This board's contract.
-pub struct Pico;
-
-impl super::Board for Pico {
-    const NAME: &'static str = NAME;
-    const STORE_RANGE: Range<u32> = STORE_RANGE;
-    type ResetCause = ResetCause;
-    type Sampler = Sampler;
-    type Motors = Motors;
-    type LinkRx = LinkRx;
-    type LinkTx = LinkTx;
-    type Led = Led;
-    type ButtonPin = ButtonPin;
-    type Watchdog = Watchdog;
-    type StoreFlash = StoreFlash;
-    type Crc = Crc;
-
-    fn emergency_stop() {
-        emergency_stop();
-    }
-
-    fn reset_cause() -> ResetCause {
-        reset_cause()
-    }
-
-    fn init() -> super::Parts<Self> {
-        init()
-    }
-
-    fn reset() -> ! {
-        reset()
-    }
-}
+board_contract!(Pico);
 
 /// Starts the clocks (125 MHz) and every peripheral of the board. The watchdog first; the
 /// bridges come up in standby with both inputs low and duty 0.
