@@ -189,8 +189,8 @@ class Bench:
         step (CONTROL_STEPS moved; the boot and the store's restore are not the control loop):
         instructions executed
         in the milliseconds without a flash write (median, 99th and 99.9th percentile, busiest) and the busiest with
-        one, with the step-cost benchmark's cycle model (2.2 cycles an instruction,
-        scripts/step-cost.sh) for the percentage. One line, for the log."""
+        one, with 2.2 cycles an instruction (the flash's wait states, pessimistically) for the
+        percentage. One line, for the log."""
         plain = sorted(m for m in self.load if not m[3])
         writing = [m for m in self.load if m[3]]
         if not plain:
