@@ -19,7 +19,7 @@ use mmu_firmware::{BoardAction, Config, Direction, Duty, Instant, MotorCommand};
 use mmu_model::Model;
 use mmu_protocol::{ButtonCode, ErrorCode, ParamCode, ProgressCode, RequestCode, ResponseDecoder};
 
-use crate::flash::{FlashWear, G0_ERASE_STALL_US, G0_PROGRAM_STALL_US, uncommanded_um};
+use crate::flash::{FlashWear, G0_ERASE_STALL_US, G0_PROGRAM_STALL_US, MotionWatch};
 use crate::logic::UnitLogic;
 
 /// A board whose firmware image a bench can run.
@@ -104,10 +104,9 @@ pub struct FirmwareUnit {
     resets: u64,
     erases: u64,
     programs: u64,
-    /// Erases in steps that ended with a motor driven ([`FlashWear::erases_while_driven`]).
-    erases_while_driven: u64,
-    /// [`FlashWear::most_uncommanded_um`] at the board's longest stalls.
-    most_uncommanded_um: u64,
+    /// What the image's flash operations could do to the filament, at the board's longest
+    /// stalls.
+    motion: MotionWatch,
     /// Where the unit's flash wear goes when it is dropped ([`FirmwareUnit::report_wear`]).
     wear_sink: Option<Arc<Mutex<FlashWear>>>,
     failure: Option<String>,
@@ -147,8 +146,7 @@ impl FirmwareUnit {
             resets: 0,
             erases: 0,
             programs: 0,
-            erases_while_driven: 0,
-            most_uncommanded_um: 0,
+            motion: MotionWatch::default(),
             wear_sink: None,
             failure: None,
             line: String::new(),
@@ -232,17 +230,15 @@ impl FirmwareUnit {
         let erases = number(counts[2])?;
         let programs = number(counts[3])?;
         // The image writes its flash after a step, with the motors as that step left them.
-        let (new_erases, new_programs) = (
-            erases.saturating_sub(self.erases),
-            programs.saturating_sub(self.programs),
+        self.motion.step(
+            &self.motors,
+            (
+                erases.saturating_sub(self.erases),
+                programs.saturating_sub(self.programs),
+            ),
+            self.board.stall_us(),
+            self.config.full_duty_speed,
         );
-        if self.motors.iter().any(|motor| motor.is_driving()) {
-            self.erases_while_driven += new_erases;
-        }
-        let (erase_us, program_us) = self.board.stall_us();
-        let stall_us = new_erases * erase_us + new_programs * program_us;
-        let motion = uncommanded_um(&self.motors, self.config.full_duty_speed, stall_us);
-        self.most_uncommanded_um = self.most_uncommanded_um.max(motion);
         (self.erases, self.programs) = (erases, programs);
         self.wire.watch(&sent);
         tx.extend_from_slice(&sent);
@@ -331,13 +327,12 @@ impl UnitLogic for FirmwareUnit {
 
     fn flash_wear(&mut self) -> FlashWear {
         // The bench counts operations, not pages: every erase counts against the most worn page.
-        FlashWear {
+        self.motion.wear(FlashWear {
             bytes_written: self.programs * self.board.program_bytes(),
             erases: self.erases,
             max_page_erases: self.erases,
-            erases_while_driven: self.erases_while_driven,
-            most_uncommanded_um: self.most_uncommanded_um,
-        }
+            ..FlashWear::default()
+        })
     }
 
     fn motors(&self) -> Vec<MotorCommand> {

@@ -23,19 +23,50 @@ pub const G0_ERASE_STALL_US: u64 = 40_000;
 /// The longest a double-word program stalls it, µs (datasheet: 125 µs at most).
 pub const G0_PROGRAM_STALL_US: u64 = 125;
 
-/// The filament the fastest of `motors` moves while the CPU stalls `stall_us` with them running
-/// on, µm: a driven motor's duty at `full_duty_speed` mm/s for the whole duty.
-pub fn uncommanded_um(motors: &[mmu_firmware::MotorCommand], full_duty_speed: u16, stall_us: u64) -> u64 {
-    let fastest_permille = motors
-        .iter()
-        .filter_map(|motor| match motor {
-            mmu_firmware::MotorCommand::Drive { duty, .. } => Some(u64::from(duty.permille())),
-            _ => None,
-        })
-        .max()
-        .unwrap_or(0);
-    // mm/s × µs = 10⁻³ µm.
-    fastest_permille * u64::from(full_duty_speed) * stall_us / 1_000_000
+/// What a unit's flash operations could do to its filament, step by step: the figures of
+/// [`FlashWear`] that only the unit, which sees its motors, can count.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct MotionWatch {
+    erases_while_driven: u64,
+    most_uncommanded_um: u64,
+}
+
+impl MotionWatch {
+    /// A step left `motors` as they are, then erased `erases` pages and programmed `programs`
+    /// times, each stalling the CPU at most `stall_us` (erase, program) with the motors running
+    /// on at their duty of `full_duty_speed` mm/s.
+    pub fn step(
+        &mut self,
+        motors: &[mmu_firmware::MotorCommand],
+        (erases, programs): (u64, u64),
+        (erase_us, program_us): (u64, u64),
+        full_duty_speed: u16,
+    ) {
+        let fastest_permille = motors
+            .iter()
+            .filter_map(|motor| match motor {
+                mmu_firmware::MotorCommand::Drive { duty, .. } => Some(u64::from(duty.permille())),
+                _ => None,
+            })
+            .max()
+            .unwrap_or(0);
+        if fastest_permille > 0 {
+            self.erases_while_driven += erases;
+        }
+        // mm/s × µs = 10⁻³ µm.
+        let stall_us = erases * erase_us + programs * program_us;
+        let moved_um = fastest_permille * u64::from(full_duty_speed) * stall_us / 1_000_000;
+        self.most_uncommanded_um = self.most_uncommanded_um.max(moved_um);
+    }
+
+    /// `wear` with what this watch counted.
+    pub fn wear(self, wear: FlashWear) -> FlashWear {
+        FlashWear {
+            erases_while_driven: self.erases_while_driven,
+            most_uncommanded_um: self.most_uncommanded_um,
+            ..wear
+        }
+    }
 }
 
 /// Why an operation failed.

@@ -18,7 +18,7 @@ use mmu_firmware::{App, BoardAction, Config, Instant, MAX_SLOTS, MotorCommand};
 use mmu_model::Model;
 use mmu_protocol::{ButtonCode, RequestCode};
 
-use crate::flash::{FlashWear, G0_ERASE_STALL_US, G0_PAGE, G0_PROGRAM_STALL_US, MemFlash, uncommanded_um};
+use crate::flash::{FlashWear, G0_ERASE_STALL_US, G0_PAGE, G0_PROGRAM_STALL_US, MemFlash, MotionWatch};
 
 /// The simulated unit's flash for persisted state: 16 pages of the STM32G0 (32 KiB).
 pub type UnitFlash = MemFlash<G0_PAGE>;
@@ -94,9 +94,7 @@ struct PersistentApp<const N: usize> {
     /// What it booted with: a watchdog reset boots with it again.
     boot_config: Config,
     /// Page erases after a step that drove a motor, over every boot.
-    erases_while_driven: u64,
-    /// [`FlashWear::most_uncommanded_um`], over every boot.
-    most_uncommanded_um: u64,
+    motion: MotionWatch,
 }
 
 impl<const N: usize> PersistentApp<N> {
@@ -113,17 +111,16 @@ impl<const N: usize> PersistentApp<N> {
             received: ReceiveRing::new(MemoryRing::new()),
             hung_ms: None,
             boot_config: config,
-            erases_while_driven: 0,
-            most_uncommanded_um: 0,
+            motion: MotionWatch::default(),
         }
     }
 
     /// The flash goes to a fresh App booted on it; this one is left with a blank store.
     fn reboot(&mut self, config: Config) {
         let flash = std::mem::replace(self.keeper.store().flash(), blank_flash());
-        let (erases, motion) = (self.erases_while_driven, self.most_uncommanded_um);
+        let motion = self.motion;
         *self = PersistentApp::boot(config, flash);
-        (self.erases_while_driven, self.most_uncommanded_um) = (erases, motion);
+        self.motion = motion;
     }
 }
 
@@ -170,14 +167,15 @@ impl<const N: usize> UnitLogic for PersistentApp<N> {
             step.out.motors
         };
         let after = self.keeper.store().flash().wear();
-        let erases = after.erases - before.erases;
-        let programs = (after.bytes_written - before.bytes_written) / 8;
-        if motors.iter().any(|motor| motor.is_driving()) {
-            self.erases_while_driven += erases;
-        }
-        let stall_us = erases * G0_ERASE_STALL_US + programs * G0_PROGRAM_STALL_US;
-        let motion = uncommanded_um(&motors, self.control.app().config().full_duty_speed, stall_us);
-        self.most_uncommanded_um = self.most_uncommanded_um.max(motion);
+        self.motion.step(
+            &motors,
+            (
+                after.erases - before.erases,
+                (after.bytes_written - before.bytes_written) / 8,
+            ),
+            (G0_ERASE_STALL_US, G0_PROGRAM_STALL_US),
+            self.control.app().config().full_duty_speed,
+        );
         model.step(dt_ms, &motors);
         self.motors = motors;
         step.out.action
@@ -205,11 +203,7 @@ impl<const N: usize> UnitLogic for PersistentApp<N> {
     }
 
     fn flash_wear(&mut self) -> FlashWear {
-        FlashWear {
-            erases_while_driven: self.erases_while_driven,
-            most_uncommanded_um: self.most_uncommanded_um,
-            ..self.keeper.store().flash().wear()
-        }
+        self.motion.wear(self.keeper.store().flash().wear())
     }
 
     fn motors(&self) -> Vec<MotorCommand> {
