@@ -541,18 +541,29 @@ struct MotionStep<'a, P, const N: usize> {
     config: &'a Config,
 }
 
+/// What the sensors showed a motion step, read once for its goal, its motion and its drive.
+#[derive(Debug, Clone, Copy)]
+struct Seen {
+    /// The hub sensor sees filament.
+    hub: bool,
+    /// The slot sensor sees filament.
+    slot_sees: bool,
+    /// The slot's odometry, 1/100 mm.
+    odometry: i32,
+}
+
 impl<P: MotionPhase, const N: usize> MotionStep<'_, P, N> {
     /// One step of the phase attempt `run` (see [`step`]).
     fn run(&mut self, run: &mut Option<PhaseRun>, resume_goal_from: Option<i32>) -> Outcome {
         let Some(run) = self.attempt(run, resume_goal_from) else {
             return Outcome::Fail(ErrorCode::INVALID_TOOL);
         };
-        let goal = match self.decide(run) {
-            Ok(goal) => goal,
+        let (goal, seen) = match self.decide(run) {
+            Ok(decided) => decided,
             Err(outcome) => return outcome,
         };
-        match self.motion(goal, run) {
-            Ok(motion) => self.drive(motion, run),
+        match self.motion(goal, seen, run) {
+            Ok(motion) => self.drive(motion, seen, run),
             Err(outcome) => outcome,
         }
     }
@@ -580,16 +591,10 @@ impl<P: MotionPhase, const N: usize> MotionStep<'_, P, N> {
         })
     }
 
-    fn odometry(&self) -> i32 {
-        self.unit
-            .feeders
-            .get(self.slot)
-            .map_or(0, |feeder| feeder.odometry_centi())
-    }
-
-    /// Where the phase stands against its goal, what it learned written down; `Err` when the
-    /// step ends here (a faulty sensor fails it; a sensor warming up waits).
-    fn decide(&mut self, run: &mut PhaseRun) -> Result<Goal, Outcome> {
+    /// Where the phase stands against its goal, what it learned written down, and what the
+    /// sensors showed; `Err` when the step ends here (a faulty sensor fails it; a sensor warming
+    /// up waits).
+    fn decide(&mut self, run: &mut PhaseRun) -> Result<(Goal, Seen), Outcome> {
         let slot = self.slot;
         let sensors = [
             SensorId::MotorHall(slot),
@@ -603,13 +608,13 @@ impl<P: MotionPhase, const N: usize> MotionStep<'_, P, N> {
             return Err(Outcome::Fail(sensor_fault_error(fault)));
         }
         let hub = self.unit.hub_present().ok_or(Outcome::Continue)?;
-        let slot_sees = self
+        let feeder = self
             .unit
             .feeders
             .get(slot)
-            .and_then(|f| f.filament.present())
-            .ok_or(Outcome::Continue)?;
-        let odometry = self.odometry();
+            .ok_or(Outcome::Fail(ErrorCode::INTERNAL))?;
+        let slot_sees = feeder.filament.present().ok_or(Outcome::Continue)?;
+        let odometry = feeder.odometry_centi();
         let toward_goal_mm = match self.bounds.direction {
             Direction::Forward => distance_centi(run.goal_from_centi, odometry) / 100,
             Direction::Reverse => distance_centi(odometry, run.goal_from_centi) / 100,
@@ -630,15 +635,18 @@ impl<P: MotionPhase, const N: usize> MotionStep<'_, P, N> {
         if let Some(milestone) = learned {
             learn(milestone, slot, self.notes, self.unit);
         }
-        Ok(goal)
+        let seen = Seen {
+            hub,
+            slot_sees,
+            odometry,
+        };
+        Ok((goal, seen))
     }
 
     /// How the motor moves toward `goal`; `Err` when the phase ends or waits this step (the
     /// motor braked or freed).
-    fn motion(&mut self, goal: Goal, run: &mut PhaseRun) -> Result<Motion, Outcome> {
+    fn motion(&mut self, goal: Goal, seen: Seen, run: &mut PhaseRun) -> Result<Motion, Outcome> {
         let (phase, slot, now, direction) = (self.motion, self.slot, self.now, self.bounds.direction);
-        let slot_sees = self.unit.feeders.get(slot).and_then(|f| f.filament.present()) == Some(true);
-        let odometry = self.odometry();
         let Some(drive) = self.unit.drives.get_mut(slot) else {
             return Err(Outcome::Fail(ErrorCode::INTERNAL));
         };
@@ -651,11 +659,10 @@ impl<P: MotionPhase, const N: usize> MotionStep<'_, P, N> {
                 Err(Outcome::Done)
             }
             Goal::Drive | Goal::DriveAt(_)
-                if direction == Direction::Reverse && !slot_sees && !phase.past_slot_sensor() =>
+                if direction == Direction::Reverse && !seen.slot_sees && !phase.past_slot_sensor() =>
             {
                 drive.brake(now);
-                let hub = self.unit.hub_present() == Some(true);
-                match phase.stopped_at_gear(hub) {
+                match phase.stopped_at_gear(seen.hub) {
                     Some(lane) => {
                         learn(Milestone::Arrived(lane), slot, self.notes, self.unit);
                         Err(Outcome::Done)
@@ -674,14 +681,14 @@ impl<P: MotionPhase, const N: usize> MotionStep<'_, P, N> {
             Goal::DriveAt(speed) => Ok(Motion::Run { direction, speed }),
             Goal::Yield => {
                 // Let the motor turn freely while the phase waits.
-                run.pause(now, odometry);
+                run.pause(now, seen.odometry);
                 drive.release(now);
                 Err(Outcome::Continue)
             }
             Goal::Drive | Goal::Hold => {
                 // Hold: the phase waits, or the printer's `f` may be lost and its co-feed has
                 // stopped.
-                run.pause(now, odometry);
+                run.pause(now, seen.odometry);
                 drive.brake(now);
                 Err(Outcome::Continue)
             }
@@ -689,7 +696,7 @@ impl<P: MotionPhase, const N: usize> MotionStep<'_, P, N> {
     }
 
     /// Drive `motion` under the drive's budget, begun again after a hold.
-    fn drive(&mut self, motion: Motion, run: &mut PhaseRun) -> Outcome {
+    fn drive(&mut self, motion: Motion, seen: Seen, run: &mut PhaseRun) -> Outcome {
         let (slot, now, config) = (self.slot, self.now, self.config);
         let tension = self.unit.hub.tension.reading();
         let (Some(feeder), Some(drive)) = (self.unit.feeders.get(slot), self.unit.drives.get_mut(slot))
@@ -698,9 +705,9 @@ impl<P: MotionPhase, const N: usize> MotionStep<'_, P, N> {
         };
         if run.held {
             run.held = false;
-            let odometry = feeder.odometry_centi();
             drive.begin(
-                run.budget_use.resume(self.bounds.budget(config), now, odometry),
+                run.budget_use
+                    .resume(self.bounds.budget(config), now, seen.odometry),
                 feeder,
                 now,
             );
