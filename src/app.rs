@@ -429,8 +429,7 @@ impl<const N: usize> App<N> {
         };
         let accepted = registers::write(&mut target, N, address, value);
         if accepted && registers::LEFT <= address && address < registers::LEFT + N as u8 {
-            let tally = &mut self.tally;
-            tally.ledger.sync_used(&mut tally.counters.lanes);
+            self.tally.left_written();
         }
         if accepted && address != registers::FSENSOR {
             self.settings_revision = self.settings_revision.wrapping_add(1);

@@ -106,6 +106,10 @@ pub enum FilterKind {
     Motor,
 }
 
+/// The presence filter's median and average windows, samples.
+const PRESENCE_MEDIAN: usize = 5;
+const PRESENCE_AVERAGE: usize = 4;
+
 /// Fractional bits of a smoothed value.
 const FRACTION_BITS: u32 = 8;
 
@@ -140,7 +144,7 @@ impl Filter {
     /// Feed one raw sample through the filter `kind`; returns the filtered value.
     pub fn push(&mut self, raw: u16, kind: FilterKind) -> u16 {
         match kind {
-            FilterKind::Presence => self.push_with::<5, 4, 1>(raw),
+            FilterKind::Presence => self.push_with::<PRESENCE_MEDIAN, PRESENCE_AVERAGE, 1>(raw),
             FilterKind::Motor => self.push_with::<3, 1, 0>(raw),
         }
     }
@@ -219,7 +223,7 @@ pub struct AnalogSensor {
 
 /// Samples a filter needs before its output means anything: twice the presence filter's median
 /// and average windows together.
-const WARM_UP_SAMPLES: u16 = 2 * (5 + 4);
+const WARM_UP_SAMPLES: u16 = 2 * (PRESENCE_MEDIAN + PRESENCE_AVERAGE) as u16;
 
 impl Default for AnalogSensor {
     fn default() -> Self {

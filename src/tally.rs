@@ -45,6 +45,11 @@ impl<const N: usize> Tally<N> {
         self.fed_centi_beyond_mm = [0; N];
     }
 
+    /// A register write set the filament left of a lane: the whole metres kept follow.
+    pub fn left_written(&mut self) {
+        self.ledger.sync_used(&mut self.counters.lanes);
+    }
+
     /// `slot`'s odometry was set to `centi` (not a motion).
     pub fn odometry_set(&mut self, slot: usize, centi: i32) {
         if let Some(seen) = self.odometry_seen.get_mut(slot) {

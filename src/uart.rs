@@ -11,8 +11,8 @@
 //! src/board/pico/uart_ring.rs); the simulator models the same ring. [`ReceiveRing`] reads any of
 //! them for the control step ([`crate::control::ControlLoop::step`]), and [`DmaRing`] is its
 //! decisions, tested below against a model of the DMA, which also holds the ring sizes to the
-//! longest stall of each board ([`G071_DMA_RING`], [`PICO_DMA_RING`]): a page erase while the printer sends without pause loses
-//! no byte.
+//! longest stall of each board ([`G071_DMA_RING`], [`PICO_DMA_RING`]): a page erase while the
+//! printer sends without pause loses no byte.
 
 use crate::control::{LINE_BYTES_PER_MS, MAX_RX_PER_STEP};
 

@@ -373,12 +373,15 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Store<F, N, C> {
                 wrote: false,
             },
         );
-        if self.job.is_some() || self.fresh_page_ready() {
+        if self.job.is_some() {
             return Ok(done);
         }
         let Some(page) = self.fresh_page() else {
             return Err(StoreError::Flash);
         };
+        if self.ready == Some(page) {
+            return Ok(done);
+        }
         let offset = match self.checking {
             Some((checked, offset)) if checked == page => offset,
             _ => 0,
