@@ -16,6 +16,7 @@ use crate::arbiter::MotorArbiter;
 use crate::config::{Config, Contract};
 use crate::drive;
 use crate::persist::{MAX_SETTINGS, Snapshot};
+use crate::profile::Profile;
 use crate::registers;
 use crate::runner::{Learned, Runner, Status};
 use crate::session::Session;
@@ -121,6 +122,22 @@ impl<const N: usize> App<N> {
             bowden_learned_mm: 0,
             settings_revision: 0,
         }
+    }
+
+    /// A freshly started unit on the hardware `profile` with `config` (its defaults:
+    /// [`Config::for_profile`]); `None` when the profile has fewer than `N` lanes.
+    pub fn with_profile(profile: &'static Profile, config: Config) -> Option<Self> {
+        if N > profile.max_slots {
+            return None;
+        }
+        let mut app = Self::new(config);
+        app.unit.profile = profile;
+        Some(app)
+    }
+
+    /// What senses each lane.
+    pub fn profile(&self) -> &'static Profile {
+        self.unit.profile
     }
 
     /// The settings in force.
@@ -388,6 +405,7 @@ impl<const N: usize> App<N> {
     /// The value of register `address`, or `None` when the unit has no such register.
     pub fn read_register(&self, address: u8) -> Option<u16> {
         let view = registers::View {
+            profile: self.unit.profile,
             config: &self.config,
             hub: &self.unit.hub,
             finda: self.arbiter.finda(&self.unit),
@@ -422,6 +440,7 @@ impl<const N: usize> App<N> {
     pub fn write_register(&mut self, address: u8, value: u16) -> bool {
         let filament_readings = self.filament_readings();
         let mut target = registers::Target {
+            profile: self.unit.profile,
             config: &mut self.config,
             fsensor: &mut self.unit.fsensor,
             filament_readings,
@@ -471,7 +490,14 @@ impl<const N: usize> App<N> {
     fn settings(&self) -> Vec<(u8, u16), MAX_SETTINGS> {
         let mut settings = Vec::new();
         // MAX_SETTINGS holds every setting of a 5-slot unit.
-        registers::changed_settings(&self.config, &Config::DEFAULT, &self.unit.hub, N, &mut settings);
+        registers::changed_settings(
+            self.unit.profile,
+            &self.config,
+            &Config::for_profile(self.unit.profile),
+            &self.unit.hub,
+            N,
+            &mut settings,
+        );
         settings
     }
 

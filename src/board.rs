@@ -56,6 +56,7 @@ macro_rules! board_contract {
 
         impl super::Board for $board {
             const NAME: &'static str = NAME;
+            const PROFILE: &'static mmu_firmware::profile::Profile = &PROFILE;
             const STORE_RANGE: Range<u32> = STORE_RANGE;
             type ResetCause = ResetCause;
             type Sampler = Sampler;
@@ -111,6 +112,8 @@ use mmu_hal_port::{Button, Motors, SensorScan, StatusLed};
 pub trait Board {
     /// The board, as the boot log names it.
     const NAME: &'static str;
+    /// What senses each lane on this build ([`crate::profile`]).
+    const PROFILE: &'static mmu_firmware::profile::Profile;
     /// The store's region of the flash, as offsets from its base.
     const STORE_RANGE: Range<u32>;
     /// Why the MCU last started, for the boot log.

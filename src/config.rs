@@ -5,6 +5,7 @@
 //! ([`crate::registers`]); the defaults are for the reference unit (a 360 mm Bowden tube).
 
 use crate::MAX_SLOTS;
+use crate::profile::Profile;
 use crate::sensor::Thresholds;
 
 /// The version reported through `S0`..`S3`. The printer checks major, minor and revision for
@@ -190,6 +191,17 @@ impl Config {
         motor_thresholds: [Thresholds { on: 2300, off: 1800 }; MAX_SLOTS],
         spool_m: [crate::lanes::DEFAULT_SPOOL_M; MAX_SLOTS],
     };
+}
+
+impl Config {
+    /// The default settings on the hardware `profile`: the reference unit's, with the profile's
+    /// distance per turn of its motion sensor.
+    pub const fn for_profile(profile: &Profile) -> Config {
+        Config {
+            mm_per_rev_centi: profile.mm_per_rev_centi,
+            ..Config::DEFAULT
+        }
+    }
 }
 
 impl Default for Config {

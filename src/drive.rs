@@ -139,7 +139,7 @@ impl SlotDrive {
                 );
             }
         }
-        let still_since = lease.started.max(feeder.hall.last_revolution());
+        let still_since = lease.started.max(feeder.motion.last_mark());
         let still_too_long = self.command.is_driving()
             && millis_u32(now.millis_since(still_since)) > lease.budget.max_still_ms;
         let too_far = distance_centi(lease.from_centi, feeder.odometry_centi()).unsigned_abs() / 100
@@ -271,7 +271,7 @@ impl SlotDrive {
         let Some(since) = self.hard_drive_since else {
             return false;
         };
-        let last_sign_of_life = since.max(feeder.hall.last_revolution());
+        let last_sign_of_life = since.max(feeder.motion.last_mark());
         now.millis_since(last_sign_of_life) > u64::from(config.stall_timeout_ms)
     }
 }

@@ -1,11 +1,14 @@
-//! What one slot's feeding system senses: the motor Hall sensor that measures how far the motor
-//! turned (odometry in mm, speed) and the slot filament sensor at the slot entry. Its motor is
-//! driven by [`crate::drive`].
+//! What one slot's feeding system senses: how far its filament moved (odometry in mm, speed,
+//! from whichever motion sensor the profile has), the slot filament sensor at the slot entry,
+//! and, where the profile has one per lane, the lane's tension. Its motor is driven by
+//! [`crate::drive`].
 
 use mmu_hal_port::{Direction, SlotSamples};
 
 use crate::config::Config;
-use crate::sensor::{FilterKind, PresenceSensor, RevolutionCounter, Thresholds};
+use crate::odometer::Odometer;
+use crate::profile::{Profile, TensionAt};
+use crate::sensor::{AnalogSensor, FilterKind, PresenceSensor, Thresholds};
 use crate::time::Instant;
 
 /// Thresholds no reading reaches, for a slot beyond the configured ones.
@@ -14,17 +17,15 @@ const DISABLED: Thresholds = Thresholds {
     off: u16::MAX - 1,
 };
 
-/// One slot's sensors: motor Hall sensor and slot filament sensor.
+/// One slot's sensors.
 #[derive(Debug, Clone, Copy)]
 pub struct Feeder {
-    /// The motor Hall sensor and its revolution count.
-    pub hall: RevolutionCounter,
+    /// The lane's motion: odometry, speed and the motion sensor's health.
+    pub motion: Odometer,
     /// The slot filament sensor.
     pub filament: PresenceSensor,
-    /// Where the motor moved the filament, in 1/100 mm, forward positive. It wraps (at ±21.47 km):
-    /// a distance is only ever the `wrapping_sub` of two readings, exact while the filament moved
-    /// less than 21.47 km between them, so a slot past the end behaves as a fresh one.
-    odometry_centi: i32,
+    /// The lane's own tension sensor (a profile with [`TensionAt::Lane`]).
+    pub tension: AnalogSensor,
 }
 
 impl Default for Feeder {
@@ -36,12 +37,14 @@ impl Default for Feeder {
 impl Feeder {
     /// A slot that has seen no sample.
     pub const NEW: Feeder = Feeder {
-        hall: RevolutionCounter::NEW,
+        motion: Odometer::NEW,
         filament: PresenceSensor::NEW,
-        odometry_centi: 0,
+        tension: AnalogSensor::NEW,
     };
 
-    /// Take the slot's raw samples at `now`; a revolution moves the filament in `counting`.
+    /// Take the slot's raw samples at `now`, read as `profile` says; a motion sensor that cannot
+    /// tell the direction counts the way the motor was last driven (`counting`). Returns true
+    /// when the lane's motion made a mark ([`crate::odometer`]).
     pub fn sense(
         &mut self,
         slot: usize,
@@ -49,44 +52,47 @@ impl Feeder {
         counting: Direction,
         now: Instant,
         config: &Config,
-    ) {
+        profile: &Profile,
+    ) -> bool {
         let presence = config.slot_thresholds.get(slot).copied().unwrap_or(DISABLED);
         let edges = config.motor_thresholds.get(slot).copied().unwrap_or(DISABLED);
         self.filament
-            .update(sample.filament, now, FilterKind::Presence, presence);
-        let revolution = self.hall.update(sample.motor_hall, now, FilterKind::Motor, edges);
-        if revolution {
-            let step = i32::from(config.mm_per_rev_centi);
-            self.odometry_centi = match counting {
-                Direction::Forward => self.odometry_centi.wrapping_add(step),
-                Direction::Reverse => self.odometry_centi.wrapping_sub(step),
-            };
+            .update(sample.filament, now, profile.presence, presence);
+        if profile.tension == TensionAt::Lane {
+            self.tension.update(sample.tension, now, FilterKind::Presence);
         }
+        self.motion.sense(
+            profile.motion,
+            sample.motion,
+            counting,
+            edges,
+            config.mm_per_rev_centi,
+            now,
+        )
     }
 
     /// Where the motor has moved the filament since start, mm (forward positive; wraps with the
-    /// odometry, see [`Feeder::odometry_centi`]).
+    /// odometry, see [`Odometer::centi`]).
     pub fn odometry_mm(&self) -> i32 {
-        self.odometry_centi / 100
+        self.motion.centi() / 100
     }
 
-    /// Filament speed from the motor's last revolution period, mm/s (0 when it stands still).
-    pub fn speed_mm_s(&self, now: Instant, config: &Config) -> u16 {
-        let speed = self.hall.speed_mm_s(now, config.mm_per_rev_centi);
-        speed.min(u32::from(u16::MAX)) as u16
+    /// Filament speed over the lane's last marks, mm/s (0 when it stands still).
+    pub fn speed_mm_s(&self, now: Instant) -> u16 {
+        self.motion.speed_mm_s(now).min(u32::from(u16::MAX)) as u16
     }
 
     /// The odometry in 1/100 mm. It wraps: a distance is the `wrapping_sub` of two readings
     /// (see [`distance_centi`]).
     pub fn odometry_centi(&self) -> i32 {
-        self.odometry_centi
+        self.motion.centi()
     }
 
     /// Start the odometry from `centi` instead of 0: for tests (a slot that has fed kilometres)
     /// and a restart that keeps it. Only differences of two readings are distances, so any
     /// start behaves as 0 does.
     pub fn set_odometry_centi(&mut self, centi: i32) {
-        self.odometry_centi = centi;
+        self.motion.set_centi(centi);
     }
 }
 

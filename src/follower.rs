@@ -42,8 +42,7 @@ pub fn follow<const N: usize>(
     now: Instant,
     config: &Config,
 ) -> Option<(usize, ErrorCode)> {
-    let tension = unit.hub.tension.reading();
-    let assist = follow_duty(0, tension, config).permille() > 0;
+    let tensions: [Option<u16>; N] = core::array::from_fn(|slot| unit.tension_reading(slot));
     let mut failed = None;
     // A slot restored as loaded is followed only once it is known to hold the path.
     let follows: [bool; N] =
@@ -52,6 +51,8 @@ pub fn follow<const N: usize>(
         if Some(slot) == driving {
             continue;
         }
+        let tension = tensions.get(slot).copied().flatten();
+        let assist = follow_duty(0, tension, config).permille() > 0;
         if !(allowed && follows.get(slot).copied().unwrap_or(false) && assist) {
             drive.release(now);
             continue;

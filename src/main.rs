@@ -66,9 +66,10 @@ async fn main(spawner: Spawner) {
     // Before anything else: every bridge off, whatever state a reset left the pins in.
     ThisBoard::emergency_stop();
     info!(
-        "mmu-firmware {=str} on {=str} starting, reset cause: {}",
+        "mmu-firmware {=str} on {=str} ({=str} lanes) starting, reset cause: {}",
         env!("CARGO_PKG_VERSION"),
         ThisBoard::NAME,
+        ThisBoard::PROFILE.name,
         ThisBoard::reset_cause()
     );
     let parts = ThisBoard::init();
@@ -95,7 +96,11 @@ async fn main(spawner: Spawner) {
 #[inline(never)]
 fn new_logic() -> &'static mut Logic<SLOTS> {
     static LOGIC: StaticCell<Logic<SLOTS>> = StaticCell::new();
-    LOGIC.init_with(|| RefCell::new(ControlLoop::new(App::new(Config::default()), tasks::now())))
+    let profile = ThisBoard::PROFILE;
+    LOGIC.init_with(|| {
+        let app = unwrap!(App::with_profile(profile, Config::for_profile(profile)));
+        RefCell::new(ControlLoop::new(app, tasks::now()))
+    })
 }
 
 /// Reloads the watchdog (once the board's `init` has started it).

@@ -17,6 +17,7 @@ use mmu_protocol::{ErrorCode, ProgressCode};
 use crate::config::Config;
 use crate::feeder::Feeder;
 use crate::lanes::{LaneFigures, left_mm};
+use crate::profile::{MotionSensor, Profile};
 use crate::runner::Status;
 use crate::sensor::{AnalogSensor, Thresholds};
 use crate::time::Instant;
@@ -31,6 +32,8 @@ const LANE_BLOCK: u8 = crate::MAX_SLOTS as u8;
 
 /// What a register read sees of the unit: plain borrowed state, the same for every slot count.
 pub struct View<'a> {
+    /// What senses each lane.
+    pub profile: &'a Profile,
     /// The settings in force.
     pub config: &'a Config,
     /// The hub's sensors.
@@ -76,7 +79,7 @@ pub struct View<'a> {
 
 impl View<'_> {
     fn sensor(&self, id: SensorId) -> Option<&AnalogSensor> {
-        crate::unit::sensor_in(self.hub, self.feeders, id)
+        crate::unit::sensor_in(self.profile, self.hub, self.feeders, id)
     }
 
     fn sensor_count(&self) -> usize {
@@ -86,6 +89,8 @@ impl View<'_> {
 
 /// What a register write may change.
 pub struct Target<'a> {
+    /// What senses each lane.
+    pub profile: &'a Profile,
     /// The settings.
     pub config: &'a mut Config,
     /// The printer's filament sensor state (register 0x09, as `f`).
@@ -623,7 +628,7 @@ registers! {
         Sensors,
         "threshold_on",
         0..=4095,
-        |v, _, i| Some(thresholds(v.config, SensorId::from_index(i))?.on),
+        |v, _, i| Some(thresholds(v.profile, v.config, SensorId::from_index(i))?.on),
         |t, _, i, value| set_threshold(t, SensorId::from_index(i), |th| th.on = value)
     ),
     ThresholdOff: writable(
@@ -631,7 +636,7 @@ registers! {
         Sensors,
         "threshold_off",
         0..=4095,
-        |v, _, i| Some(thresholds(v.config, SensorId::from_index(i))?.off),
+        |v, _, i| Some(thresholds(v.profile, v.config, SensorId::from_index(i))?.off),
         |t, _, i, value| set_threshold(t, SensorId::from_index(i), |th| th.off = value)
     ),
     SlotOdometry: block(ODOMETRY, Slots, "odometry", |v, _, k| Some(
@@ -644,7 +649,7 @@ registers! {
         .copied()),
     Failures: block(FAILURES, Slots, "failures", |v, _, k| v.failures.get(k).copied()),
     Speed: block(SPEED, Slots, "speed", |v, _, k| Some(
-        v.feeders.get(k)?.speed_mm_s(v.now, v.config)
+        v.feeders.get(k)?.speed_mm_s(v.now)
     )),
     FedMetres: block(FED_METRES, Slots, "fed_metres", |v, _, k| Some(
         u16::try_from(*v.fed_mm.get(k)? / 1000).unwrap_or(u16::MAX)
@@ -704,13 +709,16 @@ registers! {
     )),
 }
 
-/// The thresholds of a sensor, if it has any.
-fn thresholds(config: &Config, sensor: SensorId) -> Option<Thresholds> {
+/// The thresholds of a sensor, if it has any on this hardware: presence sensors have them, a
+/// Hall wave's edges have them, a count or an angle has none.
+fn thresholds(profile: &Profile, config: &Config, sensor: SensorId) -> Option<Thresholds> {
     match sensor {
-        SensorId::HubFilament => Some(config.hub_thresholds),
+        SensorId::HubFilament => profile.hub_sensor.then_some(config.hub_thresholds),
         SensorId::SlotFilament(slot) => config.slot_thresholds.get(slot).copied(),
-        SensorId::MotorHall(slot) => config.motor_thresholds.get(slot).copied(),
-        SensorId::HubTension | SensorId::HubCutter => None,
+        SensorId::Motion(slot) if profile.motion == MotionSensor::HallWave => {
+            config.motor_thresholds.get(slot).copied()
+        }
+        SensorId::Motion(_) | SensorId::HubTension | SensorId::HubCutter | SensorId::LaneTension(_) => None,
     }
 }
 
@@ -730,14 +738,17 @@ fn set_threshold(target: &mut Target, sensor: SensorId, change: impl FnOnce(&mut
     let seen = match sensor {
         SensorId::HubFilament => target.filament_readings.first().copied().flatten(),
         SensorId::SlotFilament(slot) => target.filament_readings.get(1 + slot).copied().flatten(),
-        SensorId::MotorHall(_) | SensorId::HubTension | SensorId::HubCutter => None,
+        SensorId::Motion(_) | SensorId::HubTension | SensorId::HubCutter | SensorId::LaneTension(_) => None,
     };
+    if thresholds(target.profile, target.config, sensor).is_none() {
+        return false;
+    }
     let config = &mut *target.config;
     let thresholds = match sensor {
         SensorId::HubFilament => Some(&mut config.hub_thresholds),
         SensorId::SlotFilament(slot) => config.slot_thresholds.get_mut(slot),
-        SensorId::MotorHall(slot) => config.motor_thresholds.get_mut(slot),
-        SensorId::HubTension | SensorId::HubCutter => None,
+        SensorId::Motion(slot) => config.motor_thresholds.get_mut(slot),
+        SensorId::HubTension | SensorId::HubCutter | SensorId::LaneTension(_) => None,
     };
     let Some(thresholds) = thresholds else {
         return false;
@@ -783,8 +794,9 @@ pub fn write(target: &mut Target, slots: usize, address: u8, value: u16) -> bool
 
 /// What a register read sees of a configuration alone: setting registers read only the
 /// configuration (`hub` only completes the view: the unit's own, so that no default hub is built).
-pub fn settings_view<'a>(config: &'a Config, hub: &'a Hub) -> View<'a> {
+pub fn settings_view<'a>(profile: &'a Profile, config: &'a Config, hub: &'a Hub) -> View<'a> {
     View {
+        profile,
         config,
         hub,
         finda: false,
@@ -846,6 +858,7 @@ pub fn settings(slots: usize) -> impl Iterator<Item = Setting> {
 /// Every setting register ([`settings`]) whose value in `config` differs from `defaults`, in
 /// table order, as many as fit `settings`.
 pub fn changed_settings<const CAP: usize>(
+    profile: &Profile,
     config: &Config,
     defaults: &Config,
     hub: &Hub,
@@ -853,7 +866,7 @@ pub fn changed_settings<const CAP: usize>(
     changed: &mut heapless::Vec<(u8, u16), CAP>,
 ) {
     // One view, its settings switched: setting registers read nothing else.
-    let mut view = settings_view(defaults, hub);
+    let mut view = settings_view(profile, defaults, hub);
     for setting in settings(slots) {
         view.config = defaults;
         let default = setting.read(&view);
@@ -948,7 +961,7 @@ mod tests {
             name(THRESHOLD_ON + 5).as_deref(),
             Some("threshold_on.slot1.filament")
         );
-        assert_eq!(name(FILTERED + 8).as_deref(), Some("filtered.slot2.hall"));
+        assert_eq!(name(FILTERED + 8).as_deref(), Some("filtered.slot2.motion"));
         assert_eq!(name(LANE + 2).as_deref(), Some("lane.slot2"));
         // A 3-slot unit has nine sensors and three slots.
         assert_eq!(name(FILTERED + 9), None);
@@ -1001,6 +1014,7 @@ mod tests {
         let mut config = Config::default();
         let mut fsensor = 0;
         let mut target = Target {
+            profile: &crate::profile::THESIS,
             config: &mut config,
             fsensor: &mut fsensor,
             filament_readings: NO_FILAMENT_READINGS,
@@ -1021,6 +1035,7 @@ mod tests {
         let mut config = Config::default();
         let mut fsensor = 0;
         let mut target = Target {
+            profile: &crate::profile::THESIS,
             config: &mut config,
             fsensor: &mut fsensor,
             filament_readings: NO_FILAMENT_READINGS,
@@ -1047,6 +1062,7 @@ mod tests {
         let mut config = Config::default();
         let mut fsensor = 0;
         let mut target = Target {
+            profile: &crate::profile::THESIS,
             config: &mut config,
             fsensor: &mut fsensor,
             filament_readings: NO_FILAMENT_READINGS,
@@ -1078,6 +1094,7 @@ mod tests {
         filament_readings[0] = Some(3000);
         filament_readings[2] = Some(2800);
         let mut target = Target {
+            profile: &crate::profile::THESIS,
             config: &mut config,
             fsensor: &mut fsensor,
             filament_readings,

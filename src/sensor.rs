@@ -1,5 +1,5 @@
-//! Analog Hall sensors: one filter pipeline for all of them, thresholds with hysteresis, rail
-//! detection and the motor revolution counter.
+//! The unit's sensors: one filter pipeline for every analog one, thresholds with hysteresis,
+//! rail detection, and digital readings taken as they are.
 //!
 //! The sensors are noisy (thesis §6.2): every raw sample goes through a sliding median (kills
 //! spikes), a moving average and exponential smoothing, and presence decisions use two thresholds
@@ -7,6 +7,7 @@
 //! disconnected or shorted sensor: it is never fed to the filter, and after a short time the
 //! sensor is reported faulty instead of being believed.
 
+use crate::profile::PresenceInput;
 use crate::time::Instant;
 
 /// The longest median or average window.
@@ -186,6 +187,14 @@ impl Filter {
         self.value
     }
 
+    /// Hold `value` as it is, as if every sample had been it.
+    pub fn set(&mut self, value: u16) {
+        self.medians.fill(value);
+        self.averages.fill(value);
+        self.smoothed = Some(u32::from(value) << FRACTION_BITS);
+        self.value = value;
+    }
+
     /// Forget every sample.
     pub fn clear(&mut self) {
         *self = Self::new();
@@ -202,23 +211,38 @@ pub enum Rail {
     High,
 }
 
+/// Why a sensor is not believed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum SensorFault {
+    /// An analog reading stuck at a rail.
+    Rail(Rail),
+    /// A digital sensor that could not measure (an angle sensor without its magnet, a sensor
+    /// that does not answer on its bus).
+    NoSignal,
+}
+
 /// A raw reading at or below this is a sensor stuck at the low rail. The rail limits are the
 /// same for every sensor and fixed at build time (no register changes them).
 pub const RAIL_LOW: u16 = 40;
 /// A raw reading at or above this is a sensor stuck at the high rail.
 pub const RAIL_HIGH: u16 = 4055;
-/// How long a reading must stay at a rail before the sensor is reported faulty, ms.
+/// How long a reading must stay at a rail (or a digital sensor fail to measure) before the
+/// sensor is reported faulty, ms.
 pub const RAIL_TIMEOUT_MS: u64 = 50;
 
-/// One analog sensor: its latest raw sample, its filtered value and its health.
+/// One sensor: its latest raw sample, its filtered value and its health. An analog sensor's
+/// samples go through the filter ([`AnalogSensor::update`]); a digital one's are taken as they
+/// are ([`AnalogSensor::measure`]).
 #[derive(Debug, Clone, Copy)]
 pub struct AnalogSensor {
     filter: Filter,
     raw: u16,
     /// Samples filtered since start or the last fault, counted up to [`WARM_UP_SAMPLES`].
     samples: u16,
-    at_rail_since: Option<(Rail, Instant)>,
-    fault: Option<Rail>,
+    /// What has looked wrong, and since when, before it is called a fault.
+    suspect_since: Option<(SensorFault, Instant)>,
+    fault: Option<SensorFault>,
 }
 
 /// Samples a filter needs before its output means anything: twice the presence filter's median
@@ -237,11 +261,11 @@ impl AnalogSensor {
         filter: Filter::new(),
         raw: 0,
         samples: 0,
-        at_rail_since: None,
+        suspect_since: None,
         fault: None,
     };
 
-    /// Take a new raw sample at `now`.
+    /// Take a new raw analog sample at `now`.
     pub fn update(&mut self, raw: u16, now: Instant, filter: FilterKind) {
         self.raw = raw;
         let rail = if raw <= RAIL_LOW {
@@ -251,28 +275,54 @@ impl AnalogSensor {
         } else {
             None
         };
-        match (rail, self.at_rail_since) {
-            (Some(rail), Some((seen, since))) if rail == seen => {
-                if now.millis_since(since) >= RAIL_TIMEOUT_MS {
-                    self.fault = Some(rail);
-                }
+        if self.suspect(rail.map(SensorFault::Rail), now) {
+            self.filter.push(raw, filter);
+            // Counted up to the warm-up only: all that is asked of the count.
+            if self.samples < WARM_UP_SAMPLES {
+                self.samples += 1;
             }
-            (Some(rail), _) => self.at_rail_since = Some((rail, now)),
-            (None, _) => {
-                if self.at_rail_since.is_some() {
-                    self.at_rail_since = None;
+        }
+    }
+
+    /// Take a digital sensor's sample `raw` at `now`: its `reading`, taken as it is, or `None`
+    /// when the sensor could not measure.
+    pub fn measure(&mut self, raw: u16, reading: Option<u16>, now: Instant) {
+        self.raw = raw;
+        let wrong = match reading {
+            Some(_) => None,
+            None => Some(SensorFault::NoSignal),
+        };
+        if self.suspect(wrong, now)
+            && let Some(value) = reading
+        {
+            self.filter.set(value);
+            self.samples = WARM_UP_SAMPLES;
+        }
+    }
+
+    /// Tracks what looks `wrong` now; true when the sample is good to take. Something wrong for
+    /// [`RAIL_TIMEOUT_MS`] becomes the fault; a good sample after a fault starts the sensor
+    /// afresh (old samples say nothing about a reconnected sensor).
+    fn suspect(&mut self, wrong: Option<SensorFault>, now: Instant) -> bool {
+        match (wrong, self.suspect_since) {
+            (Some(wrong), Some((seen, since))) if wrong == seen => {
+                if now.millis_since(since) >= RAIL_TIMEOUT_MS {
+                    self.fault = Some(wrong);
                 }
+                false
+            }
+            (Some(wrong), _) => {
+                self.suspect_since = Some((wrong, now));
+                false
+            }
+            (None, _) => {
+                self.suspect_since = None;
                 if self.fault.is_some() {
-                    // Back from a fault: old samples say nothing about the reconnected sensor.
                     self.fault = None;
                     self.filter.clear();
                     self.samples = 0;
                 }
-                self.filter.push(raw, filter);
-                // Counted up to the warm-up only: all that is asked of the count.
-                if self.samples < WARM_UP_SAMPLES {
-                    self.samples += 1;
-                }
+                true
             }
         }
     }
@@ -287,8 +337,8 @@ impl AnalogSensor {
         self.filter.value()
     }
 
-    /// The rail the sensor is stuck at, if it is faulty.
-    pub fn fault(&self) -> Option<Rail> {
+    /// Why the sensor is faulty, if it is.
+    pub fn fault(&self) -> Option<SensorFault> {
         self.fault
     }
 
@@ -319,9 +369,12 @@ impl PresenceSensor {
         present: false,
     };
 
-    /// Take a new raw sample at `now` and decide presence.
-    pub fn update(&mut self, raw: u16, now: Instant, filter: FilterKind, thresholds: Thresholds) {
-        self.analog.update(raw, now, filter);
+    /// Take a new raw sample at `now`, read as `input`, and decide presence.
+    pub fn update(&mut self, raw: u16, now: Instant, input: PresenceInput, thresholds: Thresholds) {
+        match input {
+            PresenceInput::Analog => self.analog.update(raw, now, FilterKind::Presence),
+            PresenceInput::Digital => self.analog.measure(raw, Some(raw), now),
+        }
         if let Some(value) = self.analog.reading() {
             self.present = thresholds.decide(self.present, value);
         }
@@ -330,88 +383,6 @@ impl PresenceSensor {
     /// Filament present, or `None` while the sensor is faulty or warming up.
     pub fn present(&self) -> Option<bool> {
         self.analog.reading().map(|_| self.present)
-    }
-}
-
-/// Counts motor revolutions from the filtered Hall sine: one rising edge through both thresholds
-/// is one revolution, so noise between the thresholds cannot add counts.
-#[derive(Debug, Clone, Copy)]
-pub struct RevolutionCounter {
-    /// The analog part.
-    pub analog: AnalogSensor,
-    high: bool,
-    revolutions: u32,
-    last_revolution: Instant,
-    /// Time between the last two revolutions, ms.
-    period_ms: Option<u64>,
-}
-
-impl Default for RevolutionCounter {
-    fn default() -> Self {
-        Self::NEW
-    }
-}
-
-impl RevolutionCounter {
-    /// A counter that has seen no sample.
-    pub const NEW: RevolutionCounter = RevolutionCounter {
-        analog: AnalogSensor::NEW,
-        high: false,
-        revolutions: 0,
-        last_revolution: Instant::ZERO,
-        period_ms: None,
-    };
-
-    /// Take a new raw sample at `now`; returns true when it completed a revolution.
-    pub fn update(&mut self, raw: u16, now: Instant, filter: FilterKind, edges: Thresholds) -> bool {
-        self.analog.update(raw, now, filter);
-        let Some(value) = self.analog.reading() else {
-            return false;
-        };
-        let was_high = self.high;
-        self.high = edges.decide(was_high, value);
-        if self.high && !was_high {
-            self.period_ms = (self.revolutions > 0).then(|| now.millis_since(self.last_revolution));
-            self.revolutions = self.revolutions.wrapping_add(1);
-            self.last_revolution = now;
-            true
-        } else {
-            false
-        }
-    }
-
-    /// Revolutions counted since start (wraps).
-    pub fn revolutions(&self) -> u32 {
-        self.revolutions
-    }
-
-    /// When the last revolution completed.
-    pub fn last_revolution(&self) -> Instant {
-        self.last_revolution
-    }
-
-    /// Revolutions per minute from the last full period; 0 when the motor has not turned for
-    /// longer than that period (or has turned less than twice).
-    pub fn rpm(&self, now: Instant) -> u32 {
-        self.live_period_ms(now).map_or(0, |period| 60_000 / period)
-    }
-
-    /// The speed of what a revolution moves by `centi_per_rev` 1/100 mm, mm/s, from the last
-    /// full period (`centi_per_rev × 10 / period`: one division); 0 when [`Self::rpm`] is.
-    pub fn speed_mm_s(&self, now: Instant, centi_per_rev: u16) -> u32 {
-        self.live_period_ms(now)
-            .map_or(0, |period| u32::from(centi_per_rev) * 10 / period)
-    }
-
-    /// The last full period, ms, unless the motor has not turned for longer than it (or has
-    /// turned less than twice). In 32 bits (a period over 2³² ms is no speed at all): the 64-bit
-    /// division costs twice.
-    fn live_period_ms(&self, now: Instant) -> Option<u32> {
-        self.period_ms
-            .filter(|&period| {
-                period > 0 && now.millis_since(self.last_revolution) <= period.saturating_mul(2)
-            })
-            .and_then(|period| u32::try_from(period).ok())
     }
 }
 
@@ -490,13 +461,13 @@ mod tests {
         let mut sensor = PresenceSensor::default();
         let mut now = Instant::ZERO;
         for _ in 0..30 {
-            sensor.update(2048, now, FilterKind::Presence, THRESHOLDS);
+            sensor.update(2048, now, PresenceInput::Analog, THRESHOLDS);
             now = now + 1;
         }
         assert_eq!(sensor.present(), Some(false));
         // 50 ms at the rail: suspicious, held, not yet called faulty.
         for _ in 0..50 {
-            sensor.update(4095, now, FilterKind::Presence, THRESHOLDS);
+            sensor.update(4095, now, PresenceInput::Analog, THRESHOLDS);
             now = now + 1;
             assert_eq!(
                 sensor.present(),
@@ -504,36 +475,8 @@ mod tests {
                 "the rail value is never taken as presence"
             );
         }
-        sensor.update(4095, now, FilterKind::Presence, THRESHOLDS);
-        assert_eq!(sensor.analog.fault(), Some(Rail::High));
+        sensor.update(4095, now, PresenceInput::Analog, THRESHOLDS);
+        assert_eq!(sensor.analog.fault(), Some(SensorFault::Rail(Rail::High)));
         assert_eq!(sensor.present(), None);
-    }
-
-    #[test]
-    fn revolutions_count_full_periods_only() {
-        let edges = Thresholds { on: 2300, off: 1800 };
-        let mut counter = RevolutionCounter::default();
-        let mut now = Instant::ZERO;
-        // Warm up at rest, then wobble between the thresholds: no revolution.
-        for i in 0..100u32 {
-            counter.update(
-                if i % 2 == 0 { 2100 } else { 2250 },
-                now,
-                FilterKind::Motor,
-                edges,
-            );
-            now = now + 1;
-        }
-        assert_eq!(counter.revolutions(), 0);
-        for _ in 0..3 {
-            for value in [2400, 2500, 2000, 1700, 1600, 2000] {
-                counter.update(value, now, FilterKind::Motor, edges);
-                now = now + 1;
-            }
-        }
-        assert_eq!(counter.revolutions(), 3);
-        // One revolution every 6 ms is 10 000 rpm; long after the last one the motor is still.
-        assert_eq!(counter.rpm(now), 10_000);
-        assert_eq!(counter.rpm(now + 100), 0);
     }
 }

@@ -6,6 +6,7 @@ use mmu_hal_port::Samples;
 use crate::config::Config;
 use crate::drive::SlotDrive;
 use crate::feeder::Feeder;
+use crate::profile::{MotionSensor, PresenceInput, Profile, THESIS, TensionAt};
 use crate::sensor::{AnalogSensor, FilterKind, PresenceSensor};
 use crate::time::Instant;
 
@@ -56,11 +57,12 @@ impl Lane {
     }
 }
 
-/// Revolutions of a coasting motor in one burst that prove the printer's extruder moved its
-/// filament: 10 mm with the reference drive (a lone edge could be noise or a nudge by hand).
-pub const PROOF_REVOLUTIONS: u8 = 5;
-/// The longest pause between two revolutions of one burst, ms (the printer's extruder moves at
-/// 20 mm/s or more: a revolution every 100 ms).
+/// Marks ([`crate::odometer`]) of a coasting lane in one burst that prove the printer's extruder
+/// moved its filament: 10 mm with the reference drive (a lone edge could be noise or a nudge by
+/// hand).
+pub const PROOF_MARKS: u8 = 5;
+/// The longest pause between two marks of one burst, ms (the printer's extruder moves at 20 mm/s
+/// or more: a mark every 100 ms).
 pub const PROOF_GAP_MS: u64 = 500;
 
 /// One of the unit's analog sensors.
@@ -75,20 +77,25 @@ pub enum SensorId {
     HubCutter,
     /// A slot's filament sensor.
     SlotFilament(usize),
-    /// A slot's motor Hall sensor.
-    MotorHall(usize),
+    /// A slot's motion sensor (the motor Hall, the encoder, the angle sensor).
+    Motion(usize),
+    /// A slot's own tension sensor (a profile with [`TensionAt::Lane`]); it has no diagnostic
+    /// index: the registers show it in a block of its own.
+    LaneTension(usize),
 }
 
 impl SensorId {
     /// The sensor's index in the diagnostic registers: hub sensors 0-2, then per slot k the
-    /// filament sensor at 3 + 2k and the motor Hall at 4 + 2k.
-    pub const fn index(self) -> usize {
+    /// filament sensor at 3 + 2k and the motion sensor at 4 + 2k; a lane's tension sensor has
+    /// none.
+    pub const fn index(self) -> Option<usize> {
         match self {
-            SensorId::HubFilament => 0,
-            SensorId::HubTension => 1,
-            SensorId::HubCutter => 2,
-            SensorId::SlotFilament(slot) => 3 + 2 * slot,
-            SensorId::MotorHall(slot) => 4 + 2 * slot,
+            SensorId::HubFilament => Some(0),
+            SensorId::HubTension => Some(1),
+            SensorId::HubCutter => Some(2),
+            SensorId::SlotFilament(slot) => Some(3 + 2 * slot),
+            SensorId::Motion(slot) => Some(4 + 2 * slot),
+            SensorId::LaneTension(_) => None,
         }
     }
 
@@ -99,32 +106,41 @@ impl SensorId {
             1 => SensorId::HubTension,
             2 => SensorId::HubCutter,
             i if i % 2 == 1 => SensorId::SlotFilament((i - 3) / 2),
-            i => SensorId::MotorHall((i - 4) / 2),
+            i => SensorId::Motion((i - 4) / 2),
         }
     }
 }
 
 impl core::fmt::Display for SensorId {
-    /// `hub.filament`, `hub.tension`, `hub.cutter`, `slot<k>.filament`, `slot<k>.hall`.
+    /// `hub.filament`, `hub.tension`, `hub.cutter`, `slot<k>.filament`, `slot<k>.motion`,
+    /// `slot<k>.tension`.
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match self {
             SensorId::HubFilament => f.write_str("hub.filament"),
             SensorId::HubTension => f.write_str("hub.tension"),
             SensorId::HubCutter => f.write_str("hub.cutter"),
             SensorId::SlotFilament(slot) => write!(f, "slot{slot}.filament"),
-            SensorId::MotorHall(slot) => write!(f, "slot{slot}.hall"),
+            SensorId::Motion(slot) => write!(f, "slot{slot}.motion"),
+            SensorId::LaneTension(slot) => write!(f, "slot{slot}.tension"),
         }
     }
 }
 
-/// One analog sensor among the hub's and the slots' feeders.
-pub fn sensor_in<'a>(hub: &'a Hub, feeders: &'a [Feeder], id: SensorId) -> Option<&'a AnalogSensor> {
+/// One sensor among the hub's and the slots' feeders, if `profile` has it.
+pub fn sensor_in<'a>(
+    profile: &Profile,
+    hub: &'a Hub,
+    feeders: &'a [Feeder],
+    id: SensorId,
+) -> Option<&'a AnalogSensor> {
+    let hub_tension = profile.tension == TensionAt::Hub;
     match id {
-        SensorId::HubFilament => Some(&hub.filament.analog),
-        SensorId::HubTension => Some(&hub.tension),
-        SensorId::HubCutter => Some(&hub.cutter),
+        SensorId::HubFilament => profile.hub_sensor.then_some(&hub.filament.analog),
+        SensorId::HubTension => hub_tension.then_some(&hub.tension),
+        SensorId::HubCutter => profile.hub_sensor.then_some(&hub.cutter),
         SensorId::SlotFilament(slot) => feeders.get(slot).map(|f| &f.filament.analog),
-        SensorId::MotorHall(slot) => feeders.get(slot).map(|f| &f.hall.analog),
+        SensorId::Motion(slot) => feeders.get(slot).map(|f| &f.motion.sensor),
+        SensorId::LaneTension(slot) => feeders.get(slot).filter(|_| !hub_tension).map(|f| &f.tension),
     }
 }
 
@@ -142,6 +158,8 @@ pub struct Hub {
 /// Everything the logic knows about the hardware.
 #[derive(Debug, Clone)]
 pub struct Unit<const N: usize> {
+    /// What senses each lane.
+    pub profile: &'static Profile,
     /// Per slot feeding systems' sensors.
     pub feeders: [Feeder; N],
     /// Per slot motors: the only way to move one ([`crate::drive`]).
@@ -158,12 +176,12 @@ pub struct Unit<const N: usize> {
     /// The slot this unit itself fed past its park position since it started: its ownership of
     /// the hub path is known, not a stored belief.
     pub proven_owner: Option<usize>,
-    /// Per slot, motor revolutions counted in one burst (each within [`PROOF_GAP_MS`] of the
-    /// last) while the motor coasted, since the last command ended: the printer's extruder moved
-    /// that slot's filament, so it holds the hub path. A lone edge (noise, a nudge) never adds up.
+    /// Per slot, marks counted in one burst (each within [`PROOF_GAP_MS`] of the last) while the
+    /// motor coasted, since the last command ended: the printer's extruder moved that slot's
+    /// filament, so it holds the hub path. A lone edge (noise, a nudge) never adds up.
     pub moved_by_printer: [u8; N],
-    /// When each slot's last coasting revolution came.
-    coasting_revolution_at: [Instant; N],
+    /// When each slot's last coasting mark came.
+    coasting_mark_at: [Instant; N],
     /// Per slot: pulled back out of the merge since it was last fed towards the hub.
     pub clear_of_merge: [bool; N],
 }
@@ -192,6 +210,7 @@ impl<const N: usize> Default for Unit<N> {
 impl<const N: usize> Unit<N> {
     /// A unit that has seen no sample, every lane unknown.
     const NEW: Unit<N> = Unit {
+        profile: &THESIS,
         feeders: [Feeder::NEW; N],
         drives: [SlotDrive::NEW; N],
         hub: Hub::NEW,
@@ -200,14 +219,15 @@ impl<const N: usize> Unit<N> {
         selected: None,
         proven_owner: None,
         moved_by_printer: [0; N],
-        coasting_revolution_at: [Instant::ZERO; N],
+        coasting_mark_at: [Instant::ZERO; N],
         clear_of_merge: [false; N],
     };
 }
 
 impl<const N: usize> Unit<N> {
-    /// Take a round of raw samples at `now`.
+    /// Take a round of raw samples at `now`, read as the profile says.
     pub fn sense(&mut self, samples: &Samples<N>, now: Instant, config: &Config) {
+        let profile = self.profile;
         for (slot, ((feeder, sample), drive)) in self
             .feeders
             .iter_mut()
@@ -215,13 +235,12 @@ impl<const N: usize> Unit<N> {
             .zip(self.drives.iter())
             .enumerate()
         {
-            let before = feeder.odometry_centi();
-            feeder.sense(slot, *sample, drive.counting(), now, config);
-            if feeder.odometry_centi() != before
+            let mark = feeder.sense(slot, *sample, drive.counting(), now, config, profile);
+            if mark
                 && drive.is_coasting()
                 && let (Some(moved), Some(last)) = (
                     self.moved_by_printer.get_mut(slot),
-                    self.coasting_revolution_at.get_mut(slot),
+                    self.coasting_mark_at.get_mut(slot),
                 )
             {
                 let in_burst = now.millis_since(*last) <= PROOF_GAP_MS;
@@ -230,11 +249,36 @@ impl<const N: usize> Unit<N> {
             }
         }
         let hub = &samples.hub;
-        self.hub
-            .filament
-            .update(hub.filament, now, FilterKind::Presence, config.hub_thresholds);
-        self.hub.tension.update(hub.tension, now, FilterKind::Presence);
-        self.hub.cutter.update(hub.cutter, now, FilterKind::Presence);
+        if profile.hub_sensor {
+            self.hub
+                .filament
+                .update(hub.filament, now, PresenceInput::Analog, config.hub_thresholds);
+            self.hub.cutter.update(hub.cutter, now, FilterKind::Presence);
+        }
+        if profile.tension == TensionAt::Hub {
+            self.hub.tension.update(hub.tension, now, FilterKind::Presence);
+        }
+    }
+
+    /// The filament's motion between two marks of a lane ([`crate::odometer`]), 1/100 mm.
+    pub const fn mark_centi(&self, config: &Config) -> u16 {
+        match self.profile.motion {
+            MotionSensor::HallWave => config.mm_per_rev_centi,
+            _ => crate::odometer::MARK_CENTI,
+        }
+    }
+
+    /// The tension sensor that reads `slot`'s filament: the hub's, or the lane's own.
+    pub fn tension(&self, slot: usize) -> Option<&AnalogSensor> {
+        match self.profile.tension {
+            TensionAt::Hub => Some(&self.hub.tension),
+            TensionAt::Lane => self.feeders.get(slot).map(|feeder| &feeder.tension),
+        }
+    }
+
+    /// `slot`'s tension reading, if its sensor is healthy and warm.
+    pub fn tension_reading(&self, slot: usize) -> Option<u16> {
+        self.tension(slot).and_then(AnalogSensor::reading)
     }
 
     /// Filament in the hub, `None` while the hub sensor is faulty or warming up.
@@ -265,7 +309,7 @@ impl<const N: usize> Unit<N> {
     fn moved_by_printer(&self, slot: usize) -> bool {
         self.moved_by_printer
             .get(slot)
-            .is_some_and(|&revolutions| revolutions >= PROOF_REVOLUTIONS)
+            .is_some_and(|&revolutions| revolutions >= PROOF_MARKS)
     }
 
     /// The slot whose filament occupies the hub path.
@@ -292,18 +336,23 @@ impl<const N: usize> Unit<N> {
         }
     }
 
-    /// One analog sensor.
+    /// One sensor, if the profile has it.
     pub fn sensor(&self, id: SensorId) -> Option<&AnalogSensor> {
-        sensor_in(&self.hub, &self.feeders, id)
+        sensor_in(self.profile, &self.hub, &self.feeders, id)
     }
 
-    /// The number of analog sensors: three in the hub, two per slot.
+    /// The number of diagnostic sensor indices: three in the hub, two per slot.
     pub const SENSOR_COUNT: usize = 3 + 2 * N;
+
+    /// Every sensor the unit may have: the diagnostic ones, then each lane's tension.
+    pub fn sensor_ids() -> impl Iterator<Item = SensorId> {
+        (0..Self::SENSOR_COUNT)
+            .map(SensorId::from_index)
+            .chain((0..N).map(SensorId::LaneTension))
+    }
 
     /// The first faulty sensor, if any.
     pub fn first_fault(&self) -> Option<SensorId> {
-        (0..Self::SENSOR_COUNT)
-            .map(SensorId::from_index)
-            .find(|&id| self.sensor(id).is_some_and(|s| s.fault().is_some()))
+        Self::sensor_ids().find(|&id| self.sensor(id).is_some_and(|s| s.fault().is_some()))
     }
 }

@@ -44,7 +44,11 @@ fn samples() -> impl Strategy<Value = Samples<3>> {
         (0u16..4096, 0u16..4096, 0u16..4096),
     )
         .prop_map(|(slots, (filament, tension, cutter))| Samples {
-            slots: slots.map(|(motor_hall, filament)| SlotSamples { motor_hall, filament }),
+            slots: slots.map(|(motion, filament)| SlotSamples {
+                motion,
+                filament,
+                tension: 2048,
+            }),
             hub: HubSamples {
                 filament,
                 tension,

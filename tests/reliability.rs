@@ -17,7 +17,7 @@ const Q0: &[u8] = b"Q0*ea\n";
 /// motor commands of the step.
 fn step_with_hall_stuck(rig: &mut Rig<3>, slot: usize, hall: u16) -> [MotorCommand; 3] {
     let mut samples = rig.model.samples::<3>();
-    samples.slots[slot].motor_hall = hall;
+    samples.slots[slot].motion = hall;
     let rx: &[u8] = if rig.now.is_multiple_of(100) { Q0 } else { b"" };
     let out = rig.app.step(Instant::from_millis(rig.now), &samples, rx);
     rig.model.step(STEP_MS as u32, &out.motors);

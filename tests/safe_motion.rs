@@ -57,8 +57,9 @@ fn a_jam_while_printing_stops_the_motor_within_5_s_and_retry_resumes() {
 fn samples(hub_filament: u16, tension: u16) -> Samples<3> {
     Samples {
         slots: [SlotSamples {
-            motor_hall: 2048,
+            motion: 2048,
             filament: 3000,
+            tension: 2048,
         }; 3],
         hub: HubSamples {
             filament: hub_filament,

@@ -14,6 +14,13 @@ pub mod tb6612;
 /// Largest raw analog sample: every board scales its ADC readings to 12 bits.
 pub const ADC_MAX: u16 = 4095;
 
+/// Counts of an angle sensor's turn (12 bits, AS5600).
+pub const ANGLE_COUNTS: u16 = 4096;
+
+/// Set in an angle sample the sensor could not measure (no magnet, a magnet too weak or too
+/// strong, no answer on its bus).
+pub const ANGLE_FAULT: u16 = 0x8000;
+
 /// Which way a slot motor turns the filament.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -134,7 +141,7 @@ impl<P: embedded_hal::digital::InputPin> Button for P {
     }
 }
 
-/// Every analog sensor of a unit with `N` slots, scanned together: the board's ADC (by DMA on the
+/// Every sensor of a unit with `N` slots, scanned together: the board's ADC (by DMA on the
 /// NUCLEO-G071RB, through an analog multiplexer on the Pico). The firmware's control task bounds
 /// the wait with a timeout, so an implementation may simply wait for its converter.
 #[allow(async_fn_in_trait)] // called from one executor thread; no `Send` bound is wanted
@@ -158,14 +165,18 @@ pub trait Watchdog {
     fn feed(&mut self);
 }
 
-/// Raw samples of one slot's two analog Hall sensors.
+/// Raw samples of one slot's sensors. What `motion` means is the hardware profile's: an analog
+/// Hall level (a sine-like wave, one period per motor revolution), a wrapping quadrature count,
+/// or an angle sensor's 12-bit angle.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct SlotSamples {
-    /// The motor Hall sensor: a sine-like wave, one period per motor revolution.
-    pub motor_hall: u16,
+    /// The lane's motion sensor.
+    pub motion: u16,
     /// The slot filament sensor at the slot entry: higher with filament present.
     pub filament: u16,
+    /// The lane's own tension sensor, where the profile has one (0 where it has none).
+    pub tension: u16,
 }
 
 /// Raw samples of the Filament Hub's three analog Hall sensors.
@@ -196,8 +207,9 @@ impl<const N: usize> Samples<N> {
     pub const fn uniform(value: u16) -> Self {
         Samples {
             slots: [SlotSamples {
-                motor_hall: value,
+                motion: value,
                 filament: value,
+                tension: value,
             }; N],
             hub: HubSamples {
                 filament: value,

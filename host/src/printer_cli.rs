@@ -20,6 +20,7 @@ use std::error::Error;
 use std::path::PathBuf;
 
 use clap::Subcommand;
+use mmu_firmware::profile::Profile;
 use mmu_protocol::{ErrorCode, ParamCode, Request, RequestCode, Response};
 use mmu_sim::{
     FAULT_HELP, Outcome, Personality, Printer, PrinterError, PrinterOptions, ScheduledFault, Sim, SimLink,
@@ -105,6 +106,10 @@ pub struct SimTargetArgs {
     /// Seed of the simulator's random draws (and of `soak` unless it has its own).
     #[arg(long, value_name = "S", default_value_t = 1, conflicts_with = "port")]
     pub seed: u64,
+    /// What senses each lane of the simulated unit: thesis, n20-quadrature, bmcu-c (see
+    /// `mmu sim --help`).
+    #[arg(long, value_name = "NAME", default_value = "thesis", conflicts_with = "port", value_parser = crate::sim_cli::parse_hardware)]
+    pub hardware: &'static Profile,
     /// Inject a fault, e.g. `jam:1` or `uart-drop:0.05@2000-9000` (repeatable; the list is
     /// at the end of --help).
     #[arg(long = "fault", value_name = "SPEC", conflicts_with = "port")]
@@ -543,7 +548,7 @@ pub fn sim_link(args: &SimTargetArgs, printer: Personality) -> Result<SimLink, B
         slots: args.slots,
         seed: args.seed,
         printer,
-        ..SimOptions::default()
+        ..SimOptions::for_hardware(args.hardware)
     })?;
     for fault in &args.faults {
         sim.schedule(*fault);

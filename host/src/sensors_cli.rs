@@ -59,7 +59,7 @@ pub struct SensorsArgs {
     #[arg(long, value_name = "MS", default_value_t = 100, value_parser = clap::value_parser!(u64).range(1..=60_000))]
     pub every: u64,
     /// Read only this sensor (repeatable): hub.filament, hub.tension, hub.cutter,
-    /// slotK.filament, slotK.hall (K from 0), or its number 0-8. Fewer sensors, faster samples.
+    /// slotK.filament, slotK.motion (K from 0), or its number 0-8. Fewer sensors, faster samples.
     #[arg(long = "sensor", value_name = "NAME")]
     pub sensors: Vec<String>,
     /// The unit firmware version to expect (3.0.2 for a unit set up for an MK3S).
@@ -110,14 +110,14 @@ pub fn sensor_name(index: u8) -> String {
 }
 
 /// The sensor's short name, as `--sensor` takes it and the console's registers use it:
-/// `hub.filament`, `slot1.hall`.
+/// `hub.filament`, `slot1.motion`.
 pub fn sensor_subject(index: u8) -> String {
     match index {
         0 => "hub.filament".to_string(),
         1 => "hub.tension".to_string(),
         2 => "hub.cutter".to_string(),
         i if i % 2 == 1 => format!("slot{}.filament", (i - 3) / 2),
-        i => format!("slot{}.hall", (i - 4) / 2),
+        i => format!("slot{}.motion", (i - 4) / 2),
     }
 }
 
@@ -147,14 +147,14 @@ fn select_sensors(names: &[String], count: u8) -> Result<Vec<u8>, String> {
     Ok(selected)
 }
 
-/// The sensor's CSV column prefix: `hub_filament`, `slot1_hall`.
+/// The sensor's CSV column prefix: `hub_filament`, `slot1_motion`.
 fn column_name(index: u8) -> String {
     match index {
         0 => "hub_filament".to_string(),
         1 => "hub_tension".to_string(),
         2 => "hub_cutter".to_string(),
         i if i % 2 == 1 => format!("slot{}_filament", (i - 3) / 2),
-        i => format!("slot{}_hall", (i - 4) / 2),
+        i => format!("slot{}_motion", (i - 4) / 2),
     }
 }
 
@@ -564,7 +564,7 @@ mod tests {
                 "slot 2 motor Hall"
             ]
         );
-        assert_eq!(column_name(8), "slot2_hall");
+        assert_eq!(column_name(8), "slot2_motion");
     }
 
     #[test]
@@ -595,12 +595,12 @@ mod tests {
     fn sensors_are_picked_by_name_or_number() {
         assert_eq!(select_sensors(&[], 9), Ok((0..9).collect()));
         let names = |list: &[&str]| list.iter().map(|s| s.to_string()).collect::<Vec<_>>();
-        assert_eq!(select_sensors(&names(&["slot0.hall"]), 9), Ok(vec![4]));
+        assert_eq!(select_sensors(&names(&["slot0.motion"]), 9), Ok(vec![4]));
         assert_eq!(
             select_sensors(&names(&["8", "HUB.filament", "8"]), 9),
             Ok(vec![8, 0])
         );
-        let error = select_sensors(&names(&["slot3.hall"]), 9).expect_err("a 3-slot unit has no slot 3");
-        assert!(error.contains("slot2.hall"), "{error}");
+        let error = select_sensors(&names(&["slot3.motion"]), 9).expect_err("a 3-slot unit has no slot 3");
+        assert!(error.contains("slot2.motion"), "{error}");
     }
 }

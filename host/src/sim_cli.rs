@@ -31,6 +31,7 @@ use std::thread;
 use std::time::{Duration, Instant};
 
 use clap::{ArgGroup, Args};
+use mmu_firmware::profile::{self, Profile};
 use mmu_protocol::{
     DecodeError, Request, RequestCode, RequestDecoder, Response, ResponseDecoder, SILENCE_MS,
 };
@@ -83,6 +84,11 @@ pub struct SimArgs {
     /// Seed of every random draw (sensor noise, UART faults).
     #[arg(long, value_name = "S", default_value_t = 1)]
     pub seed: u64,
+    /// What senses each lane: thesis (analog Hall per motor, hub sensors), n20-quadrature (N20
+    /// encoder gear motors, hub sensors), bmcu-c (AS5600 on the drive gear, tension per lane,
+    /// no hub sensor; 4 lanes).
+    #[arg(long, value_name = "NAME", default_value = "thesis", value_parser = parse_hardware)]
+    pub hardware: &'static Profile,
     /// Virtual ms per wall ms: 1 is real time, 10 runs ten times faster.
     #[arg(long, value_name = "K", default_value_t = 1.0, value_parser = parse_time_scale)]
     pub time_scale: f64,
@@ -132,7 +138,7 @@ pub fn run(args: &SimArgs) -> Result<(), Box<dyn Error>> {
         seed: args.seed,
         print_mm_s: args.print_rate,
         printer: args.printer,
-        ..SimOptions::default()
+        ..SimOptions::for_hardware(args.hardware)
     };
     let mut sim = match (&args.firmware, args.board) {
         (Some(image), Some(board)) => {
@@ -708,6 +714,14 @@ pub(crate) fn parse_slots(text: &str) -> Result<usize, String> {
         Ok(slots) if (1..=max).contains(&slots) => Ok(slots),
         _ => Err(format!("a unit has 1 to {max} slots")),
     }
+}
+
+/// A hardware profile by name (also for `mmu printer --sim --hardware`).
+pub(crate) fn parse_hardware(text: &str) -> Result<&'static Profile, String> {
+    profile::by_name(text).ok_or_else(|| {
+        let names: Vec<&str> = profile::ALL.iter().map(|p| p.name).collect();
+        format!("the hardware is one of {}", names.join(", "))
+    })
 }
 
 fn parse_time_scale(text: &str) -> Result<f64, String> {

@@ -198,7 +198,7 @@ fn sensors_stream_csv() {
         "hub_tension",
         "hub_cutter",
         "slot2_filament",
-        "slot2_hall",
+        "slot2_motion",
     ] {
         for field in ["raw", "filtered"] {
             let column = format!("{sensor}_{field}");

@@ -463,7 +463,7 @@ const COMMANDS: &[(&str, Check)] = &[
         Check::Exits(0),
     ),
     (
-        "mmu sensors --port /dev/ttyUSB0 --sensor slot0.hall --every 1 --plot hall.png --seconds 2",
+        "mmu sensors --port /dev/ttyUSB0 --sensor slot0.motion --every 1 --plot hall.png --seconds 2",
         Check::OnPtyExits(0),
     ),
     ("cargo console --sim", Check::Exits(0)),

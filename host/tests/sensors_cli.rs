@@ -57,14 +57,16 @@ fn one_sensor_alone_is_sampled_several_times_faster() {
         "--every",
         "1",
         "--sensor",
-        "slot0.hall",
+        "slot0.motion",
     ]);
     assert!(output.status.success(), "{}", text(&output));
     let stdout = String::from_utf8_lossy(&output.stdout);
     let mut lines = stdout.lines();
     assert_eq!(
         lines.next(),
-        Some("t_ms,slot0_hall_raw,slot0_hall_filtered,slot0_hall_on,slot0_hall_off,slot0_hall_stuck")
+        Some(
+            "t_ms,slot0_motion_raw,slot0_motion_filtered,slot0_motion_on,slot0_motion_off,slot0_motion_stuck"
+        )
     );
     let rows = lines.count();
     assert!(rows >= 200, "at least 200 samples in a second: {rows}");
@@ -103,7 +105,7 @@ fn a_plot_that_cannot_be_written_is_refused_before_recording() {
 /// A sensor the unit does not have is named with the ones it has.
 #[test]
 fn an_unknown_sensor_lists_the_unit_s_sensors() {
-    let output = mmu(&["sensors", "--sim", "--sensor", "slot7.hall", "--seconds", "1"]);
+    let output = mmu(&["sensors", "--sim", "--sensor", "slot7.motion", "--seconds", "1"]);
     assert_eq!(output.status.code(), Some(2), "{}", text(&output));
-    assert!(text(&output).contains("slot2.hall"), "{}", text(&output));
+    assert!(text(&output).contains("slot2.motion"), "{}", text(&output));
 }

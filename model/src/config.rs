@@ -1,5 +1,21 @@
 //! Every physical constant of the model, with realistic defaults.
 
+/// What the model's lanes measure their motion with, as a hardware profile has it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum LaneMotionSensor {
+    /// An analog Hall sine, one period per motor revolution (noisy, like every analog sensor).
+    #[default]
+    HallWave,
+    /// A quadrature encoder: the sample is the wrapping count of `counts_per_rev` a revolution.
+    Quadrature {
+        /// Counts per revolution.
+        counts_per_rev: u16,
+    },
+    /// An angle sensor: the sample is the 12-bit angle of the revolution, or the fault flag
+    /// ([`mmu_hal_port::ANGLE_FAULT`]) while disconnected.
+    Angle,
+}
+
 /// The physical constants of a [`Model`](crate::Model).
 ///
 /// Positions are filament-tip positions in mm along the filament path, relative to the hub
@@ -50,8 +66,13 @@ pub struct ModelConfig {
     /// Duties below this (per mille) do not overcome the spool drag: the motor stays still.
     /// Default 80 (8 %).
     pub dead_band_permille: u16,
-    /// Filament moved per motor revolution, mm. Default 2.0.
+    /// Filament moved per motor revolution, mm (per turn of the sensed shaft: the drive gear for
+    /// an angle sensor). Default 2.0.
     pub mm_per_rev: f32,
+    /// What each lane's motion sensor reads. Default the Hall wave.
+    pub motion_sensor: LaneMotionSensor,
+    /// Each lane has its own tension sensor (read from that lane's buffer). Default false.
+    pub lane_tension: bool,
 
     /// Travel of the hub's tension buffer each way from its rest, mm. Default 6.
     pub buffer_limit_mm: f32,
@@ -94,6 +115,8 @@ impl Default for ModelConfig {
             coast_tau_ms: 60.0,
             dead_band_permille: 80,
             mm_per_rev: 2.0,
+            motion_sensor: LaneMotionSensor::HallWave,
+            lane_tension: false,
             buffer_limit_mm: 6.0,
             buffer_relax_ms: 100.0,
             rest_level: 2048,
@@ -131,6 +154,8 @@ impl ModelConfig {
             coast_tau_ms: non_neg(self.coast_tau_ms, d.coast_tau_ms),
             dead_band_permille: self.dead_band_permille,
             mm_per_rev: positive(self.mm_per_rev, d.mm_per_rev),
+            motion_sensor: self.motion_sensor,
+            lane_tension: self.lane_tension,
             buffer_limit_mm: non_neg(self.buffer_limit_mm, d.buffer_limit_mm),
             buffer_relax_ms: non_neg(self.buffer_relax_ms, d.buffer_relax_ms),
             rest_level: self.rest_level,

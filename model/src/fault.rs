@@ -11,6 +11,8 @@ pub enum SensorId {
     HubFilament,
     /// The hub tension (buffer) sensor.
     HubTension,
+    /// A lane's own tension sensor (a profile with one per lane).
+    LaneTension(usize),
     /// The hub cutter sensor.
     HubCutter,
 }
@@ -19,7 +21,9 @@ impl SensorId {
     /// The slot this sensor belongs to, if it is a per-slot sensor.
     pub fn slot(self) -> Option<usize> {
         match self {
-            SensorId::MotorHall(slot) | SensorId::SlotFilament(slot) => Some(slot),
+            SensorId::MotorHall(slot) | SensorId::SlotFilament(slot) | SensorId::LaneTension(slot) => {
+                Some(slot)
+            }
             SensorId::HubFilament | SensorId::HubTension | SensorId::HubCutter => None,
         }
     }

@@ -65,7 +65,7 @@ mod config;
 mod fault;
 mod rng;
 
-pub use config::ModelConfig;
+pub use config::{LaneMotionSensor, ModelConfig};
 pub use fault::{Fault, FaultKind, Rail, SensorId};
 pub use mmu_hal_port::{Direction, Duty, HubSamples, MotorCommand, Samples, SlotSamples};
 pub use rng::Rng;
@@ -598,20 +598,47 @@ impl Model {
         }
     }
 
-    /// One fresh noisy sample of `slot`'s two sensors; `None` for an unknown slot.
+    /// One fresh sample of `slot`'s sensors (noisy where they are analog); `None` for an unknown
+    /// slot. A lane without its own tension sensor reads 0 there.
     pub fn sample_slot(&mut self, slot: usize) -> Option<SlotSamples> {
         let s = self.slots.get(slot)?;
         let p = &self.p;
-        let angle = core::f64::consts::TAU * (s.hall_phase + s.motor_revs).rem_euclid(1.0);
-        let hall = p.rest + p.hall_amplitude * angle.sin();
+        let turns = s.hall_phase + s.motor_revs;
         let filament = if s.covers_upstream(p.slot_sensor) {
             p.filament_level
         } else {
             p.rest
         };
+        let tension = p.rest + p.tension_gain * s.buffer;
+        let sensor = SensorId::MotorHall(slot);
+        let motion = match self.config.motion_sensor {
+            LaneMotionSensor::HallWave => {
+                let hall = p.rest + p.hall_amplitude * (core::f64::consts::TAU * turns.rem_euclid(1.0)).sin();
+                self.read(sensor, hall)
+            }
+            // A disconnected encoder's channels stay put: the count stops.
+            LaneMotionSensor::Quadrature { counts_per_rev } => match self.disconnected(sensor) {
+                Some(_) => 0,
+                None => ((turns * f64::from(counts_per_rev)).floor() as i64).rem_euclid(65_536) as u16,
+            },
+            LaneMotionSensor::Angle => match self.disconnected(sensor) {
+                Some(_) => mmu_hal_port::ANGLE_FAULT,
+                None => {
+                    let counts = f64::from(mmu_hal_port::ANGLE_COUNTS);
+                    ((turns.rem_euclid(1.0) * counts).floor() as u16) % mmu_hal_port::ANGLE_COUNTS
+                }
+            },
+        };
+        let filament = self.read(SensorId::SlotFilament(slot), filament);
+        let tension = if self.config.lane_tension {
+            self.read(SensorId::LaneTension(slot), tension)
+        } else {
+            0
+        };
         Some(SlotSamples {
-            motor_hall: self.read(SensorId::MotorHall(slot), hall),
-            filament: self.read(SensorId::SlotFilament(slot), filament),
+            motion,
+            filament,
+            tension,
         })
     }
 

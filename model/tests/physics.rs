@@ -73,7 +73,7 @@ impl HallCounter {
 fn run_counting(m: &mut Model, ms: u32, command: MotorCommand, counter: &mut HallCounter) {
     for _ in 0..ms {
         m.step(1, &only_slot0(command));
-        counter.push(m.sample_slot(0).unwrap().motor_hall);
+        counter.push(m.sample_slot(0).unwrap().motion);
     }
 }
 
@@ -311,7 +311,7 @@ fn disconnected_sensors_read_at_the_rail() {
         m.step(1, &[forward(1000); SLOTS]);
         let s = m.samples::<SLOTS>();
         assert_eq!(s.hub.filament, 4095);
-        assert_eq!(s.slots[1].motor_hall, 0);
+        assert_eq!(s.slots[1].motion, 0);
         assert_eq!(s.slots[2].filament, 4095);
         assert_ne!(s.hub.tension, 0);
     }
@@ -322,7 +322,7 @@ fn disconnected_sensors_read_at_the_rail() {
     assert!(hub > 2600 && hub < 4095, "filament at the hub: {hub}");
     m.clear_all();
     assert!(m.active_faults().is_empty());
-    assert!(m.sample_slot(1).unwrap().motor_hall > 0);
+    assert!(m.sample_slot(1).unwrap().motion > 0);
 }
 
 #[test]
@@ -562,12 +562,14 @@ fn same_seed_same_samples() {
             out.push(s.slots);
             out.push([
                 SlotSamples {
-                    motor_hall: s.hub.filament,
+                    motion: s.hub.filament,
                     filament: s.hub.tension,
+                    tension: 0,
                 },
                 SlotSamples {
-                    motor_hall: s.hub.cutter,
+                    motion: s.hub.cutter,
                     filament: 0,
+                    tension: 0,
                 },
                 SlotSamples::default(),
             ]);
@@ -659,7 +661,7 @@ fn out_of_range_and_garbage_inputs_never_panic() {
         m.step((next() % 20) as u32, &cmds[..(next() % 5) as usize]);
         let s = m.samples::<4>();
         for slot in &s.slots {
-            assert!(slot.motor_hall <= 4095 && slot.filament <= 4095);
+            assert!(slot.motion <= 4095 && slot.filament <= 4095);
         }
         assert!(m.fsensor_state() <= 2);
         for i in 0..SLOTS {

@@ -18,7 +18,8 @@ slip:SLOT:RATIO              the slot's drive gear slips (filament motion = RATI
 motor-dead:SLOT              the slot's motor does not turn
 noise:SIGMA                  every sensor's noise has this standard deviation, ADC counts
 disconnect:SENSOR[:low|high] a sensor reads its rail (SENSOR: hub-filament, hub-tension,
-                             hub-cutter, slot-filament-K, motor-hall-K; default low)
+                             hub-cutter, slot-filament-K, motor-hall-K (the lane's
+                             motion sensor), lane-tension-K; default low)
 runout:SLOT                  the slot's spool runs out (clearing refills it)
 fastened-end:SLOT            the slot's spool ends, its end fastened to the core (clearing: a new spool)
 uart-corrupt:P               each UART byte (both directions) has one bit flipped with probability P
@@ -129,6 +130,7 @@ fn sensor(spec: &str, name: Option<&str>) -> Result<SensorId, FaultSpecError> {
         "hub-cutter" => Ok(SensorId::HubCutter),
         _ if name.starts_with("slot-filament-") => slot("slot-filament-").map(SensorId::SlotFilament),
         _ if name.starts_with("motor-hall-") => slot("motor-hall-").map(SensorId::MotorHall),
+        _ if name.starts_with("lane-tension-") => slot("lane-tension-").map(SensorId::LaneTension),
         _ => Err(bad(spec, "unknown sensor")),
     }
 }
@@ -140,6 +142,7 @@ fn sensor_name(sensor: SensorId) -> String {
         SensorId::HubCutter => "hub-cutter".into(),
         SensorId::SlotFilament(k) => format!("slot-filament-{k}"),
         SensorId::MotorHall(k) => format!("motor-hall-{k}"),
+        SensorId::LaneTension(k) => format!("lane-tension-{k}"),
     }
 }
 

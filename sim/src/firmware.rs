@@ -346,7 +346,7 @@ fn sensor_levels(model: &mut Model, slots: usize) -> Vec<u16> {
     let mut levels = Vec::with_capacity(2 * slots + 3);
     for slot in 0..slots {
         let s = model.sample_slot(slot).unwrap_or_default();
-        levels.extend([s.motor_hall, s.filament]);
+        levels.extend([s.motion, s.filament]);
     }
     let hub = model.sample_hub();
     levels.extend([hub.filament, hub.tension, hub.cutter]);

@@ -12,6 +12,7 @@
 
 use mmu_firmware::control::{ControlLoop, Tick};
 use mmu_firmware::persist::{Keeper, Store};
+use mmu_firmware::profile::Profile;
 use mmu_firmware::runner::Status;
 use mmu_firmware::uart::{G071_DMA_RING, MemoryRing, ReceiveRing};
 use mmu_firmware::{App, BoardAction, Config, Instant, MAX_SLOTS, MotorCommand};
@@ -99,12 +100,12 @@ struct PersistentApp<const N: usize> {
 
 impl<const N: usize> PersistentApp<N> {
     /// Boot on `flash`: what it holds is restored before the first step.
-    fn boot(config: Config, flash: UnitFlash) -> Self {
+    fn boot(profile: &'static Profile, config: Config, flash: UnitFlash) -> Option<Self> {
         let range = 0..(STORE_PAGES * G0_PAGE) as u32;
         let store = Store::new(flash, range).unwrap_or_else(|_| unreachable!("a valid region"));
-        let mut app = App::new(config.clone());
+        let mut app = App::with_profile(profile, config.clone())?;
         let (keeper, _) = Keeper::boot(store, &mut app);
-        PersistentApp {
+        Some(PersistentApp {
             control: ControlLoop::new(app, Instant::ZERO),
             keeper,
             motors: mmu_firmware::drive::stopped(),
@@ -112,14 +113,15 @@ impl<const N: usize> PersistentApp<N> {
             hung_ms: None,
             boot_config: config,
             motion: MotionWatch::default(),
-        }
+        })
     }
 
     /// The flash goes to a fresh App booted on it; this one is left with a blank store.
     fn reboot(&mut self, config: Config) {
         let flash = std::mem::replace(self.keeper.store().flash(), blank_flash());
         let motion = self.motion;
-        *self = PersistentApp::boot(config, flash);
+        let profile = self.control.app().profile();
+        *self = PersistentApp::boot(profile, config, flash).unwrap_or_else(|| unreachable!("booted once"));
         self.motion = motion;
     }
 }
@@ -211,18 +213,30 @@ impl<const N: usize> UnitLogic for PersistentApp<N> {
     }
 }
 
-/// A unit logic with `slots` slots booted on `flash`, or `None` when the count is not 1 to
-/// [`MAX_SLOTS`].
-pub fn new_logic(slots: usize, config: Config, flash: UnitFlash) -> Option<Box<dyn UnitLogic>> {
+/// A unit logic with `slots` slots on the hardware `profile` booted on `flash`, or `None` when
+/// the count is not 1 to what the profile has.
+pub fn new_logic(
+    slots: usize,
+    profile: &'static Profile,
+    config: Config,
+    flash: UnitFlash,
+) -> Option<Box<dyn UnitLogic>> {
     const _: () = assert!(MAX_SLOTS == 5, "new_logic lists every slot count");
-    Some(match slots {
-        1 => Box::new(PersistentApp::<1>::boot(config, flash)),
-        2 => Box::new(PersistentApp::<2>::boot(config, flash)),
-        3 => Box::new(PersistentApp::<3>::boot(config, flash)),
-        4 => Box::new(PersistentApp::<4>::boot(config, flash)),
-        5 => Box::new(PersistentApp::<5>::boot(config, flash)),
-        _ => return None,
-    })
+    fn boxed<const N: usize>(
+        profile: &'static Profile,
+        config: Config,
+        flash: UnitFlash,
+    ) -> Option<Box<dyn UnitLogic>> {
+        PersistentApp::<N>::boot(profile, config, flash).map(|app| Box::new(app) as Box<dyn UnitLogic>)
+    }
+    match slots {
+        1 => boxed::<1>(profile, config, flash),
+        2 => boxed::<2>(profile, config, flash),
+        3 => boxed::<3>(profile, config, flash),
+        4 => boxed::<4>(profile, config, flash),
+        5 => boxed::<5>(profile, config, flash),
+        _ => None,
+    }
 }
 
 #[cfg(test)]
@@ -233,7 +247,13 @@ mod tests {
     #[test]
     fn every_supported_slot_count_boots_and_no_other() {
         for slots in 1..=MAX_SLOTS {
-            let mut logic = new_logic(slots, Config::default(), blank_flash()).expect("supported count");
+            let mut logic = new_logic(
+                slots,
+                &mmu_firmware::profile::THESIS,
+                Config::default(),
+                blank_flash(),
+            )
+            .expect("supported count");
             let mut model = Model::new(ModelConfig::default(), slots, 1);
             let mut tx = Vec::new();
             for ms in 0..300 {
@@ -241,13 +261,35 @@ mod tests {
             }
             assert_eq!(logic.command(), ((RequestCode::Reset, 0), Status::Finished));
         }
-        assert!(new_logic(0, Config::default(), blank_flash()).is_none());
-        assert!(new_logic(MAX_SLOTS + 1, Config::default(), blank_flash()).is_none());
+        assert!(
+            new_logic(
+                0,
+                &mmu_firmware::profile::THESIS,
+                Config::default(),
+                blank_flash()
+            )
+            .is_none()
+        );
+        assert!(
+            new_logic(
+                MAX_SLOTS + 1,
+                &mmu_firmware::profile::THESIS,
+                Config::default(),
+                blank_flash()
+            )
+            .is_none()
+        );
     }
 
     #[test]
     fn a_hung_loop_keeps_its_motors_until_the_watchdog_boots_the_unit_again() {
-        let mut logic = new_logic(3, Config::default(), blank_flash()).expect("3 slots");
+        let mut logic = new_logic(
+            3,
+            &mmu_firmware::profile::THESIS,
+            Config::default(),
+            blank_flash(),
+        )
+        .expect("3 slots");
         let mut model = Model::new(ModelConfig::default(), 3, 1);
         let mut tx = Vec::new();
         let tool_0 = mmu_protocol::Request::new(RequestCode::Tool, 0).encode();

@@ -9,9 +9,10 @@
 //! *protocol logic* (handshake, polling, retries) is the client's business; see
 //! [`crate::printer`].
 
+use mmu_firmware::profile::{MotionSensor, Profile, THESIS, TensionAt};
 use mmu_firmware::runner::Status;
 use mmu_firmware::{Config, Direction, Instant, MotorCommand};
-use mmu_model::{Model, ModelConfig, Rng};
+use mmu_model::{LaneMotionSensor, Model, ModelConfig, Rng};
 use mmu_protocol::RequestCode;
 
 use crate::event::{Event, EventKind, FaultAction};
@@ -56,6 +57,50 @@ pub struct SimOptions {
     /// 6.5.3 the extruder gears sit before the filament sensor
     /// ([`Personality::gears_before_sensor_mm`]), whatever [`SimOptions::model`] says.
     pub printer: Personality,
+    /// What senses each lane: the unit runs on this profile and the model's sensors read as it
+    /// says ([`SimOptions::for_hardware`] also takes its default settings).
+    pub hardware: &'static Profile,
+}
+
+impl SimOptions {
+    /// The default options on the hardware `profile`: its default settings and, for the model,
+    /// its sensors and its distance per turn of the sensed shaft.
+    pub fn for_hardware(profile: &'static Profile) -> SimOptions {
+        SimOptions::default().on_hardware(profile)
+    }
+
+    /// These options on the hardware `profile`: the unit's settings keep theirs but the distance
+    /// per turn of the sensed shaft, which becomes the profile's.
+    pub fn on_hardware(self, profile: &'static Profile) -> SimOptions {
+        SimOptions {
+            unit: Config {
+                mm_per_rev_centi: profile.mm_per_rev_centi,
+                ..self.unit
+            },
+            hardware: profile,
+            ..self
+        }
+    }
+}
+
+/// `model` with the sensors of `profile`: what each lane's motion sensor reads, the lanes' own
+/// tension sensors, and the turn of the sensed shaft where the profile has its own.
+pub fn model_for(profile: &Profile, model: &ModelConfig) -> ModelConfig {
+    let motion_sensor = match profile.motion {
+        MotionSensor::HallWave => LaneMotionSensor::HallWave,
+        MotionSensor::Quadrature { counts_per_rev } => LaneMotionSensor::Quadrature { counts_per_rev },
+        MotionSensor::Angle => LaneMotionSensor::Angle,
+    };
+    let mm_per_rev = match profile.motion {
+        MotionSensor::HallWave => model.mm_per_rev,
+        _ => f32::from(profile.mm_per_rev_centi) / 100.0,
+    };
+    ModelConfig {
+        motion_sensor,
+        lane_tension: profile.tension == TensionAt::Lane,
+        mm_per_rev,
+        ..model.clone()
+    }
 }
 
 impl Default for SimOptions {
@@ -68,6 +113,7 @@ impl Default for SimOptions {
             print_mm_s: 1.0,
             boot_ms: 50,
             printer: Personality::default(),
+            hardware: &THESIS,
         }
     }
 }
@@ -147,20 +193,21 @@ pub struct Sim {
 impl Sim {
     /// A unit just powered on, with every slot's filament parked and nothing loaded.
     pub fn new(options: SimOptions) -> Result<Sim, BadOptions> {
-        let logic = new_logic(options.slots, options.unit.clone(), blank_flash()).ok_or_else(|| {
-            BadOptions(format!(
-                "a unit has 1 to {} slots, not {}",
-                mmu_firmware::MAX_SLOTS,
-                options.slots
-            ))
-        })?;
+        let hardware = options.hardware;
+        let logic =
+            new_logic(options.slots, hardware, options.unit.clone(), blank_flash()).ok_or_else(|| {
+                BadOptions(format!(
+                    "the {} hardware has 1 to {} slots, not {}",
+                    hardware.name, hardware.max_slots, options.slots
+                ))
+            })?;
         Ok(Sim::with_unit(options, logic))
     }
 
     /// The unit `logic` (the host-built logic of [`Sim::new`], or a firmware image on an emulated
     /// chip: [`crate::firmware::FirmwareUnit`]) just powered on, with `options.slots` slots.
     pub fn with_unit(options: SimOptions, logic: Box<dyn UnitLogic>) -> Sim {
-        let mut geometry = options.model.clone();
+        let mut geometry = model_for(options.hardware, &options.model);
         if let Some(before) = options.printer.gears_before_sensor_mm() {
             geometry.extruder_gears_mm = geometry.bowden_length_mm - before;
         }

@@ -221,7 +221,7 @@ impl<const N: usize> Ledger<N> {
             driving.and_then(|slot| unit.feeders.get(slot)),
         ) {
             let dt_ms = now.millis_since(last_step).min(1000) as u32;
-            tally.add(drive, feeder, dt_ms, now, config);
+            tally.add(drive, feeder, dt_ms, now);
             self.open |= 1 << slot;
         }
         let driving_bit = driving.map_or(0, |slot| 1u8 << slot);

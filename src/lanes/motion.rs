@@ -31,14 +31,7 @@ pub(super) struct MotionTally {
 
 impl MotionTally {
     /// One step of a move the running command drives, `dt_ms` after the last.
-    pub(super) fn add(
-        &mut self,
-        drive: &SlotDrive,
-        feeder: &Feeder,
-        dt_ms: u32,
-        now: Instant,
-        config: &Config,
-    ) {
+    pub(super) fn add(&mut self, drive: &SlotDrive, feeder: &Feeder, dt_ms: u32, now: Instant) {
         let odometry = feeder.odometry_centi();
         let moved = self
             .last_centi
@@ -50,11 +43,11 @@ impl MotionTally {
         };
         self.commanded_mm_ms = self.commanded_mm_ms.saturating_add(u32::from(speed) * dt_ms);
         self.counted_centi = self.counted_centi.saturating_add(moved.unsigned_abs());
-        // Sampled at each revolution (the speed is measured from its period).
+        // Sampled where the lane moved (the speed is measured from its marks).
         if moved == 0 {
             return;
         }
-        let measured = feeder.hall.speed_mm_s(now, config.mm_per_rev_centi);
+        let measured = feeder.motion.speed_mm_s(now);
         if measured >= u32::from(MIN_SPEED) {
             self.duty_sum = self.duty_sum.saturating_add(u32::from(duty.permille()));
             self.speed_sum = self.speed_sum.saturating_add(measured);

@@ -24,8 +24,9 @@ impl Defaults {
     /// view (its slots decide which registers exist): setting registers read only the
     /// configuration.
     pub(super) fn new<const N: usize>(app: &App<N>) -> Self {
-        let config = Config::default();
-        let view = registers::settings_view(&config, &app.unit().hub);
+        let profile = app.profile();
+        let config = Config::for_profile(profile);
+        let view = registers::settings_view(profile, &config, &app.unit().hub);
         let mut defaults = Vec::new();
         for setting in registers::settings(N) {
             if let Some(value) = setting.read(&view) {

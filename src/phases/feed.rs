@@ -184,7 +184,7 @@ fn push_proof<const N: usize>(run: &mut PhaseRun, at: &Sight<'_, N>) -> Result<D
             return Ok(Goal::Drive.into());
         }
     }
-    let Some(tension) = at.unit.hub.tension.reading() else {
+    let Some(tension) = at.unit.tension_reading(at.slot) else {
         return Err(ErrorCode::FINDA_VS_EEPROM_DISREPANCY);
     };
     if compressed_for(run, tension, at.now, at.config) >= MET_CONFIRM_MS {

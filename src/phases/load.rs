@@ -8,6 +8,8 @@ use mmu_protocol::{ErrorCode, ProgressCode};
 
 use super::{Bounds, Decision, Goal, MotionPhase, Outcome, PhaseRun, Sight, sensor_fault_error};
 use crate::config::Config;
+use crate::profile::TensionAt;
+use crate::sensor::AnalogSensor;
 use crate::time::Instant;
 use crate::unit::{Lane, SensorId, Unit};
 
@@ -168,11 +170,15 @@ impl MotionPhase for ToNozzle {
     }
 
     fn goal<const N: usize>(self, run: &mut PhaseRun, at: &Sight<'_, N>) -> Result<Decision, ErrorCode> {
-        let goal = match at.unit.hub.tension.reading() {
+        let sensor = at.unit.tension(at.slot);
+        let goal = match sensor.and_then(AnalogSensor::reading) {
             Some(tension) => push_into_gears(run, tension, at.toward_goal_mm, at.now, at.config)?,
             // Nothing else shows the gears holding the tip: no load is reported done blind.
-            None if at.unit.hub.tension.fault().is_some() => {
-                return Err(sensor_fault_error(SensorId::HubTension));
+            None if sensor.is_some_and(|sensor| sensor.fault().is_some()) => {
+                return Err(sensor_fault_error(match at.unit.profile.tension {
+                    TensionAt::Hub => SensorId::HubTension,
+                    TensionAt::Lane => SensorId::LaneTension(at.slot),
+                }));
             }
             None => Goal::Hold,
         };

@@ -308,12 +308,12 @@ impl Bounds {
     }
 
     /// The drive's budget: the distance, twice the nominal duration plus slack, and the still
-    /// limit: [`STILL_MS`], or three revolutions at the slower of `speed` and the slow speed when
-    /// they take longer (slow speeds or a long `mm_per_rev_centi` set by the user), never more
-    /// than the time bound.
+    /// limit: [`STILL_MS`], or three marks ([`crate::odometer`], `mark_centi` apart) at the slower
+    /// of `speed` and the slow speed when they take longer (slow speeds or a long
+    /// `mm_per_rev_centi` set by the user), never more than the time bound.
     ///
     /// Computed where a phase's motion begins or resumes only: [`Bounds`] itself holds no time.
-    fn budget(&self, config: &Config) -> Budget {
+    fn budget(&self, config: &Config, mark_centi: u16) -> Budget {
         let twice_the_time_ms = |mm: u16, speed: u16| u32::from(mm) * 2000 / u32::from(speed.max(1));
         // At most 65 535 × 2000 + 65 535 × 2000 + 65 535.
         let max_ms = twice_the_time_ms(self.max_mm, self.speed)
@@ -321,11 +321,11 @@ impl Bounds {
             + u32::from(config.phase_slack_ms);
         // Part of a phase may go at the slow speed (`Goal::DriveAt`).
         let slowest = u32::from(self.speed.min(config.slow_speed).max(1));
-        let three_revolutions_ms = 3 * u32::from(config.mm_per_rev_centi) * 10 / slowest;
+        let three_marks_ms = 3 * u32::from(mark_centi) * 10 / slowest;
         Budget {
             max_mm: self.max_mm,
             max_ms,
-            max_still_ms: STILL_MS.max(three_revolutions_ms).min(max_ms),
+            max_still_ms: STILL_MS.max(three_marks_ms).min(max_ms),
             error: self.error,
         }
     }
@@ -440,7 +440,9 @@ fn learn<const N: usize>(milestone: Milestone, slot: usize, notes: &mut Notes, u
 pub const fn sensor_fault_error(sensor: SensorId) -> ErrorCode {
     match sensor {
         SensorId::HubFilament | SensorId::HubTension | SensorId::HubCutter => ErrorCode::FINDA_FLICKERS,
-        SensorId::SlotFilament(_) | SensorId::MotorHall(_) => ErrorCode::MOVE_PULLEY_FAILED,
+        SensorId::SlotFilament(_) | SensorId::Motion(_) | SensorId::LaneTension(_) => {
+            ErrorCode::MOVE_PULLEY_FAILED
+        }
     }
 }
 
@@ -575,6 +577,7 @@ impl<P: MotionPhase, const N: usize> MotionStep<'_, P, N> {
         run: &'r mut Option<PhaseRun>,
         resume_goal_from: Option<i32>,
     ) -> Option<&'r mut PhaseRun> {
+        let mark_centi = self.unit.mark_centi(self.config);
         let (feeder, drive) = (
             self.unit.feeders.get(self.slot)?,
             self.unit.drives.get_mut(self.slot)?,
@@ -583,7 +586,7 @@ impl<P: MotionPhase, const N: usize> MotionStep<'_, P, N> {
         Some(match run {
             Some(run) => run,
             None => {
-                drive.begin(self.bounds.budget(self.config), feeder, self.now);
+                drive.begin(self.bounds.budget(self.config, mark_centi), feeder, self.now);
                 let run = PhaseRun::start(run, self.now, resume_goal_from.unwrap_or(odometry), odometry);
                 run.retried = resume_goal_from.is_some();
                 run
@@ -597,7 +600,7 @@ impl<P: MotionPhase, const N: usize> MotionStep<'_, P, N> {
     fn decide(&mut self, run: &mut PhaseRun) -> Result<(Goal, Seen), Outcome> {
         let slot = self.slot;
         let sensors = [
-            SensorId::MotorHall(slot),
+            SensorId::Motion(slot),
             SensorId::HubFilament,
             SensorId::SlotFilament(slot),
         ];
@@ -698,7 +701,8 @@ impl<P: MotionPhase, const N: usize> MotionStep<'_, P, N> {
     /// Drive `motion` under the drive's budget, begun again after a hold.
     fn drive(&mut self, motion: Motion, seen: Seen, run: &mut PhaseRun) -> Outcome {
         let (slot, now, config) = (self.slot, self.now, self.config);
-        let tension = self.unit.hub.tension.reading();
+        let tension = self.unit.tension_reading(slot);
+        let mark_centi = self.unit.mark_centi(config);
         let (Some(feeder), Some(drive)) = (self.unit.feeders.get(slot), self.unit.drives.get_mut(slot))
         else {
             return Outcome::Fail(ErrorCode::INTERNAL);
@@ -707,7 +711,7 @@ impl<P: MotionPhase, const N: usize> MotionStep<'_, P, N> {
             run.held = false;
             drive.begin(
                 run.budget_use
-                    .resume(self.bounds.budget(config), now, seen.odometry),
+                    .resume(self.bounds.budget(config, mark_centi), now, seen.odometry),
                 feeder,
                 now,
             );
@@ -739,17 +743,19 @@ mod tests {
             ..Bounds::new(Direction::Forward, speed, max_mm, ErrorCode::MOVE_PULLEY_FAILED)
         };
         // 100 mm at 50 mm/s, 20 of them at 20 mm/s: 4000 + 2000 + 500 ms.
-        let budget = bounds(50, 100, 20).budget(&config);
+        let budget = bounds(50, 100, 20).budget(&config, 1000);
         assert_eq!((budget.max_mm, budget.max_ms), (100, 6500));
-        // Three 10 mm revolutions at 20 mm/s take 1500 ms.
+        // Three 10 mm marks at 20 mm/s take 1500 ms.
         assert_eq!(budget.max_still_ms, STILL_MS.max(1500));
-        let budget = bounds(0, 1, 0).budget(&config);
+        let budget = bounds(0, 1, 0).budget(&config, 1000);
         assert_eq!((budget.max_ms, budget.max_still_ms), (2500, 2500));
-        let slowest = bounds(u16::MAX, u16::MAX, u16::MAX).budget(&Config {
-            slow_speed: 0,
-            mm_per_rev_centi: u16::MAX,
-            ..config
-        });
+        let slowest = bounds(u16::MAX, u16::MAX, u16::MAX).budget(
+            &Config {
+                slow_speed: 0,
+                ..config
+            },
+            u16::MAX,
+        );
         assert_eq!(slowest.max_still_ms, 3 * 65_535 * 10);
         assert_eq!(slowest.error, ErrorCode::MOVE_PULLEY_FAILED);
     }

@@ -64,7 +64,7 @@ impl<const N: usize> Watch<N> {
             let followed = &mut self.followed_since[slot];
             *followed = follows.then(|| followed.unwrap_or(now));
             if let (Some(since), Some(feeder)) = (*followed, app.unit().feeders.get(slot)) {
-                let still_since = since.max(feeder.hall.last_revolution().as_millis());
+                let still_since = since.max(feeder.motion.last_mark().as_millis());
                 if now - still_since > follower::STILL_MS + 1 {
                     return Err(format!(
                         "slot {slot} assisted {} ms without a revolution",

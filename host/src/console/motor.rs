@@ -114,7 +114,7 @@ impl MotorReport {
         if !(low <= off && high >= on) {
             advice.push(format!(
                 "the Hall reading stayed between {low} and {high}: bring the magnet closer to the sensor, or put the \
-                 thresholds inside that swing (on above off, e.g. `set threshold_on.slot{k}.hall ...`); a motor at full \
+                 thresholds inside that swing (on above off, e.g. `set threshold_on.slot{k}.motion ...`); a motor at full \
                  speed turns faster than the PC can sample, so a narrow range here can also be sampling",
                 k = self.slot
             ));

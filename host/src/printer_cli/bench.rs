@@ -237,7 +237,7 @@ mod tests {
         let error = parse_settings("0x22 70000\n").unwrap_err();
         assert!(error.contains("too large"), "{error}");
         assert_eq!(setting_name(0x93), "threshold_on.slot0.filament");
-        assert_eq!(setting_name(0xa4), "threshold_off.slot0.hall");
+        assert_eq!(setting_name(0xa4), "threshold_off.slot0.motion");
         assert_eq!(setting_name(0x22), "bowden_mm (MMU3 Bowden_Length)");
     }
 }

@@ -66,7 +66,7 @@ pub(super) fn run_soak(
         sim: SimOptions {
             slots: args.sim_options.slots,
             seed,
-            ..SimOptions::default()
+            ..SimOptions::for_hardware(args.sim_options.hardware)
         },
         printer: printer_options(args),
         personality: personality(args),

@@ -393,6 +393,7 @@ fn kind_name(fault: &SimFault) -> String {
             SensorId::HubCutter => "disconnect:hub-cutter",
             SensorId::SlotFilament(_) => "disconnect:slot-filament",
             SensorId::MotorHall(_) => "disconnect:motor-hall",
+            SensorId::LaneTension(_) => "disconnect:lane-tension",
         },
         SimFault::Model(Fault::SpoolRunout { .. }) => "runout",
         SimFault::Model(Fault::SpoolFastened { .. }) => "fastened-end",

@@ -43,6 +43,8 @@ use uart_ring::G071Ring;
 
 /// The board, as the boot log names it.
 pub const NAME: &str = "NUCLEO-G071RB";
+/// The thesis build's sensors: an analog Hall per motor, the hub's sensors.
+pub const PROFILE: mmu_firmware::profile::Profile = mmu_firmware::profile::THESIS;
 /// Filament slots on this board.
 pub const SLOTS: usize = 3;
 /// PWM carrier of the motor bridges: above hearing, well below the TB6612FNG's 100 kHz limit.
@@ -567,8 +569,9 @@ impl SensorScan<SLOTS> for Sampler {
         };
         Ok(Samples {
             slots: core::array::from_fn(|slot| SlotSamples {
-                motor_hall: input(2 * slot),
+                motion: input(2 * slot),
                 filament: input(2 * slot + 1),
+                tension: 0,
             }),
             hub: HubSamples {
                 filament: input(HUB_INPUTS),

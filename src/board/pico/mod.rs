@@ -50,6 +50,8 @@ pub use uart_ring::{PicoRing, RingRx};
 
 /// The board, as the boot log names it.
 pub const NAME: &str = "Raspberry Pi Pico";
+/// The thesis build's sensors: an analog Hall per motor, the hub's sensors.
+pub const PROFILE: mmu_firmware::profile::Profile = mmu_firmware::profile::THESIS;
 /// Filament slots on this board.
 pub const SLOTS: usize = 3;
 /// The Pico's QSPI flash: 2 MiB.
@@ -441,8 +443,9 @@ impl SensorScan<SLOTS> for Sampler {
         }
         Ok(Samples {
             slots: core::array::from_fn(|slot| SlotSamples {
-                motor_hall: raw.get(2 * slot).copied().unwrap_or_default(),
+                motion: raw.get(2 * slot).copied().unwrap_or_default(),
                 filament: raw.get(2 * slot + 1).copied().unwrap_or_default(),
+                tension: 0,
             }),
             hub: HubSamples {
                 filament: raw[HUB_INPUTS],

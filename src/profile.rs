@@ -1,0 +1,146 @@
+//! What senses a lane on this hardware: a hardware profile.
+//!
+//! The thesis build, a lane made of a buyable encoder gear motor and the BMCU-C kit differ in
+//! what counts the motion, where the tension is read and whether a hub sensor exists at all. A
+//! board declares its profile at compile time, the simulator picks one at run time; the logic
+//! reads motion as distance and direction ([`crate::feeder::Feeder`]) and sensors as facts
+//! ([`crate::unit::Unit`]), never as a sensor kind.
+
+/// How a lane measures the filament's motion. Every source is read as a count of a sensed
+/// shaft's turn, `counts_per_rev` counts to the turn; register 0x42 (`mm_per_rev_centi`) says
+/// how far the filament moves per turn, so the odometry is `counts × mm_per_rev / counts_per_rev`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum MotionSensor {
+    /// An analog Hall sensor that sees one magnet on the motor shaft: a sine-like wave, one
+    /// period per revolution, read on the ADC. It cannot tell the direction: a revolution counts
+    /// the way the motor was last driven.
+    HallWave,
+    /// A two-channel Hall quadrature encoder on the motor: the board counts every edge of both
+    /// channels, up and down, into a wrapping 16-bit count (the sample).
+    Quadrature {
+        /// Edges per turn of the output shaft (4 × pulses per channel × gear ratio).
+        counts_per_rev: u16,
+    },
+    /// A magnetic angle sensor (AS5600) on the drive gear: the sample is its 12-bit angle, with
+    /// [`ANGLE_FAULT`] set while the magnet is missing, too weak or too strong, or the sensor
+    /// does not answer.
+    Angle,
+}
+
+pub use mmu_hal_port::{ANGLE_COUNTS, ANGLE_FAULT};
+
+impl MotionSensor {
+    /// Counts of one turn of the sensed shaft.
+    pub const fn counts_per_rev(self) -> u16 {
+        match self {
+            MotionSensor::HallWave => 1,
+            MotionSensor::Quadrature { counts_per_rev } => counts_per_rev,
+            MotionSensor::Angle => ANGLE_COUNTS,
+        }
+    }
+}
+
+/// How a lane's presence sensor is read.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum PresenceInput {
+    /// An analog level (a Hall sensor, an opto) through the noise filter, a level stuck at a rail
+    /// a fault.
+    Analog,
+    /// A switch on a digital input: 0 or [`mmu_hal_port::ADC_MAX`], unfiltered, never a fault.
+    Digital,
+}
+
+/// Where the Bowden tension is read.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum TensionAt {
+    /// One sensor at the hub, for whichever lane is loaded.
+    Hub,
+    /// One sensor per lane (a sprung slider in each lane's path).
+    Lane,
+}
+
+/// What senses a lane on one build, and how many lanes it has.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Profile {
+    /// The name `--hardware` takes.
+    pub name: &'static str,
+    /// What counts each lane's motion.
+    pub motion: MotionSensor,
+    /// How each lane's presence is read.
+    pub presence: PresenceInput,
+    /// Where the tension is read.
+    pub tension: TensionAt,
+    /// Whether a filament sensor sits where the lanes merge (the unit's FINDA). Without one the
+    /// unit tells FINDA from the loaded lane's odometry.
+    pub hub_sensor: bool,
+    /// The most lanes this hardware has.
+    pub max_slots: usize,
+    /// The filament's motion per turn of the sensed shaft before any calibration, 1/100 mm.
+    pub mm_per_rev_centi: u16,
+}
+
+/// The thesis build: an analog Hall per motor reading one magnet per revolution, analog Hall
+/// presence sensors, the hub's filament and tension sensors.
+pub const THESIS: Profile = Profile {
+    name: "thesis",
+    motion: MotionSensor::HallWave,
+    presence: PresenceInput::Analog,
+    tension: TensionAt::Hub,
+    hub_sensor: true,
+    max_slots: crate::MAX_SLOTS,
+    mm_per_rev_centi: 200,
+};
+
+/// Lanes of N20 gear motors with a magnetic quadrature encoder (7 pulses per channel per motor
+/// turn, 100:1), on an MK8-type drive gear of 7.5 mm effective diameter; the hub as in the
+/// thesis build.
+pub const N20_QUADRATURE: Profile = Profile {
+    name: "n20-quadrature",
+    motion: MotionSensor::Quadrature {
+        counts_per_rev: 4 * 7 * 100,
+    },
+    presence: PresenceInput::Analog,
+    tension: TensionAt::Hub,
+    hub_sensor: true,
+    max_slots: crate::MAX_SLOTS,
+    mm_per_rev_centi: 2356,
+};
+
+/// The BMCU-C kit: four lanes, an AS5600 on each drive gear (7.5 mm effective diameter), an
+/// opto presence sensor and a sprung tension slider per lane, no hub sensor.
+pub const BMCU_C: Profile = Profile {
+    name: "bmcu-c",
+    motion: MotionSensor::Angle,
+    presence: PresenceInput::Analog,
+    tension: TensionAt::Lane,
+    hub_sensor: false,
+    max_slots: 4,
+    mm_per_rev_centi: 2356,
+};
+
+/// Every profile, the default first.
+pub const ALL: [&Profile; 3] = [&THESIS, &N20_QUADRATURE, &BMCU_C];
+
+/// The profile called `name`.
+pub fn by_name(name: &str) -> Option<&'static Profile> {
+    ALL.iter().copied().find(|profile| profile.name == name)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_profile_is_found_by_its_name_and_fits_the_printers_menus() {
+        for profile in ALL {
+            assert_eq!(by_name(profile.name), Some(profile));
+            assert!((1..=crate::MAX_SLOTS).contains(&profile.max_slots));
+            assert!(profile.motion.counts_per_rev() >= 1);
+        }
+        assert_eq!(by_name("mk3"), None);
+    }
+}
