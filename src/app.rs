@@ -441,6 +441,7 @@ impl<const N: usize> App<N> {
         let filament_readings = self.filament_readings();
         let mut target = registers::Target {
             profile: self.unit.profile,
+            slots: N,
             config: &mut self.config,
             fsensor: &mut self.unit.fsensor,
             filament_readings,

@@ -114,6 +114,9 @@ pub struct Config {
     pub bowden_mm: u16,
     /// How far before the hub sensor a parked tip rests, mm.
     pub park_mm: u16,
+    /// On hardware without a hub sensor, how far past a lane's presence sensor its tip counts as
+    /// in the hub (FINDA), mm: where the lanes merge, calibrated. 0 on hardware with a hub sensor.
+    pub lane_to_hub_mm: u16,
     /// How much of the Bowden tube is fed fast before slowing down for the printer's sensor, as mm
     /// left before its nominal position.
     pub bowden_slowdown_mm: u16,
@@ -171,6 +174,7 @@ impl Config {
         slow_speed: 20,
         bowden_mm: 360,
         park_mm: 15,
+        lane_to_hub_mm: 0,
         bowden_slowdown_mm: 30,
         fsensor_search_mm: 90,
         preload_max_mm: 150,
@@ -193,13 +197,24 @@ impl Config {
     };
 }
 
+/// The default distance from a lane's presence sensor to where the lanes merge, on hardware
+/// without a hub sensor, mm: the simulator's geometry until a calibration measures the unit's.
+pub const LANE_TO_HUB_MM: u16 = 95;
+
 impl Config {
     /// The default settings on the hardware `profile`: the reference unit's, with the profile's
     /// distance per turn of its motion sensor.
     pub const fn for_profile(profile: &Profile) -> Config {
+        Config::DEFAULT.on_profile(profile)
+    }
+
+    /// These settings on the hardware `profile`: those that depend on it (the distance per turn
+    /// of the motion sensor, the merge's distance without a hub sensor) are the profile's.
+    pub const fn on_profile(self, profile: &Profile) -> Config {
         Config {
             mm_per_rev_centi: profile.mm_per_rev_centi,
-            ..Config::DEFAULT
+            lane_to_hub_mm: if profile.hub_sensor { 0 } else { LANE_TO_HUB_MM },
+            ..self
         }
     }
 }

@@ -83,6 +83,22 @@ pub struct Profile {
     pub mm_per_rev_centi: u16,
 }
 
+impl Profile {
+    /// The profile as register 0x8d shows it: bits 0-1 the motion sensor (0 a Hall wave, 1 a
+    /// quadrature encoder, 2 an angle sensor), bit 2 a digital presence input, bit 3 a tension
+    /// sensor per lane, bit 4 a hub sensor.
+    pub const fn code(&self) -> u16 {
+        let motion = match self.motion {
+            MotionSensor::HallWave => 0,
+            MotionSensor::Quadrature { .. } => 1,
+            MotionSensor::Angle => 2,
+        };
+        let digital = matches!(self.presence, PresenceInput::Digital) as u16;
+        let lane_tension = matches!(self.tension, TensionAt::Lane) as u16;
+        motion | digital << 2 | lane_tension << 3 | (self.hub_sensor as u16) << 4
+    }
+}
+
 /// The thesis build: an analog Hall per motor reading one magnet per revolution, analog Hall
 /// presence sensors, the hub's filament and tension sensors.
 pub const THESIS: Profile = Profile {
@@ -140,7 +156,11 @@ mod tests {
             assert_eq!(by_name(profile.name), Some(profile));
             assert!((1..=crate::MAX_SLOTS).contains(&profile.max_slots));
             assert!(profile.motion.counts_per_rev() >= 1);
+            // A tension sensor per lane takes a diagnostic index of its own: 4 lanes fit.
+            assert!(profile.tension == TensionAt::Hub || profile.max_slots <= 4);
         }
+        let codes: [u16; 3] = ALL.map(Profile::code);
+        assert_eq!(codes, [0b1_0000, 0b1_0001, 0b0_1010]);
         assert_eq!(by_name("mk3"), None);
     }
 }

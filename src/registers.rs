@@ -23,8 +23,8 @@ use crate::sensor::{AnalogSensor, Thresholds};
 use crate::time::Instant;
 use crate::unit::{Hub, Lane, SensorId};
 
-/// Sensor diagnostic blocks hold up to 16 sensors (3 hub + 2 per slot, at most 13).
-const SENSOR_BLOCK: u8 = 16;
+/// Sensor diagnostic blocks hold up to 16 sensors ([`crate::unit::SENSOR_INDICES`]).
+const SENSOR_BLOCK: u8 = crate::unit::SENSOR_INDICES as u8;
 /// Per-slot blocks hold up to 8 slots.
 const SLOT_BLOCK: u8 = 8;
 /// Lane blocks (filament left, lane health) hold 5 slots, packed where 8 do not fit.
@@ -78,12 +78,12 @@ pub struct View<'a> {
 }
 
 impl View<'_> {
-    fn sensor(&self, id: SensorId) -> Option<&AnalogSensor> {
+    fn sensor_of(&self, id: SensorId) -> Option<&AnalogSensor> {
         crate::unit::sensor_in(self.profile, self.hub, self.feeders, id)
     }
 
-    fn sensor_count(&self) -> usize {
-        3 + 2 * self.feeders.len()
+    fn sensor(&self, index: usize) -> Option<&AnalogSensor> {
+        self.sensor_of(SensorId::from_index(index, self.feeders.len()))
     }
 }
 
@@ -91,6 +91,8 @@ impl View<'_> {
 pub struct Target<'a> {
     /// What senses each lane.
     pub profile: &'a Profile,
+    /// The unit's slots.
+    pub slots: usize,
     /// The settings.
     pub config: &'a mut Config,
     /// The printer's filament sensor state (register 0x09, as `f`).
@@ -281,6 +283,7 @@ settings! {
     0x4d => tension_deadband,
     0x4e => tension_gain,
     0x4f => tension_max_duty,
+    0x5f => lane_to_hub_mm,
 }
 
 fn read_setting(v: &View, address: u8, _: usize) -> Option<u16> {
@@ -475,6 +478,11 @@ pub const REPORTED_REVISION: u8 = 0x52;
 /// Extension: the Bowden length (0x22) the last Retry of FSENSOR TOO EARLY learned since start,
 /// mm; 0 when none (read only).
 pub const BOWDEN_LEARNED: u8 = 0x53;
+/// Extension: what senses each lane, [`Profile::code`] (read only).
+pub const HARDWARE: u8 = 0x8d;
+/// Extension: counts of a turn of each lane's motion sensor (read only): register 0x42 is the
+/// filament's motion per such turn.
+pub const COUNTS_PER_REV: u8 = 0x8e;
 /// Extension: length of the filament on slot `k`'s spool when inserted, m, at `SPOOL + k`.
 pub const SPOOL: u8 = 0x54;
 /// Extension: filament left on slot `k`'s spool, m, at `LEFT + k` (state: a write sets it).
@@ -595,10 +603,8 @@ registers! {
     setting(0x4e, "tension_gain", 0..=100),
     setting(0x4f, "tension_max_duty", 0..=1000),
     SensorFaults: read_only(0x50, "sensor_faults", |v, _, _| Some(
-        (0..v.sensor_count())
-            .filter(|&i| v
-                .sensor(SensorId::from_index(i))
-                .is_some_and(|s| s.fault().is_some()))
+        (0..SensorId::count(v.feeders.len()))
+            .filter(|&i| v.sensor(i).is_some_and(|s| s.fault().is_some()))
             .fold(0u16, |mask, i| mask | (1 << i))
     )),
     DroppedResponses: read_only(0x51, "dropped_responses", |v, _, _| Some(v.dropped_responses)),
@@ -617,27 +623,32 @@ registers! {
         }
     ),
     LearnedBowdenMm: read_only(0x53, "learned_bowden_mm", |v, _, _| Some(v.bowden_learned_mm)),
+    Hardware: read_only(HARDWARE, "hardware", |v, _, _| Some(v.profile.code())),
+    CountsPerRev: read_only(COUNTS_PER_REV, "counts_per_rev", |v, _, _| Some(
+        v.profile.motion.counts_per_rev()
+    )),
+    setting(0x5f, "lane_to_hub_mm", 0..=1000),
     Raw: block(RAW, Sensors, "raw", |v, _, i| Some(
-        v.sensor(SensorId::from_index(i))?.raw()
+        v.sensor(i)?.raw()
     )),
     Filtered: block(FILTERED, Sensors, "filtered", |v, _, i| Some(
-        v.sensor(SensorId::from_index(i))?.filtered()
+        v.sensor(i)?.filtered()
     )),
     ThresholdOn: writable(
         THRESHOLD_ON,
         Sensors,
         "threshold_on",
         0..=4095,
-        |v, _, i| Some(thresholds(v.profile, v.config, SensorId::from_index(i))?.on),
-        |t, _, i, value| set_threshold(t, SensorId::from_index(i), |th| th.on = value)
+        |v, _, i| Some(thresholds(v.profile, v.config, SensorId::from_index(i, v.feeders.len()))?.on),
+        |t, _, i, value| set_threshold(t, SensorId::from_index(i, t.slots), |th| th.on = value)
     ),
     ThresholdOff: writable(
         THRESHOLD_OFF,
         Sensors,
         "threshold_off",
         0..=4095,
-        |v, _, i| Some(thresholds(v.profile, v.config, SensorId::from_index(i))?.off),
-        |t, _, i, value| set_threshold(t, SensorId::from_index(i), |th| th.off = value)
+        |v, _, i| Some(thresholds(v.profile, v.config, SensorId::from_index(i, v.feeders.len()))?.off),
+        |t, _, i, value| set_threshold(t, SensorId::from_index(i, t.slots), |th| th.off = value)
     ),
     SlotOdometry: block(ODOMETRY, Slots, "odometry", |v, _, k| Some(
         v.feeders.get(k)?.odometry_mm() as i16 as u16
@@ -769,7 +780,7 @@ fn find(address: u8, slots: usize) -> Option<(&'static Row, usize)> {
         .find_map(|row| row.index_of(address).map(|index| (row, index)))?;
     let exists = match row.span() {
         Span::One => true,
-        Span::Sensors => index < 3 + 2 * slots,
+        Span::Sensors => index < SensorId::count(slots),
         Span::Slots | Span::Lanes => index < slots,
     };
     exists.then_some((row, index))
@@ -848,7 +859,7 @@ pub fn settings(slots: usize) -> impl Iterator<Item = Setting> {
         .flat_map(move |row| {
             let count = match row.span() {
                 Span::One => 1,
-                Span::Sensors => 3 + 2 * slots,
+                Span::Sensors => SensorId::count(slots),
                 Span::Slots | Span::Lanes => slots,
             };
             (0..count).map(move |index| Setting { row, index })
@@ -905,7 +916,7 @@ pub fn describe(address: u8, slots: usize) -> Option<Register> {
     let (row, index) = find(address, slots)?;
     let subject = match row.span() {
         Span::One => None,
-        Span::Sensors => Some(Subject::Sensor(SensorId::from_index(index))),
+        Span::Sensors => Some(Subject::Sensor(SensorId::from_index(index, slots))),
         Span::Slots | Span::Lanes => Some(Subject::Slot(index)),
     };
     Some(Register {
@@ -963,8 +974,11 @@ mod tests {
         );
         assert_eq!(name(FILTERED + 8).as_deref(), Some("filtered.slot2.motion"));
         assert_eq!(name(LANE + 2).as_deref(), Some("lane.slot2"));
-        // A 3-slot unit has nine sensors and three slots.
-        assert_eq!(name(FILTERED + 9), None);
+        // A 3-slot unit has twelve sensor places (nine on the thesis build, whose lanes have no
+        // tension sensor of their own) and three slots.
+        assert_eq!(name(FILTERED + 9).as_deref(), Some("filtered.slot0.tension"));
+        assert_eq!(name(FILTERED + 11).as_deref(), Some("filtered.slot2.tension"));
+        assert_eq!(name(FILTERED + 12), None);
         assert_eq!(name(LANE + 3), None);
         assert_eq!(name(0x80), None);
     }
@@ -1015,6 +1029,7 @@ mod tests {
         let mut fsensor = 0;
         let mut target = Target {
             profile: &crate::profile::THESIS,
+            slots: 3,
             config: &mut config,
             fsensor: &mut fsensor,
             filament_readings: NO_FILAMENT_READINGS,
@@ -1036,6 +1051,7 @@ mod tests {
         let mut fsensor = 0;
         let mut target = Target {
             profile: &crate::profile::THESIS,
+            slots: 3,
             config: &mut config,
             fsensor: &mut fsensor,
             filament_readings: NO_FILAMENT_READINGS,
@@ -1063,6 +1079,7 @@ mod tests {
         let mut fsensor = 0;
         let mut target = Target {
             profile: &crate::profile::THESIS,
+            slots: 3,
             config: &mut config,
             fsensor: &mut fsensor,
             filament_readings: NO_FILAMENT_READINGS,
@@ -1095,6 +1112,7 @@ mod tests {
         filament_readings[2] = Some(2800);
         let mut target = Target {
             profile: &crate::profile::THESIS,
+            slots: 3,
             config: &mut config,
             fsensor: &mut fsensor,
             filament_readings,

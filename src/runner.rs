@@ -14,7 +14,7 @@
 
 use mmu_protocol::{ButtonCode, ErrorCode, ProgressCode, RequestCode};
 
-use crate::commands::{Action, Command, MAX_PHASES, Plan, Retry, clear_hub, extend};
+use crate::commands::{Action, Command, MAX_PHASES, Plan, Retry, clear_hub, extend, fit_to_profile};
 use crate::config::Config;
 use crate::phases::{self, Notes, Outcome, Phase, PhaseRun, PrinterLink};
 use crate::time::Instant;
@@ -186,6 +186,7 @@ impl Runner {
                         self.inherited = inherited;
                         return None;
                     };
+                    fit_to_profile(&mut plan, unit);
                     if let Some(bowden_mm) = replanned.bowden_mm {
                         config.bowden_mm = bowden_mm;
                         learned = Some(Learned::BowdenMm(bowden_mm));
@@ -205,6 +206,7 @@ impl Runner {
                     self.status = Status::Failed(error);
                     return None;
                 }
+                fit_to_profile(&mut unload, unit);
                 *self = Runner::new(self.request, &unload);
                 self.then_plan = true;
             }

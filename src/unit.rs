@@ -1,11 +1,11 @@
 //! The unit's hardware state as the logic knows it: every feeding system, the Filament Hub's
 //! sensors, the printer's filament sensor as last reported, and where each slot's filament is.
 
-use mmu_hal_port::Samples;
+use mmu_hal_port::{Direction, MotorCommand, Samples};
 
 use crate::config::Config;
 use crate::drive::SlotDrive;
-use crate::feeder::Feeder;
+use crate::feeder::{Feeder, distance_centi};
 use crate::profile::{MotionSensor, PresenceInput, Profile, THESIS, TensionAt};
 use crate::sensor::{AnalogSensor, FilterKind, PresenceSensor};
 use crate::time::Instant;
@@ -65,7 +65,10 @@ pub const PROOF_MARKS: u8 = 5;
 /// or more: a mark every 100 ms).
 pub const PROOF_GAP_MS: u64 = 500;
 
-/// One of the unit's analog sensors.
+/// The diagnostic indices of sensors a unit may have at most: a diagnostic register block's.
+pub const SENSOR_INDICES: usize = 16;
+
+/// One of the unit's sensors.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum SensorId {
@@ -79,35 +82,45 @@ pub enum SensorId {
     SlotFilament(usize),
     /// A slot's motion sensor (the motor Hall, the encoder, the angle sensor).
     Motion(usize),
-    /// A slot's own tension sensor (a profile with [`TensionAt::Lane`]); it has no diagnostic
-    /// index: the registers show it in a block of its own.
+    /// A slot's own tension sensor (a profile with [`TensionAt::Lane`]).
     LaneTension(usize),
 }
 
 impl SensorId {
-    /// The sensor's index in the diagnostic registers: hub sensors 0-2, then per slot k the
-    /// filament sensor at 3 + 2k and the motion sensor at 4 + 2k; a lane's tension sensor has
-    /// none.
-    pub const fn index(self) -> Option<usize> {
+    /// The sensor's index in the diagnostic registers of a unit with `slots` slots: hub sensors
+    /// 0-2, then per slot k the filament sensor at 3 + 2k and the motion sensor at 4 + 2k, then
+    /// each lane's tension sensor at 3 + 2 × `slots` + k. Every index exists on every hardware;
+    /// a sensor the profile lacks reads as absent.
+    pub const fn index(self, slots: usize) -> usize {
         match self {
-            SensorId::HubFilament => Some(0),
-            SensorId::HubTension => Some(1),
-            SensorId::HubCutter => Some(2),
-            SensorId::SlotFilament(slot) => Some(3 + 2 * slot),
-            SensorId::Motion(slot) => Some(4 + 2 * slot),
-            SensorId::LaneTension(_) => None,
+            SensorId::HubFilament => 0,
+            SensorId::HubTension => 1,
+            SensorId::HubCutter => 2,
+            SensorId::SlotFilament(slot) => 3 + 2 * slot,
+            SensorId::Motion(slot) => 4 + 2 * slot,
+            SensorId::LaneTension(slot) => 3 + 2 * slots + slot,
         }
     }
 
-    /// The sensor at a diagnostic index.
-    pub const fn from_index(index: usize) -> Self {
+    /// The sensor at a diagnostic index of a unit with `slots` slots.
+    pub const fn from_index(index: usize, slots: usize) -> Self {
         match index {
             0 => SensorId::HubFilament,
             1 => SensorId::HubTension,
             2 => SensorId::HubCutter,
+            i if i >= 3 + 2 * slots => SensorId::LaneTension(i - 3 - 2 * slots),
             i if i % 2 == 1 => SensorId::SlotFilament((i - 3) / 2),
             i => SensorId::Motion((i - 4) / 2),
         }
+    }
+
+    /// How many diagnostic indices a unit with `slots` slots has: three in the hub and three
+    /// per slot, within the 16 of a diagnostic block (a profile with a tension sensor per lane
+    /// has at most 4 lanes; a 5-slot unit's indices stop at its third lane's tension sensor,
+    /// which only such a profile has).
+    pub const fn count(slots: usize) -> usize {
+        let all = 3 + 3 * slots;
+        if all < SENSOR_INDICES { all } else { SENSOR_INDICES }
     }
 }
 
@@ -141,6 +154,32 @@ pub fn sensor_in<'a>(
         SensorId::SlotFilament(slot) => feeders.get(slot).map(|f| &f.filament.analog),
         SensorId::Motion(slot) => feeders.get(slot).map(|f| &f.motion.sensor),
         SensorId::LaneTension(slot) => feeders.get(slot).filter(|_| !hub_tension).map(|f| &f.tension),
+    }
+}
+
+/// Follows one lane's tip by `moved` (1/100 mm) and homes it at its presence sensor's edge
+/// (`present` is the sensor's decision this step, `driven` the way the unit drives the lane).
+///
+/// Only an edge the unit's own drive makes is the tip: fed in, or pulled back out past the
+/// sensor. A sensor that clears while the printer pulls the lane is the spool's end leaving it,
+/// and one that comes on undriven is a filament pushed in by hand or a tail pulled back: the
+/// tip stays where it was counted, or is not known.
+fn follow_tip(
+    tip: &mut Option<i32>,
+    was_present: &mut Option<bool>,
+    moved: i32,
+    present: Option<bool>,
+    driven: Option<Direction>,
+) {
+    *tip = tip.map(|tip| tip.saturating_add(moved));
+    match (*was_present, present, driven) {
+        (Some(false), Some(true), Some(Direction::Forward))
+        | (Some(true), Some(false), Some(Direction::Reverse)) => *tip = Some(0),
+        (Some(false), Some(true), _) => *tip = None,
+        _ => {}
+    }
+    if present.is_some() {
+        *was_present = present;
     }
 }
 
@@ -184,6 +223,14 @@ pub struct Unit<const N: usize> {
     coasting_mark_at: [Instant; N],
     /// Per slot: pulled back out of the merge since it was last fed towards the hub.
     pub clear_of_merge: [bool; N],
+    /// Per slot, on hardware without a hub sensor: where its tip is, 1/100 mm past its presence
+    /// sensor ([`Unit::tip_centi`]); `None` until the sensor's edge was seen since start.
+    tips: [Option<i32>; N],
+    /// Per slot: the presence sensor's last decision.
+    was_present: [Option<bool>; N],
+    /// Where a tip counts as in the hub, 1/100 mm past its presence sensor: the setting
+    /// `lane_to_hub_mm` as of the last [`Unit::sense`].
+    merge_centi: i32,
 }
 
 impl Default for Hub {
@@ -221,6 +268,9 @@ impl<const N: usize> Unit<N> {
         moved_by_printer: [0; N],
         coasting_mark_at: [Instant::ZERO; N],
         clear_of_merge: [false; N],
+        tips: [None; N],
+        was_present: [None; N],
+        merge_centi: 0,
     };
 }
 
@@ -228,6 +278,7 @@ impl<const N: usize> Unit<N> {
     /// Take a round of raw samples at `now`, read as the profile says.
     pub fn sense(&mut self, samples: &Samples<N>, now: Instant, config: &Config) {
         let profile = self.profile;
+        self.merge_centi = i32::from(config.lane_to_hub_mm) * 100;
         for (slot, ((feeder, sample), drive)) in self
             .feeders
             .iter_mut()
@@ -235,7 +286,19 @@ impl<const N: usize> Unit<N> {
             .zip(self.drives.iter())
             .enumerate()
         {
+            let before = feeder.odometry_centi();
             let mark = feeder.sense(slot, *sample, drive.counting(), now, config, profile);
+            if !profile.hub_sensor
+                && let (Some(tip), Some(was_present)) =
+                    (self.tips.get_mut(slot), self.was_present.get_mut(slot))
+            {
+                let moved = distance_centi(before, feeder.odometry_centi());
+                let driven = match drive.command() {
+                    MotorCommand::Drive { direction, .. } => Some(direction),
+                    MotorCommand::Coast | MotorCommand::Brake => None,
+                };
+                follow_tip(tip, was_present, moved, feeder.filament.present(), driven);
+            }
             if mark
                 && drive.is_coasting()
                 && let (Some(moved), Some(last)) = (
@@ -281,9 +344,29 @@ impl<const N: usize> Unit<N> {
         self.tension(slot).and_then(AnalogSensor::reading)
     }
 
-    /// Filament in the hub, `None` while the hub sensor is faulty or warming up.
+    /// Filament in the hub, `None` while the hub sensor is faulty or warming up. Without a hub
+    /// sensor: a lane's tip estimate at or past the merge (`lane_to_hub_mm`), or a lane recorded
+    /// in the hub whose tip has not been seen since start (the record is the only word on it
+    /// until its presence sensor's edge homes it: see [`crate::commands::fit_to_profile`]).
     pub fn hub_present(&self) -> Option<bool> {
-        self.hub.filament.present()
+        if self.profile.hub_sensor {
+            return self.hub.filament.present();
+        }
+        let merge = self.merge_centi;
+        Some(
+            self.tips
+                .iter()
+                .zip(self.lanes.iter())
+                .any(|(tip, lane)| tip.map_or(lane.owns_hub(), |tip| tip >= merge)),
+        )
+    }
+
+    /// Where `slot`'s tip is, 1/100 mm past its presence sensor, on hardware without a hub
+    /// sensor: counted from the sensor's last edge (an edge is the tip passing it: a tip that
+    /// comes in, or one pulled back out; a tail leaving forwards is a spool's end, not a tip).
+    /// `None` on hardware with a hub sensor, and until such an edge since start.
+    pub fn tip_centi(&self, slot: usize) -> Option<i32> {
+        self.tips.get(slot).copied().flatten()
     }
 
     /// The printer reports filament at (or past) its sensor.
@@ -341,18 +424,51 @@ impl<const N: usize> Unit<N> {
         sensor_in(self.profile, &self.hub, &self.feeders, id)
     }
 
-    /// The number of diagnostic sensor indices: three in the hub, two per slot.
-    pub const SENSOR_COUNT: usize = 3 + 2 * N;
-
-    /// Every sensor the unit may have: the diagnostic ones, then each lane's tension.
+    /// Every sensor the unit may have, in diagnostic order.
     pub fn sensor_ids() -> impl Iterator<Item = SensorId> {
-        (0..Self::SENSOR_COUNT)
-            .map(SensorId::from_index)
-            .chain((0..N).map(SensorId::LaneTension))
+        (0..SensorId::count(N)).map(|index| SensorId::from_index(index, N))
     }
 
     /// The first faulty sensor, if any.
     pub fn first_fault(&self) -> Option<SensorId> {
         Self::sensor_ids().find(|&id| self.sensor(id).is_some_and(|s| s.fault().is_some()))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `follow_tip` over steps of (moved, present, driven), from a tip at `tip`.
+    fn follow(mut tip: Option<i32>, steps: &[(i32, bool, Option<Direction>)]) -> Option<i32> {
+        let mut was_present = Some(true);
+        for &(moved, present, driven) in steps {
+            follow_tip(&mut tip, &mut was_present, moved, Some(present), driven);
+        }
+        tip
+    }
+
+    #[test]
+    fn only_an_edge_the_drive_makes_homes_the_tip() {
+        let back = Some(Direction::Reverse);
+        let fed = Some(Direction::Forward);
+        // Pulled back out past the sensor: the tip is there, then counted on.
+        assert_eq!(
+            follow(
+                Some(8_000),
+                &[(-50, true, back), (-30, false, back), (-20, false, back)]
+            ),
+            Some(-20)
+        );
+        // Fed in past it from behind: homed at the edge.
+        assert_eq!(
+            follow(None, &[(0, false, fed), (40, true, fed), (60, true, fed)]),
+            Some(60)
+        );
+        // The spool's end leaving the sensor while the printer pulls: the tip is where it was.
+        assert_eq!(follow(Some(45_000), &[(100, false, None)]), Some(45_100));
+        // A filament pushed in by hand, or a tail pulled back in: no tip is known.
+        assert_eq!(follow(Some(-2_000), &[(0, false, None), (0, true, None)]), None);
+        assert_eq!(follow(Some(45_000), &[(0, false, None), (-50, true, back)]), None);
     }
 }

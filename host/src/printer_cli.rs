@@ -35,7 +35,6 @@ use crate::explain::{
 };
 use crate::sim_cli::parse_slots;
 use crate::usage::usage;
-pub(crate) use bench::sensor_count;
 use console::{Console, JsonLine, Target, result_name, state_text};
 pub use failure::Failure;
 pub(crate) use failure::printer_failure;

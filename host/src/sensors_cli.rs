@@ -5,10 +5,12 @@
 //! It only reads (the printer's handshake without its writes, then `R` requests): raw readings
 //! at `0x60 + i`, filtered at `0x70 + i`, "on"/"off" thresholds at `0x90 + i`/`0xa0 + i` and the
 //! stuck-at-a-rail mask at `0x50`. Sensor `i`: 0 hub filament, 1 hub tension, 2 hub cutter, then
-//! slot `k`'s filament sensor at `3 + 2k` and its motor Hall sensor at `4 + 2k`.
+//! slot `k`'s filament sensor at `3 + 2k` and its motion sensor at `4 + 2k`, then each lane's
+//! tension sensor (`mmu_firmware::unit::SensorId::index`). Only the sensors the unit's hardware
+//! has are shown: those whose raw reading it answers.
 //!
-//! Each reading is a request and its answer, about a millisecond apiece on the wire: all nine
-//! sensors take some 19 ms a sample, so `--sensor NAME` reads only the named ones (one sensor:
+//! Each reading is a request and its answer, about a millisecond apiece on the wire: the nine
+//! sensors of a 3-slot thesis build take some 19 ms a sample, so `--sensor NAME` reads only the named ones (one sensor:
 //! a sample every 3 ms or so). A sample that takes longer than `--every` is said once, and
 //! `--seconds` counts the unit's clock, not rows. Ctrl-C ends the run with what it has (the
 //! table, the rows, the plot of the samples so far) and exit status 130.
@@ -23,6 +25,7 @@ use std::sync::atomic::Ordering;
 use mmu_firmware::registers::{
     FILTERED, RAW, SENSOR_FAULTS as STUCK, SLOT_COUNT, THRESHOLD_OFF, THRESHOLD_ON,
 };
+use mmu_firmware::unit::SensorId;
 use mmu_protocol::{ErrorCode, ParamCode, Request, RequestCode};
 use mmu_sim::{Decision, Link, Operator, Personality, Printer, PrinterEvent, PrinterOptions};
 
@@ -59,7 +62,8 @@ pub struct SensorsArgs {
     #[arg(long, value_name = "MS", default_value_t = 100, value_parser = clap::value_parser!(u64).range(1..=60_000))]
     pub every: u64,
     /// Read only this sensor (repeatable): hub.filament, hub.tension, hub.cutter,
-    /// slotK.filament, slotK.motion (K from 0), or its number 0-8. Fewer sensors, faster samples.
+    /// slotK.filament, slotK.motion, slotK.tension (K from 0, those the hardware has), or its
+    /// number. Fewer sensors, faster samples.
     #[arg(long = "sensor", value_name = "NAME")]
     pub sensors: Vec<String>,
     /// The unit firmware version to expect (3.0.2 for a unit set up for an MK3S).
@@ -70,8 +74,10 @@ pub struct SensorsArgs {
 /// One sensor's readings at one time.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Reading {
-    /// The sensor's number (0 hub filament ... 4 + 2k slot k's motor Hall).
+    /// The sensor's number (its diagnostic index).
     pub sensor: u8,
+    /// The sensor.
+    pub id: SensorId,
     /// Raw ADC sample, 0..=4095.
     pub raw: u16,
     /// After the unit's filter.
@@ -98,70 +104,54 @@ pub struct Thresholds {
     pub off: u16,
 }
 
-/// The sensor's name: `hub filament`, `slot 1 motor Hall`.
-pub fn sensor_name(index: u8) -> String {
-    match index {
-        0 => "hub filament".to_string(),
-        1 => "hub tension".to_string(),
-        2 => "hub cutter".to_string(),
-        i if i % 2 == 1 => format!("slot {} filament", (i - 3) / 2),
-        i => format!("slot {} motor Hall", (i - 4) / 2),
+/// The sensor's name: `hub filament`, `slot 1 motion sensor`.
+pub fn sensor_name(id: SensorId) -> String {
+    match id {
+        SensorId::HubFilament => "hub filament".to_string(),
+        SensorId::HubTension => "hub tension".to_string(),
+        SensorId::HubCutter => "hub cutter".to_string(),
+        SensorId::SlotFilament(k) => format!("slot {k} filament"),
+        SensorId::Motion(k) => format!("slot {k} motion sensor"),
+        SensorId::LaneTension(k) => format!("slot {k} tension"),
     }
 }
 
-/// The sensor's short name, as `--sensor` takes it and the console's registers use it:
-/// `hub.filament`, `slot1.motion`.
-pub fn sensor_subject(index: u8) -> String {
-    match index {
-        0 => "hub.filament".to_string(),
-        1 => "hub.tension".to_string(),
-        2 => "hub.cutter".to_string(),
-        i if i % 2 == 1 => format!("slot{}.filament", (i - 3) / 2),
-        i => format!("slot{}.motion", (i - 4) / 2),
-    }
-}
-
-/// The sensors `names` pick out of a unit's `count`: each a short name or a number; all of them
-/// for none.
-fn select_sensors(names: &[String], count: u8) -> Result<Vec<u8>, String> {
+/// The sensors `names` pick out of those a unit has (`sensors`, by number): each a short name
+/// (`slot1.motion`, as the registers name it) or a number; all of them for none.
+fn select_sensors(names: &[String], sensors: &[(u8, SensorId)]) -> Result<Vec<(u8, SensorId)>, String> {
     if names.is_empty() {
-        return Ok((0..count).collect());
+        return Ok(sensors.to_vec());
     }
     let mut selected = Vec::new();
     for name in names {
         let wanted = name.trim().to_ascii_lowercase();
-        let index = (0..count)
-            .find(|&i| sensor_subject(i) == wanted || i.to_string() == wanted)
+        let sensor = sensors
+            .iter()
+            .find(|(i, id)| id.to_string() == wanted || i.to_string() == wanted)
+            .copied()
             .ok_or_else(|| {
-                let known: Vec<String> = (0..count).map(sensor_subject).collect();
+                let known: Vec<String> = sensors.iter().map(|(i, id)| format!("{id} ({i})")).collect();
                 format!(
-                    "--sensor {name}: this unit has no such sensor; it has {} (or their numbers 0-{})",
-                    known.join(", "),
-                    count.saturating_sub(1)
+                    "--sensor {name}: this unit has no such sensor; it has {} (by name or number)",
+                    known.join(", ")
                 )
             })?;
-        if !selected.contains(&index) {
-            selected.push(index);
+        if !selected.contains(&sensor) {
+            selected.push(sensor);
         }
     }
     Ok(selected)
 }
 
 /// The sensor's CSV column prefix: `hub_filament`, `slot1_motion`.
-fn column_name(index: u8) -> String {
-    match index {
-        0 => "hub_filament".to_string(),
-        1 => "hub_tension".to_string(),
-        2 => "hub_cutter".to_string(),
-        i if i % 2 == 1 => format!("slot{}_filament", (i - 3) / 2),
-        i => format!("slot{}_motion", (i - 4) / 2),
-    }
+fn column_name(id: SensorId) -> String {
+    id.to_string().replace('.', "_")
 }
 
 /// A person's word for what a sensor reads, following the unit's hysteresis: `previous` is
 /// the state shown before (the state only changes past a threshold).
 fn state(
-    index: u8,
+    id: SensorId,
     reading: &Reading,
     thresholds: Option<Thresholds>,
     previous: Option<bool>,
@@ -179,7 +169,8 @@ fn state(
     } else {
         previous.unwrap_or(false)
     };
-    let hall = index >= 4 && index.is_multiple_of(2);
+    // Of the motion sensors only a Hall wave has thresholds: its magnet's edges.
+    let hall = matches!(id, SensorId::Motion(_));
     let word = match (hall, on) {
         (true, true) => "high (magnet)",
         (true, false) => "low",
@@ -203,10 +194,10 @@ impl<L> Operator<L> for Silent {
 /// Reads the sensors of a unit over a read-only printer connection.
 struct Sampler<L: Link> {
     printer: Printer<L>,
-    /// The unit's sensors.
-    sensors: u8,
-    /// The sensors read, by number.
-    selected: Vec<u8>,
+    /// The sensors the unit's hardware has, by number.
+    sensors: Vec<(u8, SensorId)>,
+    /// The sensors read.
+    selected: Vec<(u8, SensorId)>,
 }
 
 impl<L: Link> Sampler<L> {
@@ -222,7 +213,7 @@ impl<L: Link> Sampler<L> {
             .map_err(|error| crate::printer_cli::printer_failure(error, version))?;
         let mut sampler = Sampler {
             printer,
-            sensors: 0,
+            sensors: Vec::new(),
             selected: Vec::new(),
         };
         let slots = sampler
@@ -232,7 +223,13 @@ impl<L: Link> Sampler<L> {
             .ok()
             .filter(|&s| s <= 8)
             .ok_or("the unit claims too many slots")?;
-        sampler.sensors = crate::printer_cli::sensor_count(slots);
+        // The sensors this hardware has: those whose raw reading the unit answers.
+        for index in 0..SensorId::count(usize::from(slots)) as u8 {
+            if sampler.read(RAW + index)?.is_some() {
+                let id = SensorId::from_index(usize::from(index), usize::from(slots));
+                sampler.sensors.push((index, id));
+            }
+        }
         Ok(sampler)
     }
 
@@ -251,7 +248,7 @@ impl<L: Link> Sampler<L> {
         self.selected
             .clone()
             .into_iter()
-            .map(|i| {
+            .map(|(i, _)| {
                 let on = self.read(THRESHOLD_ON + i)?;
                 let off = self.read(THRESHOLD_OFF + i)?;
                 Ok(on.zip(off).map(|(on, off)| Thresholds { on, off }))
@@ -262,10 +259,11 @@ impl<L: Link> Sampler<L> {
     fn sample(&mut self, t_ms: u64) -> Result<Sample, Box<dyn Error>> {
         let stuck = self.read(STUCK)?.unwrap_or(0);
         let mut readings = Vec::with_capacity(self.selected.len());
-        for i in self.selected.clone() {
-            let missing = || format!("the unit refused to read sensor {i} ({})", sensor_name(i));
+        for (i, id) in self.selected.clone() {
+            let missing = || format!("the unit refused to read sensor {i} ({})", sensor_name(id));
             readings.push(Reading {
                 sensor: i,
+                id,
                 raw: self.read(RAW + i)?.ok_or_else(missing)?,
                 filtered: self.read(FILTERED + i)?.ok_or_else(missing)?,
                 stuck: stuck & (1 << i) != 0,
@@ -324,7 +322,7 @@ pub fn run(args: &SensorsArgs) -> Result<(), Box<dyn Error>> {
 
 /// Sample until --seconds or Ctrl-C, showing each sample as asked.
 fn watch<L: Link>(mut sampler: Sampler<L>, args: &SensorsArgs) -> Result<(), Box<dyn Error>> {
-    sampler.selected = select_sensors(&args.sensors, sampler.sensors).map_err(usage)?;
+    sampler.selected = select_sensors(&args.sensors, &sampler.sensors).map_err(usage)?;
     if let Some(file) = &args.plot {
         check_plot_file(file)?;
     }
@@ -472,10 +470,10 @@ fn check_plot_file(file: &std::path::Path) -> Result<(), Box<dyn Error>> {
     Ok(())
 }
 
-fn csv_header(sensors: &[u8]) -> String {
+fn csv_header(sensors: &[(u8, SensorId)]) -> String {
     let mut columns = vec!["t_ms".to_string()];
-    for &i in sensors {
-        let name = column_name(i);
+    for &(_, id) in sensors {
+        let name = column_name(id);
         for field in ["raw", "filtered", "on", "off", "stuck"] {
             columns.push(format!("{name}_{field}"));
         }
@@ -506,7 +504,7 @@ fn table(
 ) -> String {
     let eol = if live { "\x1b[K\n" } else { "\n" };
     let mut text = format!(
-        "t = {:>8.1} s{}{eol}{:<3} {:<19} {:>5} {:>8} {:>5} {:>5}  state{eol}",
+        "t = {:>8.1} s{}{eol}{:<3} {:<21} {:>5} {:>8} {:>5} {:>5}  state{eol}",
         sample.t_ms as f64 / 1000.0,
         if live { "   (Ctrl-C stops)" } else { "" },
         "#",
@@ -519,7 +517,7 @@ fn table(
     for (position, (reading, limits)) in sample.readings.iter().zip(thresholds).enumerate() {
         let i = reading.sensor;
         let previous = states.get(position).copied().flatten();
-        let (word, now) = state(i, reading, *limits, previous);
+        let (word, now) = state(reading.id, reading, *limits, previous);
         if let Some(slot) = states.get_mut(position) {
             *slot = now;
         }
@@ -527,8 +525,8 @@ fn table(
             (t.on.to_string(), t.off.to_string())
         });
         text.push_str(&format!(
-            "{i:<3} {:<19} {:>5} {:>8} {on:>5} {off:>5}  {word}{eol}",
-            sensor_name(i),
+            "{i:<3} {:<21} {:>5} {:>8} {on:>5} {off:>5}  {word}{eol}",
+            sensor_name(reading.id),
             reading.raw,
             reading.filtered
         ));
@@ -547,9 +545,19 @@ fn parse_seconds(text: &str) -> Result<f64, String> {
 mod tests {
     use super::*;
 
+    /// The sensors of a 3-slot unit on the thesis build, as the sampler finds them.
+    fn thesis_sensors() -> Vec<(u8, SensorId)> {
+        (0..9)
+            .map(|i| (i, SensorId::from_index(usize::from(i), 3)))
+            .collect()
+    }
+
     #[test]
     fn names_follow_the_register_map() {
-        let names: Vec<String> = (0..9).map(sensor_name).collect();
+        let names: Vec<String> = thesis_sensors()
+            .into_iter()
+            .map(|(_, id)| sensor_name(id))
+            .collect();
         assert_eq!(
             names,
             [
@@ -557,14 +565,15 @@ mod tests {
                 "hub tension",
                 "hub cutter",
                 "slot 0 filament",
-                "slot 0 motor Hall",
+                "slot 0 motion sensor",
                 "slot 1 filament",
-                "slot 1 motor Hall",
+                "slot 1 motion sensor",
                 "slot 2 filament",
-                "slot 2 motor Hall"
+                "slot 2 motion sensor"
             ]
         );
-        assert_eq!(column_name(8), "slot2_motion");
+        assert_eq!(column_name(SensorId::Motion(2)), "slot2_motion");
+        assert_eq!(column_name(SensorId::from_index(12, 4)), "slot1_tension");
     }
 
     #[test]
@@ -572,35 +581,46 @@ mod tests {
         let limits = Some(Thresholds { on: 2600, off: 2400 });
         let at = |filtered| Reading {
             sensor: 0,
+            id: SensorId::HubFilament,
             raw: filtered,
             filtered,
             stuck: false,
         };
-        assert_eq!(state(0, &at(2700), limits, None).0, "filament");
-        assert_eq!(state(0, &at(2500), limits, Some(true)).0, "filament");
-        assert_eq!(state(0, &at(2500), limits, Some(false)).0, "no filament");
-        assert_eq!(state(0, &at(2300), limits, Some(true)).0, "no filament");
-        assert_eq!(state(4, &at(2700), limits, None).0, "high (magnet)");
-        assert_eq!(state(1, &at(2700), None, None).0, "");
-        let stuck = Reading {
-            sensor: 0,
-            raw: 0,
-            filtered: 0,
-            stuck: true,
-        };
-        assert!(state(0, &stuck, limits, None).0.contains("wiring"));
+        let hub = SensorId::HubFilament;
+        assert_eq!(state(hub, &at(2700), limits, None).0, "filament");
+        assert_eq!(state(hub, &at(2500), limits, Some(true)).0, "filament");
+        assert_eq!(state(hub, &at(2500), limits, Some(false)).0, "no filament");
+        assert_eq!(state(hub, &at(2300), limits, Some(true)).0, "no filament");
+        assert_eq!(
+            state(SensorId::Motion(0), &at(2700), limits, None).0,
+            "high (magnet)"
+        );
+        assert_eq!(state(SensorId::HubTension, &at(2700), None, None).0, "");
+        let stuck = Reading { stuck: true, ..at(0) };
+        assert!(state(hub, &stuck, limits, None).0.contains("wiring"));
     }
 
     #[test]
     fn sensors_are_picked_by_name_or_number() {
-        assert_eq!(select_sensors(&[], 9), Ok((0..9).collect()));
+        let sensors = thesis_sensors();
+        assert_eq!(select_sensors(&[], &sensors), Ok(sensors.clone()));
         let names = |list: &[&str]| list.iter().map(|s| s.to_string()).collect::<Vec<_>>();
-        assert_eq!(select_sensors(&names(&["slot0.motion"]), 9), Ok(vec![4]));
         assert_eq!(
-            select_sensors(&names(&["8", "HUB.filament", "8"]), 9),
-            Ok(vec![8, 0])
+            select_sensors(&names(&["slot0.motion"]), &sensors),
+            Ok(vec![(4, SensorId::Motion(0))])
         );
-        let error = select_sensors(&names(&["slot3.motion"]), 9).expect_err("a 3-slot unit has no slot 3");
+        assert_eq!(
+            select_sensors(&names(&["8", "HUB.filament", "8"]), &sensors),
+            Ok(vec![(8, SensorId::Motion(2)), (0, SensorId::HubFilament)])
+        );
+        let error =
+            select_sensors(&names(&["slot3.motion"]), &sensors).expect_err("a 3-slot unit has no slot 3");
         assert!(error.contains("slot2.motion"), "{error}");
+        // A unit without hub sensors has none to pick.
+        let bmcu: Vec<(u8, SensorId)> = (3..15)
+            .map(|i| (i, SensorId::from_index(usize::from(i), 4)))
+            .collect();
+        let error = select_sensors(&names(&["hub.filament"]), &bmcu).expect_err("no hub sensor");
+        assert!(error.contains("slot3.tension"), "{error}");
     }
 }

@@ -261,12 +261,37 @@ fn sensors_table_names_every_sensor() {
         "hub tension",
         "hub cutter",
         "slot 0 filament",
-        "slot 0 motor Hall",
-        "slot 2 motor Hall",
+        "slot 0 motion sensor",
+        "slot 2 motion sensor",
     ] {
         assert!(out.contains(name), "{name} missing:\n{out}");
     }
     assert!(out.contains("no filament"), "{out}");
+}
+
+/// On hardware without hub sensors and with a tension sensor per lane, the table shows the
+/// sensors the unit has: no hub row, a tension row per lane.
+#[test]
+fn sensors_table_follows_the_hardware() {
+    let out = ok(&[
+        "sensors",
+        "--sim",
+        "--hardware",
+        "bmcu-c",
+        "--slots",
+        "4",
+        "--seconds",
+        "1",
+    ]);
+    assert!(!out.contains("hub"), "{out}");
+    for name in [
+        "slot 0 filament",
+        "slot 3 motion sensor",
+        "slot 0 tension",
+        "slot 3 tension",
+    ] {
+        assert!(out.contains(name), "{name} missing:\n{out}");
+    }
 }
 
 /// Before: `mmu sim --pty` showed nothing while serving, even for an invalid request.

@@ -181,7 +181,7 @@ fn the_motor_test_passes_a_good_motor_and_names_a_dead_one() {
     let output = run(&["motor", "--sim", "--fault", "motor-dead:0", "0"], "", &config);
     let all = text(&output);
     assert_eq!(output.status.code(), Some(1), "{all}");
-    assert!(all.contains("no revolution was counted forward"), "{all}");
+    assert!(all.contains("no motion was counted forward"), "{all}");
     assert!(all.contains("STALLED_PULLEY"), "{all}");
 }
 

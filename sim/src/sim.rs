@@ -69,14 +69,11 @@ impl SimOptions {
         SimOptions::default().on_hardware(profile)
     }
 
-    /// These options on the hardware `profile`: the unit's settings keep theirs but the distance
-    /// per turn of the sensed shaft, which becomes the profile's.
+    /// These options on the hardware `profile`: the unit's settings keep theirs but those that
+    /// depend on the hardware ([`Config::on_profile`]).
     pub fn on_hardware(self, profile: &'static Profile) -> SimOptions {
         SimOptions {
-            unit: Config {
-                mm_per_rev_centi: profile.mm_per_rev_centi,
-                ..self.unit
-            },
+            unit: self.unit.clone().on_profile(profile),
             hardware: profile,
             ..self
         }

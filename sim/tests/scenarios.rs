@@ -23,3 +23,8 @@ fn every_scenario_passes_on_the_host_logic() {
 fn every_scenario_passes_on_lanes_of_n20_encoder_motors() {
     every_scenario_passes_on(&profile::N20_QUADRATURE);
 }
+
+#[test]
+fn every_scenario_passes_on_the_bmcu_c_without_a_hub_sensor() {
+    every_scenario_passes_on(&profile::BMCU_C);
+}

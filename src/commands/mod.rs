@@ -191,24 +191,17 @@ impl Command {
             return Err(ErrorCode::INVALID_TOOL);
         }
         match self {
-            Command::StartUp => {
-                start_up::plan(plan);
-                Ok(())
-            }
-            Command::ToolChange => tool_change::plan(slot, unit, config, plan),
-            Command::Preload => preload::plan(slot, unit, config, plan),
-            Command::UnloadFromNozzle => unload_from_nozzle::plan(unit, config, plan),
-            Command::Eject => {
-                eject::plan(slot, unit, config, plan);
-                Ok(())
-            }
-            Command::Cut => cut::plan(slot, unit, config, plan),
-            Command::Home => {
-                home::plan(plan);
-                Ok(())
-            }
-            Command::Mode => Ok(()),
+            Command::StartUp => start_up::plan(plan),
+            Command::ToolChange => tool_change::plan(slot, unit, config, plan)?,
+            Command::Preload => preload::plan(slot, unit, config, plan)?,
+            Command::UnloadFromNozzle => unload_from_nozzle::plan(unit, config, plan)?,
+            Command::Eject => eject::plan(slot, unit, config, plan),
+            Command::Cut => cut::plan(slot, unit, config, plan)?,
+            Command::Home => home::plan(plan),
+            Command::Mode => {}
         }
+        fit_to_profile(plan, unit);
+        Ok(())
     }
 
     /// The recovery tables that apply to this command, its own first.
@@ -250,6 +243,33 @@ impl Command {
 }
 
 /// Append as much of `phases` as fits (every plan built here fits).
+/// `plan` made right for hardware without a hub sensor, where a lane's tip is known only from
+/// its presence sensor's edge: every park homes the lane there first ([`Phase::HomeLane`], then
+/// [`Phase::FeedToPark`] in place of [`Phase::RetractToPark`]), and so does every feed to the hub
+/// of a lane whose tip the unit has not seen since start. With a hub sensor, `plan` as it is.
+pub(crate) fn fit_to_profile<const N: usize>(plan: &mut Plan, unit: &Unit<N>) {
+    if unit.profile.hub_sensor {
+        return;
+    }
+    let mut fitted = Plan::new();
+    for &phase in plan.iter() {
+        match phase {
+            Phase::RetractToPark { slot } => {
+                extend(
+                    &mut fitted,
+                    &[Phase::HomeLane { slot }, Phase::FeedToPark { slot }],
+                );
+            }
+            Phase::FeedToHub { slot, .. } if unit.tip_centi(usize::from(slot)).is_none() => extend(
+                &mut fitted,
+                &[Phase::HomeLane { slot }, Phase::FeedToPark { slot }, phase],
+            ),
+            phase => extend(&mut fitted, &[phase]),
+        }
+    }
+    *plan = fitted;
+}
+
 pub(crate) fn extend(plan: &mut Plan, phases: &[Phase]) {
     for &phase in phases {
         if plan.push(phase).is_err() {

@@ -5,7 +5,7 @@ use mmu_protocol::{ErrorCode, ProgressCode};
 
 use super::{Notes, Outcome, PhaseRun, sensor_fault_error};
 use crate::time::Instant;
-use crate::unit::{Lane, SensorId, Unit};
+use crate::unit::{Lane, Unit};
 
 /// How long a check may wait for the sensors to settle after start, ms.
 const SENSOR_SETTLE_MS: u64 = 1000;
@@ -59,9 +59,8 @@ fn check_sensors<const N: usize>(
     }
     // Every sensor must have settled: a reading, or a fault (a sensor stuck at a rail is called
     // faulty only after the rail timeout, so an early check would miss it).
-    let unsettled = (0..Unit::<N>::SENSOR_COUNT)
-        .map(SensorId::from_index)
-        .find(|&id| unit.sensor(id).is_some_and(|s| s.reading().is_none()));
+    let unsettled =
+        Unit::<N>::sensor_ids().find(|&id| unit.sensor(id).is_some_and(|s| s.reading().is_none()));
     let hub = unit.hub_present();
     if let (Some(_), _) | (None, None) = (unsettled, hub) {
         let started = match run {

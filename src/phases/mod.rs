@@ -18,6 +18,7 @@
 
 mod check;
 mod feed;
+mod home;
 mod load;
 mod run;
 mod unload;
@@ -136,6 +137,17 @@ pub enum Phase {
         /// The slot.
         slot: u8,
     },
+    /// `P19` (`home.rs`), without a hub sensor: pull back until the slot's presence sensor
+    /// clears, where its tip is known again.
+    HomeLane {
+        /// The slot.
+        slot: u8,
+    },
+    /// `P19` (`home.rs`), after [`Phase::HomeLane`]: feed on to the park position.
+    FeedToPark {
+        /// The slot.
+        slot: u8,
+    },
     /// `P18` (`unload.rs`): pull back until the slot sensor clears.
     EjectFromSlot {
         /// The slot.
@@ -180,6 +192,14 @@ macro_rules! motion {
                 let $p = unload::FromSlot;
                 $body
             }
+            Phase::HomeLane { .. } => {
+                let $p = home::ToPresenceEdge;
+                $body
+            }
+            Phase::FeedToPark { .. } => {
+                let $p = home::FromEdgeToPark;
+                $body
+            }
             Phase::FeedThroughBowden { .. } => {
                 let $p = load::ThroughBowden;
                 $body
@@ -220,6 +240,8 @@ impl Phase {
             | Phase::ProveOwner { slot }
             | Phase::ClearMerge { slot }
             | Phase::PushProof { slot }
+            | Phase::HomeLane { slot }
+            | Phase::FeedToPark { slot }
             | Phase::EjectFromSlot { slot } => Some(slot as usize),
             Phase::CheckSensors | Phase::AwaitContinue => None,
         }

@@ -32,12 +32,15 @@ const fn reverse(speed: u16, max_mm: u16, error: ErrorCode) -> Bounds {
     Bounds::new(Direction::Reverse, speed, max_mm, error)
 }
 
-/// The longest way from the printer's sensor back to the hub sensor, mm.
+/// The longest way from the printer's sensor back to the hub sensor, mm; without a hub sensor,
+/// back to the lane's presence sensor, which a tip not seen since start must reach to clear the
+/// hub ([`crate::unit::Unit::hub_present`]).
 const fn printer_to_hub_mm(config: &Config) -> u16 {
     config
         .bowden_mm
         .saturating_add(config.fsensor_search_mm)
         .saturating_add(config.hub_search_mm)
+        .saturating_add(config.lane_to_hub_mm)
 }
 
 /// `P3` ([`super::Phase::UnloadToHub`]): pull back until the printer's sensor and then the hub

@@ -127,6 +127,9 @@ struct SlotRun {
 }
 
 /// The diagnostic index of slot `slot`'s filament sensor (hub filament is 0).
+/// Register 0x8d's bit for a hub sensor ([`mmu_firmware::profile::Profile::code`]).
+const HUB_SENSOR_BIT: u16 = 1 << 4;
+
 fn slot_sensor(slot: u8) -> u8 {
     3 + 2 * slot
 }
@@ -140,6 +143,19 @@ pub fn run(bench: &mut Bench, step: Step, options: &CalibrateOptions) -> Result<
             bench.slots(),
             bench.slots().saturating_sub(1)
         ));
+    }
+    // Every step measures against the hub sensor (an older firmware without register 0x8d has
+    // one).
+    let hub_sensor = bench
+        .read(mmu_firmware::registers::HARDWARE)
+        .map_or(true, |code| code & HUB_SENSOR_BIT != 0);
+    if !hub_sensor {
+        return Err(
+            "this unit has no hub sensor (its hardware profile tells FINDA from each lane's odometry): the \
+             calibration measures from the hub sensor and cannot run; set mm_per_rev_centi (0x42) from the drive \
+             gear's effective diameter (π × diameter × 100) and lane_to_hub_mm (0x5f) from the build"
+                .into(),
+        );
     }
     idle(bench)?;
     let mut results = Results::default();

@@ -1,5 +1,5 @@
 //! The motor test of one slot, for the first power-on: does the motor turn both ways, and does its
-//! Hall sensor count the revolutions?
+//! motion sensor (a Hall wave, an encoder, an angle sensor) count it?
 //!
 //! The unit has no jog command, so the test asks for the one motion that is short, bounded and
 //! supervised and needs no printer: a preload (`L<slot>`), which feeds the slot's filament forward
@@ -30,10 +30,11 @@ pub struct MotorReport {
     pub forward_mm: i32,
     /// Filament moved back, mm (odometry).
     pub back_mm: i32,
-    /// The motor Hall sensor's lowest and highest raw reading.
+    /// The motion sensor's lowest and highest raw reading.
     pub hall_range: (u16, u16),
-    /// Its thresholds: on, off.
-    pub hall_thresholds: (u16, u16),
+    /// Its thresholds, on and off: a Hall wave's; `None` for a counting sensor (an encoder's
+    /// count, an angle), which has none.
+    pub hall_thresholds: Option<(u16, u16)>,
     /// Times the sampled reading went from below "off" to above "on".
     pub hall_rises: u32,
     /// Readings taken.
@@ -56,16 +57,8 @@ impl MotorReport {
     /// The report, line by line, with what to check.
     pub fn lines(&self) -> Vec<String> {
         let (low, high) = self.hall_range;
-        let (on, off) = self.hall_thresholds;
-        let mut lines = vec![
-            format!(
-                "slot {}: forward {} mm, back {} mm in {:.1} s (the unit's odometry: motor revolutions × mm per revolution)",
-                self.slot,
-                self.forward_mm,
-                self.back_mm,
-                self.duration_ms as f64 / 1000.0
-            ),
-            format!(
+        let sensor = match self.hall_thresholds {
+            Some((on, off)) => format!(
                 "motor Hall sensor: raw {low} to {high} over {} readings, thresholds off {off} / on {on}{}",
                 self.samples,
                 if low <= off && high >= on {
@@ -74,6 +67,20 @@ impl MotorReport {
                     ": it does NOT swing across both"
                 }
             ),
+            None => format!(
+                "motion sensor (a count or an angle): raw {low} to {high} over {} readings",
+                self.samples
+            ),
+        };
+        let mut lines = vec![
+            format!(
+                "slot {}: forward {} mm, back {} mm in {:.1} s (the unit's odometry: turns of its motion sensor × mm per turn)",
+                self.slot,
+                self.forward_mm,
+                self.back_mm,
+                self.duration_ms as f64 / 1000.0
+            ),
+            sensor,
         ];
         if let Some(error) = self.error {
             lines.push(format!(
@@ -88,7 +95,6 @@ impl MotorReport {
     /// What to check, from what was seen.
     fn advice(&self) -> Vec<String> {
         let (low, high) = self.hall_range;
-        let (on, off) = self.hall_thresholds;
         let mut advice = Vec::new();
         if self.passed() {
             if self.forward_mm <= 0 || self.back_mm <= 0 {
@@ -99,19 +105,22 @@ impl MotorReport {
                 );
             }
             advice.push(format!(
-                "motor test passed: slot {}'s motor turns both ways and its Hall sensor counts its revolutions",
+                "motor test passed: slot {}'s motor turns both ways and its motion sensor counts it",
                 self.slot
             ));
             return advice;
         }
         if self.forward_mm <= 0 {
             advice.push(
-                "no revolution was counted forward: the motor did not turn (its wires, the TB6612FNG, the motor supply) \
-                 or its Hall sensor does not see the magnet on its shaft"
+                "no motion was counted forward: the motor did not turn (its wires, its bridge, the motor supply) \
+                 or its motion sensor does not see it (the Hall's magnet, the encoder's wires, the angle sensor's \
+                 magnet)"
                     .to_string(),
             );
         }
-        if !(low <= off && high >= on) {
+        if let Some((on, off)) = self.hall_thresholds
+            && !(low <= off && high >= on)
+        {
             advice.push(format!(
                 "the Hall reading stayed between {low} and {high}: bring the magnet closer to the sensor, or put the \
                  thresholds inside that swing (on above off, e.g. `set threshold_on.slot{k}.motion ...`); a motor at full \
@@ -158,7 +167,15 @@ pub fn run(bench: &mut Bench, slot: u8) -> Result<MotorReport, String> {
         ));
     }
     let hall = 4 + 2 * slot;
-    let thresholds = (bench.read(0x90 + hall)?, bench.read(0xa0 + hall)?);
+    // Only a Hall wave has thresholds (an older firmware without register 0x8d has one).
+    let hall_wave = bench
+        .read(mmu_firmware::registers::HARDWARE)
+        .map_or(true, |code| code & 0b11 == 0);
+    let thresholds = if hall_wave {
+        Some((bench.read(0x90 + hall)?, bench.read(0xa0 + hall)?))
+    } else {
+        None
+    };
     // Odometry from where the test starts, mm: the register wraps at 16 bits (and the unit's
     // odometry at 32), so positions are wrapping differences from the first reading.
     let start_raw = bench.read(0xb0 + slot)?;
@@ -190,12 +207,10 @@ pub fn run(bench: &mut Bench, slot: u8) -> Result<MotorReport, String> {
         samples += 1;
         low = low.min(reading);
         high = high.max(reading);
-        let now_above = if reading >= thresholds.0 {
-            Some(true)
-        } else if reading <= thresholds.1 {
-            Some(false)
-        } else {
-            above
+        let now_above = match thresholds {
+            Some((on, _)) if reading >= on => Some(true),
+            Some((_, off)) if reading <= off => Some(false),
+            _ => above,
         };
         if above == Some(false) && now_above == Some(true) {
             rises += 1;

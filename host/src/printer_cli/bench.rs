@@ -24,11 +24,6 @@ use crate::explain::{lane_state, register_name};
 
 use mmu_firmware::registers::{Access, FAILURES as ERRORS, FED_METRES, LANE, LEFT, SLOT_COUNT, TOOL_CHANGES};
 
-/// Sensors of a unit with `slots` slots: 3 in the hub, 2 per slot.
-pub fn sensor_count(slots: u8) -> u8 {
-    3 + 2 * slots
-}
-
 impl<L: Target> Session<L> {
     /// Register `address`, read quietly; `None` when the unit refuses it (no such register).
     pub(crate) fn read_quietly(&mut self, address: u8) -> Result<Option<u16>, Failure> {

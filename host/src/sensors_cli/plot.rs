@@ -95,8 +95,10 @@ where
     // Room around the traces, within the ADC's range.
     let margin = ((high.saturating_sub(low)) / 10).max(50);
     let (y_low, y_high) = (low.saturating_sub(margin), high.saturating_add(margin).min(4095));
-    let sensor = samples.iter().find_map(&reading).map_or(u8::MAX, |r| r.sensor);
-    let mut name = sensor_name(sensor);
+    let mut name = samples
+        .iter()
+        .find_map(&reading)
+        .map_or_else(String::new, |r| sensor_name(r.id));
     // The unit stops believing a sensor stuck at a rail: say so where the trace shows it.
     if let Some(first) = samples.iter().find(|s| reading(s).is_some_and(|r| r.stuck)) {
         name.push_str(&format!(
