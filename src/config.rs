@@ -2,7 +2,9 @@
 //!
 //! Every motion the logic makes is bounded by a distance and a time derived from these values.
 //! The printer and the user change many of them at run time through registers
-//! ([`crate::registers`]); the defaults are for the reference unit (a 360 mm Bowden tube).
+//! ([`crate::registers`]); the defaults are for the reference unit (a 360 mm Bowden tube). What
+//! the settings may be is checked against the build's [`Hardware`] in one place,
+//! [`crate::guards`].
 
 use crate::MAX_SLOTS;
 use crate::sensor::Thresholds;
@@ -94,6 +96,45 @@ pub fn offered_revision(accepted: u8, repeat: u8) -> u8 {
     }
 }
 
+/// What the build is, as far as the settings must agree with it: where its parts sit along the
+/// filament path, what its drive train can move per revolution, how noisy its sensors read. The
+/// guards ([`crate::guards`]) check every setting against it. No register writes it: it is the
+/// build's, like the pin map.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Hardware {
+    /// From the hub sensor back to where the slot paths join into the hub path, mm. A tip
+    /// resting closer to the hub than this blocks every other slot.
+    pub merge_mm: u16,
+    /// From the hub sensor back to each slot's filament sensor, mm: the slot path.
+    pub slot_sensor_mm: u16,
+    /// The least filament a motor revolution of this drive train can move, 1/100 mm.
+    pub min_mm_per_rev_centi: u16,
+    /// The most filament a motor revolution of this drive train can move, 1/100 mm.
+    pub max_mm_per_rev_centi: u16,
+    /// How far the filtered reading of a presence or tension sensor strays from its level when
+    /// nothing moves, counts (the presence filter's output).
+    pub sensor_noise: u16,
+    /// How far the filtered reading of a motor Hall sensor strays when the motor stands still,
+    /// counts (the motor filter's output, lighter: noisier).
+    pub hall_noise: u16,
+}
+
+impl Hardware {
+    /// The reference unit (the thesis build, and the simulator's model): the slot paths join
+    /// 8 mm before the hub sensor, the slot sensors sit 95 mm before it; the drive train moves
+    /// 2.00 mm per revolution, a quarter either way allowed for a calibration of another gear or
+    /// filament; filtered readings stray up to 25 counts (presence filter, the model's 15 counts
+    /// of raw noise) and 45 counts (motor filter) at rest.
+    pub const REFERENCE: Hardware = Hardware {
+        merge_mm: 8,
+        slot_sensor_mm: 95,
+        min_mm_per_rev_centi: 150,
+        max_mm_per_rev_centi: 250,
+        sensor_noise: 25,
+        hall_noise: 45,
+    };
+}
+
 /// Everything the unit logic can be tuned with.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Config {
@@ -152,6 +193,8 @@ pub struct Config {
     pub motor_thresholds: [Thresholds; MAX_SLOTS],
     /// Length of the filament on each slot's spool when it is inserted, m (register `0x54 + k`).
     pub spool_m: [u16; MAX_SLOTS],
+    /// What the build is: what the settings are checked against (no register).
+    pub hardware: Hardware,
 }
 
 impl Config {
@@ -189,6 +232,7 @@ impl Config {
         slot_thresholds: [Thresholds { on: 2600, off: 2400 }; MAX_SLOTS],
         motor_thresholds: [Thresholds { on: 2300, off: 1800 }; MAX_SLOTS],
         spool_m: [crate::lanes::DEFAULT_SPOOL_M; MAX_SLOTS],
+        hardware: Hardware::REFERENCE,
     };
 }
 
