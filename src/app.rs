@@ -15,7 +15,8 @@ use mmu_protocol::{ButtonCode, ErrorCode, ParamCode, Request, RequestCode, Respo
 use crate::arbiter::MotorArbiter;
 use crate::config::{Config, Contract};
 use crate::drive;
-use crate::persist::{MAX_SETTINGS, Snapshot};
+use crate::guards::{self, Rule};
+use crate::persist::{IDENTITY_REGISTERS, MAX_SETTINGS, Snapshot};
 use crate::profile::Profile;
 use crate::registers;
 use crate::runner::{Learned, Runner, Status};
@@ -97,6 +98,9 @@ pub struct App<const N: usize> {
     bowden_learned_mm: u16,
     /// Moves (wrapping) whenever a setting may have changed: see [`App::settings_revision`].
     settings_revision: u32,
+    /// The rule the last refusal broke: of a write (`None` when it broke none: an unknown or
+    /// read-only register, a value out of range), or of the stored settings (register 0x8f).
+    refused_rule: Option<Rule>,
 }
 
 impl<const N: usize> App<N> {
@@ -121,6 +125,7 @@ impl<const N: usize> App<N> {
             started_up: false,
             bowden_learned_mm: 0,
             settings_revision: 0,
+            refused_rule: None,
         }
     }
 
@@ -143,6 +148,13 @@ impl<const N: usize> App<N> {
     /// The settings in force.
     pub fn config(&self) -> &Config {
         &self.config
+    }
+
+    /// The rule of the guards ([`crate::guards`]) the last refusal broke: of a register write
+    /// (`None` when it broke none: an unknown or read-only register, a value out of range), or of
+    /// the stored settings at start (register 0x8f).
+    pub fn refused_rule(&self) -> Option<Rule> {
+        self.refused_rule
     }
 
     /// A number that changes whenever a setting may have changed (an accepted setting write, a
@@ -424,6 +436,7 @@ impl<const N: usize> App<N> {
             lane_figures: &self.tally.counters.lanes,
             used_centi: self.tally.ledger.used_centi(),
             lanes_drifted: self.tally.ledger.drifted(),
+            refused_rule: self.refused_rule,
             // Right after an `S2`, the build of the revision it offered: what `S3` would report.
             build: crate::config::build_of(
                 self.session
@@ -435,8 +448,9 @@ impl<const N: usize> App<N> {
         registers::read(&view, address)
     }
 
-    /// Write `value` to register `address`; false (answered `R`) when the register is unknown or
-    /// read-only or the value is out of range.
+    /// Write `value` to register `address`; false (answered `R`, nothing changed) when the register
+    /// is unknown or read-only, the value out of range, or the settings with it would break a
+    /// rule of the guards ([`crate::guards`]; register 0x8f then names the rule).
     pub fn write_register(&mut self, address: u8, value: u16) -> bool {
         let filament_readings = self.filament_readings();
         let mut target = registers::Target {
@@ -447,7 +461,14 @@ impl<const N: usize> App<N> {
             filament_readings,
             used_centi: self.tally.ledger.used_centi_mut(),
         };
-        let accepted = registers::write(&mut target, N, address, value);
+        let written = registers::write(&mut target, N, address, value);
+        if let Err(refused) = written {
+            self.refused_rule = match refused {
+                registers::Refused::Broke(rule) => Some(rule),
+                _ => None,
+            };
+        }
+        let accepted = written.is_ok();
         if accepted && registers::LEFT <= address && address < registers::LEFT + N as u8 {
             self.tally.left_written();
         }
@@ -459,11 +480,11 @@ impl<const N: usize> App<N> {
 
     /// The reading of each presence sensor that sees filament where the lanes say filament is
     /// (the hub's while a slot owns the hub path, a slot's while its tip is at least parked),
-    /// for the threshold guard ([`registers::FilamentReadings`]). A reading counts only at or
+    /// for the guards ([`guards::FilamentReadings`]). A reading counts only at or
     /// above the "on" threshold in force: a sensor stuck "present" below it (an "off" threshold
     /// no reading goes under) holds no write back.
-    fn filament_readings(&self) -> registers::FilamentReadings {
-        let mut readings = registers::NO_FILAMENT_READINGS;
+    fn filament_readings(&self) -> guards::FilamentReadings {
+        let mut readings = guards::NO_FILAMENT_READINGS;
         let filament = |reading: Option<u16>, on: u16| reading.filter(|&value| value >= on);
         if let Some(hub) = readings.first_mut()
             && self.unit.active().is_some()
@@ -516,21 +537,40 @@ impl<const N: usize> App<N> {
         }
     }
 
-    /// Take back what a previous run kept, before the first step. Settings go through the
-    /// register checks (a value out of range is dropped; the reciprocals of those the steps divide
-    /// by are built as they come, not in the first move); the start-up check then compares the
-    /// lanes with what the sensors show.
+    /// Take back what a previous run kept, before the first step; the start-up check then
+    /// compares the lanes with what the sensors show.
+    ///
+    /// The stored settings are outside input. Each goes in with its register's own checks (a
+    /// value out of range is dropped), all together onto the build's settings, and the guards
+    /// then judge the whole ([`guards::check`]). A stored configuration that breaks a rule is
+    /// dropped whole: the unit runs on the build's settings (the defaults), keeping only the
+    /// identity registers ([`IDENTITY_REGISTERS`]: no rule concerns them, and a printer needs
+    /// them to talk to the unit), and register 0x8f names the rule. The store keeps only the
+    /// newest settings, so there is no older good one to go back to; the next save writes the
+    /// settings in force over the refused ones.
     pub fn restore(&mut self, snapshot: &Snapshot<N>) {
         for (slot, &lane) in snapshot.lanes.iter().enumerate() {
             self.unit.set_lane(slot, lane);
         }
         self.tally.restore(snapshot);
-        // Twice: a pair of thresholds may only be valid once both are in.
-        for _ in 0..2 {
-            for &(address, value) in &snapshot.settings {
-                self.write_register(address, value);
+        let mut stored = self.config.clone();
+        for &(address, value) in &snapshot.settings {
+            registers::apply_setting(self.unit.profile, &mut stored, N, address, value);
+        }
+        match guards::check(&stored, &guards::NO_FILAMENT_READINGS) {
+            Ok(()) => self.config = stored,
+            Err(rule) => {
+                self.refused_rule = Some(rule);
+                let identity = snapshot
+                    .settings
+                    .iter()
+                    .filter(|(address, _)| IDENTITY_REGISTERS.contains(address));
+                for &(address, value) in identity {
+                    registers::apply_setting(self.unit.profile, &mut self.config, N, address, value);
+                }
             }
         }
+        self.settings_revision = self.settings_revision.wrapping_add(1);
     }
 
     /// The running command's status changed from `before`, or not: counted, and what the

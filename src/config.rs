@@ -2,7 +2,9 @@
 //!
 //! Every motion the logic makes is bounded by a distance and a time derived from these values.
 //! The printer and the user change many of them at run time through registers
-//! ([`crate::registers`]); the defaults are for the reference unit (a 360 mm Bowden tube).
+//! ([`crate::registers`]); the defaults are for the reference unit (a 360 mm Bowden tube). What
+//! the settings may be is checked against the build's [`Hardware`] in one place,
+//! [`crate::guards`].
 
 use crate::MAX_SLOTS;
 use crate::profile::Profile;
@@ -95,6 +97,68 @@ pub fn offered_revision(accepted: u8, repeat: u8) -> u8 {
     }
 }
 
+/// What the build is, as far as the settings must agree with it: where its parts sit along the
+/// filament path, what its drive train can move per revolution, how noisy its sensors read. The
+/// guards ([`crate::guards`]) check every setting against it. No register writes it: it is the
+/// build's, like the pin map.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Hardware {
+    /// From the hub sensor back to where the slot paths join into the hub path, mm. A tip
+    /// resting closer to the hub than this blocks every other slot.
+    pub merge_mm: u16,
+    /// From the hub sensor back to each slot's filament sensor, mm: the slot path.
+    pub slot_sensor_mm: u16,
+    /// The least filament a motor revolution of this drive train can move, 1/100 mm.
+    pub min_mm_per_rev_centi: u16,
+    /// The most filament a motor revolution of this drive train can move, 1/100 mm.
+    pub max_mm_per_rev_centi: u16,
+    /// How far the filtered reading of a presence or tension sensor strays from its level when
+    /// nothing moves, counts (the presence filter's output).
+    pub sensor_noise: u16,
+    /// How far the filtered reading of a motor Hall sensor strays when the motor stands still,
+    /// counts (the motor filter's output, lighter: noisier).
+    pub hall_noise: u16,
+    /// The lanes' motion sensors count fractions of a turn (an encoder, an angle sensor): a
+    /// counted distance is known to a mark ([`crate::odometer::MARK_CENTI`]), not to a whole
+    /// revolution of register 0x42.
+    pub counts_fractions: bool,
+    /// A filament sensor where the lanes merge. Without one, `lane_to_hub_mm` (0x5f) is the slot
+    /// path: the distance from a lane's presence sensor to where its tip counts as in the hub.
+    pub hub_sensor: bool,
+}
+
+impl Hardware {
+    /// The reference unit (the thesis build, and the simulator's model): the slot paths join
+    /// 8 mm before the hub sensor, the slot sensors sit 95 mm before it; the drive train moves
+    /// 2.00 mm per revolution, a quarter either way allowed for a calibration of another gear or
+    /// filament; filtered readings stray up to 25 counts (presence filter, the model's 15 counts
+    /// of raw noise) and 45 counts (motor filter) at rest.
+    pub const REFERENCE: Hardware = Hardware {
+        merge_mm: 8,
+        slot_sensor_mm: 95,
+        min_mm_per_rev_centi: 150,
+        max_mm_per_rev_centi: 250,
+        sensor_noise: 25,
+        hall_noise: 45,
+        counts_fractions: false,
+        hub_sensor: true,
+    };
+
+    /// The build of the hardware `profile`: the reference unit's path and sensors, with the
+    /// profile's drive train (its start value of register 0x42, a quarter either way) and motion
+    /// and hub sensors.
+    pub const fn of_profile(profile: &Profile) -> Hardware {
+        let centi = profile.mm_per_rev_centi;
+        Hardware {
+            min_mm_per_rev_centi: centi - centi / 4,
+            max_mm_per_rev_centi: centi.saturating_add(centi / 4),
+            counts_fractions: !matches!(profile.motion, crate::profile::MotionSensor::HallWave),
+            hub_sensor: profile.hub_sensor,
+            ..Hardware::REFERENCE
+        }
+    }
+}
+
 /// Everything the unit logic can be tuned with.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Config {
@@ -156,6 +220,8 @@ pub struct Config {
     pub motor_thresholds: [Thresholds; MAX_SLOTS],
     /// Length of the filament on each slot's spool when it is inserted, m (register `0x54 + k`).
     pub spool_m: [u16; MAX_SLOTS],
+    /// What the build is: what the settings are checked against (no register).
+    pub hardware: Hardware,
 }
 
 impl Config {
@@ -194,6 +260,7 @@ impl Config {
         slot_thresholds: [Thresholds { on: 2600, off: 2400 }; MAX_SLOTS],
         motor_thresholds: [Thresholds { on: 2300, off: 1800 }; MAX_SLOTS],
         spool_m: [crate::lanes::DEFAULT_SPOOL_M; MAX_SLOTS],
+        hardware: Hardware::REFERENCE,
     };
 }
 
@@ -214,6 +281,7 @@ impl Config {
         Config {
             mm_per_rev_centi: profile.mm_per_rev_centi,
             lane_to_hub_mm: if profile.hub_sensor { 0 } else { LANE_TO_HUB_MM },
+            hardware: Hardware::of_profile(profile),
             ..self
         }
     }

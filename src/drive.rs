@@ -79,7 +79,9 @@ pub struct SlotDrive {
     command: MotorCommand,
     schedule: Option<SpeedSchedule>,
     lease: Option<DriveLease>,
-    /// Since when the motor has been driven at or above the stall duty.
+    /// Since when the motor has been driven at or above the stall duty with no revolution
+    /// since: a dip below the stall duty does not start the count again (see
+    /// [`SlotDrive::stalled`]).
     hard_drive_since: Option<Instant>,
     /// The direction revolutions count in (the extruder pulls forward while the motor coasts).
     counting: Option<Direction>,
@@ -134,6 +136,7 @@ impl SlotDrive {
                 self.schedule = None;
                 self.set(
                     MotorCommand::forward(follow_duty(speed, tension, config)),
+                    feeder,
                     now,
                     config,
                 );
@@ -248,31 +251,38 @@ impl SlotDrive {
                 direction,
                 duty: Duty::from_permille(duty as u16),
             },
+            feeder,
             now,
             config,
         );
     }
 
-    fn set(&mut self, command: MotorCommand, now: Instant, config: &Config) {
+    /// Drive as `command`; a hard drive (at or above the stall duty) starts the stall count
+    /// unless one runs with no revolution since it began.
+    fn set(&mut self, command: MotorCommand, feeder: &Feeder, now: Instant, config: &Config) {
         self.command = command;
         if let MotorCommand::Drive { direction, duty } = command {
             self.counting = Some(direction);
-            let hard = duty.permille() >= config.stall_min_duty;
-            self.hard_drive_since = match (hard, self.hard_drive_since) {
-                (true, Some(since)) => Some(since),
-                (true, None) => Some(now),
-                (false, _) => None,
-            };
+            let turned_since = |since: Instant| feeder.motion.last_mark() > since;
+            if duty.permille() >= config.stall_min_duty && self.hard_drive_since.is_none_or(turned_since) {
+                self.hard_drive_since = Some(now);
+            }
         }
     }
 
-    /// True when the motor is driven hard enough to turn but has not turned for the stall timeout.
+    /// True when the motor, driven hard enough to turn (at or above the stall duty) now, has not
+    /// turned for the stall timeout since it was first driven that hard. A duty that dips below
+    /// the stall duty on the way (a follower's, hovering at it on a noisy tension reading) does
+    /// not start the count again, or every dip would put the stop off by the time before it. A
+    /// brake or a release ends the count; so does a revolution, the count starting again at the
+    /// next hard drive.
     fn stalled(&self, feeder: &Feeder, now: Instant, config: &Config) -> bool {
         let Some(since) = self.hard_drive_since else {
             return false;
         };
+        let hard_now = matches!(self.command, MotorCommand::Drive { duty, .. } if duty.permille() >= config.stall_min_duty);
         let last_sign_of_life = since.max(feeder.motion.last_mark());
-        now.millis_since(last_sign_of_life) > u64::from(config.stall_timeout_ms)
+        hard_now && now.millis_since(last_sign_of_life) > u64::from(config.stall_timeout_ms)
     }
 }
 
@@ -414,6 +424,47 @@ mod tests {
         for now_ms in [0, u64::from(u32::MAX), u64::from(u32::MAX) + 1, 1 << 40, u64::MAX] {
             assert_eq!(timed_run(u32::MAX, now_ms), Ok(()), "{now_ms}");
         }
+    }
+
+    /// A follower's duty hovering at the stall duty (a noisy tension reading: 250 ‰ one step, 248
+    /// the next) on a motor that never turns: stopped once the stall timeout has passed since it
+    /// was first driven that hard, at the first hard step after it. Each dip used to start the
+    /// count again, and this motor was never stopped by the stall rule.
+    #[test]
+    fn a_duty_hovering_at_the_stall_duty_stalls_within_the_timeout_of_the_first_hard_step() {
+        let (config, feeder, mut drive) = (Config::default(), Feeder::default(), SlotDrive::NEW);
+        let budget = Budget {
+            max_mm: u16::MAX,
+            max_ms: u32::MAX,
+            max_still_ms: u32::MAX,
+            error: ErrorCode::MOVE_PULLEY_FAILED,
+        };
+        // Neutral 2048, dead band 60, gain 2: 2233 gives 250 ‰, 2232 gives 248 ‰.
+        let hard = config.tension_neutral + config.tension_deadband + config.stall_min_duty / 2;
+        assert_eq!(
+            follow_duty(0, Some(hard), &config).permille(),
+            config.stall_min_duty
+        );
+        drive.begin(budget, &feeder, Instant::ZERO);
+        let timeout = u64::from(config.stall_timeout_ms);
+        for ms in 1..=timeout + 3 {
+            let tension = if ms % 2 == 1 { hard } else { hard - 1 };
+            let verdict = drive.run(
+                Motion::Follow { speed: 0 },
+                &feeder,
+                Some(tension),
+                Instant::from_millis(ms),
+                &config,
+            );
+            // First hard at 1 ms: past the timeout from 402 ms, the next hard step is 403 ms.
+            let expected = if ms == timeout + 3 {
+                Err(ErrorCode::STALLED_PULLEY)
+            } else {
+                Ok(())
+            };
+            assert_eq!(verdict, expected, "at {ms} ms");
+        }
+        assert_eq!(drive.command(), MotorCommand::Brake);
     }
 
     /// The lag the drive catches up: whole millimetres behind the schedule, truncated toward

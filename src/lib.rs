@@ -16,6 +16,7 @@ pub mod control;
 pub mod drive;
 pub mod feeder;
 pub mod follower;
+pub mod guards;
 pub mod lanes;
 pub mod odometer;
 pub mod persist;

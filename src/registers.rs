@@ -3,7 +3,9 @@
 //! `0x00`-`0x22` follow the MMU3 map where a register means something on this hardware (the
 //! others answer `R`). The unit's own settings and diagnostics live from `0x40`; `0x80`-`0x82`
 //! stay free because the MK4 intercepts them printer-side. Writes are validated: an unknown or
-//! read-only register, or a value out of range, answers `R` and changes nothing.
+//! read-only register, a value out of range, or one that would leave a configuration the guards
+//! refuse ([`crate::guards`]: each write is applied to a copy of the settings, and the whole copy
+//! is checked) answers `R` and changes nothing.
 //!
 //! Every register is a row of [`REGISTERS`]: its address (a block of addresses for per-sensor and
 //! per-slot registers), its name, whether it can be written, and how it is read and written. The
@@ -16,6 +18,7 @@ use mmu_protocol::{ErrorCode, ProgressCode};
 
 use crate::config::Config;
 use crate::feeder::Feeder;
+use crate::guards::{self, Rule};
 use crate::lanes::{LaneFigures, left_mm};
 use crate::profile::{MotionSensor, Profile};
 use crate::runner::Status;
@@ -73,6 +76,8 @@ pub struct View<'a> {
     pub used_centi: &'a [i32],
     /// Per slot, its last load distance drifted (bit k of register 0x5e).
     pub lanes_drifted: u8,
+    /// The rule the last refusal broke (register 0x8f).
+    pub refused_rule: Option<Rule>,
     /// The time of the current step.
     pub now: Instant,
 }
@@ -97,21 +102,27 @@ pub struct Target<'a> {
     pub config: &'a mut Config,
     /// The printer's filament sensor state (register 0x09, as `f`).
     pub fsensor: &'a mut u8,
-    /// What the presence sensors show now, for the threshold guard ([`FilamentReadings`]).
+    /// What the presence sensors show now, for the guards ([`Rule::OnAtFilamentSeen`]).
     pub filament_readings: FilamentReadings,
     /// Filament taken off each slot's spool, 1/100 mm (register `0x59 + k` sets what is left).
     pub used_centi: &'a mut [i32],
 }
 
-/// The filtered reading of each presence sensor that sees filament the unit knows is there
-/// (index 0: the hub sensor, `1 + k`: slot *k*'s), `None` for the others. A threshold write
-/// under which such a reading would no longer be filament (an "on" above it) is refused (`R`);
-/// the rule is in the book's register map (`book/src/registers.md`).
-pub type FilamentReadings = [Option<u16>; 1 + crate::MAX_SLOTS];
+pub use crate::guards::{FilamentReadings, NO_FILAMENT_READINGS};
 
-/// No presence sensor known to see filament (before the first step, in a settings check): the
-/// threshold guard has nothing to hold a write to.
-pub const NO_FILAMENT_READINGS: FilamentReadings = [None; 1 + crate::MAX_SLOTS];
+/// Why a write was answered `R`. Whatever the reason, it changed nothing.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Refused {
+    /// The unit has no such register.
+    Unknown,
+    /// The register is read only.
+    ReadOnly,
+    /// The value is outside the register's range (or names a slot the unit lacks).
+    OutOfRange,
+    /// The settings with the value would break a guard's rule ([`crate::guards`]).
+    Broke(Rule),
+}
 
 /// Whether the printer may write a register.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -290,19 +301,9 @@ fn read_setting(v: &View, address: u8, _: usize) -> Option<u16> {
     setting_field(v.config, address).copied()
 }
 
-/// Write a plain setting; refused when it would break a pair: `stall_min_duty` (0x44) may not
-/// exceed `max_duty` (0x43), or no duty the logic commands reaches it and the stall rule is off
-/// (as a sensor's "on" threshold must stay above its "off" one). A restore writes its settings
-/// twice, so a stored pair goes in whichever of the two it meets first.
+/// Write a plain setting (what it must agree with is the guards' to check, on the whole
+/// configuration: [`write`]).
 fn write_setting(t: &mut Target, address: u8, _: usize, value: u16) -> bool {
-    let (max_duty, stall_min_duty) = match address {
-        0x43 => (value, t.config.stall_min_duty),
-        0x44 => (t.config.max_duty, value),
-        _ => (0, 0),
-    };
-    if stall_min_duty > max_duty {
-        return false;
-    }
     match setting_field_mut(t.config, address) {
         Some(field) => {
             *field = value;
@@ -489,6 +490,10 @@ pub const SPOOL: u8 = 0x54;
 pub const LEFT: u8 = 0x59;
 /// Extension: warning bits: bit k, slot k's load distance drifted; bit 8 + k, slot k is low.
 pub const LANE_WARNINGS: u8 = 0x5e;
+/// Extension: the code of the guards' rule ([`Rule::code`]) the last refusal broke, of a write or
+/// of the stored settings at start; 0 when it broke none (an unknown or read-only register, a
+/// value out of range) or nothing was refused (read only).
+pub const REFUSED_RULE: u8 = 0x8f;
 /// Extension: rolling drag of slot `k`, % of a free lane's duty, at `DRAG + k` (read only).
 pub const DRAG: u8 = 0x83;
 /// Extension: rolling slip of slot `k`'s moves, per mille, two's complement, at `SLIP + k`.
@@ -705,6 +710,9 @@ registers! {
         v.used_centi,
         &v.config.spool_m
     ))),
+    RefusedRule: read_only(REFUSED_RULE, "refused_rule", |v, _, _| Some(
+        v.refused_rule.map_or(0, |rule| rule.code().into())
+    )),
     Drag: block(DRAG, Lanes, "drag_pct", |v, _, k| Some(v.lane_figures.get(k)?.drag_pct)),
     Slip: block(SLIP, Lanes, "slip_permille", |v, _, k| Some(
         v.lane_figures.get(k)?.slip_permille as u16
@@ -733,24 +741,10 @@ fn thresholds(profile: &Profile, config: &Config, sensor: SensorId) -> Option<Th
     }
 }
 
-/// Change one threshold of a sensor; refused when the pair would not be valid (on > off), or
-/// when it would blind a presence sensor to the filament it sees now.
-///
-/// The guard: a presence sensor whose reading is filament under the thresholds in force, where
-/// the unit knows filament is ([`FilamentReadings`]), keeps an "on" threshold at or below that
-/// reading. An "on" above it could never see that filament again once it has left, nor at the
-/// next start, whose check would then pass with filament in the hub (hub "on" written to
-/// 3,072..3,902 while the sensor reads about 3,000 with filament). Only this direction is
-/// refused: a sensor that sees filament where none is stops the next command with an error,
-/// whereas one blind to filament lets a motor push into an occupied path. A calibration is
-/// never refused: it puts "on" 60 % of the way from the empty to the full level, below the
-/// reading with filament.
+/// Change one threshold of a sensor; false for a sensor without thresholds. Whether the pair is
+/// one the sensor can use (ordered, within the rails, wider than the noise, not above the
+/// filament it sees now) is the guards' to check ([`crate::guards`]).
 fn set_threshold(target: &mut Target, sensor: SensorId, change: impl FnOnce(&mut Thresholds)) -> bool {
-    let seen = match sensor {
-        SensorId::HubFilament => target.filament_readings.first().copied().flatten(),
-        SensorId::SlotFilament(slot) => target.filament_readings.get(1 + slot).copied().flatten(),
-        SensorId::Motion(_) | SensorId::HubTension | SensorId::HubCutter | SensorId::LaneTension(_) => None,
-    };
     if thresholds(target.profile, target.config, sensor).is_none() {
         return false;
     }
@@ -764,12 +758,7 @@ fn set_threshold(target: &mut Target, sensor: SensorId, change: impl FnOnce(&mut
     let Some(thresholds) = thresholds else {
         return false;
     };
-    let mut updated = *thresholds;
-    change(&mut updated);
-    if !updated.is_valid() || seen.is_some_and(|reading| updated.on > reading) {
-        return false;
-    }
-    *thresholds = updated;
+    change(thresholds);
     true
 }
 
@@ -792,15 +781,61 @@ pub fn read(view: &View, address: u8) -> Option<u16> {
     row.read(view, index)
 }
 
-/// Write `value` to register `address` of a unit with `slots` slots; false (answered `R`) when
-/// the register is unknown or read-only or the value is out of range.
-pub fn write(target: &mut Target, slots: usize, address: u8, value: u16) -> bool {
+/// Write `value` to register `address` of a unit with `slots` slots; `Err` (answered `R`, nothing
+/// changed) when the register is unknown or read-only, the value out of its range, or the
+/// settings with it would break a rule of the guards ([`guards::check`], the whole configuration,
+/// with what the presence sensors see now). The value goes into a copy of the settings, which
+/// replaces them only once the guards take it.
+pub fn write(target: &mut Target, slots: usize, address: u8, value: u16) -> Result<(), Refused> {
+    let (row, index) = find(address, slots).ok_or(Refused::Unknown)?;
+    let (min, max) = row.range().ok_or(Refused::ReadOnly)?;
+    if !(min..=max).contains(&value) {
+        return Err(Refused::OutOfRange);
+    }
+    let mut candidate = target.config.clone();
+    let mut staged = Target {
+        profile: target.profile,
+        slots: target.slots,
+        config: &mut candidate,
+        fsensor: &mut *target.fsensor,
+        filament_readings: target.filament_readings,
+        used_centi: &mut *target.used_centi,
+    };
+    if !write_row(row.handler, &mut staged, row.address, index, value) {
+        return Err(Refused::OutOfRange);
+    }
+    // State registers (the printer's sensor, filament left) change no setting: nothing to check.
+    if candidate != *target.config {
+        guards::check(&candidate, &target.filament_readings).map_err(Refused::Broke)?;
+        *target.config = candidate;
+    }
+    Ok(())
+}
+
+/// Apply a stored setting (`address`, `value`) to `config` of a unit with `slots` slots, with the
+/// register's own checks (a setting register of this unit, within its range) but not the guards:
+/// they judge the stored settings once all are in ([`crate::App::restore`]), since a pair of
+/// settings may only agree once both are. False when the register is no setting or the value is
+/// out of its range (the setting is dropped).
+pub fn apply_setting(profile: &Profile, config: &mut Config, slots: usize, address: u8, value: u16) -> bool {
     let Some((row, index)) = find(address, slots) else {
         return false;
     };
-    // A read-only row accepts no value.
-    let (min, max) = row.accepts;
-    (min..=max).contains(&value) && write_row(row.handler, target, row.address, index, value)
+    let is_setting = !matches!(row.address, FSENSOR | LEFT);
+    let in_range = row.range().is_some_and(|(min, max)| (min..=max).contains(&value));
+    if !(is_setting && in_range) {
+        return false;
+    }
+    let mut fsensor = 0;
+    let mut target = Target {
+        profile,
+        slots,
+        config,
+        fsensor: &mut fsensor,
+        filament_readings: NO_FILAMENT_READINGS,
+        used_centi: &mut [],
+    };
+    write_row(row.handler, &mut target, row.address, index, value)
 }
 
 /// What a register read sees of a configuration alone: setting registers read only the
@@ -826,6 +861,7 @@ pub fn settings_view<'a>(profile: &'a Profile, config: &'a Config, hub: &'a Hub)
         lane_figures: &[],
         used_centi: &[],
         lanes_drifted: 0,
+        refused_rule: None,
         build: config.version.build(),
         now: Instant::ZERO,
     }
@@ -1035,8 +1071,8 @@ mod tests {
             filament_readings: NO_FILAMENT_READINGS,
             used_centi: &mut [],
         };
-        assert!(write(&mut target, 3, 0x4c, 1234));
-        assert!(write(&mut target, 3, 0x0d, 77));
+        assert_eq!(write(&mut target, 3, 0x4c, 1234), Ok(()));
+        assert_eq!(write(&mut target, 3, 0x0d, 77), Ok(()));
         let expected = Config {
             tension_neutral: 1234,
             unload_speed: 77,
@@ -1063,7 +1099,7 @@ mod tests {
             assert_eq!(register.row.range(), None, "{register}");
             for value in [0, 1, 2, 255, 4095, u16::MAX] {
                 assert!(
-                    !write(&mut target, 3, register.address, value),
+                    write(&mut target, 3, register.address, value).is_err(),
                     "{register} = {value}"
                 );
             }
@@ -1085,21 +1121,153 @@ mod tests {
             filament_readings: NO_FILAMENT_READINGS,
             used_centi: &mut [],
         };
-        assert!(write(&mut target, 3, 0x22, 410));
-        assert!(!write(&mut target, 3, 0x22, 49));
-        assert!(!write(&mut target, 3, 0x40, 3));
-        assert!(!write(&mut target, 3, THRESHOLD_ON + 9, 3000));
-        // The "on" threshold must stay above the "off" one.
-        assert!(!write(&mut target, 3, THRESHOLD_ON, 2000));
-        // `stall_min_duty` must stay at or below `max_duty` (the stall rule stays on).
-        assert!(!write(&mut target, 3, 0x43, 249));
-        assert!(write(&mut target, 3, 0x43, 250));
-        assert!(!write(&mut target, 3, 0x44, 251));
-        assert!(write(&mut target, 3, 0x44, 250));
-        assert!(write(&mut target, 3, 0x43, 1000));
-        assert!(write(&mut target, 3, 0x09, 1));
+        assert_eq!(write(&mut target, 3, 0x22, 410), Ok(()));
+        assert_eq!(write(&mut target, 3, 0x22, 49), Err(Refused::OutOfRange));
+        assert_eq!(write(&mut target, 3, 0x40, 3), Err(Refused::ReadOnly));
+        assert_eq!(write(&mut target, 3, 0x80, 3), Err(Refused::Unknown));
+        assert_eq!(
+            write(&mut target, 3, THRESHOLD_ON + 12, 3000),
+            Err(Refused::Unknown)
+        );
+        // The hub tension sensor has no thresholds, nor does a lane's (index 9 of three slots).
+        assert_eq!(
+            write(&mut target, 3, THRESHOLD_ON + 9, 3000),
+            Err(Refused::OutOfRange)
+        );
+        assert_eq!(
+            write(&mut target, 3, THRESHOLD_ON + 1, 3000),
+            Err(Refused::OutOfRange)
+        );
+        assert_eq!(write(&mut target, 3, 0x09, 1), Ok(()));
         assert_eq!(config.bowden_mm, 410);
         assert_eq!(fsensor, 1);
+    }
+
+    /// A write the guards refuse answers with the rule it would break; a pair whose two halves
+    /// must move together is written in the order that keeps every rule on the way.
+    #[test]
+    fn a_write_that_would_break_a_rule_is_refused_and_changes_nothing() {
+        let mut config = Config::default();
+        let mut fsensor = 0;
+        let mut target = Target {
+            profile: &crate::profile::THESIS,
+            slots: 3,
+            config: &mut config,
+            fsensor: &mut fsensor,
+            filament_readings: NO_FILAMENT_READINGS,
+            used_centi: &mut [],
+        };
+        let broke = |rule| Err(Refused::Broke(rule));
+        // The "on" threshold must stay above the "off" one.
+        assert_eq!(
+            write(&mut target, 3, THRESHOLD_ON, 2000),
+            broke(Rule::ThresholdsOrdered)
+        );
+        assert_eq!(
+            write(&mut target, 3, THRESHOLD_ON, 4095),
+            broke(Rule::ThresholdsWithinRails)
+        );
+        assert_eq!(write(&mut target, 3, 0x41, 1), broke(Rule::ParkClearsMerge));
+        assert_eq!(
+            write(&mut target, 3, 0x42, 5000),
+            broke(Rule::RevolutionFitsDrive)
+        );
+        assert_eq!(write(&mut target, 3, 0x4d, 0), broke(Rule::DeadBandAboveNoise));
+        // `stall_min_duty` must stay at or below `max_duty` (the stall rule stays on).
+        assert_eq!(write(&mut target, 3, 0x44, 700), Ok(()));
+        assert_eq!(write(&mut target, 3, 0x43, 699), broke(Rule::StallDutyWithinMax));
+        assert_eq!(write(&mut target, 3, 0x43, 700), Ok(()));
+        assert_eq!(write(&mut target, 3, 0x44, 701), broke(Rule::StallDutyWithinMax));
+        // A longer park needs the hub search first.
+        assert_eq!(write(&mut target, 3, 0x41, 60), broke(Rule::HubSearchReachesHub));
+        assert_eq!(write(&mut target, 3, 0x47, 64), Ok(()));
+        assert_eq!(write(&mut target, 3, 0x41, 60), Ok(()));
+        let expected = Config {
+            max_duty: 700,
+            stall_min_duty: 700,
+            hub_search_mm: 64,
+            park_mm: 60,
+            ..Config::default()
+        };
+        assert!(config == expected, "{config:?}");
+    }
+
+    /// Every setting register, written with values across its range: whatever is taken leaves a
+    /// configuration that keeps every rule, and whatever is refused changes nothing.
+    #[test]
+    fn no_write_leaves_settings_the_guards_refuse() {
+        let mut config = Config::default();
+        let mut fsensor = 0;
+        let mut used = [0i32; 3];
+        let mut taken = 0;
+        let mut refused = 0;
+        for register in all(3).filter(|r| r.row.access() == Access::ReadWrite) {
+            let Some((min, max)) = register.row.range() else {
+                continue;
+            };
+            let span = u32::from(max - min);
+            for step in 0..=16u32 {
+                let value = min + (span * step / 16) as u16;
+                let before = config.clone();
+                let mut target = Target {
+                    profile: &crate::profile::THESIS,
+                    slots: 3,
+                    config: &mut config,
+                    fsensor: &mut fsensor,
+                    filament_readings: NO_FILAMENT_READINGS,
+                    used_centi: &mut used,
+                };
+                match write(&mut target, 3, register.address, value) {
+                    Ok(()) => taken += 1,
+                    Err(why) => {
+                        refused += 1;
+                        assert!(
+                            config == before,
+                            "{register} = {value} refused ({why:?}) but changed"
+                        );
+                    }
+                }
+                assert_eq!(
+                    guards::check(&config, &NO_FILAMENT_READINGS),
+                    Ok(()),
+                    "after {register} = {value}"
+                );
+            }
+        }
+        assert!(taken > 100 && refused > 100, "{taken} taken, {refused} refused");
+    }
+
+    /// A stored setting goes in with its register's own checks only: the guards judge the whole.
+    #[test]
+    fn a_stored_setting_is_applied_within_its_range_and_state_is_no_setting() {
+        let mut config = Config::default();
+        assert!(apply_setting(&crate::profile::THESIS, &mut config, 3, 0x41, 1));
+        assert_eq!(config.park_mm, 1);
+        assert!(!apply_setting(&crate::profile::THESIS, &mut config, 3, 0x41, 201));
+        assert!(!apply_setting(
+            &crate::profile::THESIS,
+            &mut config,
+            3,
+            FSENSOR,
+            1
+        ));
+        assert!(!apply_setting(&crate::profile::THESIS, &mut config, 3, LEFT, 1));
+        assert!(!apply_setting(&crate::profile::THESIS, &mut config, 3, 0x40, 1));
+        assert!(!apply_setting(
+            &crate::profile::THESIS,
+            &mut config,
+            3,
+            SPOOL + 3,
+            100
+        ));
+        assert!(apply_setting(
+            &crate::profile::THESIS,
+            &mut config,
+            3,
+            SPOOL + 2,
+            100
+        ));
+        assert_eq!(config.spool_m[2], 100);
     }
 
     #[test]
@@ -1118,18 +1286,19 @@ mod tests {
             filament_readings,
             used_centi: &mut [],
         };
+        let seen = Err(Refused::Broke(Rule::OnAtFilamentSeen));
         for on in [3001, 3072, 3902] {
-            assert!(!write(&mut target, 3, THRESHOLD_ON, on), "{on}");
+            assert_eq!(write(&mut target, 3, THRESHOLD_ON, on), seen, "{on}");
         }
-        assert!(!write(&mut target, 3, THRESHOLD_ON + 5, 2801));
+        assert_eq!(write(&mut target, 3, THRESHOLD_ON + 5, 2801), seen);
         // At the reading, or what a calibration writes: taken.
-        assert!(write(&mut target, 3, THRESHOLD_ON, 3000));
-        assert!(write(&mut target, 3, THRESHOLD_ON, 2619));
-        assert!(write(&mut target, 3, THRESHOLD_ON + 5, 2500));
+        assert_eq!(write(&mut target, 3, THRESHOLD_ON, 3000), Ok(()));
+        assert_eq!(write(&mut target, 3, THRESHOLD_ON, 2619), Ok(()));
+        assert_eq!(write(&mut target, 3, THRESHOLD_ON + 5, 2500), Ok(()));
         // Slot 0 (index 1) sees no filament the unit knows of: nothing to hold a write to.
-        assert!(write(&mut target, 3, THRESHOLD_ON + 3, 3500));
+        assert_eq!(write(&mut target, 3, THRESHOLD_ON + 3, 3500), Ok(()));
         // "off" only ever lowers what is seen as filament: the pair stays valid, so taken.
-        assert!(write(&mut target, 3, THRESHOLD_OFF, 100));
+        assert_eq!(write(&mut target, 3, THRESHOLD_OFF, 100), Ok(()));
         assert_eq!((config.hub_thresholds.on, config.hub_thresholds.off), (2619, 100));
     }
 }

@@ -432,6 +432,13 @@ fn log_restored<const N: usize, F: NorFlash, C: EntryCrc>(_keeper: &Keeper<F, N,
             &c.failures[..],
             &c.fed_mm[..]
         );
+        if let Some(rule) = _app.refused_rule() {
+            defmt::warn!(
+                "restored settings refused (rule {=u8}, {}): running on the defaults",
+                rule.code(),
+                rule
+            );
+        }
     }
 }
 

@@ -64,7 +64,7 @@ fn a_driven_motor_that_never_turns_is_stopped_within_the_phase_still_limit() {
 
 /// Finding 2: `stall_min_duty` (0x44) above `max_duty` (0x43) switched the stall rule off (no
 /// duty reaches it); both writes that would make it so are refused, the pair as the sensor
-/// thresholds' on/off pair is.
+/// thresholds' on/off pair is (the guards' `stall_duty_within_max`).
 #[test]
 fn the_stall_rule_cannot_be_switched_off_through_its_registers() {
     let mut rig = Rig::<3>::new();
@@ -76,24 +76,27 @@ fn the_stall_rule_cannot_be_switched_off_through_its_registers() {
     // Above the highest duty: refused.
     assert_eq!(write(&mut rig, 0x44, 1000), Some(ParamCode::Accepted));
     assert_eq!(write(&mut rig, 0x43, 900), Some(ParamCode::Rejected));
-    assert_eq!(write(&mut rig, 0x44, 600), Some(ParamCode::Accepted));
-    assert_eq!(write(&mut rig, 0x43, 600), Some(ParamCode::Accepted));
-    assert_eq!(write(&mut rig, 0x44, 601), Some(ParamCode::Rejected));
+    assert_eq!(write(&mut rig, 0x44, 700), Some(ParamCode::Accepted));
+    assert_eq!(write(&mut rig, 0x43, 700), Some(ParamCode::Accepted));
+    assert_eq!(write(&mut rig, 0x44, 701), Some(ParamCode::Rejected));
     let config = rig.app.config();
-    assert_eq!((config.max_duty, config.stall_min_duty), (600, 600));
+    assert_eq!((config.max_duty, config.stall_min_duty), (700, 700));
 }
 
-/// A stored pair below the defaults (highest duty 200, stall duty 150) comes back whole: the
-/// restore writes its settings twice, so the highest duty, refused while the default stall duty
-/// (250) is above it, goes in once the stall duty has.
+/// A stored set below the defaults (highest duty 200, stall duty 150, and speeds that duty can
+/// give) comes back whole: the stored settings go in together and the guards judge them once,
+/// so the highest duty, which the default stall duty (250) and speeds alone would refuse, is
+/// taken with the rest.
 #[test]
 fn a_stored_duty_pair_below_the_defaults_is_restored() {
     let mut app = mmu_firmware::App::<3>::new(Config::default());
     let mut snapshot = mmu_firmware::persist::Snapshot::<3>::default();
-    snapshot.settings.push((0x43, 200)).unwrap();
-    snapshot.settings.push((0x44, 150)).unwrap();
+    for setting in [(0x0d, 25), (0x11, 25), (0x14, 15), (0x43, 200), (0x44, 150)] {
+        snapshot.settings.push(setting).unwrap();
+    }
     app.restore(&snapshot);
     assert_eq!((app.config().max_duty, app.config().stall_min_duty), (200, 150));
+    assert_eq!(app.config().slow_speed, 15);
 }
 
 /// Odometry 5 mm short of where an `i32` of hundredths ends (21.47 km): the next moves cross it.

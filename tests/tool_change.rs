@@ -76,8 +76,9 @@ fn a_slot_the_unit_does_not_have_is_accepted_then_reported_invalid() {
 fn hub_never_sees_the_tip() {
     let mut rig = Rig::<3>::new();
     rig.boot();
-    // A hub threshold no reading reaches: the tip passes unseen.
-    rig.write(0x90, 4090);
+    // A hub threshold above the filament's reading (3,000; one no reading reaches at all, at the
+    // rail, is refused): the tip passes unseen.
+    rig.write(0x90, 4000);
     rig.command_fails_with(t(0), ErrorCode::FINDA_DIDNT_SWITCH_ON);
     // Before a preload the unit does not know where the tip is: the bound is the preload distance.
     let tip = rig.model.tip_mm(0).unwrap();
@@ -260,7 +261,7 @@ fn motor_hall_sensor_disconnected_while_parking_the_old_slot_then_retry_parks_an
 fn hub_threshold_fixed_then_retry_loads() {
     let mut rig = Rig::<3>::new();
     rig.boot();
-    rig.write(0x90, 4090);
+    rig.write(0x90, 4000);
     rig.command_fails_with(t(0), ErrorCode::FINDA_DIDNT_SWITCH_ON);
     rig.write(0x90, 2600);
     rig.idle(100);

@@ -59,14 +59,20 @@ fn a_waiting_error_is_not_blamed_on_the_next_command() {
 }
 
 /// Before: "the value is out of its range", without the range, and nothing about a threshold
-/// that must stay above (or below) its partner.
+/// that must stay above (or below) its partner, or about the guards' rule a setting breaks.
 #[test]
 fn a_refused_write_says_the_range_and_the_threshold_rule() {
     let config = config_dir("range");
-    let script =
-        "set bowden 5\nset threshold_on.hub.filament 100\nset threshold_off.hub.filament 3000\nquit\n";
+    let script = "set bowden 5\nset threshold_on.hub.filament 100\nset threshold_off.hub.filament 3000\n\
+                  set park 1\nquit\n";
     let all = text(&run(&["console", "--sim"], script, &config));
     assert!(all.contains("5 is out of its range, 50 to 2000"), "{all}");
+    assert!(
+        all.contains(
+            "rule 6 (park_clears_merge), the park distance must reach two revolutions past the merge"
+        ),
+        "{all}"
+    );
     assert!(
         all.contains("\"on\" threshold must stay above its \"off\" one (threshold_off.hub.filament is 2400)"),
         "{all}"

@@ -203,6 +203,33 @@ fn buddy_6_5_soaks_clean_with_1_3_and_5_slots() {
     }
 }
 
+/// Every hardware profile soaks clean with random faults on every printer family, with one
+/// slot, three and the most it has: the thesis build, lanes of N20 encoder motors, the BMCU-C
+/// (no hub sensor). The full matrix (ten seeds, 100 changes each) is `scripts/soak-matrix.sh`.
+#[test]
+fn every_hardware_profile_soaks_clean_on_every_printer() {
+    for hardware in mmu_firmware::profile::ALL {
+        for personality in Personality::ALL {
+            for slots in [1, 3, hardware.max_slots] {
+                let mut options = options(6, true, 7);
+                options.personality = personality;
+                options.printer.version = personality.version();
+                options.sim = SimOptions {
+                    slots,
+                    ..options.sim.on_hardware(hardware)
+                };
+                let report = soak::run(&options, &mut |_| {});
+                assert!(
+                    report.passed(),
+                    "{} on {personality}, {slots} slots:\n{report}\n{:#?}",
+                    hardware.name,
+                    report.notes
+                );
+            }
+        }
+    }
+}
+
 /// A power loss at a random moment of every change, on every printer family: after the printer's
 /// recovery (`U0`, then the same `T`) each change completes, and none asks for UNLOAD MANUALLY
 /// (`8008`): the unit proves its stored slot and carries on. The figures, by phase, in the report.

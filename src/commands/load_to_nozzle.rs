@@ -108,12 +108,17 @@ pub const MIN_LEARNED_BOWDEN_MM: u16 = 50;
 /// triggering sensor shows, if it is one to keep: never longer than the length in force (the
 /// sensor triggered before it, so the tube is not longer), never shorter than what was fed (the
 /// tip got that far; the printer reports its sensor within a few ms, under 1 mm at the fast
-/// speed), and within register 0x22's range.
+/// speed), within register 0x22's range, and a setting the guards take as a write of it
+/// ([`crate::guards`]).
 pub fn learned_bowden_mm(fed_mm: i32, config: &Config) -> Option<u16> {
     let fed = u16::try_from(fed_mm).ok()?;
-    (MIN_LEARNED_BOWDEN_MM..config.bowden_mm)
-        .contains(&fed)
-        .then_some(fed)
+    let learned = Config {
+        bowden_mm: fed,
+        ..config.clone()
+    };
+    ((MIN_LEARNED_BOWDEN_MM..config.bowden_mm).contains(&fed)
+        && crate::guards::check(&learned, &crate::guards::NO_FILAMENT_READINGS).is_ok())
+    .then_some(fed)
 }
 
 /// What each error of the load means and what Retry does.

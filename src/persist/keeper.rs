@@ -655,4 +655,36 @@ mod tests {
         unit.keeper.before(BoardAction::Reset, &unit.app).unwrap();
         assert_eq!(unit.stored(), snapshot, "saved before the reset");
     }
+
+    /// A store holding settings the guards refuse (a park inside the merge: from a firmware
+    /// without the guards, or flash damaged past its check sums) boots on the defaults, keeping
+    /// the identity; the first full check saves the settings in force over the refused ones, so
+    /// the next boot restores them without a refusal.
+    #[test]
+    fn refused_stored_settings_are_replaced_by_the_settings_in_force() {
+        use crate::guards::Rule;
+        let mut store = Store::<_, 3>::new(RamFlash::erased(3), 0..3 * PAGE as u32).unwrap();
+        let mut refused = Snapshot::<3>::default();
+        for setting in [(0x41, 1), (0x22, 500), (0x52, 2)] {
+            refused.settings.push(setting).unwrap();
+        }
+        store.save(&refused, None).unwrap();
+        let mut app = App::<3>::new(Config::default());
+        let (keeper, _) = Keeper::boot(store, &mut app);
+        assert_eq!(app.refused_rule(), Some(Rule::ParkClearsMerge));
+        assert_eq!((app.config().park_mm, app.config().bowden_mm), (15, 360));
+        assert_eq!(app.config().version.revision, 2, "the identity is kept");
+        let mut unit = Unit {
+            app,
+            keeper,
+            now: Instant::ZERO,
+            deferral: Deferral::default(),
+        };
+        unit.steps_until_stored(false, |stored| stored.settings.as_slice() == [(0x52, 2)]);
+        let mut restarted = App::<3>::new(Config::default());
+        let store = Store::<_, 3>::new(unit.keeper.into_store().into_flash(), 0..3 * PAGE as u32).unwrap();
+        let _ = Keeper::boot(store, &mut restarted);
+        assert_eq!(restarted.refused_rule(), None);
+        assert!(restarted.config() == unit.app.config());
+    }
 }

@@ -279,19 +279,40 @@ impl Bench {
             Some((low, high)) if value < low || value > high => {
                 format!("{value} is out of its range, {low} to {high}")
             }
-            Some(_) => match address {
-                0x90..=0x9f => format!(
-                    "a sensor's \"on\" threshold must stay above its \"off\" one ({}): set \"off\" lower first",
-                    self.partner_threshold(address + 0x10)
-                ),
-                0xa0..=0xaf => format!(
-                    "a sensor's \"off\" threshold must stay below its \"on\" one ({}): set \"on\" higher first",
-                    self.partner_threshold(address - 0x10)
-                ),
-                _ => "the unit does not take that value here".to_string(),
-            },
+            Some(_) => self.broken_rule(address),
         };
         Err(format!("the unit refused {register} = {value}: {why}"))
+    }
+
+    /// Why the unit refused an in-range write to `address`: the guards' rule it names in register
+    /// 0x8f (`mmu_firmware::guards`), with the other threshold of a pair where that helps.
+    fn broken_rule(&mut self, address: u8) -> String {
+        use mmu_firmware::guards::Rule;
+        let rule = self
+            .read(mmu_firmware::registers::REFUSED_RULE)
+            .ok()
+            .and_then(Rule::from_code);
+        let Some(rule) = rule else {
+            return "the unit does not take that value here".to_string();
+        };
+        let text = match (rule, address) {
+            (Rule::ThresholdsOrdered, 0x90..=0x9f) => format!(
+                "a sensor's \"on\" threshold must stay above its \"off\" one ({}): set \"off\" lower first",
+                self.partner_threshold(address + 0x10)
+            ),
+            (Rule::ThresholdsOrdered, 0xa0..=0xaf) => format!(
+                "a sensor's \"off\" threshold must stay below its \"on\" one ({}): set \"on\" higher first",
+                self.partner_threshold(address - 0x10)
+            ),
+            (Rule::HysteresisAboveNoise, 0x90..=0x9f) => {
+                format!("{} ({})", rule.meaning(), self.partner_threshold(address + 0x10))
+            }
+            (Rule::HysteresisAboveNoise, 0xa0..=0xaf) => {
+                format!("{} ({})", rule.meaning(), self.partner_threshold(address - 0x10))
+            }
+            _ => rule.meaning().to_string(),
+        };
+        format!("rule {} ({}), {text}", rule.code(), rule.name())
     }
 
     /// The other threshold of a pair, as text (`off is 2400`), for a refused write.
