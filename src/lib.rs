@@ -32,6 +32,7 @@ pub mod tally;
 #[cfg(feature = "tasks")]
 pub mod tasks;
 pub mod time;
+pub mod tip;
 pub mod uart;
 pub mod unit;
 

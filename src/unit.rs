@@ -1,7 +1,7 @@
 //! The unit's hardware state as the logic knows it: every feeding system, the Filament Hub's
 //! sensors, the printer's filament sensor as last reported, and where each slot's filament is.
 
-use mmu_hal_port::{Direction, MotorCommand, Samples};
+use mmu_hal_port::{MotorCommand, Samples};
 
 use crate::config::Config;
 use crate::drive::SlotDrive;
@@ -9,6 +9,7 @@ use crate::feeder::{Feeder, distance_centi};
 use crate::profile::{MotionSensor, PresenceInput, Profile, THESIS, TensionAt};
 use crate::sensor::{AnalogSensor, FilterKind, PresenceSensor};
 use crate::time::Instant;
+use crate::tip::TipEstimates;
 
 /// Where one slot's filament is, as far as the unit knows.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -157,32 +158,6 @@ pub fn sensor_in<'a>(
     }
 }
 
-/// Follows one lane's tip by `moved` (1/100 mm) and homes it at its presence sensor's edge
-/// (`present` is the sensor's decision this step, `driven` the way the unit drives the lane).
-///
-/// Only an edge the unit's own drive makes is the tip: fed in, or pulled back out past the
-/// sensor. A sensor that clears while the printer pulls the lane is the spool's end leaving it,
-/// and one that comes on undriven is a filament pushed in by hand or a tail pulled back: the
-/// tip stays where it was counted, or is not known.
-fn follow_tip(
-    tip: &mut Option<i32>,
-    was_present: &mut Option<bool>,
-    moved: i32,
-    present: Option<bool>,
-    driven: Option<Direction>,
-) {
-    *tip = tip.map(|tip| tip.saturating_add(moved));
-    match (*was_present, present, driven) {
-        (Some(false), Some(true), Some(Direction::Forward))
-        | (Some(true), Some(false), Some(Direction::Reverse)) => *tip = Some(0),
-        (Some(false), Some(true), _) => *tip = None,
-        _ => {}
-    }
-    if present.is_some() {
-        *was_present = present;
-    }
-}
-
 /// The Filament Hub's sensors.
 #[derive(Debug, Clone, Copy)]
 pub struct Hub {
@@ -223,14 +198,8 @@ pub struct Unit<const N: usize> {
     coasting_mark_at: [Instant; N],
     /// Per slot: pulled back out of the merge since it was last fed towards the hub.
     pub clear_of_merge: [bool; N],
-    /// Per slot, on hardware without a hub sensor: where its tip is, 1/100 mm past its presence
-    /// sensor ([`Unit::tip_centi`]); `None` until the sensor's edge was seen since start.
-    tips: [Option<i32>; N],
-    /// Per slot: the presence sensor's last decision.
-    was_present: [Option<bool>; N],
-    /// Where a tip counts as in the hub, 1/100 mm past its presence sensor: the setting
-    /// `lane_to_hub_mm` as of the last [`Unit::sense`].
-    merge_centi: i32,
+    /// On hardware without a hub sensor: where each lane's tip is ([`Unit::tip_centi`]).
+    tips: TipEstimates<N>,
 }
 
 impl Default for Hub {
@@ -268,9 +237,7 @@ impl<const N: usize> Unit<N> {
         moved_by_printer: [0; N],
         coasting_mark_at: [Instant::ZERO; N],
         clear_of_merge: [false; N],
-        tips: [None; N],
-        was_present: [None; N],
-        merge_centi: 0,
+        tips: TipEstimates::NEW,
     };
 }
 
@@ -278,7 +245,7 @@ impl<const N: usize> Unit<N> {
     /// Take a round of raw samples at `now`, read as the profile says.
     pub fn sense(&mut self, samples: &Samples<N>, now: Instant, config: &Config) {
         let profile = self.profile;
-        self.merge_centi = i32::from(config.lane_to_hub_mm) * 100;
+        self.tips.place_hub(config.lane_to_hub_mm);
         for (slot, ((feeder, sample), drive)) in self
             .feeders
             .iter_mut()
@@ -288,16 +255,13 @@ impl<const N: usize> Unit<N> {
         {
             let before = feeder.odometry_centi();
             let mark = feeder.sense(slot, *sample, drive.counting(), now, config, profile);
-            if !profile.hub_sensor
-                && let (Some(tip), Some(was_present)) =
-                    (self.tips.get_mut(slot), self.was_present.get_mut(slot))
-            {
+            if !profile.hub_sensor {
                 let moved = distance_centi(before, feeder.odometry_centi());
                 let driven = match drive.command() {
                     MotorCommand::Drive { direction, .. } => Some(direction),
                     MotorCommand::Coast | MotorCommand::Brake => None,
                 };
-                follow_tip(tip, was_present, moved, feeder.filament.present(), driven);
+                self.tips.follow(slot, moved, feeder.filament.present(), driven);
             }
             if mark
                 && drive.is_coasting()
@@ -352,13 +316,7 @@ impl<const N: usize> Unit<N> {
         if self.profile.hub_sensor {
             return self.hub.filament.present();
         }
-        let merge = self.merge_centi;
-        Some(
-            self.tips
-                .iter()
-                .zip(self.lanes.iter())
-                .any(|(tip, lane)| tip.map_or(lane.owns_hub(), |tip| tip >= merge)),
-        )
+        Some(self.tips.in_hub(&self.lanes))
     }
 
     /// Where `slot`'s tip is, 1/100 mm past its presence sensor, on hardware without a hub
@@ -366,7 +324,7 @@ impl<const N: usize> Unit<N> {
     /// comes in, or one pulled back out; a tail leaving forwards is a spool's end, not a tip).
     /// `None` on hardware with a hub sensor, and until such an edge since start.
     pub fn tip_centi(&self, slot: usize) -> Option<i32> {
-        self.tips.get(slot).copied().flatten()
+        self.tips.tip_centi(slot)
     }
 
     /// The printer reports filament at (or past) its sensor.
@@ -432,43 +390,5 @@ impl<const N: usize> Unit<N> {
     /// The first faulty sensor, if any.
     pub fn first_fault(&self) -> Option<SensorId> {
         Self::sensor_ids().find(|&id| self.sensor(id).is_some_and(|s| s.fault().is_some()))
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// `follow_tip` over steps of (moved, present, driven), from a tip at `tip`.
-    fn follow(mut tip: Option<i32>, steps: &[(i32, bool, Option<Direction>)]) -> Option<i32> {
-        let mut was_present = Some(true);
-        for &(moved, present, driven) in steps {
-            follow_tip(&mut tip, &mut was_present, moved, Some(present), driven);
-        }
-        tip
-    }
-
-    #[test]
-    fn only_an_edge_the_drive_makes_homes_the_tip() {
-        let back = Some(Direction::Reverse);
-        let fed = Some(Direction::Forward);
-        // Pulled back out past the sensor: the tip is there, then counted on.
-        assert_eq!(
-            follow(
-                Some(8_000),
-                &[(-50, true, back), (-30, false, back), (-20, false, back)]
-            ),
-            Some(-20)
-        );
-        // Fed in past it from behind: homed at the edge.
-        assert_eq!(
-            follow(None, &[(0, false, fed), (40, true, fed), (60, true, fed)]),
-            Some(60)
-        );
-        // The spool's end leaving the sensor while the printer pulls: the tip is where it was.
-        assert_eq!(follow(Some(45_000), &[(100, false, None)]), Some(45_100));
-        // A filament pushed in by hand, or a tail pulled back in: no tip is known.
-        assert_eq!(follow(Some(-2_000), &[(0, false, None), (0, true, None)]), None);
-        assert_eq!(follow(Some(45_000), &[(0, false, None), (-50, true, back)]), None);
     }
 }
