@@ -561,7 +561,8 @@ const fn filament_input(slot: usize) -> usize {
 
 /// Conversions in the ADC's DMA ring: 24 whole scans, about 5 ms of continuous conversion. A
 /// step reads the newest whole scan, which the DMA reaches again only a lap (5 ms) later; the
-/// DMA's half- and full-ring interrupts (embassy-stm32's ring sets them) come every 2.5 ms.
+/// DMA's half- and full-ring interrupts (embassy-stm32's ring sets them) come every 2.5 ms. (In
+/// the `g071-n20` build a lap is 3.3 ms, its interrupts 1.7 ms apart.)
 const ADC_RING: usize = 24 * ANALOG_INPUTS;
 
 /// The ADC's DMA ring, written only by the DMA (embassy-stm32's ring set the transfer up, then
@@ -575,7 +576,8 @@ static ADC_RING_BUFFER: AdcRing = AdcRing(UnsafeCell::new([0; ADC_RING]));
 
 /// The ADC: the nine Hall sensors converted over and over (continuous mode, a scan every 207 µs:
 /// 9 channels x 8 oversampled conversions of (79.5 + 12.5) / 32 MHz) into a DMA ring; a scan
-/// takes the newest whole one.
+/// takes the newest whole one. In the `g071-n20` build the six filament and hub sensors (a scan
+/// every 138 µs), and each lane's motion is its encoder timer's count, read with the scan.
 ///
 /// Why: a DMA `read` per step reconfigured the sequence and the DMA channel and woke the control
 /// task at its end, and the samples of one scan are what a step wants, whenever it runs. So the
@@ -866,15 +868,9 @@ fn init() -> super::Parts<G071> {
             parts.hub_cutter.degrade_adc(),
         ],
         LaneEncoders::new(
-            parts.slot0_encoder,
-            parts.slot0_encoder_a,
-            parts.slot0_encoder_b,
-            parts.slot1_encoder,
-            parts.slot1_encoder_a,
-            parts.slot1_encoder_b,
-            parts.slot2_encoder,
-            parts.slot2_encoder_a,
-            parts.slot2_encoder_b,
+            (parts.slot0_encoder, parts.slot0_encoder_a, parts.slot0_encoder_b),
+            (parts.slot1_encoder, parts.slot1_encoder_a, parts.slot1_encoder_b),
+            (parts.slot2_encoder, parts.slot2_encoder_a, parts.slot2_encoder_b),
         ),
     );
 

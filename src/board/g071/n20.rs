@@ -48,24 +48,20 @@ fn encoder<T: embassy_stm32::timer::GeneralInstance4Channel>(
     Qei::new(timer, channel_a, channel_b, config)
 }
 
+/// One lane's encoder: its timer and the pins of channels A and B.
+type EncoderParts<T, A, B> = (Peri<'static, T>, Peri<'static, A>, Peri<'static, B>);
+
 impl LaneEncoders {
     /// The three counters, started at 0.
-    #[allow(clippy::too_many_arguments)]
     pub fn new(
-        slot0_timer: Peri<'static, TIM2>,
-        slot0_a: Peri<'static, impl TimerPin<TIM2, Ch1>>,
-        slot0_b: Peri<'static, impl TimerPin<TIM2, Ch2>>,
-        slot1_timer: Peri<'static, TIM3>,
-        slot1_a: Peri<'static, impl TimerPin<TIM3, Ch1>>,
-        slot1_b: Peri<'static, impl TimerPin<TIM3, Ch2>>,
-        slot2_timer: Peri<'static, TIM1>,
-        slot2_a: Peri<'static, impl TimerPin<TIM1, Ch1>>,
-        slot2_b: Peri<'static, impl TimerPin<TIM1, Ch2>>,
+        slot0: EncoderParts<TIM2, impl TimerPin<TIM2, Ch1>, impl TimerPin<TIM2, Ch2>>,
+        slot1: EncoderParts<TIM3, impl TimerPin<TIM3, Ch1>, impl TimerPin<TIM3, Ch2>>,
+        slot2: EncoderParts<TIM1, impl TimerPin<TIM1, Ch1>, impl TimerPin<TIM1, Ch2>>,
     ) -> Self {
         LaneEncoders {
-            slot0: encoder(slot0_timer, slot0_a, slot0_b),
-            slot1: encoder(slot1_timer, slot1_a, slot1_b),
-            slot2: encoder(slot2_timer, slot2_a, slot2_b),
+            slot0: encoder(slot0.0, slot0.1, slot0.2),
+            slot1: encoder(slot1.0, slot1.1, slot1.2),
+            slot2: encoder(slot2.0, slot2.1, slot2.2),
         }
     }
 
