@@ -4,11 +4,12 @@
 # The one place the firmware build steps live: the Dockerfile RUNs this script and CI runs it, so
 # the image cannot drift from what CI checks.
 #
-#   scripts/build-firmware.sh [g071|pico] [OUT_DIR]     (default: g071, the NUCLEO-G071RB)
+#   scripts/build-firmware.sh [g071|g071-n20|pico] [OUT_DIR]     (default: g071, the NUCLEO-G071RB;
+#                                                             g071-n20: the same board, N20 encoder motors)
 #
 # Prints the path of the built ELF on stdout (cargo's progress goes to stderr). With OUT_DIR, also
 # copies it there as mmu-firmware-<board>.elf. Honours CARGO_TARGET_DIR and DEFMT_LOG (default:
-# info, as in .cargo/config.toml). Both boards build the one binary `mmu-firmware` (one main, the
+# info, as in .cargo/config.toml). Every board builds the one binary `mmu-firmware` (one main, the
 # board chosen by feature), so the ELF at the printed path is the last board built.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -18,8 +19,9 @@ out_dir="${2:-}"
 target=thumbv6m-none-eabi
 case "$board" in
     g071) alias=fw ;;
+    g071-n20) alias=fw-n20 ;;
     pico) alias=fw-pico ;;
-    *) echo "build-firmware: unknown board '$board' (g071 or pico)" >&2; exit 2 ;;
+    *) echo "build-firmware: unknown board '$board' (g071, g071-n20 or pico)" >&2; exit 2 ;;
 esac
 
 # rust-toolchain.toml asks for the thumb target; rustup installs it on first use, but say so
@@ -39,7 +41,7 @@ remap=""
 for index in "$cargo_home"/registry/src/*/ "$cargo_home"/git/checkouts/; do
     [ -d "$index" ] && remap="$remap\"--remap-path-prefix=$index=\","
 done
-# `cargo fw` / `cargo fw-pico` (.cargo/config.toml). --locked: exactly the versions in Cargo.lock.
+# `cargo fw` / `cargo fw-n20` / `cargo fw-pico` (.cargo/config.toml). --locked: exactly the versions in Cargo.lock.
 cargo "$alias" --locked --config "target.thumbv6m-none-eabi.rustflags=[${remap%,}]" >&2
 
 target_dir="${CARGO_TARGET_DIR:-target}"

@@ -6,7 +6,7 @@
 # only when a board's flash is over its bar or its static RAM plus stack over its chip's RAM.
 #
 #   scripts/firmware-size.sh              # both boards
-#   scripts/firmware-size.sh g071         # one board (g071 or pico)
+#   scripts/firmware-size.sh g071         # one board (g071, g071-n20 or pico)
 #   TOP=30 scripts/firmware-size.sh       # list more of the largest symbols
 #
 # flash      = every section loaded into flash: .vector_table + .text + .rodata + .data (its
@@ -49,6 +49,7 @@ report() {
     local board="$1" flash_bar ram_total vectors
     case "$board" in
         g071) flash_bar=98304; ram_total=36864; vectors=0x08000000; name="NUCLEO-G071RB (STM32G071RB, 128 KiB flash, 36 KiB RAM)" ;;
+        g071-n20) flash_bar=98304; ram_total=36864; vectors=0x08000000; name="NUCLEO-G071RB, N20 encoder motors (STM32G071RB, 128 KiB flash, 36 KiB RAM)" ;;
         pico) flash_bar=1048576; ram_total=270336; vectors=0x10000100; name="Raspberry Pi Pico (RP2040, 2 MiB flash, 264 KiB RAM)" ;;
         *) echo "firmware-size: unknown board '$board'" >&2; exit 2 ;;
     esac
@@ -115,7 +116,7 @@ report() {
         echo "firmware-size: FAIL: $board static RAM $ram B + stack $stack B is over the $ram_total B of RAM" >&2
         status=1
     fi
-    summary="$summary$(printf '\n  %-5s flash %6d B (%s), static RAM %6d B, stack (estimate) %6d B' \
+    summary="$summary$(printf '\n  %-8s flash %6d B (%s), static RAM %6d B, stack (estimate) %6d B' \
         "$board" "$flash" "$(kib "$flash")" "$ram" "$stack")"
     bars="$bars${bars:+; }$board flash <= $flash_bar B, static RAM + stack <= $ram_total B"
 }

@@ -1,6 +1,7 @@
 //! The board the firmware runs on, one module per board, selected by feature: `g071` (the
-//! reference board, a NUCLEO-G071RB with embassy-stm32, `cargo fw`) or `pico` (a Raspberry Pi
-//! Pico with embassy-rp, `cargo fw-pico`). Only these modules touch HAL types.
+//! reference board, a NUCLEO-G071RB with embassy-stm32, `cargo fw`; `g071-n20` is the same board
+//! with N20 encoder gear motors, `cargo fw-n20`) or `pico` (a Raspberry Pi Pico with embassy-rp,
+//! `cargo fw-pico`). Only these modules touch HAL types.
 //!
 //! Every board module implements [`Board`], the contract `main` and the tasks see a board
 //! through (its `SLOTS` beside it), and the feature's board is [`ThisBoard`]. What both boards
@@ -88,9 +89,9 @@ macro_rules! board_contract {
     };
 }
 
-#[cfg(feature = "g071")]
+#[cfg(feature = "_stm32g071")]
 mod g071;
-#[cfg(feature = "g071")]
+#[cfg(feature = "_stm32g071")]
 pub use g071::{G071 as ThisBoard, SLOTS};
 
 #[cfg(feature = "pico")]
@@ -170,7 +171,7 @@ pub struct Parts<B: Board + ?Sized> {
     pub crc: B::Crc,
 }
 
-/// An IN input of the unused bridge: not wired to the MCU.
+/// An IN (or PWM) input of the unused bridge: not wired to the MCU.
 pub struct NotConnected;
 
 impl embedded_hal::digital::ErrorType for NotConnected {
@@ -183,6 +184,23 @@ impl OutputPin for NotConnected {
     }
 
     fn set_high(&mut self) -> Result<(), Infallible> {
+        Ok(())
+    }
+}
+
+#[cfg(feature = "g071-n20")]
+impl embedded_hal::pwm::ErrorType for NotConnected {
+    type Error = Infallible;
+}
+
+/// The unused bridge's PWM input, where a board has no timer channel left for it: duty 0 always.
+#[cfg(feature = "g071-n20")]
+impl embedded_hal::pwm::SetDutyCycle for NotConnected {
+    fn max_duty_cycle(&self) -> u16 {
+        1
+    }
+
+    fn set_duty_cycle(&mut self, _duty: u16) -> Result<(), Infallible> {
         Ok(())
     }
 }

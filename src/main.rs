@@ -24,10 +24,14 @@
 #![no_std]
 #![no_main]
 
-#[cfg(not(any(feature = "g071", feature = "pico")))]
-compile_error!("choose a board: `cargo fw` (--features g071) or `cargo fw-pico` (--features pico)");
-#[cfg(all(feature = "g071", feature = "pico"))]
-compile_error!("the features g071 and pico are two boards: build one at a time");
+#[cfg(not(any(feature = "g071", feature = "g071-n20", feature = "pico")))]
+compile_error!(
+    "choose a board: `cargo fw` (--features g071), `cargo fw-n20` (--features g071-n20) or `cargo fw-pico` (--features pico)"
+);
+#[cfg(all(feature = "_stm32g071", feature = "pico"))]
+compile_error!("the features g071 (or g071-n20) and pico are two boards: build one at a time");
+#[cfg(all(feature = "g071", feature = "g071-n20"))]
+compile_error!("the features g071 and g071-n20 are two builds of one board: build one at a time");
 
 mod board;
 

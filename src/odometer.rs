@@ -78,6 +78,14 @@ impl Odometer {
                 self.sensor.measure(raw, Some(raw), now);
                 self.count_since_last(Some(raw), |from, to| i32::from(to.wrapping_sub(from) as i16))
             }
+            MotionSensor::Pulses { .. } => {
+                self.sensor.measure(raw, Some(raw), now);
+                let pulses = self.count_since_last(Some(raw), |from, to| i32::from(to.wrapping_sub(from)));
+                match counting {
+                    Direction::Forward => pulses,
+                    Direction::Reverse => -pulses,
+                }
+            }
             MotionSensor::Angle => {
                 let angle = (raw & ANGLE_FAULT == 0).then_some(raw % ANGLE_COUNTS);
                 self.sensor.measure(raw, angle, now);
@@ -238,6 +246,20 @@ mod tests {
         feed(&mut odometer, source, &creep, &mut now, 2356);
         assert_eq!(odometer.centi(), 1178 + 2356);
         assert!(odometer.marks() > 10);
+    }
+
+    #[test]
+    fn pulses_count_the_way_the_motor_was_driven_across_the_counters_wrap() {
+        let source = MotionSensor::Pulses { counts_per_rev: 700 };
+        let mut odometer = Odometer::NEW;
+        let mut now = Instant::ZERO;
+        // 700 pulses a turn of 23.56 mm, from just below the wrap, driven forward then back.
+        let forward: [u16; 8] = core::array::from_fn(|i| 65_400u16.wrapping_add(100 * i as u16));
+        feed(&mut odometer, source, &forward, &mut now, 2356);
+        assert_eq!(odometer.centi(), 2356);
+        let back = [forward[7].wrapping_add(350)];
+        odometer.sense(source, back[0], Direction::Reverse, EDGES, 2356, now);
+        assert_eq!(odometer.centi(), 2356 - 1178);
     }
 
     #[test]

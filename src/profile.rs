@@ -22,6 +22,13 @@ pub enum MotionSensor {
         /// Edges per turn of the output shaft (4 × pulses per channel × gear ratio).
         counts_per_rev: u16,
     },
+    /// One channel of pulses (an encoder wired with one channel, a slotted disc): the board
+    /// counts its edges up into a wrapping 16-bit count. It cannot tell the direction: the
+    /// pulses count the way the motor was last driven, as a Hall wave's revolutions do.
+    Pulses {
+        /// Edges per turn of the output shaft.
+        counts_per_rev: u16,
+    },
     /// A magnetic angle sensor (AS5600) on the drive gear: the sample is its 12-bit angle, with
     /// [`ANGLE_FAULT`] set while the magnet is missing, too weak or too strong, or the sensor
     /// does not answer.
@@ -35,7 +42,9 @@ impl MotionSensor {
     pub const fn counts_per_rev(self) -> u16 {
         match self {
             MotionSensor::HallWave => 1,
-            MotionSensor::Quadrature { counts_per_rev } => counts_per_rev,
+            MotionSensor::Quadrature { counts_per_rev } | MotionSensor::Pulses { counts_per_rev } => {
+                counts_per_rev
+            }
             MotionSensor::Angle => ANGLE_COUNTS,
         }
     }
@@ -85,13 +94,14 @@ pub struct Profile {
 
 impl Profile {
     /// The profile as register 0x8d shows it: bits 0-1 the motion sensor (0 a Hall wave, 1 a
-    /// quadrature encoder, 2 an angle sensor), bit 2 a digital presence input, bit 3 a tension
+    /// quadrature encoder, 2 an angle sensor, 3 one channel of pulses), bit 2 a digital presence input, bit 3 a tension
     /// sensor per lane, bit 4 a hub sensor.
     pub const fn code(&self) -> u16 {
         let motion = match self.motion {
             MotionSensor::HallWave => 0,
             MotionSensor::Quadrature { .. } => 1,
             MotionSensor::Angle => 2,
+            MotionSensor::Pulses { .. } => 3,
         };
         let digital = matches!(self.presence, PresenceInput::Digital) as u16;
         let lane_tension = matches!(self.tension, TensionAt::Lane) as u16;

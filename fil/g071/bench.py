@@ -21,21 +21,59 @@ import profile as profiling  # noqa: E402
 from chip import Chip  # noqa: E402
 from cpu import EmulationError  # noqa: E402
 
-# The protocol's sensor order (mmu_hal_port::Samples) -> the ADC channel the pin map
-# (src/board/g071/mod.rs) wires each to: slot0 hall PA0 IN0, slot0 filament PA1 IN1, slot1 hall
-# PA4 IN4, slot1 filament PB1 IN9, slot2 hall PB11 IN15, slot2 filament PB12 IN16, hub filament
-# PA6 IN6, hub tension PA7 IN7, hub cutter PB0 IN8.
-SENSOR_CHANNELS = (0, 1, 4, 9, 15, 16, 6, 7, 8)
-
 PORT = {c: i for i, c in enumerate("ABCDEF")}
-# Each slot's TB6612FNG inputs: (STBY pin, IN1 pin, IN2 pin, TIM3 channel and its pin).
-SLOTS = (
-    (("C", 2), ("B", 3), ("B", 5), (0, ("C", 6))),
-    (("C", 2), ("B", 4), ("B", 14), (1, ("C", 7))),
-    (("C", 3), ("C", 0), ("C", 1), (2, ("C", 8))),
-)
-TIM3_AF = 1  # PC6/PC7/PC8 AF1 = TIM3_CH1/2/3 (STM32G071 datasheet, alternate function table)
 BOARD, SLOT_COUNT = "g071", 3
+
+
+class Build:
+    """What one build of the image wires where (its pin map in src/board/g071/mod.rs): the
+    protocol's sensors (mmu_hal_port::Samples order) to ADC channels or, for a lane's motion in
+    the `g071-n20` build, to the timer counting its encoder; each slot's TB6612FNG inputs as
+    (STBY pin, IN1 pin, IN2 pin, (PWM timer, its channel, the pin and its AF number)).
+    `sensors`: per protocol value, ("adc", channel) or ("encoder", timer name)."""
+
+    def __init__(self, profile, time_driver, sensors, slots):
+        self.profile, self.time_driver, self.sensors, self.slots = profile, time_driver, sensors, slots
+
+    def sensor_max(self, index):
+        """The largest value the protocol's `index`-th sensor value may take: 12 bits for a level,
+        16 for an encoder count."""
+        return 0xFFFF if self.sensors[index][0] == "encoder" else 4095
+
+
+# The thesis build (`g071`): embassy-time on TIM2; slot0 hall PA0 IN0, slot0 filament PA1 IN1,
+# slot1 hall PA4 IN4, slot1 filament PB1 IN9, slot2 hall PB11 IN15, slot2 filament PB12 IN16, hub
+# filament PA6 IN6, hub tension PA7 IN7, hub cutter PB0 IN8; PWM PC6/PC7/PC8 AF1 = TIM3_CH1/2/3
+# (STM32G071 datasheet, alternate function tables).
+THESIS = Build(
+    "thesis", "TIM2",
+    tuple(("adc", c) for c in (0, 1, 4, 9, 15, 16, 6, 7, 8)),
+    ((("C", 2), ("B", 3), ("B", 5), ("tim3", 0, ("C", 6), 1)),
+     (("C", 2), ("B", 4), ("B", 14), ("tim3", 1, ("C", 7), 1)),
+     (("C", 3), ("C", 0), ("C", 1), ("tim3", 2, ("C", 8), 1))),
+)
+# The `g071-n20` build: embassy-time on TIM15; each lane's motion is its encoder count, on TIM2
+# (slot 0), TIM3 (slot 1), TIM1 (slot 2); the filament and hub sensors as above; PWM PA4 AF4
+# TIM14_CH1, PB8 AF2 TIM16_CH1, PB9 AF2 TIM17_CH1.
+N20 = Build(
+    "n20-quadrature", "TIM15",
+    (("encoder", "tim2"), ("adc", 1), ("encoder", "tim3"), ("adc", 9), ("encoder", "tim1"),
+     ("adc", 16), ("adc", 6), ("adc", 7), ("adc", 8)),
+    ((("C", 2), ("B", 3), ("B", 5), ("tim14", 0, ("A", 4), 4)),
+     (("C", 2), ("B", 4), ("B", 14), ("tim16", 0, ("B", 8), 2)),
+     (("C", 3), ("C", 0), ("C", 1), ("tim17", 0, ("B", 9), 2))),
+)
+
+
+def build_of(symbols):
+    """The build the image is: the one whose embassy-time timer has an interrupt handler of its
+    own (cortex-m-rt points every other vector at DefaultHandler)."""
+    default = symbols.get("DefaultHandler")
+    for build in (N20, THESIS):
+        handler = symbols.get(build.time_driver)
+        if handler is not None and handler != default:
+            return build
+    return THESIS
 
 
 # The firmware's count of control steps (src/tasks.rs): the load counts the milliseconds in which
@@ -59,6 +97,7 @@ class Bench:
             address, size = STORE
             segments = list(segments) + [(address, b"\x00" * size)]
         self.chip = Chip(segments)
+        self.build = build_of(self.symbols)
         self.rtt = open(rtt, "ab") if rtt else None
         self.rtt_block = self.symbols.get("_SEGGER_RTT")
         self.line_origin = 0    # cycle the current run of back-to-back characters started
@@ -79,7 +118,7 @@ class Bench:
         port, n = pin
         return self.chip.gpio[PORT[port]].output_level(n)
 
-    def pwm(self, channel, pin):
+    def pwm(self, timer, channel, pin, af):
         port, n = pin
         g = self.chip.gpio[PORT[port]]
         mode = g.mode(n)
@@ -87,18 +126,18 @@ class Bench:
             return 1000 * ((g.odr() >> n) & 1)
         if mode == 2:
             afr = g.regs.get(0x20 if n < 8 else 0x24, 0) >> (4 * (n % 8)) & 0xF
-            if afr == TIM3_AF:
-                return self.chip.tim3.duty_permille(channel)
+            if afr == af:
+                return getattr(self.chip, timer).duty_permille(channel)
         return 0
 
     def motors(self):
         out = []
-        for stby, in1, in2, (channel, pin) in SLOTS:
+        for stby, in1, in2, pwm in self.build.slots:
             if not self.chip.powered:
                 out.append("000:0")
                 continue
             out.append(f"{self.level(stby)}{self.level(in1)}{self.level(in2)}:"
-                       f"{self.pwm(channel, pin)}")
+                       f"{self.pwm(*pwm)}")
         return out
 
     def pump_rtt(self):
@@ -130,8 +169,11 @@ class Bench:
         chip = self.chip
         start = chip.time
         end = start + clock.us(us)
-        for level, channel in zip(levels, SENSOR_CHANNELS):
-            chip.sensor[channel] = level
+        for value, (kind, where) in zip(levels, self.build.sensors):
+            if kind == "adc":
+                chip.sensor[where] = value
+            else:
+                chip.set_encoder(where, value)
         if chip.powered:
             if self.line_origin + clock.char_time(self.line_count) <= start:
                 self.line_origin, self.line_count = start, 0
@@ -222,7 +264,7 @@ class Bench:
                 raise ValueError(f"step takes 11 arguments, got {len(words) - 1}")
             us = int(words[1])
             levels = [int(w) for w in words[2:11]]
-            if us < 0 or any(not 0 <= v <= 4095 for v in levels):
+            if us < 0 or any(not 0 <= v <= self.build.sensor_max(i) for i, v in enumerate(levels)):
                 raise ValueError("step: a value out of range")
             rx = b"" if words[11] == "-" else bytes.fromhex(words[11])
             return self.step(us, levels, rx)
@@ -252,7 +294,7 @@ def main():
     except (OSError, ValueError, EmulationError) as e:
         print(f"error {e}", flush=True)
         return 1
-    print(f"ready {BOARD} {SLOT_COUNT}", file=out, flush=True)
+    print(f"ready {BOARD} {SLOT_COUNT} {bench.build.profile}", file=out, flush=True)
     for line in sys.stdin:
         if line.strip() == "quit":
             print(bench.load_summary(), file=sys.stderr, flush=True)

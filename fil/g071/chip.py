@@ -80,6 +80,7 @@ class Chip:
         self.powered = True
         self.hung = False
         self.sensor = {}           # ADC channel -> level, kept across resets
+        self.encoder = {}          # encoder timer's name -> the lane's count, kept across resets
         self.flash = None
         self._build(csr_flags=(1 << CSR_FLAGS["power"]) | (1 << CSR_FLAGS["pin"]))
         self.cpu.reset()
@@ -97,6 +98,14 @@ class Chip:
         self.dmamux = DmaMux(self, self.dma)
         self.tim2 = Timer(self, irq=15, bits=32)
         self.tim3 = Timer(self, irq=16)
+        # The `g071-n20` build's: TIM1 (an encoder), TIM14/16/17 (PWM), TIM15 (embassy-time).
+        self.tim1 = Timer(self)
+        self.tim14 = Timer(self)
+        self.tim15 = Timer(self, irq=20)
+        self.tim16 = Timer(self)
+        self.tim17 = Timer(self)
+        for name, count in self.encoder.items():
+            getattr(self, name).encoder_count = count
         self.usart1 = Usart(self)
         self.adc = Adc(self)
         self.adc.levels = self.sensor
@@ -104,19 +113,26 @@ class Chip:
         self.crc = Crc(self)
         self.gpio = [Gpio(self, port) for port in range(6)]
         self.blocks = {
-            0x4000_0000: self.tim2, 0x4000_0400: self.tim3, 0x4000_3000: self.iwdg,
+            0x4000_0000: self.tim2, 0x4000_0400: self.tim3, 0x4000_2000: self.tim14,
+            0x4001_2C00: self.tim1, 0x4001_4000: self.tim15, 0x4001_4400: self.tim16,
+            0x4001_4800: self.tim17, 0x4000_3000: self.iwdg,
             0x4000_7000: self.pwr, 0x4001_2400: self.adc, 0x4001_3800: self.usart1,
             0x4002_0000: self.dma, 0x4002_0800: self.dmamux, 0x4002_1000: self.rcc,
             0x4002_2000: self.flash, 0x4002_3000: self.crc,
         }
         for port, g in enumerate(self.gpio):
             self.blocks[0x5000_0000 + 0x400 * port] = g
-        self.timed = [self.tim2, self.tim3, self.usart1, self.adc, self.iwdg, self.flash]
-        self.irq_sources = [self.tim2, self.tim3, self.usart1, self.adc, self.dma, self.flash]
+        self.timed = [self.tim2, self.tim3, self.tim15, self.usart1, self.adc, self.iwdg, self.flash]
+        self.irq_sources = [self.tim2, self.tim3, self.tim15, self.usart1, self.adc, self.dma, self.flash]
         self.others = {}  # plain storage for every other register block touched
         self.routes = {}
         self.stall_until = None
         self.reset_request = None
+
+    def set_encoder(self, timer, count):
+        """The lane's encoder count at the inputs of `timer` (a name: "tim1", "tim2", "tim3")."""
+        self.encoder[timer] = count
+        getattr(self, timer).encoder_count = count
 
     def _block_at(self, address):
         if address >= 0xE000_E000:

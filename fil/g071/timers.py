@@ -1,5 +1,8 @@
-"""General-purpose timers (TIM2 at 0x40000000: embassy-time's driver; TIM3 at 0x40000400: the
-motors' PWM), counting virtual time.
+"""The timers, counting virtual time: in the `g071` build TIM2 (0x40000000) is embassy-time's
+driver and TIM3 (0x40000400) the motors' PWM; in the `g071-n20` build TIM15 (0x40014000) is
+embassy-time's driver, TIM14/TIM16/TIM17 (0x40002000/0x40014400/0x40014800) the motors' PWM and
+TIM2, TIM3, TIM1 (0x40012C00) count the lanes' encoders. The registers this models sit at the
+same offsets in every one of them (RM0444 §20-§23: TIM1, TIM2/3, TIM14, TIM15/16/17).
 
 RM0444 §22.4 (TIM2/TIM3 registers): CR1 0x00 (CEN 0, URS 2, ARPE 7), DIER 0x0C (UIE 0, CCxIE
 1-4), SR 0x10 (UIF 0, CCxIF 1-4; rc_w0: writing 0 clears, 1 leaves), EGR 0x14 (UG 0: the counter
@@ -10,7 +13,11 @@ Counting (§22.3.2, upcounting): the counter clock is the timer kernel clock (64
 the counter counts 0..ARR and overflows to 0, setting UIF (the update event). Output compare
 (§22.3.10): CCxIF is set when the counter equals CCRx.
 The counter is computed from virtual time, never ticked: CNT = (start + ticks) mod (ARR + 1).
-Left out: down/center-aligned counting, one-pulse mode, slave modes, input capture, DMA requests,
+Encoder mode (§22.3.19; SMCR 0x08, SMS [16, 2:0] = 001, 010 or 011): the counter is the lane's
+encoder count the bench sets (`encoder_count`, from the simulator's motion sample), shifted by
+what the firmware last wrote to CNT; it counts only while CEN is set.
+Left out: down/center-aligned counting, one-pulse mode, the other slave modes, input capture
+filters and prescalers (the bench gives the count, not the edges), DMA requests,
 the ARR preload (ARPE: ARR applies at once), the prescaler's preload only at UG (the
 time driver writes PSC then UG, which this does).
 PWM (§22.3.11): the duty of channel x is CCRx / (ARR + 1) in PWM mode 1 (OCxM 110), its complement
@@ -19,8 +26,9 @@ in PWM mode 2 (111), 100 % forced active (101), 0 forced inactive (100); 0 with 
 
 from regs import Block
 
-CR1, DIER, SR, EGR, CCMR1, CCMR2, CCER, CNT, PSC, ARR = (0x00, 0x0C, 0x10, 0x14, 0x18, 0x1C, 0x20,
-                                                         0x24, 0x28, 0x2C)
+CR1, SMCR, DIER, SR, EGR, CCMR1, CCMR2, CCER, CNT, PSC, ARR = (0x00, 0x08, 0x0C, 0x10, 0x14, 0x18,
+                                                               0x1C, 0x20, 0x24, 0x28, 0x2C)
+ENCODER_MODES = (1, 2, 3)  # SMS: encoder mode 1 (TI1), 2 (TI2), 3 (both)
 CCR = (0x34, 0x38, 0x3C, 0x40)
 
 
@@ -40,6 +48,8 @@ class Timer(Block):
         self._due = None      # cached: tick of the next flag to set (None: none / stopped)
         self._next = None     # cached: cycle of the next flag with its interrupt enabled
         self._dirty = True
+        self.encoder_count = 0  # the lane's count the bench sets, used in encoder mode
+        self.encoder_shift = 0  # CNT written by the firmware less the count at that moment
 
     # ---- counting ----------------------------------------------------------------------------
     def running(self):
@@ -48,9 +58,15 @@ class Timer(Block):
     def period(self):
         return (self.regs[ARR] & self.top) + 1
 
+    def encoder_mode(self):
+        smcr = self.regs.get(SMCR, 0)
+        return ((smcr & 7) | ((smcr >> 13) & 8)) in ENCODER_MODES
+
     def counter(self):
         if not self.regs.get(CR1, 0) & 1:
             return self.start_cnt
+        if self.encoder_mode():
+            return (self.encoder_count + self.encoder_shift) % self.period()
         ticks = (self.now - self.start_time) // (self.psc + 1)
         return (self.start_cnt + ticks) % ((self.regs[ARR] & self.top) + 1)
 
@@ -145,6 +161,8 @@ class Timer(Block):
             super().write_reg(offset, value, mask)
             if was != self.running():
                 self.rebase(cnt)
+                if self.encoder_mode():
+                    self.encoder_shift = cnt - self.encoder_count
         elif offset == SR:
             # rc_w0
             self.regs[SR] = self.regs.get(SR, 0) & (value | ~mask)
@@ -157,6 +175,7 @@ class Timer(Block):
         elif offset == CNT:
             super().write_reg(offset, value, mask)
             self.rebase(self.regs[CNT] & self.top)
+            self.encoder_shift = (self.regs[CNT] & self.top) - self.encoder_count
         elif offset == ARR:
             cnt = self.counter()
             super().write_reg(offset, value, mask)

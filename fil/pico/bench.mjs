@@ -85,7 +85,7 @@ async function main(argv) {
     out(`error ${e.message}`);
     process.exit(1);
   }
-  out('ready pico 3');
+  out('ready pico 3 thesis');
   const lines = createInterface({ input: process.stdin, crlfDelay: Infinity });
   for await (const line of lines) {
     if (line.trim() === '') continue;

@@ -1,8 +1,9 @@
 //! `mmu fil`: the firmware-in-the-loop scenarios on a firmware image.
 //!
-//! The image built by `cargo fw` / `cargo fw-pico` runs unchanged on its board's emulated chip
-//! (the benches in `fil/`), wired to the simulated unit and driven by the simulated printer; the
-//! scenarios are the ones the host-built logic passes in `cargo test`
+//! The image built by `cargo fw` / `cargo fw-n20` / `cargo fw-pico` runs unchanged on its board's
+//! emulated chip (the benches in `fil/`), wired to the simulated unit and driven by the simulated
+//! printer; the simulated lanes sense as the image's hardware profile says (its bench names it).
+//! The scenarios are the ones the host-built logic passes in `cargo test`
 //! ([`mmu_sim::scenarios`]). Boards run side by side, one thread each. One line per scenario,
 //! then a summary line per board and its real-time contract: the busiest millisecond of the
 //! control loop within [`BUSIEST_PERCENT`] of the period (on the Pico not counting those that
@@ -37,7 +38,8 @@ pub struct FilArgs {
     #[arg(long = "board", value_name = "BOARD", value_parser = parse_board)]
     pub boards: Vec<Board>,
     /// The firmware image (ELF), with one --board; by default `dist/mmu-firmware-<BOARD>.elf`,
-    /// where `scripts/build-firmware.sh <BOARD> dist` puts it.
+    /// where `scripts/build-firmware.sh <BOARD> dist` puts it. The G071's N20 encoder build runs
+    /// as `--board g071 --image dist/mmu-firmware-g071-n20.elf`.
     #[arg(long, value_name = "ELF")]
     pub image: Option<PathBuf>,
     /// Run only the scenarios whose name contains this text.
@@ -167,6 +169,9 @@ fn run_board(board: Board, image: &Path, fil_dir: &Path, log: &Path, only: Optio
             ));
         }
         unit.report_wear(Arc::clone(&wear));
+        // The simulated lanes sense as the image's build does (its motion samples, its distance
+        // per turn).
+        let options = options.on_hardware(unit.profile());
         Ok(Sim::with_unit(options, Box::new(unit)))
     };
     let started = Instant::now();

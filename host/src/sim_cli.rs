@@ -157,6 +157,13 @@ pub fn run(args: &SimArgs) -> Result<(), Box<dyn Error>> {
                     unit.slots()
                 )));
             }
+            if unit.profile() != args.hardware {
+                let built_for = unit.profile().name;
+                return Err(usage(format!(
+                    "the image is built for the {built_for} hardware, not {}: --hardware {built_for}",
+                    args.hardware.name
+                )));
+            }
             Sim::with_unit(options, Box::new(unit))
         }
         _ => Sim::new(options)?,

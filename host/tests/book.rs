@@ -355,6 +355,10 @@ const COMMANDS: &[(&str, Check)] = &[
     ),
     ("cargo bench -p mmu-sim --bench toolchange", Check::InCi),
     (
+        "bash scripts/soak-matrix.sh",
+        Check::NotRun("about 20 minutes; sim/tests/soak.rs runs one seed of every combination in CI"),
+    ),
+    (
         "cargo install cargo-fuzz",
         Check::NotRun("installs a tool; needs a nightly toolchain to use"),
     ),

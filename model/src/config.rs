@@ -11,6 +11,12 @@ pub enum LaneMotionSensor {
         /// Counts per revolution.
         counts_per_rev: u16,
     },
+    /// One channel of pulses: the sample is the wrapping count of its edges, `counts_per_rev` a
+    /// revolution, counting up whichever way the motor turns.
+    Pulses {
+        /// Counts per revolution.
+        counts_per_rev: u16,
+    },
     /// An angle sensor: the sample is the 12-bit angle of the revolution, or the fault flag
     /// ([`mmu_hal_port::ANGLE_FAULT`]) while disconnected.
     Angle,

@@ -167,6 +167,8 @@ struct Slot {
     motor_speed: f64,
     /// Motor revolutions since start (signed).
     motor_revs: f64,
+    /// Motor revolutions since start, either way (what one channel of pulses counts).
+    turned_revs: f64,
     /// Start phase of the Hall magnet, revolutions.
     hall_phase: f64,
     /// Cumulative filament motion at the drive gear side, mm (the reference of `jam_limit`).
@@ -196,12 +198,14 @@ impl Slot {
     fn spin_free(&mut self, speed: f64, p: &Params) {
         self.motor_speed = speed;
         self.motor_revs += speed * DT / p.mm_per_rev;
+        self.turned_revs += (speed * DT / p.mm_per_rev).abs();
     }
 
     /// The motor surface moves `d_m` mm in this sub-step.
     fn turn(&mut self, d_m: f64, p: &Params) {
         self.motor_speed = d_m / DT;
         self.motor_revs += d_m / p.mm_per_rev;
+        self.turned_revs += (d_m / p.mm_per_rev).abs();
     }
 
     /// Apply a spool runout: the tail moves just past the slot sensor.
@@ -301,6 +305,7 @@ impl Model {
                 buffer: 0.0,
                 motor_speed: 0.0,
                 motor_revs: 0.0,
+                turned_revs: 0.0,
                 hall_phase: rng.uniform(),
                 rear_travel: 0.0,
                 jam_limit: None,
@@ -620,6 +625,13 @@ impl Model {
             LaneMotionSensor::Quadrature { counts_per_rev } => match self.disconnected(sensor) {
                 Some(_) => 0,
                 None => ((turns * f64::from(counts_per_rev)).floor() as i64).rem_euclid(65_536) as u16,
+            },
+            // Edges of one channel count up whichever way it turns: the distance turned.
+            LaneMotionSensor::Pulses { counts_per_rev } => match self.disconnected(sensor) {
+                Some(_) => 0,
+                None => {
+                    ((s.turned_revs * f64::from(counts_per_rev)).floor() as i64).rem_euclid(65_536) as u16
+                }
             },
             LaneMotionSensor::Angle => match self.disconnected(sensor) {
                 Some(_) => mmu_hal_port::ANGLE_FAULT,

@@ -14,6 +14,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, ChildStdin, ChildStdout, Command, Stdio};
 use std::sync::{Arc, Mutex};
 
+use mmu_firmware::profile::{self, Profile};
 use mmu_firmware::runner::Status;
 use mmu_firmware::{BoardAction, Config, Direction, Duty, Instant, MotorCommand};
 use mmu_model::Model;
@@ -98,6 +99,8 @@ pub struct FirmwareUnit {
     to_bench: ChildStdin,
     from_bench: BufReader<ChildStdout>,
     slots: usize,
+    /// What senses each lane on the image's build, as its bench's `ready` line names it.
+    profile: &'static Profile,
     config: Config,
     motors: Vec<MotorCommand>,
     wire: WireWatch,
@@ -116,7 +119,8 @@ pub struct FirmwareUnit {
 impl FirmwareUnit {
     /// Start `board`'s bench (from `fil_dir`) on `image` and wait for it to be ready; what the
     /// bench logs goes to `log`. `config` is what the image was built with (the defaults, unless
-    /// the build changed them).
+    /// the build changed them), but for the distance per turn of the sensed shaft, which is the
+    /// image's profile's (`Config::for_profile`, as the firmware's `main` takes it).
     pub fn start(
         board: Board,
         image: &Path,
@@ -140,6 +144,7 @@ impl FirmwareUnit {
             to_bench,
             from_bench: BufReader::new(from_bench),
             slots: 0,
+            profile: &profile::THESIS,
             config,
             motors: Vec::new(),
             wire: WireWatch::default(),
@@ -153,11 +158,14 @@ impl FirmwareUnit {
         };
         let ready = unit.read_line()?;
         match ready.split_whitespace().collect::<Vec<_>>()[..] {
-            ["ready", name, slots] if name == board.name() => {
+            ["ready", name, slots, hardware] if name == board.name() => {
                 unit.slots = slots.parse().map_err(|_| format!("bench says {ready:?}"))?;
+                unit.profile = profile::by_name(hardware)
+                    .ok_or_else(|| format!("the {} bench names no known profile: {ready:?}", board.name()))?;
             }
             _ => return Err(format!("the {} bench says {ready:?}, not `ready`", board.name())),
         }
+        unit.config.mm_per_rev_centi = unit.profile.mm_per_rev_centi;
         unit.motors = vec![MotorCommand::Coast; unit.slots];
         Ok(unit)
     }
@@ -170,6 +178,12 @@ impl FirmwareUnit {
     /// Slots of the board the image runs on.
     pub fn slots(&self) -> usize {
         self.slots
+    }
+
+    /// What senses each lane on the image's build (the simulated unit's sensors must read as it
+    /// says: [`crate::SimOptions::on_hardware`]).
+    pub fn profile(&self) -> &'static Profile {
+        self.profile
     }
 
     /// Chip resets since the bench started (watchdog, reset requests, power-ons).
@@ -340,8 +354,9 @@ impl UnitLogic for FirmwareUnit {
     }
 }
 
-/// The nine sensor levels of a step in the protocol's order (`mmu_hal_port::Samples`: each
-/// slot's motor Hall and filament sensor, then the hub's filament, tension and cutter sensor).
+/// The nine sensor values of a step in the protocol's order (`mmu_hal_port::Samples`: each
+/// slot's motion sample and filament sensor, then the hub's filament, tension and cutter sensor).
+/// A lane's motion sample is what its profile's sensor reads: a Hall level, or an encoder count.
 fn sensor_levels(model: &mut Model, slots: usize) -> Vec<u16> {
     let mut levels = Vec::with_capacity(2 * slots + 3);
     for slot in 0..slots {

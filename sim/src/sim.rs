@@ -86,6 +86,7 @@ pub fn model_for(profile: &Profile, model: &ModelConfig) -> ModelConfig {
     let motion_sensor = match profile.motion {
         MotionSensor::HallWave => LaneMotionSensor::HallWave,
         MotionSensor::Quadrature { counts_per_rev } => LaneMotionSensor::Quadrature { counts_per_rev },
+        MotionSensor::Pulses { counts_per_rev } => LaneMotionSensor::Pulses { counts_per_rev },
         MotionSensor::Angle => LaneMotionSensor::Angle,
     };
     let mm_per_rev = match profile.motion {

@@ -28,3 +28,18 @@ fn every_scenario_passes_on_lanes_of_n20_encoder_motors() {
 fn every_scenario_passes_on_the_bmcu_c_without_a_hub_sensor() {
     every_scenario_passes_on(&profile::BMCU_C);
 }
+
+/// Lanes of N20 motors with one encoder channel wired: pulses that cannot tell the direction,
+/// counted the way the motor was last driven.
+static N20_ONE_CHANNEL: Profile = Profile {
+    name: "n20-one-channel",
+    motion: profile::MotionSensor::Pulses {
+        counts_per_rev: 2 * 7 * 100,
+    },
+    ..profile::N20_QUADRATURE
+};
+
+#[test]
+fn every_scenario_passes_on_lanes_counting_one_encoder_channel() {
+    every_scenario_passes_on(&N20_ONE_CHANNEL);
+}

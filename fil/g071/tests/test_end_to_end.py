@@ -63,7 +63,7 @@ class BenchProcess:
 class EndToEndTest(unittest.TestCase):
     def setUp(self):
         self.bench = BenchProcess()
-        self.assertEqual(self.bench.ready, "ready g071 3")
+        self.assertRegex(self.bench.ready, r"^ready g071 3 (thesis|n20-quadrature)$")
 
     def tearDown(self):
         self.assertEqual(self.bench.close(), 0)
@@ -107,7 +107,7 @@ class EndToEndTest(unittest.TestCase):
 class ProtocolTest(unittest.TestCase):
     def test_bad_request_is_an_error_with_status_1(self):
         bench = BenchProcess()
-        self.assertEqual(bench.ready, "ready g071 3")
+        self.assertRegex(bench.ready, r"^ready g071 3 (thesis|n20-quadrature)$")
         self.assertTrue(bench.ask("step 1000 1 2 3").startswith("error "))
         self.assertEqual(bench.proc.wait(timeout=30), 1)
         bench.proc.stdout.close()

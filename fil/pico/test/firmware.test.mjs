@@ -46,7 +46,7 @@ async function idle(bench, ms) {
 
 test('boots and answers S0*c6 with S0 A... within 200 ms', { skip }, async (t) => {
   const bench = start(t);
-  assert.equal(await bench.line(), 'ready pico 3');
+  assert.equal(await bench.line(), 'ready pico 3 thesis');
   const { ms, tx, last } = await exchange(bench, request('S', 0), '\n', 200);
   assert.match(tx, /^S0 A[0-9a-f]+\*[0-9a-f]+\n$/, 'the answer and nothing else');
   assert.equal(last.resets, 0);
@@ -121,7 +121,7 @@ test('--rtt FILE receives the image\'s defmt frames (RTT up channel 0)', { skip 
   const file = join(mkdtempSync(join(tmpdir(), 'fil-pico-rtt-')), 'rtt.bin');
   const bench = new Driver(IMAGE, ['--rtt', file]);
   t.after(() => bench.child.kill());
-  assert.equal(await bench.line(), 'ready pico 3');
+  assert.equal(await bench.line(), 'ready pico 3 thesis');
   await idle(bench, 5);
   const bytes = readFileSync(file);
   // defmt-rtt's frames: rzCOBS-encoded, each ended by a 0 byte; the boot logs two.

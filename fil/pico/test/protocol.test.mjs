@@ -14,7 +14,7 @@ writeFileSync(image, tinyElf([B_SELF]));
 
 test('ready, step, power, hang, quit', async () => {
   const bench = new Driver(image);
-  assert.equal(await bench.line(), 'ready pico 3');
+  assert.equal(await bench.line(), 'ready pico 3 thesis');
   assert.equal(await bench.ask('step 1000 0 0 0 0 0 0 0 0 4095 -'), 'ok 000:0 000:0 000:0 - 0 0 0');
   assert.equal(await bench.ask('step 1000 1 2 3 4 5 6 7 8 9 53300a'), 'ok 000:0 000:0 000:0 - 0 0 0');
   assert.equal(await bench.ask('power off'), 'ok');
@@ -27,7 +27,7 @@ test('ready, step, power, hang, quit', async () => {
 
 test('end of input exits 0', async () => {
   const bench = new Driver(image);
-  assert.equal(await bench.line(), 'ready pico 3');
+  assert.equal(await bench.line(), 'ready pico 3 thesis');
   bench.child.stdin.end();
   assert.equal(await bench.exit, 0);
 });
@@ -43,7 +43,7 @@ for (const bad of [
 ]) {
   test(`'${bad}' is answered error and the bench exits 1`, async () => {
     const bench = new Driver(image);
-    assert.equal(await bench.line(), 'ready pico 3');
+    assert.equal(await bench.line(), 'ready pico 3 thesis');
     assert.match(await bench.ask(bad), /^error \S/);
     assert.equal(await bench.exit, 1);
   });
@@ -60,7 +60,7 @@ test('an instruction at an unmapped address is an error of the bench', async () 
   // ldr r0, [pc, #4]; ldr r0, [r0]; b .; b .; .word 0x30000000 (nothing is mapped there)
   writeFileSync(unmapped, tinyElf([0x4801, 0x6800, B_SELF, B_SELF, 0x0000, 0x3000]));
   const bench = new Driver(unmapped);
-  assert.equal(await bench.line(), 'ready pico 3');
+  assert.equal(await bench.line(), 'ready pico 3 thesis');
   assert.match(await bench.ask('step 1000 0 0 0 0 0 0 0 0 0 -'), /^error .*invalid memory address/);
   assert.equal(await bench.exit, 1);
 });

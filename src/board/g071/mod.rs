@@ -5,15 +5,23 @@
 //! (`uart_ring`), the blocking flash driver under the store, `IndependentWatchdog`, the CRC unit,
 //! the button on EXTI, and embassy-time's driver on TIM2.
 //!
-//! The `pin_map!` table below is the single source of truth for pins, timers, DMA channels and
-//! the UART: the book's wiring table mirrors it (`scripts/check-pinmap.sh` compares the two), the
-//! emergency stop derives its pins from it, and the sensor scan order is computed from the
-//! channels it names. Register code is left where the HAL has no driver: the emergency stop
-//! (raw GPIO writes, usable in the fault handler), the reset flags and the flash's ECC register;
-//! and where its drivers cost too much on the M0+, each in one place: the ADC ring's and the
-//! UART ring's positions read from the DMA (`Sampler::latest`, `uart_ring`), USART1's receiver
-//! and its error flags (`uart_ring`), and USART1's interrupt enabled (`init`).
+//! With the feature `g071-n20` the same board drives N20 encoder gear motors (profile
+//! `n20-quadrature`): TIM1, TIM2 and TIM3 count the lanes' encoders, the motor PWM moves to
+//! TIM14, TIM16 and TIM17, embassy-time to TIM15, and the ADC converts the six slot filament and
+//! hub sensors only (`n20`).
+//!
+//! The `pin_map!` table below (one per build) is the single source of truth for pins, timers,
+//! DMA channels and the UART: the book's wiring tables mirror them (`scripts/check-pinmap.sh`
+//! compares them), the emergency stop derives its pins from it, and the sensor scan order is
+//! computed from the channels it names. Register code is left where the HAL has no driver: the
+//! emergency stop (raw GPIO writes, usable in the fault handler), the reset flags, the flash's
+//! ECC register and (`g071-n20`) PWM on a one-channel timer (`n20`); and where its drivers
+//! cost too much on the M0+, each in one place: the ADC ring's and the UART ring's positions
+//! read from the DMA (`Sampler::latest`, `uart_ring`), USART1's receiver and its error flags
+//! (`uart_ring`), and USART1's interrupt enabled (`init`).
 
+#[cfg(feature = "g071-n20")]
+mod n20;
 mod uart_ring;
 
 use core::cell::UnsafeCell;
@@ -23,12 +31,20 @@ use core::sync::atomic::{AtomicBool, Ordering};
 use embassy_stm32::adc::{self, Adc, AdcChannel as _, AdcConfig, AnyAdcChannel, Averaging, SampleTime};
 use embassy_stm32::exti::{self, ExtiInput};
 use embassy_stm32::flash::{self, Blocking, Flash};
-use embassy_stm32::gpio::{AnyPin, Level, Output, OutputType, Pin, Pull, Speed};
+#[cfg(not(feature = "g071-n20"))]
+use embassy_stm32::gpio::OutputType;
+use embassy_stm32::gpio::{AnyPin, Level, Output, Pin, Pull, Speed};
 use embassy_stm32::interrupt::InterruptExt as _;
-use embassy_stm32::peripherals::{self, ADC1, DMA1_CH1, TIM3};
+#[cfg(not(feature = "g071-n20"))]
+use embassy_stm32::peripherals::TIM3;
+use embassy_stm32::peripherals::{self, ADC1, DMA1_CH1};
+#[cfg(feature = "g071-n20")]
+use embassy_stm32::peripherals::{TIM14, TIM16, TIM17};
 use embassy_stm32::rcc::{self, Pll, PllMul, PllPreDiv, PllRDiv, PllSource, Sysclk};
 use embassy_stm32::time::khz;
+#[cfg(not(feature = "g071-n20"))]
 use embassy_stm32::timer::low_level::CountingMode;
+#[cfg(not(feature = "g071-n20"))]
 use embassy_stm32::timer::simple_pwm::{PwmPin, SimplePwm, SimplePwmChannel};
 use embassy_stm32::usart::{self, UartTx};
 use embassy_stm32::wdg::IndependentWatchdog;
@@ -39,12 +55,18 @@ use mmu_hal_port::tb6612::Tb6612;
 use mmu_hal_port::{HubSamples, Samples, SensorScan, SlotSamples};
 
 use super::{Bridges, NotConnected};
+#[cfg(feature = "g071-n20")]
+use n20::{LaneEncoders, SingleChannelPwm};
 use uart_ring::G071Ring;
 
 /// The board, as the boot log names it.
 pub const NAME: &str = "NUCLEO-G071RB";
 /// The thesis build's sensors: an analog Hall per motor, the hub's sensors.
+#[cfg(not(feature = "g071-n20"))]
 pub const PROFILE: mmu_firmware::profile::Profile = mmu_firmware::profile::THESIS;
+/// A quadrature encoder per motor (N20 gear motors), the hub's sensors as in the thesis build.
+#[cfg(feature = "g071-n20")]
+pub const PROFILE: mmu_firmware::profile::Profile = mmu_firmware::profile::N20_QUADRATURE;
 /// Filament slots on this board.
 pub const SLOTS: usize = 3;
 /// PWM carrier of the motor bridges: above hearing, well below the TB6612FNG's 100 kHz limit.
@@ -79,6 +101,7 @@ bind_interrupts!(struct Irqs {
 // a reserved bit on USART3. A 5 V printer port (MK3S Einsy) drives the unit's RX through a level
 // shifter or a divider (the book's wiring page), whatever the pin's tolerance. ADC pins are NOT
 // 5 V tolerant (analog pins of the G0 are 3.6 V tolerant): power the Hall sensors from 3.3 V.
+#[cfg(not(feature = "g071-n20"))]
 pin_map! {
     hal embassy_stm32;
     stop StopPins = StopPins::of;
@@ -122,6 +145,75 @@ pin_map! {
         button:          PC13, "GPIO in",    "B1 (on board)", "blue user button, active low: Middle",   -;
     }
 }
+
+// The `g071-n20` build: the thesis map with the three motor Hall inputs gone and an encoder per
+// lane in their place. Only TIM1, TIM2 and TIM3 have encoder mode, so each counts one lane
+// (channels 1 and 2: encoder A and B) and the PWM moves to the one-channel timers TIM14, TIM16 and
+// TIM17; embassy-time runs on TIM15, which needs no pin. Pins and alternate functions as the
+// STM32G071RB datasheet's AF tables give them (embassy-stm32's pin traits check the encoder pins at
+// compile time; the PWM pins' AF numbers are in `PWM_ALTERNATE_FUNCTIONS`): TIM2_CH1 PA0 AF2, TIM2_CH2 PC5 AF2,
+// TIM3_CH1 PC6 AF1, TIM3_CH2 PC7 AF1, TIM1_CH1 PC8 AF2, TIM1_CH2 PC9 AF2, TIM14_CH1 PA4 AF4,
+// TIM16_CH1 PB8 AF2, TIM17_CH1 PB9 AF2. The other timer pins of TIM1-TIM3 are taken (the printer
+// UART, the analog inputs, the bridges' IN pins), on the ST-LINK VCP (PA2/PA3) or USB-C PD
+// (PA8-PA10, PB15). Power the encoders from 3.3 V: the inputs then never see more than VDD,
+// whatever their pins' 5 V tolerance (an N20 magnetic encoder runs from 3.3 V to 5 V).
+#[cfg(feature = "g071-n20")]
+pin_map! {
+    hal embassy_stm32;
+    stop StopPins = StopPins::of;
+    peripherals {
+        slot0_pwm_timer: TIM14, "Slot 0 motor PWM, 20 kHz, channel 1 (TIM15 is embassy-time's driver)";
+        slot1_pwm_timer: TIM16, "Slot 1 motor PWM, 20 kHz, channel 1";
+        slot2_pwm_timer: TIM17, "Slot 2 motor PWM, 20 kHz, channel 1";
+        slot0_encoder: TIM2, "Slot 0 motor encoder, encoder mode 3 (every edge of A and B)";
+        slot1_encoder: TIM3, "Slot 1 motor encoder, encoder mode 3";
+        slot2_encoder: TIM1, "Slot 2 motor encoder, encoder mode 3";
+        adc: ADC1, "The six slot filament and hub sensors, scanned continuously (a scan about every 140 µs)";
+        adc_dma: DMA1_CH1, "The ADC scan's DMA channel";
+        printer_uart: USART1, "Printer MMU port, 115200 8N1: a USART with FIFO (USART2 stays on the ST-LINK VCP)";
+        printer_rx_dma: DMA1_CH2, "The printer UART's receive ring";
+        printer_tx_dma: DMA1_CH3, "The printer UART's transmit DMA";
+        button_exti: EXTI13, "The button's edge interrupt";
+        watchdog: IWDG, "Independent watchdog, fed by the control task";
+        flash: FLASH, "Internal flash: the persisted state in its last 16 pages (STORE_RANGE)";
+        crc: CRC, "CRC unit: the CRC-32 of the persisted state's entries (HardwareCrc)";
+    }
+    pins {
+        // field         pin    function      NUCLEO header   wired to                                   safe
+        stby1:           PC2,  "GPIO out",   "morpho",       "TB6612 #1 STBY (10k pull-down to GND)",   stby;
+        stby2:           PC3,  "GPIO out",   "morpho",       "TB6612 #2 STBY (10k pull-down to GND)",   stby;
+        slot0_pwm:       PA4,  "TIM14_CH1",  "Arduino A2",   "TB6612 #1 PWMA (10k pull-down to GND)",   off;
+        slot0_in1:       PB3,  "GPIO out",   "Arduino D3",   "TB6612 #1 AIN1",                          off;
+        slot0_in2:       PB5,  "GPIO out",   "Arduino D4",   "TB6612 #1 AIN2",                          off;
+        slot1_pwm:       PB8,  "TIM16_CH1",  "Arduino D15",  "TB6612 #1 PWMB (10k pull-down to GND)",   off;
+        slot1_in1:       PB4,  "GPIO out",   "Arduino D5",   "TB6612 #1 BIN1",                          off;
+        slot1_in2:       PB14, "GPIO out",   "Arduino D6",   "TB6612 #1 BIN2",                          off;
+        slot2_pwm:       PB9,  "TIM17_CH1",  "Arduino D14",  "TB6612 #2 PWMA (10k pull-down to GND)",   off;
+        slot2_in1:       PC0,  "GPIO out",   "morpho",       "TB6612 #2 AIN1",                          off;
+        slot2_in2:       PC1,  "GPIO out",   "morpho",       "TB6612 #2 AIN2",                          off;
+        slot0_encoder_a: PA0,  "TIM2_CH1",   "Arduino A0",   "slot 0 motor encoder A (encoder at 3.3 V)", -;
+        slot0_encoder_b: PC5,  "TIM2_CH2",   "morpho",       "slot 0 motor encoder B (encoder at 3.3 V)", -;
+        slot1_encoder_a: PC6,  "TIM3_CH1",   "morpho",       "slot 1 motor encoder A (encoder at 3.3 V)", -;
+        slot1_encoder_b: PC7,  "TIM3_CH2",   "Arduino D9",   "slot 1 motor encoder B (encoder at 3.3 V)", -;
+        slot2_encoder_a: PC8,  "TIM1_CH1",   "morpho",       "slot 2 motor encoder A (encoder at 3.3 V)", -;
+        slot2_encoder_b: PC9,  "TIM1_CH2",   "morpho",       "slot 2 motor encoder B (encoder at 3.3 V)", -;
+        slot0_filament:  PA1,  "ADC1_IN1",   "Arduino A1",   "slot 0 filament sensor output",           -;
+        slot1_filament:  PB1,  "ADC1_IN9",   "Arduino A3",   "slot 1 filament sensor output",           -;
+        slot2_filament:  PB12, "ADC1_IN16",  "Arduino A5",   "slot 2 filament sensor output",           -;
+        hub_filament:    PA6,  "ADC1_IN6",   "Arduino D12",  "hub filament sensor output",              -;
+        hub_tension:     PA7,  "ADC1_IN7",   "Arduino D11",  "hub tension sensor output",               -;
+        hub_cutter:      PB0,  "ADC1_IN8",   "Arduino D10",  "hub cutter sensor output",                -;
+        printer_tx:      PB6,  "USART1_TX",  "morpho",       "printer MMU port RX (3.3 V push-pull)",   -;
+        printer_rx:      PB7,  "USART1_RX",  "morpho",       "printer MMU port TX (via the level shifter)", -;
+        status_led:      PA5,  "GPIO out",   "LD4 (on board)", "green user LED",                        -;
+        button:          PC13, "GPIO in",    "B1 (on board)", "blue user button, active low: Middle",   -;
+    }
+}
+
+/// The datasheet's alternate function numbers of the `g071-n20` PWM pins (STM32G071RB AF tables:
+/// PA4 AF4 TIM14_CH1, PB8 AF2 TIM16_CH1, PB9 AF2 TIM17_CH1).
+#[cfg(feature = "g071-n20")]
+const PWM_ALTERNATE_FUNCTIONS: [u8; SLOTS] = [4, 2, 2];
 
 // ==================================================================================================
 
@@ -401,11 +493,35 @@ pub type StoreFlash = EccFlash;
 /// The board's CRC for the store's entries.
 pub type Crc = HardwareCrc;
 /// The PWM input of one bridge.
+#[cfg(not(feature = "g071-n20"))]
 type Pwm = SimplePwmChannel<'static, TIM3>;
 /// The slot motors.
+#[cfg(not(feature = "g071-n20"))]
 pub type Motors = Bridges<
     Tb6612<Pwm, Output<'static>, Output<'static>, Pwm, Output<'static>, Output<'static>, Output<'static>>,
     Tb6612<Pwm, Output<'static>, Output<'static>, Pwm, NotConnected, NotConnected, Output<'static>>,
+>;
+/// The slot motors: each bridge's PWM on its own one-channel timer.
+#[cfg(feature = "g071-n20")]
+pub type Motors = Bridges<
+    Tb6612<
+        SingleChannelPwm<TIM14>,
+        Output<'static>,
+        Output<'static>,
+        SingleChannelPwm<TIM16>,
+        Output<'static>,
+        Output<'static>,
+        Output<'static>,
+    >,
+    Tb6612<
+        SingleChannelPwm<TIM17>,
+        Output<'static>,
+        Output<'static>,
+        NotConnected,
+        NotConnected,
+        NotConnected,
+        Output<'static>,
+    >,
 >;
 /// The printer UART's receive side.
 pub type LinkRx = mmu_firmware::uart::ReceiveRing<G071Ring, { mmu_firmware::uart::G071_DMA_RING }>;
@@ -425,16 +541,28 @@ impl mmu_hal_port::Watchdog for Watchdog {
     }
 }
 
-/// Analog inputs: two per slot and three on the hub, in this order: slot `s`'s motor Hall sensor
-/// at `2 s`, its filament sensor at `2 s + 1`, then the hub's filament, tension and cutter
-/// sensors from [`HUB_INPUTS`].
-const ANALOG_INPUTS: usize = 2 * SLOTS + 3;
+/// Analog inputs of each slot: the motor Hall sensor and the filament sensor (thesis build).
+#[cfg(not(feature = "g071-n20"))]
+const INPUTS_PER_SLOT: usize = 2;
+/// Analog inputs of each slot: the filament sensor only (the encoder is counted by a timer).
+#[cfg(feature = "g071-n20")]
+const INPUTS_PER_SLOT: usize = 1;
+/// Analog inputs: [`INPUTS_PER_SLOT`] per slot and three on the hub, in this order: slot `s`'s
+/// motor Hall sensor at `2 s` (thesis build only), its filament sensor last of the slot's
+/// ([`filament_input`]), then the hub's filament, tension and cutter sensors from [`HUB_INPUTS`].
+const ANALOG_INPUTS: usize = INPUTS_PER_SLOT * SLOTS + 3;
 /// The first hub input.
-const HUB_INPUTS: usize = 2 * SLOTS;
+const HUB_INPUTS: usize = INPUTS_PER_SLOT * SLOTS;
+
+/// Where slot `slot`'s filament sensor is among the analog inputs.
+const fn filament_input(slot: usize) -> usize {
+    INPUTS_PER_SLOT * slot + INPUTS_PER_SLOT - 1
+}
 
 /// Conversions in the ADC's DMA ring: 24 whole scans, about 5 ms of continuous conversion. A
 /// step reads the newest whole scan, which the DMA reaches again only a lap (5 ms) later; the
-/// DMA's half- and full-ring interrupts (embassy-stm32's ring sets them) come every 2.5 ms.
+/// DMA's half- and full-ring interrupts (embassy-stm32's ring sets them) come every 2.5 ms. (In
+/// the `g071-n20` build a lap is 3.3 ms, its interrupts 1.7 ms apart.)
 const ADC_RING: usize = 24 * ANALOG_INPUTS;
 
 /// The ADC's DMA ring, written only by the DMA (embassy-stm32's ring set the transfer up, then
@@ -448,7 +576,8 @@ static ADC_RING_BUFFER: AdcRing = AdcRing(UnsafeCell::new([0; ADC_RING]));
 
 /// The ADC: the nine Hall sensors converted over and over (continuous mode, a scan every 207 µs:
 /// 9 channels x 8 oversampled conversions of (79.5 + 12.5) / 32 MHz) into a DMA ring; a scan
-/// takes the newest whole one.
+/// takes the newest whole one. In the `g071-n20` build the six filament and hub sensors (a scan
+/// every 138 µs), and each lane's motion is its encoder timer's count, read with the scan.
 ///
 /// Why: a DMA `read` per step reconfigured the sequence and the DMA channel and woke the control
 /// task at its end, and the samples of one scan are what a step wants, whenever it runs. So the
@@ -464,6 +593,9 @@ pub struct Sampler {
     last_position: usize,
     /// A whole scan has been written since the start (the ring's tail holds none before).
     scanned: bool,
+    /// The lanes' encoder counters, read with each scan.
+    #[cfg(feature = "g071-n20")]
+    encoders: LaneEncoders,
 }
 
 /// The DMA1 channel of the ADC's ring (`DMA1_CH1`), as `pac::DMA1.ch` numbers it.
@@ -477,6 +609,7 @@ impl Sampler {
         adc: Peri<'static, ADC1>,
         dma: Peri<'static, DMA1_CH1>,
         inputs: [AnyAdcChannel<'static, ADC1>; ANALOG_INPUTS],
+        #[cfg(feature = "g071-n20")] encoders: LaneEncoders,
     ) -> Self {
         let config = AdcConfig {
             clock: Some(adc::Clock::Async {
@@ -510,6 +643,8 @@ impl Sampler {
             scan_positions,
             last_position: usize::MAX,
             scanned: false,
+            #[cfg(feature = "g071-n20")]
+            encoders,
         }
     }
 
@@ -567,10 +702,18 @@ impl SensorScan<SLOTS> for Sampler {
             let position = positions.get(index).map_or(usize::MAX, |&at| usize::from(at));
             raw.get(position).copied().unwrap_or_default()
         };
+        // The thesis build's motion is the motor Hall sensor's level; the encoder build's is the
+        // lane's timer count, read right after the scan it goes with.
+        #[cfg(not(feature = "g071-n20"))]
+        let motion = |slot: usize| input(2 * slot);
+        #[cfg(feature = "g071-n20")]
+        let counts = self.encoders.counts();
+        #[cfg(feature = "g071-n20")]
+        let motion = |slot: usize| counts.get(slot).copied().unwrap_or_default();
         Ok(Samples {
             slots: core::array::from_fn(|slot| SlotSamples {
-                motion: input(2 * slot),
-                filament: input(2 * slot + 1),
+                motion: motion(slot),
+                filament: input(filament_input(slot)),
                 tension: 0,
             }),
             hub: HubSamples {
@@ -611,40 +754,69 @@ fn init() -> super::Parts<G071> {
     watchdog.unleash();
 
     // Motors: duty 0 on every channel before the pins switch to the timer, STBY and IN low.
-    let pwm = SimplePwm::new(
-        parts.pwm_timer,
-        Some(PwmPin::new(parts.slot0_pwm, OutputType::PushPull)),
-        Some(PwmPin::new(parts.slot1_pwm, OutputType::PushPull)),
-        Some(PwmPin::new(parts.slot2_pwm, OutputType::PushPull)),
-        None,
-        khz(PWM_KHZ),
-        CountingMode::EdgeAlignedUp,
-    );
-    let mut pwm = pwm.split();
-    for channel in [&mut pwm.ch1, &mut pwm.ch2, &mut pwm.ch3] {
-        channel.set_duty_cycle_fully_off();
-        channel.enable();
-    }
-    let chip1 = Tb6612::new(
-        pwm.ch1,
-        low(parts.slot0_in1),
-        low(parts.slot0_in2),
-        pwm.ch2,
-        low(parts.slot1_in1),
-        low(parts.slot1_in2),
-        low(parts.stby1),
-    );
-    let chip2 = Tb6612::new(
-        pwm.ch3,
-        low(parts.slot2_in1),
-        low(parts.slot2_in2),
-        pwm.ch4,
-        NotConnected,
-        NotConnected,
-        low(parts.stby2),
-    );
-    // Every error of these drivers is `Infallible`.
-    let (Ok(chip1), Ok(chip2)) = (chip1, chip2);
+    #[cfg(not(feature = "g071-n20"))]
+    let motors = {
+        let pwm = SimplePwm::new(
+            parts.pwm_timer,
+            Some(PwmPin::new(parts.slot0_pwm, OutputType::PushPull)),
+            Some(PwmPin::new(parts.slot1_pwm, OutputType::PushPull)),
+            Some(PwmPin::new(parts.slot2_pwm, OutputType::PushPull)),
+            None,
+            khz(PWM_KHZ),
+            CountingMode::EdgeAlignedUp,
+        );
+        let mut pwm = pwm.split();
+        for channel in [&mut pwm.ch1, &mut pwm.ch2, &mut pwm.ch3] {
+            channel.set_duty_cycle_fully_off();
+            channel.enable();
+        }
+        let chip1 = Tb6612::new(
+            pwm.ch1,
+            low(parts.slot0_in1),
+            low(parts.slot0_in2),
+            pwm.ch2,
+            low(parts.slot1_in1),
+            low(parts.slot1_in2),
+            low(parts.stby1),
+        );
+        let chip2 = Tb6612::new(
+            pwm.ch3,
+            low(parts.slot2_in1),
+            low(parts.slot2_in2),
+            pwm.ch4,
+            NotConnected,
+            NotConnected,
+            low(parts.stby2),
+        );
+        // Every error of these drivers is `Infallible`.
+        let (Ok(chip1), Ok(chip2)) = (chip1, chip2);
+        Bridges::new(chip1, chip2)
+    };
+    #[cfg(feature = "g071-n20")]
+    let motors = {
+        let [slot0_af, slot1_af, slot2_af] = PWM_ALTERNATE_FUNCTIONS;
+        let chip1 = Tb6612::new(
+            SingleChannelPwm::new(parts.slot0_pwm_timer, parts.slot0_pwm, slot0_af, khz(PWM_KHZ)),
+            low(parts.slot0_in1),
+            low(parts.slot0_in2),
+            SingleChannelPwm::with_break_unit(parts.slot1_pwm_timer, parts.slot1_pwm, slot1_af, khz(PWM_KHZ)),
+            low(parts.slot1_in1),
+            low(parts.slot1_in2),
+            low(parts.stby1),
+        );
+        let chip2 = Tb6612::new(
+            SingleChannelPwm::with_break_unit(parts.slot2_pwm_timer, parts.slot2_pwm, slot2_af, khz(PWM_KHZ)),
+            low(parts.slot2_in1),
+            low(parts.slot2_in2),
+            NotConnected,
+            NotConnected,
+            NotConnected,
+            low(parts.stby2),
+        );
+        // Every error of these drivers is `Infallible`.
+        let (Ok(chip1), Ok(chip2)) = (chip1, chip2);
+        Bridges::new(chip1, chip2)
+    };
 
     // The printer UART: 115 200 8N1, sent by embassy-stm32's `UartTx` (which configures
     // USART1), received by DMA into a ring the CPU need not attend (`uart_ring`).
@@ -667,6 +839,7 @@ fn init() -> super::Parts<G071> {
     let link_rx = G071Ring::start(parts.printer_rx, parts.printer_rx_dma);
 
     // In the order of `ANALOG_INPUTS`.
+    #[cfg(not(feature = "g071-n20"))]
     let sampler = Sampler::new(
         parts.adc,
         parts.adc_dma,
@@ -682,10 +855,28 @@ fn init() -> super::Parts<G071> {
             parts.hub_cutter.degrade_adc(),
         ],
     );
+    #[cfg(feature = "g071-n20")]
+    let sampler = Sampler::new(
+        parts.adc,
+        parts.adc_dma,
+        [
+            parts.slot0_filament.degrade_adc(),
+            parts.slot1_filament.degrade_adc(),
+            parts.slot2_filament.degrade_adc(),
+            parts.hub_filament.degrade_adc(),
+            parts.hub_tension.degrade_adc(),
+            parts.hub_cutter.degrade_adc(),
+        ],
+        LaneEncoders::new(
+            (parts.slot0_encoder, parts.slot0_encoder_a, parts.slot0_encoder_b),
+            (parts.slot1_encoder, parts.slot1_encoder_a, parts.slot1_encoder_b),
+            (parts.slot2_encoder, parts.slot2_encoder_a, parts.slot2_encoder_b),
+        ),
+    );
 
     super::Parts {
         sampler,
-        motors: Bridges::new(chip1, chip2),
+        motors,
         link_rx,
         link_tx,
         led: low(parts.status_led),
