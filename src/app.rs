@@ -422,6 +422,7 @@ impl<const N: usize> App<N> {
             hub: &self.unit.hub,
             finda: self.arbiter.finda(&self.unit),
             feeders: &self.unit.feeders,
+            slots: N,
             lanes: &self.unit.lanes,
             fsensor: self.unit.fsensor,
             path_slot: self.unit.active().or(self.unit.selected),

@@ -95,11 +95,10 @@ impl Odometer {
         if counts == 0 {
             return false;
         }
-        // At most 32 768 counts × 65 535: within i32 with the remainder.
-        let scaled = self.remainder + counts * i32::from(mm_per_rev_centi);
         let per_rev = i32::from(source.counts_per_rev().max(1));
-        self.centi = self.centi.wrapping_add(scaled / per_rev);
-        self.remainder = scaled % per_rev;
+        let (step, remainder) = scale(counts, mm_per_rev_centi, self.remainder, per_rev);
+        self.centi = self.centi.wrapping_add(step);
+        self.remainder = remainder;
         let moved = self.centi.wrapping_sub(self.mark_centi).unsigned_abs();
         let mark = match source {
             MotionSensor::HallWave => true,
@@ -107,8 +106,11 @@ impl Odometer {
         };
         if mark {
             let period = now.millis_since(self.last_mark);
-            self.mark_speed =
-                (self.marks > 0 && period > 0).then(|| (moved * 10 / period.max(1) as u32, period));
+            // A period over 2³² ms (49 days) is no speed at all.
+            self.mark_speed = u32::try_from(period)
+                .ok()
+                .filter(|&period| self.marks > 0 && period > 0)
+                .map(|period32| (moved.saturating_mul(10) / period32, period));
             self.marks = self.marks.wrapping_add(1);
             self.last_mark = now;
             self.mark_centi = self.centi;
@@ -174,6 +176,24 @@ impl Odometer {
         match self.mark_speed {
             Some((speed, period)) if now.millis_since(self.last_mark) <= period.saturating_mul(2) => speed,
             _ => 0,
+        }
+    }
+}
+
+/// `counts` of a turn of `per_rev` counts, each turn `mm_per_rev_centi`, with the `remainder`
+/// carried from before: the whole 1/100 mm and the new remainder. In 32 bits as long as it fits
+/// (every sample of a moving lane), else in 64: a count's difference is up to 65 535.
+fn scale(counts: i32, mm_per_rev_centi: u16, remainder: i32, per_rev: i32) -> (i32, i32) {
+    match counts
+        .checked_mul(i32::from(mm_per_rev_centi))
+        .and_then(|scaled| scaled.checked_add(remainder))
+    {
+        Some(scaled) => (scaled / per_rev, scaled % per_rev),
+        None => {
+            let scaled = i64::from(counts) * i64::from(mm_per_rev_centi) + i64::from(remainder);
+            let per_rev = i64::from(per_rev);
+            // The odometry wraps; the remainder is below `per_rev`.
+            ((scaled / per_rev) as i32, (scaled % per_rev) as i32)
         }
     }
 }
@@ -246,6 +266,14 @@ mod tests {
         feed(&mut odometer, source, &creep, &mut now, 2356);
         assert_eq!(odometer.centi(), 1178 + 2356);
         assert!(odometer.marks() > 10);
+    }
+
+    #[test]
+    fn any_count_and_distance_per_turn_scale_without_overflow_or_a_lost_fraction() {
+        // Past i32: in 64 bits, the odometry wrapping as it does.
+        assert_eq!(scale(65_535, u16::MAX, 1, 1), (-131_070, 0));
+        assert_eq!(scale(-65_535, u16::MAX, 0, 4096), (-1_048_544, -1));
+        assert_eq!(scale(3, 2356, 100, 2800), (2, 1_568));
     }
 
     #[test]

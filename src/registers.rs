@@ -44,8 +44,10 @@ pub struct View<'a> {
     /// What FINDA reads: the hub sensor, or empty while a spool end is reported
     /// ([`crate::spool_end`]).
     pub finda: bool,
-    /// Every slot's feeding system.
+    /// Every slot's feeding system (none in a view of the settings alone: [`settings_view`]).
     pub feeders: &'a [Feeder],
+    /// The unit's slots (the sensors' diagnostic indices depend on them).
+    pub slots: usize,
     /// Where each slot's filament is.
     pub lanes: &'a [Lane],
     /// The printer's filament sensor as last reported.
@@ -88,7 +90,7 @@ impl View<'_> {
     }
 
     fn sensor(&self, index: usize) -> Option<&AnalogSensor> {
-        self.sensor_of(SensorId::from_index(index, self.feeders.len()))
+        self.sensor_of(SensorId::from_index(index, self.slots))
     }
 }
 
@@ -608,7 +610,7 @@ registers! {
     setting(0x4e, "tension_gain", 0..=100),
     setting(0x4f, "tension_max_duty", 0..=1000),
     SensorFaults: read_only(0x50, "sensor_faults", |v, _, _| Some(
-        (0..SensorId::count(v.feeders.len()))
+        (0..SensorId::count(v.slots))
             .filter(|&i| v.sensor(i).is_some_and(|s| s.fault().is_some()))
             .fold(0u16, |mask, i| mask | (1 << i))
     )),
@@ -644,7 +646,7 @@ registers! {
         Sensors,
         "threshold_on",
         0..=4095,
-        |v, _, i| Some(thresholds(v.profile, v.config, SensorId::from_index(i, v.feeders.len()))?.on),
+        |v, _, i| Some(thresholds(v.profile, v.config, SensorId::from_index(i, v.slots))?.on),
         |t, _, i, value| set_threshold(t, SensorId::from_index(i, t.slots), |th| th.on = value)
     ),
     ThresholdOff: writable(
@@ -652,7 +654,7 @@ registers! {
         Sensors,
         "threshold_off",
         0..=4095,
-        |v, _, i| Some(thresholds(v.profile, v.config, SensorId::from_index(i, v.feeders.len()))?.off),
+        |v, _, i| Some(thresholds(v.profile, v.config, SensorId::from_index(i, v.slots))?.off),
         |t, _, i, value| set_threshold(t, SensorId::from_index(i, t.slots), |th| th.off = value)
     ),
     SlotOdometry: block(ODOMETRY, Slots, "odometry", |v, _, k| Some(
@@ -840,13 +842,14 @@ pub fn apply_setting(profile: &Profile, config: &mut Config, slots: usize, addre
 
 /// What a register read sees of a configuration alone: setting registers read only the
 /// configuration (`hub` only completes the view: the unit's own, so that no default hub is built).
-pub fn settings_view<'a>(profile: &'a Profile, config: &'a Config, hub: &'a Hub) -> View<'a> {
+pub fn settings_view<'a>(profile: &'a Profile, config: &'a Config, hub: &'a Hub, slots: usize) -> View<'a> {
     View {
         profile,
         config,
         hub,
         finda: false,
         feeders: &[],
+        slots,
         lanes: &[],
         fsensor: 0,
         path_slot: None,
@@ -913,7 +916,7 @@ pub fn changed_settings<const CAP: usize>(
     changed: &mut heapless::Vec<(u8, u16), CAP>,
 ) {
     // One view, its settings switched: setting registers read nothing else.
-    let mut view = settings_view(profile, defaults, hub);
+    let mut view = settings_view(profile, defaults, hub, slots);
     for setting in settings(slots) {
         view.config = defaults;
         let default = setting.read(&view);

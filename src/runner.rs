@@ -229,13 +229,17 @@ impl Runner {
         if let Some(Phase::UnloadToHub { await_release, .. }) = self.plan.get_mut(self.index) {
             *await_release = true;
         }
+        // A feed to the park position counts from the presence sensor's edge: retried from the
+        // homing before it, which finds the edge again.
         let before = self.index.checked_sub(1);
-        if let (Some(Phase::FeedToNozzle { .. }), Some(before)) = (self.phase(), before)
-            && matches!(
-                self.plan.get(before),
+        let from_before = matches!(
+            (self.phase(), before.and_then(|before| self.plan.get(before))),
+            (
+                Some(Phase::FeedToNozzle { .. }),
                 Some(Phase::FeedToFsensor { .. } | Phase::SearchFsensor { .. })
-            )
-        {
+            ) | (Some(Phase::FeedToPark { .. }), Some(Phase::HomeLane { .. }))
+        );
+        if let (true, Some(before)) = (from_before, before) {
             self.index = before;
             self.resume_goal_from = None;
         }
@@ -280,7 +284,12 @@ impl Runner {
     }
 
     /// Run [`Phase::ClearMerge`] for each suspect slot, then the blocked phase again.
-    fn clear_merge_first(&mut self, suspects: phases::SlotSet) {
+    /// False, planning nothing, when the clearances do not fit the plan: the stall is then the
+    /// error, never a loop of stalls that plans nothing.
+    fn clear_merge_first(&mut self, suspects: phases::SlotSet) -> bool {
+        if self.plan.len() + suspects.count_ones() as usize > MAX_PHASES {
+            return false;
+        }
         // Highest slot first, each before the blocked phase: they run in slot order. Every plan
         // fits with a clearance of each other slot (MAX_PHASES).
         // Pushed and swapped into place rather than `Vec::insert`, which alone links `memmove`
@@ -300,6 +309,7 @@ impl Runner {
         self.status = self
             .phase()
             .map_or(Status::Finished, |phase| Status::Running(phase.progress()));
+        true
     }
 
     fn advance(&mut self) {
@@ -389,7 +399,9 @@ impl Runner {
                     return;
                 }
                 Outcome::Blocked(suspects) => {
-                    self.clear_merge_first(suspects);
+                    if !self.clear_merge_first(suspects) {
+                        self.fail(ErrorCode::STALLED_PULLEY, unit, now);
+                    }
                     return;
                 }
             }
@@ -411,7 +423,7 @@ mod tests {
         ];
         let mut runner = Runner::new((RequestCode::Load, 1), &plan);
         runner.advance();
-        runner.clear_merge_first(0b101);
+        assert!(runner.clear_merge_first(0b101));
         let expected = [
             Phase::CheckSensors,
             Phase::ClearMerge { slot: 0 },
@@ -426,5 +438,14 @@ mod tests {
             runner.status(),
             Status::Running(ProgressCode::RETRACTING_FROM_FINDA)
         );
+    }
+
+    #[test]
+    fn clearances_that_do_not_fit_the_plan_plan_nothing() {
+        let plan = [Phase::FeedToHub { slot: 1, max_mm: 100 }; MAX_PHASES - 1];
+        let mut runner = Runner::new((RequestCode::Load, 1), &plan);
+        assert!(!runner.clear_merge_first(0b101));
+        assert_eq!(runner.plan.as_slice(), &plan);
+        assert!(runner.clear_merge_first(0b100));
     }
 }

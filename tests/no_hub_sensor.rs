@@ -110,3 +110,34 @@ fn a_hand_pushed_filament_is_homed_before_it_is_fed() {
     let error = estimate_error(&rig, 0).expect("homed");
     assert!(error.abs() < 2.0, "{error} mm");
 }
+
+#[test]
+fn a_lane_that_comes_out_of_its_drive_gear_while_parking_is_empty_and_the_change_goes_on() {
+    use mmu_protocol::ProgressCode;
+    let mut rig = bmcu_rig();
+    rig.command(t(0));
+    rig.issue(t(1));
+    rig.follow_until(t(1), Some(ProgressCode::RETRACTING_FROM_FINDA), 60_000);
+    // Lane 0's filament is pulled out by hand while the unit homes it.
+    assert!(rig.model.remove_filament(0));
+    let run = rig.follow(t(1), 60_000);
+    assert_eq!(run.last, finished(t(1)), "{:?}", run.progress);
+    assert_eq!(rig.app.unit().lane(0), Lane::Empty);
+    assert_eq!(rig.app.unit().lane(1), Lane::Loaded);
+}
+
+#[test]
+fn every_lane_not_seen_since_start_is_homed_before_a_load() {
+    let mut rig = bmcu_rig();
+    // Lane 2's tip rests in the merge (8 mm before the hub), nobody knows it.
+    assert!(rig.model.insert_filament(2, -5.0));
+    rig.idle(200);
+    let run = rig.command(t(1));
+    assert_eq!(run.last, finished(t(1)), "{:?}", run.progress);
+    for lane in [0, 2, 3] {
+        assert_eq!(rig.app.unit().lane(lane), Lane::Parked, "lane {lane}");
+        let error = estimate_error(&rig, lane).expect("homed");
+        assert!(error.abs() < 2.0, "lane {lane}: {error} mm");
+        assert_parked(&rig, lane);
+    }
+}

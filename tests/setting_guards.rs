@@ -294,3 +294,20 @@ fn the_rules_follow_the_builds_geometry() {
     assert_eq!(answer(&mut rig, 0x41, 23), Some(ParamCode::Rejected));
     assert_eq!(answer(&mut rig, 0x41, 24), Some(ParamCode::Accepted));
 }
+
+/// Every threshold a user tunes survives a restart: each slot's filament sensor and motor Hall
+/// sensor, not only the hub's (the snapshot reads each setting through the register table).
+#[test]
+fn tuned_thresholds_of_every_sensor_are_kept_across_a_restart() {
+    let mut app = App::<3>::new(Config::default());
+    // Hub, slot 1's filament sensor, slot 2's motor Hall sensor: "on" thresholds.
+    for (address, value) in [(0x90, 2700), (0x95, 2750), (0x98, 2400)] {
+        assert!(app.write_register(address, value), "{address:#x}");
+    }
+    let snapshot = app.snapshot();
+    let mut restarted = App::<3>::new(Config::default());
+    restarted.restore(&snapshot);
+    for (address, value) in [(0x90, 2700), (0x95, 2750), (0x98, 2400)] {
+        assert_eq!(restarted.read_register(address), Some(value), "{address:#x}");
+    }
+}

@@ -34,8 +34,9 @@ use crate::phases::{Phase, sensor_fault_error};
 use crate::unit::{Lane, SensorId, Unit};
 
 /// The longest plan: unload (2 phases) + load to nozzle (4) + eject (2) fits with room, and so
-/// does a load that first clears the merge of every other slot.
-pub const MAX_PHASES: usize = 12;
+/// does a load that first clears the merge of every other slot; without a hub sensor, a proving
+/// unload (4), the homing of every other lane not seen since start (2 each) and the load (6).
+pub const MAX_PHASES: usize = 16;
 
 /// The phases of one command, in order.
 pub type Plan = Vec<Phase, MAX_PHASES>;
@@ -245,8 +246,9 @@ impl Command {
 /// Append as much of `phases` as fits (every plan built here fits).
 /// `plan` made right for hardware without a hub sensor, where a lane's tip is known only from
 /// its presence sensor's edge: every park homes the lane there first ([`Phase::HomeLane`], then
-/// [`Phase::FeedToPark`] in place of [`Phase::RetractToPark`]), and so does every feed to the hub
-/// of a lane whose tip the unit has not seen since start. With a hub sensor, `plan` as it is.
+/// [`Phase::FeedToPark`] in place of [`Phase::RetractToPark`]), and a feed to the hub first homes
+/// the fed lane and every other lane with filament whose tip the unit has not seen since start
+/// (one may rest in the merge). With a hub sensor, `plan` as it is.
 pub(crate) fn fit_to_profile<const N: usize>(plan: &mut Plan, unit: &Unit<N>) {
     if unit.profile.hub_sensor {
         return;
@@ -260,10 +262,29 @@ pub(crate) fn fit_to_profile<const N: usize>(plan: &mut Plan, unit: &Unit<N>) {
                     &[Phase::HomeLane { slot }, Phase::FeedToPark { slot }],
                 );
             }
-            Phase::FeedToHub { slot, .. } if unit.tip_centi(usize::from(slot)).is_none() => extend(
-                &mut fitted,
-                &[Phase::HomeLane { slot }, Phase::FeedToPark { slot }, phase],
-            ),
+            Phase::FeedToHub { slot, .. } => {
+                // Every lane whose tip nobody has seen since start may rest in the merge: each
+                // with filament is homed and parked first (safe wherever its tip is: a pull back
+                // to its own sensor), the fed lane last. A lane recorded in the hub comes out
+                // with the unload before (`clear_hub`), homed there.
+                let fed = usize::from(slot);
+                let unseen = (0..N)
+                    .filter(|&lane| lane != fed)
+                    .chain(core::iter::once(fed))
+                    .filter(|&lane| unit.tip_centi(lane).is_none() && !unit.lane(lane).owns_hub())
+                    .filter(|&lane| {
+                        lane == fed
+                            || unit.feeders.get(lane).and_then(|f| f.filament.present()) != Some(false)
+                    });
+                for lane in unseen {
+                    let lane = lane as u8;
+                    extend(
+                        &mut fitted,
+                        &[Phase::HomeLane { slot: lane }, Phase::FeedToPark { slot: lane }],
+                    );
+                }
+                extend(&mut fitted, &[phase]);
+            }
             phase => extend(&mut fitted, &[phase]),
         }
     }

@@ -26,7 +26,7 @@ impl Defaults {
     pub(super) fn new<const N: usize>(app: &App<N>) -> Self {
         let profile = app.profile();
         let config = Config::for_profile(profile);
-        let view = registers::settings_view(profile, &config, &app.unit().hub);
+        let view = registers::settings_view(profile, &config, &app.unit().hub, N);
         let mut defaults = Vec::new();
         for setting in registers::settings(N) {
             if let Some(value) = setting.read(&view) {

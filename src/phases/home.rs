@@ -7,7 +7,7 @@
 use mmu_hal_port::Direction;
 use mmu_protocol::{ErrorCode, ProgressCode};
 
-use super::{Bounds, Decision, Goal, MotionPhase, PhaseRun, Sight};
+use super::{Bounds, Decision, Goal, Milestone, MotionPhase, PhaseRun, Sight};
 use crate::config::Config;
 use crate::unit::Lane;
 
@@ -16,6 +16,9 @@ use crate::unit::Lane;
 const SLOW_NEAR_MM: i32 = 10;
 /// How far a lane is fed with its presence sensor seeing nothing before it counts as empty, mm.
 const EMPTY_AFTER_MM: i32 = 10;
+/// How far past its presence sensor a known tip may be counted, pulling back, before the sensor
+/// counts as stuck on, mm: a drive slipping on the way back counts ahead of the filament.
+const PAST_EDGE_MM: i32 = 10;
 
 /// `P19` ([`super::Phase::HomeLane`]): pull back until the presence sensor stops seeing the tip.
 #[derive(Debug, Clone, Copy)]
@@ -39,15 +42,17 @@ impl MotionPhase for ToPresenceEdge {
         }
     }
 
+    /// Reached at the edge, where the tip is behind the merge. A known tip counted well past the
+    /// sensor that still sees filament: the sensor is stuck on, and pulling on would take the
+    /// filament out of its drive gear (`8002`).
     fn goal<const N: usize>(self, _run: &mut PhaseRun, at: &Sight<'_, N>) -> Result<Decision, ErrorCode> {
-        let near = at
-            .unit
-            .tip_centi(at.slot)
-            .is_some_and(|tip| tip < SLOW_NEAR_MM * 100);
-        Ok(match (at.slot_sees, near) {
-            (false, _) => Goal::Reached,
-            (true, true) => Goal::DriveAt(at.config.slow_speed),
-            (true, false) => Goal::Drive,
+        if !at.slot_sees {
+            return Ok(Goal::Reached.learning(Milestone::MergeCleared));
+        }
+        Ok(match at.unit.tip_centi(at.slot) {
+            Some(tip) if tip < -PAST_EDGE_MM * 100 => return Err(ErrorCode::FINDA_DIDNT_SWITCH_OFF),
+            Some(tip) if tip < SLOW_NEAR_MM * 100 => Goal::DriveAt(at.config.slow_speed),
+            _ => Goal::Drive,
         }
         .into())
     }
@@ -77,19 +82,22 @@ impl MotionPhase for FromEdgeToPark {
         )
     }
 
+    /// Parked once the tip is the park distance before the merge. A lane whose sensor sees no
+    /// tip come is empty: its filament left the drive gear (it ends there, the hub clear; a load
+    /// that follows fails on the empty slot, `8001`). A sensor that sees filament whose tip is
+    /// not known (its edge came while the motor was not driven) leaves nothing to count the park
+    /// from: `8002`, whose Retry homes the lane again ([`crate::runner`]).
     fn goal<const N: usize>(self, _run: &mut PhaseRun, at: &Sight<'_, N>) -> Result<Decision, ErrorCode> {
         let park_centi = (i32::from(at.config.lane_to_hub_mm) - i32::from(at.config.park_mm)) * 100;
-        match at.unit.tip_centi(at.slot) {
-            Some(tip) if at.slot_sees && tip >= park_centi => Ok(Goal::Reached.into()),
-            // The sensor never saw a tip come: an empty lane.
-            _ if !at.slot_sees && at.toward_goal_mm >= EMPTY_AFTER_MM => {
-                Err(ErrorCode::FINDA_DIDNT_SWITCH_ON)
+        match (at.unit.tip_centi(at.slot), at.slot_sees) {
+            (Some(tip), true) if tip >= park_centi => {
+                Ok(Goal::Reached.learning(Milestone::Arrived(Lane::Parked)))
+            }
+            (None, true) => Err(ErrorCode::FINDA_DIDNT_SWITCH_OFF),
+            (_, false) if at.toward_goal_mm >= EMPTY_AFTER_MM => {
+                Ok(Goal::Reached.learning(Milestone::Arrived(Lane::Empty)))
             }
             _ => Ok(Goal::Drive.into()),
         }
-    }
-
-    fn arrival(self) -> Option<Lane> {
-        Some(Lane::Parked)
     }
 }
