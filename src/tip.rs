@@ -59,14 +59,22 @@ impl<const N: usize> TipEstimates<N> {
         self.tips.get(slot).copied().flatten()
     }
 
-    /// Some tip is at or past the hub; a lane recorded in the hub (`lanes`) whose tip has not
-    /// been seen since start counts as there: the record is the only word on it until its
-    /// presence sensor's edge homes it.
-    pub fn in_hub(&self, lanes: &[Lane; N]) -> bool {
+    /// Some tip is at or past the hub. A lane whose tip has not been seen since start counts as
+    /// there by its record (`lanes`; `present`, its presence sensor's decision), the only word on
+    /// it until its sensor's edge homes it: loaded (its sensor may be empty: the spool's end has
+    /// passed it), or between the hub and its park position with its sensor still seeing it (one
+    /// whose sensor is empty was pulled back past it on the way to park).
+    pub fn in_hub(&self, lanes: &[Lane; N], present: impl Fn(usize) -> Option<bool>) -> bool {
+        let unseen_in_hub = |slot: usize, lane: Lane| match lane {
+            Lane::Loaded | Lane::AtFsensor => true,
+            Lane::InHub => present(slot) != Some(false),
+            Lane::Unknown | Lane::Empty | Lane::Parked => false,
+        };
         self.tips
             .iter()
             .zip(lanes.iter())
-            .any(|(tip, lane)| tip.map_or(lane.owns_hub(), |tip| tip >= self.hub_centi))
+            .enumerate()
+            .any(|(slot, (tip, &lane))| tip.map_or(unseen_in_hub(slot, lane), |tip| tip >= self.hub_centi))
     }
 }
 
@@ -109,11 +117,28 @@ mod tests {
     fn a_tip_at_the_merge_or_a_recorded_lane_not_yet_seen_fills_the_hub() {
         let mut tips = TipEstimates::<2>::NEW;
         tips.place_hub(95);
-        assert!(!tips.in_hub(&[Lane::Parked, Lane::Parked]));
-        assert!(tips.in_hub(&[Lane::Parked, Lane::Loaded]), "a record unproven");
+        let seen = |_| Some(true);
+        let empty = |_| Some(false);
+        assert!(!tips.in_hub(&[Lane::Parked, Lane::Parked], seen));
+        assert!(
+            tips.in_hub(&[Lane::Parked, Lane::Loaded], seen),
+            "a record unproven"
+        );
+        assert!(
+            tips.in_hub(&[Lane::Parked, Lane::Loaded], empty),
+            "a spool's end passed"
+        );
+        assert!(tips.in_hub(&[Lane::Parked, Lane::InHub], seen));
+        assert!(
+            !tips.in_hub(&[Lane::Parked, Lane::InHub], empty),
+            "pulled back past it"
+        );
         tips.tips = [Some(9_499), Some(-100)];
-        assert!(!tips.in_hub(&[Lane::Parked, Lane::Loaded]), "seen behind the hub");
+        assert!(
+            !tips.in_hub(&[Lane::Parked, Lane::Loaded], seen),
+            "seen behind the hub"
+        );
         tips.tips[0] = Some(9_500);
-        assert!(tips.in_hub(&[Lane::InHub, Lane::Parked]));
+        assert!(tips.in_hub(&[Lane::InHub, Lane::Parked], seen));
     }
 }

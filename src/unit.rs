@@ -316,7 +316,8 @@ impl<const N: usize> Unit<N> {
         if self.profile.hub_sensor {
             return self.hub.filament.present();
         }
-        Some(self.tips.in_hub(&self.lanes))
+        let present = |slot: usize| self.feeders.get(slot).and_then(|f| f.filament.present());
+        Some(self.tips.in_hub(&self.lanes, present))
     }
 
     /// Where `slot`'s tip is, 1/100 mm past its presence sensor, on hardware without a hub

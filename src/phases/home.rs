@@ -16,9 +16,6 @@ use crate::unit::Lane;
 const SLOW_NEAR_MM: i32 = 10;
 /// How far a lane is fed with its presence sensor seeing nothing before it counts as empty, mm.
 const EMPTY_AFTER_MM: i32 = 10;
-/// How far past its presence sensor a known tip may be counted, pulling back, before the sensor
-/// counts as stuck on, mm: a drive slipping on the way back counts ahead of the filament.
-const PAST_EDGE_MM: i32 = 10;
 
 /// `P19` ([`super::Phase::HomeLane`]): pull back until the presence sensor stops seeing the tip.
 #[derive(Debug, Clone, Copy)]
@@ -42,15 +39,15 @@ impl MotionPhase for ToPresenceEdge {
         }
     }
 
-    /// Reached at the edge, where the tip is behind the merge. A known tip counted well past the
-    /// sensor that still sees filament: the sensor is stuck on, and pulling on would take the
-    /// filament out of its drive gear (`8002`).
+    /// Reached at the edge, where the tip is behind the merge. No estimate stops the pull before
+    /// the edge: a drive that slipped, or a filament whose tail was pulled back into its gear,
+    /// leaves the count behind the filament; the phase's bound does.
     fn goal<const N: usize>(self, _run: &mut PhaseRun, at: &Sight<'_, N>) -> Result<Decision, ErrorCode> {
         if !at.slot_sees {
             return Ok(Goal::Reached.learning(Milestone::MergeCleared));
         }
-        Ok(match at.unit.tip_centi(at.slot) {
-            Some(tip) if tip < -PAST_EDGE_MM * 100 => return Err(ErrorCode::FINDA_DIDNT_SWITCH_OFF),
+        let tip = at.unit.tip_centi(at.slot);
+        Ok(match tip {
             Some(tip) if tip < SLOW_NEAR_MM * 100 => Goal::DriveAt(at.config.slow_speed),
             _ => Goal::Drive,
         }
