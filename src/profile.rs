@@ -6,49 +6,7 @@
 //! reads motion as distance and direction ([`crate::feeder::Feeder`]) and sensors as facts
 //! ([`crate::unit::Unit`]), never as a sensor kind.
 
-/// How a lane measures the filament's motion. Every source is read as a count of a sensed
-/// shaft's turn, `counts_per_rev` counts to the turn; register 0x42 (`mm_per_rev_centi`) says
-/// how far the filament moves per turn, so the odometry is `counts × mm_per_rev / counts_per_rev`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum MotionSensor {
-    /// An analog Hall sensor that sees one magnet on the motor shaft: a sine-like wave, one
-    /// period per revolution, read on the ADC. It cannot tell the direction: a revolution counts
-    /// the way the motor was last driven.
-    HallWave,
-    /// A two-channel Hall quadrature encoder on the motor: the board counts every edge of both
-    /// channels, up and down, into a wrapping 16-bit count (the sample).
-    Quadrature {
-        /// Edges per turn of the output shaft (4 × pulses per channel × gear ratio).
-        counts_per_rev: u16,
-    },
-    /// One channel of pulses (an encoder wired with one channel, a slotted disc): the board
-    /// counts its edges up into a wrapping 16-bit count. It cannot tell the direction: the
-    /// pulses count the way the motor was last driven, as a Hall wave's revolutions do.
-    Pulses {
-        /// Edges per turn of the output shaft.
-        counts_per_rev: u16,
-    },
-    /// A magnetic angle sensor (AS5600) on the drive gear: the sample is its 12-bit angle, with
-    /// [`ANGLE_FAULT`] set while the magnet is missing, too weak or too strong, or the sensor
-    /// does not answer.
-    Angle,
-}
-
-pub use mmu_hal_port::{ANGLE_COUNTS, ANGLE_FAULT};
-
-impl MotionSensor {
-    /// Counts of one turn of the sensed shaft.
-    pub const fn counts_per_rev(self) -> u16 {
-        match self {
-            MotionSensor::HallWave => 1,
-            MotionSensor::Quadrature { counts_per_rev } | MotionSensor::Pulses { counts_per_rev } => {
-                counts_per_rev
-            }
-            MotionSensor::Angle => ANGLE_COUNTS,
-        }
-    }
-}
+pub use mmu_hal_port::{ANGLE_COUNTS, ANGLE_FAULT, MotionSensor};
 
 /// How a lane's presence sensor is read.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -112,6 +112,26 @@ pub struct Target<'a> {
 
 pub use crate::guards::{FilamentReadings, NO_FILAMENT_READINGS};
 
+impl<'a> Target<'a> {
+    /// What a write may change of the settings `config` alone, on a unit with `slots` slots of
+    /// `profile`: no presence sensor known to see filament, no spool ledger.
+    pub fn of_settings(
+        profile: &'a Profile,
+        slots: usize,
+        config: &'a mut Config,
+        fsensor: &'a mut u8,
+    ) -> Self {
+        Target {
+            profile,
+            slots,
+            config,
+            fsensor,
+            filament_readings: NO_FILAMENT_READINGS,
+            used_centi: &mut [],
+        }
+    }
+}
+
 /// Why a write was answered `R`. Whatever the reason, it changed nothing.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -829,15 +849,13 @@ pub fn apply_setting(profile: &Profile, config: &mut Config, slots: usize, addre
         return false;
     }
     let mut fsensor = 0;
-    let mut target = Target {
-        profile,
-        slots,
-        config,
-        fsensor: &mut fsensor,
-        filament_readings: NO_FILAMENT_READINGS,
-        used_centi: &mut [],
-    };
-    write_row(row.handler, &mut target, row.address, index, value)
+    write_row(
+        row.handler,
+        &mut Target::of_settings(profile, slots, config, &mut fsensor),
+        row.address,
+        index,
+        value,
+    )
 }
 
 /// What a register read sees of a configuration alone: setting registers read only the
@@ -1066,14 +1084,7 @@ mod tests {
         // Through the registers, each changes its field and no other.
         let mut config = Config::default();
         let mut fsensor = 0;
-        let mut target = Target {
-            profile: &crate::profile::THESIS,
-            slots: 3,
-            config: &mut config,
-            fsensor: &mut fsensor,
-            filament_readings: NO_FILAMENT_READINGS,
-            used_centi: &mut [],
-        };
+        let mut target = Target::of_settings(&crate::profile::THESIS, 3, &mut config, &mut fsensor);
         assert_eq!(write(&mut target, 3, 0x4c, 1234), Ok(()));
         assert_eq!(write(&mut target, 3, 0x0d, 77), Ok(()));
         let expected = Config {
@@ -1088,14 +1099,7 @@ mod tests {
     fn a_read_only_register_takes_no_value() {
         let mut config = Config::default();
         let mut fsensor = 0;
-        let mut target = Target {
-            profile: &crate::profile::THESIS,
-            slots: 3,
-            config: &mut config,
-            fsensor: &mut fsensor,
-            filament_readings: NO_FILAMENT_READINGS,
-            used_centi: &mut [],
-        };
+        let mut target = Target::of_settings(&crate::profile::THESIS, 3, &mut config, &mut fsensor);
         let mut read_only = 0;
         for register in all(3).filter(|r| r.row.access() == Access::Read) {
             read_only += 1;
@@ -1116,14 +1120,7 @@ mod tests {
     fn only_settings_are_writable_and_only_within_their_range() {
         let mut config = Config::default();
         let mut fsensor = 0;
-        let mut target = Target {
-            profile: &crate::profile::THESIS,
-            slots: 3,
-            config: &mut config,
-            fsensor: &mut fsensor,
-            filament_readings: NO_FILAMENT_READINGS,
-            used_centi: &mut [],
-        };
+        let mut target = Target::of_settings(&crate::profile::THESIS, 3, &mut config, &mut fsensor);
         assert_eq!(write(&mut target, 3, 0x22, 410), Ok(()));
         assert_eq!(write(&mut target, 3, 0x22, 49), Err(Refused::OutOfRange));
         assert_eq!(write(&mut target, 3, 0x40, 3), Err(Refused::ReadOnly));
@@ -1152,14 +1149,7 @@ mod tests {
     fn a_write_that_would_break_a_rule_is_refused_and_changes_nothing() {
         let mut config = Config::default();
         let mut fsensor = 0;
-        let mut target = Target {
-            profile: &crate::profile::THESIS,
-            slots: 3,
-            config: &mut config,
-            fsensor: &mut fsensor,
-            filament_readings: NO_FILAMENT_READINGS,
-            used_centi: &mut [],
-        };
+        let mut target = Target::of_settings(&crate::profile::THESIS, 3, &mut config, &mut fsensor);
         let broke = |rule| Err(Refused::Broke(rule));
         // The "on" threshold must stay above the "off" one.
         assert_eq!(
@@ -1213,12 +1203,8 @@ mod tests {
                 let value = min + (span * step / 16) as u16;
                 let before = config.clone();
                 let mut target = Target {
-                    profile: &crate::profile::THESIS,
-                    slots: 3,
-                    config: &mut config,
-                    fsensor: &mut fsensor,
-                    filament_readings: NO_FILAMENT_READINGS,
                     used_centi: &mut used,
+                    ..Target::of_settings(&crate::profile::THESIS, 3, &mut config, &mut fsensor)
                 };
                 match write(&mut target, 3, register.address, value) {
                     Ok(()) => taken += 1,
@@ -1282,12 +1268,8 @@ mod tests {
         filament_readings[0] = Some(3000);
         filament_readings[2] = Some(2800);
         let mut target = Target {
-            profile: &crate::profile::THESIS,
-            slots: 3,
-            config: &mut config,
-            fsensor: &mut fsensor,
             filament_readings,
-            used_centi: &mut [],
+            ..Target::of_settings(&crate::profile::THESIS, 3, &mut config, &mut fsensor)
         };
         let seen = Err(Refused::Broke(Rule::OnAtFilamentSeen));
         for on in [3001, 3072, 3902] {

@@ -296,11 +296,16 @@ impl<const N: usize> Unit<N> {
     }
 
     /// The tension sensor that reads `slot`'s filament: the hub's, or the lane's own.
-    pub fn tension(&self, slot: usize) -> Option<&AnalogSensor> {
+    pub const fn tension_id(&self, slot: usize) -> SensorId {
         match self.profile.tension {
-            TensionAt::Hub => Some(&self.hub.tension),
-            TensionAt::Lane => self.feeders.get(slot).map(|feeder| &feeder.tension),
+            TensionAt::Hub => SensorId::HubTension,
+            TensionAt::Lane => SensorId::LaneTension(slot),
         }
+    }
+
+    /// The tension sensor that reads `slot`'s filament ([`Unit::tension_id`]).
+    pub fn tension(&self, slot: usize) -> Option<&AnalogSensor> {
+        self.sensor(self.tension_id(slot))
     }
 
     /// `slot`'s tension reading, if its sensor is healthy and warm.

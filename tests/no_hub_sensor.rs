@@ -8,7 +8,7 @@ use common::*;
 use mmu_firmware::profile::BMCU_C;
 use mmu_firmware::unit::Lane;
 use mmu_firmware::{App, Config};
-use mmu_model::{Fault, LaneMotionSensor, ModelConfig};
+use mmu_model::{Fault, ModelConfig, MotionSensor};
 use mmu_protocol::{ParamCode, Request, RequestCode};
 
 /// Where the model's hub sensor would be, seen from a lane's presence sensor, mm.
@@ -19,7 +19,7 @@ fn bmcu_rig() -> Rig<4> {
     rig.app = App::with_profile(&BMCU_C, Config::for_profile(&BMCU_C)).expect("4 lanes");
     rig.model = mmu_model::Model::new(
         ModelConfig {
-            motion_sensor: LaneMotionSensor::Angle,
+            motion_sensor: MotionSensor::Angle,
             lane_tension: true,
             mm_per_rev: 23.56,
             ..ModelConfig::default()

@@ -21,6 +21,48 @@ pub const ANGLE_COUNTS: u16 = 4096;
 /// strong, no answer on its bus).
 pub const ANGLE_FAULT: u16 = 0x8000;
 
+/// How a lane measures the filament's motion. Every source is read as a count of a sensed
+/// shaft's turn, `counts_per_rev` counts to the turn; register 0x42 (`mm_per_rev_centi`) says
+/// how far the filament moves per turn, so the odometry is `counts × mm_per_rev / counts_per_rev`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum MotionSensor {
+    /// An analog Hall sensor that sees one magnet on the motor shaft: a sine-like wave, one
+    /// period per revolution, read on the ADC. It cannot tell the direction: a revolution counts
+    /// the way the motor was last driven.
+    HallWave,
+    /// A two-channel Hall quadrature encoder on the motor: the board counts every edge of both
+    /// channels, up and down, into a wrapping 16-bit count (the sample).
+    Quadrature {
+        /// Edges per turn of the output shaft (4 × pulses per channel × gear ratio).
+        counts_per_rev: u16,
+    },
+    /// One channel of pulses (an encoder wired with one channel, a slotted disc): the board
+    /// counts its edges up into a wrapping 16-bit count. It cannot tell the direction: the
+    /// pulses count the way the motor was last driven, as a Hall wave's revolutions do.
+    Pulses {
+        /// Edges per turn of the output shaft.
+        counts_per_rev: u16,
+    },
+    /// A magnetic angle sensor (AS5600) on the drive gear: the sample is its 12-bit angle, with
+    /// [`ANGLE_FAULT`] set while the magnet is missing, too weak or too strong, or the sensor
+    /// does not answer.
+    Angle,
+}
+
+impl MotionSensor {
+    /// Counts of one turn of the sensed shaft.
+    pub const fn counts_per_rev(self) -> u16 {
+        match self {
+            MotionSensor::HallWave => 1,
+            MotionSensor::Quadrature { counts_per_rev } | MotionSensor::Pulses { counts_per_rev } => {
+                counts_per_rev
+            }
+            MotionSensor::Angle => ANGLE_COUNTS,
+        }
+    }
+}
+
 /// Which way a slot motor turns the filament.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -165,9 +207,8 @@ pub trait Watchdog {
     fn feed(&mut self);
 }
 
-/// Raw samples of one slot's sensors. What `motion` means is the hardware profile's: an analog
-/// Hall level (a sine-like wave, one period per motor revolution), a wrapping quadrature count,
-/// or an angle sensor's 12-bit angle.
+/// Raw samples of one slot's sensors. What `motion` means is the lane's [`MotionSensor`]'s: an
+/// analog Hall level, a wrapping count, or an angle sensor's 12-bit angle.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct SlotSamples {

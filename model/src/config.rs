@@ -1,26 +1,6 @@
 //! Every physical constant of the model, with realistic defaults.
 
-/// What the model's lanes measure their motion with, as a hardware profile has it.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum LaneMotionSensor {
-    /// An analog Hall sine, one period per motor revolution (noisy, like every analog sensor).
-    #[default]
-    HallWave,
-    /// A quadrature encoder: the sample is the wrapping count of `counts_per_rev` a revolution.
-    Quadrature {
-        /// Counts per revolution.
-        counts_per_rev: u16,
-    },
-    /// One channel of pulses: the sample is the wrapping count of its edges, `counts_per_rev` a
-    /// revolution, counting up whichever way the motor turns.
-    Pulses {
-        /// Counts per revolution.
-        counts_per_rev: u16,
-    },
-    /// An angle sensor: the sample is the 12-bit angle of the revolution, or the fault flag
-    /// ([`mmu_hal_port::ANGLE_FAULT`]) while disconnected.
-    Angle,
-}
+use mmu_hal_port::MotionSensor;
 
 /// The physical constants of a [`Model`](crate::Model).
 ///
@@ -76,7 +56,7 @@ pub struct ModelConfig {
     /// an angle sensor). Default 2.0.
     pub mm_per_rev: f32,
     /// What each lane's motion sensor reads. Default the Hall wave.
-    pub motion_sensor: LaneMotionSensor,
+    pub motion_sensor: MotionSensor,
     /// Each lane has its own tension sensor (read from that lane's buffer). Default false.
     pub lane_tension: bool,
 
@@ -121,7 +101,7 @@ impl Default for ModelConfig {
             coast_tau_ms: 60.0,
             dead_band_permille: 80,
             mm_per_rev: 2.0,
-            motion_sensor: LaneMotionSensor::HallWave,
+            motion_sensor: MotionSensor::HallWave,
             lane_tension: false,
             buffer_limit_mm: 6.0,
             buffer_relax_ms: 100.0,

@@ -65,9 +65,9 @@ mod config;
 mod fault;
 mod rng;
 
-pub use config::{LaneMotionSensor, ModelConfig};
+pub use config::ModelConfig;
 pub use fault::{Fault, FaultKind, Rail, SensorId};
-pub use mmu_hal_port::{Direction, Duty, HubSamples, MotorCommand, Samples, SlotSamples};
+pub use mmu_hal_port::{Direction, Duty, HubSamples, MotionSensor, MotorCommand, Samples, SlotSamples};
 pub use rng::Rng;
 
 use mmu_hal_port::ADC_MAX;
@@ -617,23 +617,23 @@ impl Model {
         let tension = p.rest + p.tension_gain * s.buffer;
         let sensor = SensorId::MotorHall(slot);
         let motion = match self.config.motion_sensor {
-            LaneMotionSensor::HallWave => {
+            MotionSensor::HallWave => {
                 let hall = p.rest + p.hall_amplitude * (core::f64::consts::TAU * turns.rem_euclid(1.0)).sin();
                 self.read(sensor, hall)
             }
             // A disconnected encoder's channels stay put: the count stops.
-            LaneMotionSensor::Quadrature { counts_per_rev } => match self.disconnected(sensor) {
+            MotionSensor::Quadrature { counts_per_rev } => match self.disconnected(sensor) {
                 Some(_) => 0,
                 None => ((turns * f64::from(counts_per_rev)).floor() as i64).rem_euclid(65_536) as u16,
             },
             // Edges of one channel count up whichever way it turns: the distance turned.
-            LaneMotionSensor::Pulses { counts_per_rev } => match self.disconnected(sensor) {
+            MotionSensor::Pulses { counts_per_rev } => match self.disconnected(sensor) {
                 Some(_) => 0,
                 None => {
                     ((s.turned_revs * f64::from(counts_per_rev)).floor() as i64).rem_euclid(65_536) as u16
                 }
             },
-            LaneMotionSensor::Angle => match self.disconnected(sensor) {
+            MotionSensor::Angle => match self.disconnected(sensor) {
                 Some(_) => mmu_hal_port::ANGLE_FAULT,
                 None => {
                     let counts = f64::from(mmu_hal_port::ANGLE_COUNTS);

@@ -12,7 +12,7 @@
 use mmu_firmware::profile::{MotionSensor, Profile, THESIS, TensionAt};
 use mmu_firmware::runner::Status;
 use mmu_firmware::{Config, Direction, Instant, MotorCommand};
-use mmu_model::{LaneMotionSensor, Model, ModelConfig, Rng};
+use mmu_model::{Model, ModelConfig, Rng};
 use mmu_protocol::RequestCode;
 
 use crate::event::{Event, EventKind, FaultAction};
@@ -83,18 +83,12 @@ impl SimOptions {
 /// `model` with the sensors of `profile`: what each lane's motion sensor reads, the lanes' own
 /// tension sensors, and the turn of the sensed shaft where the profile has its own.
 pub fn model_for(profile: &Profile, model: &ModelConfig) -> ModelConfig {
-    let motion_sensor = match profile.motion {
-        MotionSensor::HallWave => LaneMotionSensor::HallWave,
-        MotionSensor::Quadrature { counts_per_rev } => LaneMotionSensor::Quadrature { counts_per_rev },
-        MotionSensor::Pulses { counts_per_rev } => LaneMotionSensor::Pulses { counts_per_rev },
-        MotionSensor::Angle => LaneMotionSensor::Angle,
-    };
     let mm_per_rev = match profile.motion {
         MotionSensor::HallWave => model.mm_per_rev,
         _ => f32::from(profile.mm_per_rev_centi) / 100.0,
     };
     ModelConfig {
-        motion_sensor,
+        motion_sensor: profile.motion,
         lane_tension: profile.tension == TensionAt::Lane,
         mm_per_rev,
         ..model.clone()

@@ -8,10 +8,9 @@ use mmu_protocol::{ErrorCode, ProgressCode};
 
 use super::{Bounds, Decision, Goal, MotionPhase, Outcome, PhaseRun, Sight, sensor_fault_error};
 use crate::config::Config;
-use crate::profile::TensionAt;
 use crate::sensor::AnalogSensor;
 use crate::time::Instant;
-use crate::unit::{Lane, SensorId, Unit};
+use crate::unit::{Lane, Unit};
 
 /// How long the Bowden tube must read compressed before the push into the extruder stops, ms:
 /// the tip has met something (the gears, turning or idle, or a jam), and the push must stop
@@ -175,10 +174,7 @@ impl MotionPhase for ToNozzle {
             Some(tension) => push_into_gears(run, tension, at.toward_goal_mm, at.now, at.config)?,
             // Nothing else shows the gears holding the tip: no load is reported done blind.
             None if sensor.is_some_and(|sensor| sensor.fault().is_some()) => {
-                return Err(sensor_fault_error(match at.unit.profile.tension {
-                    TensionAt::Hub => SensorId::HubTension,
-                    TensionAt::Lane => SensorId::LaneTension(at.slot),
-                }));
+                return Err(sensor_fault_error(at.unit.tension_id(at.slot)));
             }
             None => Goal::Hold,
         };
