@@ -17,6 +17,7 @@
 /// `stby` (standby pins, forced low first), `off` (PWM and IN pins, forced low next) or `-` (not
 /// touched by the emergency stop). `scripts/check-pinmap.sh` holds the book's wiring tables to
 /// the rows.
+#[cfg(any(feature = "_stm32g071", feature = "pico"))]
 macro_rules! pin_map {
     (
         hal $hal:ident;
@@ -48,7 +49,7 @@ macro_rules! pin_map {
 }
 
 /// Declares the board's type, `$board`, and its [`Board`] contract from the names every board
-/// module defines: `NAME`, `STORE_RANGE`, `ResetCause` and the parts' types, `emergency_stop`,
+/// module defines: `NAME`, `STORE_RANGE`, `HAS_BUTTON`, `ResetCause` and the parts' types, `emergency_stop`,
 /// `reset_cause`, `init` and `reset`.
 macro_rules! board_contract {
     ($board:ident) => {
@@ -66,6 +67,7 @@ macro_rules! board_contract {
             type LinkTx = LinkTx;
             type Led = Led;
             type ButtonPin = ButtonPin;
+            const HAS_BUTTON: bool = HAS_BUTTON;
             type Watchdog = Watchdog;
             type StoreFlash = StoreFlash;
             type Crc = Crc;
@@ -99,13 +101,17 @@ mod pico;
 #[cfg(feature = "pico")]
 pub use pico::{Pico as ThisBoard, SLOTS};
 
-use core::convert::Infallible;
+#[cfg(feature = "bmcu")]
+mod bmcu;
+#[cfg(feature = "bmcu")]
+pub use bmcu::{Bmcu as ThisBoard, SLOTS};
+
 use core::ops::Range;
 
-use embedded_hal::digital::OutputPin;
 use embedded_storage::nor_flash::NorFlash;
 use mmu_firmware::persist::EntryCrc;
 use mmu_firmware::uart::Received;
+#[cfg(any(feature = "_stm32g071", feature = "pico"))]
 pub use mmu_hal_port::tb6612::Bridges;
 use mmu_hal_port::{Button, Motors, SensorScan, StatusLed};
 
@@ -118,7 +124,7 @@ pub trait Board {
     /// The store's region of the flash, as offsets from its base.
     const STORE_RANGE: Range<u32>;
     /// Why the MCU last started, for the boot log.
-    type ResetCause: defmt::Format;
+    type ResetCause: Loggable;
     /// The sensor scan.
     type Sampler: SensorScan<SLOTS>;
     /// The slot motors.
@@ -131,6 +137,8 @@ pub trait Board {
     type Led: StatusLed;
     /// The unit's button, with its edges.
     type ButtonPin: Button + embedded_hal_async::digital::Wait;
+    /// Whether the board has a button at all: without one, no button task runs.
+    const HAS_BUTTON: bool = true;
     /// The watchdog.
     type Watchdog: mmu_hal_port::Watchdog;
     /// The flash holding the store.
@@ -148,6 +156,18 @@ pub trait Board {
     /// Every bridge off, then the MCU restarted.
     fn reset() -> !;
 }
+
+/// What the boot log can print: defmt's `Format` where the board logs with defmt (not the
+/// BMCU-C, which has no log).
+#[cfg(feature = "_cortex_m")]
+pub trait Loggable: defmt::Format {}
+#[cfg(feature = "_cortex_m")]
+impl<T: defmt::Format> Loggable for T {}
+/// What the boot log can print: anything, on a board without a log.
+#[cfg(not(feature = "_cortex_m"))]
+pub trait Loggable {}
+#[cfg(not(feature = "_cortex_m"))]
+impl<T> Loggable for T {}
 
 /// What a board's `init` hands to `main`.
 pub struct Parts<B: Board + ?Sized> {
@@ -172,25 +192,28 @@ pub struct Parts<B: Board + ?Sized> {
 }
 
 /// An IN (or PWM) input of the unused bridge: not wired to the MCU.
+#[cfg(any(feature = "_stm32g071", feature = "pico"))]
 pub struct NotConnected;
 
+#[cfg(any(feature = "_stm32g071", feature = "pico"))]
 impl embedded_hal::digital::ErrorType for NotConnected {
-    type Error = Infallible;
+    type Error = core::convert::Infallible;
 }
 
-impl OutputPin for NotConnected {
-    fn set_low(&mut self) -> Result<(), Infallible> {
+#[cfg(any(feature = "_stm32g071", feature = "pico"))]
+impl embedded_hal::digital::OutputPin for NotConnected {
+    fn set_low(&mut self) -> Result<(), core::convert::Infallible> {
         Ok(())
     }
 
-    fn set_high(&mut self) -> Result<(), Infallible> {
+    fn set_high(&mut self) -> Result<(), core::convert::Infallible> {
         Ok(())
     }
 }
 
 #[cfg(feature = "g071-n20")]
 impl embedded_hal::pwm::ErrorType for NotConnected {
-    type Error = Infallible;
+    type Error = core::convert::Infallible;
 }
 
 /// The unused bridge's PWM input, where a board has no timer channel left for it: duty 0 always.
@@ -200,7 +223,7 @@ impl embedded_hal::pwm::SetDutyCycle for NotConnected {
         1
     }
 
-    fn set_duty_cycle(&mut self, _duty: u16) -> Result<(), Infallible> {
+    fn set_duty_cycle(&mut self, _duty: u16) -> Result<(), core::convert::Infallible> {
         Ok(())
     }
 }

@@ -2,7 +2,8 @@
 //! [`ControlLoop`]) on a board, with the same code the host tests and the simulator step.
 //!
 //! One `main` for every board. The board is a module selected by feature (`src/board/g071/` for
-//! the NUCLEO-G071RB, `src/board/pico/` for the Raspberry Pi Pico), seen only through its
+//! the NUCLEO-G071RB, `src/board/pico/` for the Raspberry Pi Pico, `src/board/bmcu/` for the
+//! BMCU-C's CH32V203), seen only through its
 //! `board::Board` contract: it starts the clocks and the HAL's drivers and hands over parts that
 //! implement the hal-port traits ([`SensorScan`],
 //! [`Motors`], [`Watchdog`]), the printer link (a DMA receive ring and an embedded-io-async
@@ -14,31 +15,58 @@
 //! they run.
 //!
 //! Safety: the board's `emergency_stop` (every bridge off through raw register writes) runs
-//! first at boot and in the HardFault handler, which then resets the MCU at once (it does not
-//! wait for a watchdog that may not be running yet). A panic goes through panic-probe: it logs
-//! the message over defmt and raises a HardFault (`udf`), so the same handler stops the motors
-//! and resets (with a probe attached, probe-rs stops there and prints the backtrace instead). The
-//! watchdog starts in the board's `init`, right after the clocks; only the control task feeds it, and
-//! the store's flash only within an allowance (`mmu_firmware::port::WatchedFlash`).
+//! first at boot and in the fault handler, which then resets the MCU at once (it does not wait
+//! for a watchdog that may not be running yet). On the Cortex-M boards a panic goes through
+//! panic-probe: it logs the message over defmt and raises a HardFault (`udf`), so the same
+//! handler stops the motors and resets (with a probe attached, probe-rs stops there and prints
+//! the backtrace instead). On the BMCU-C (no defmt: it does not fit) the panic handler and
+//! qingke-rt's exception handler stop the motors and reset. The watchdog starts in the board's
+//! `init`, right after the clocks; only the control task feeds it, and the store's flash only
+//! within an allowance (`mmu_firmware::port::WatchedFlash`).
 
 #![no_std]
 #![no_main]
 
-#[cfg(not(any(feature = "g071", feature = "g071-n20", feature = "pico")))]
+#[cfg(not(any(feature = "g071", feature = "g071-n20", feature = "pico", feature = "bmcu")))]
 compile_error!(
-    "choose a board: `cargo fw` (--features g071), `cargo fw-n20` (--features g071-n20) or `cargo fw-pico` (--features pico)"
+    "choose a board: `cargo fw` (--features g071), `cargo fw-n20` (--features g071-n20), `cargo fw-pico` (--features pico) or `cargo fw-bmcu` (--features bmcu)"
 );
-#[cfg(all(feature = "_stm32g071", feature = "pico"))]
-compile_error!("the features g071 (or g071-n20) and pico are two boards: build one at a time");
+#[cfg(any(
+    all(feature = "_stm32g071", feature = "pico"),
+    all(feature = "_stm32g071", feature = "bmcu"),
+    all(feature = "pico", feature = "bmcu")
+))]
+compile_error!("the features g071 (or g071-n20), pico and bmcu are three boards: build one at a time");
 #[cfg(all(feature = "g071", feature = "g071-n20"))]
 compile_error!("the features g071 and g071-n20 are two builds of one board: build one at a time");
 
 mod board;
 
+// Logs: defmt over RTT on the Cortex-M boards. The BMCU-C has none (defmt does not fit its flash,
+// and its one free UART is the printer's): `info!` says nothing there, and a setup-time
+// `unwrap!` that fails panics, which stops the motors and resets.
+#[cfg(feature = "_cortex_m")]
+use {
+    defmt::{info, unwrap},
+    defmt_rtt as _, panic_probe as _,
+};
+
+#[cfg(feature = "bmcu")]
+macro_rules! info {
+    ($format:literal, $($arg:expr),* $(,)?) => {{
+        $( let _ = $arg; )*
+    }};
+}
+
+#[cfg(feature = "bmcu")]
+macro_rules! unwrap {
+    ($e:expr) => {
+        $e.unwrap()
+    };
+}
+
 use core::cell::RefCell;
 
-use defmt::{info, unwrap};
-use defmt_rtt as _;
 use embassy_executor::Spawner;
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
@@ -46,7 +74,6 @@ use mmu_firmware::control::ControlLoop;
 use mmu_firmware::tasks::{self, Logic};
 use mmu_firmware::{App, Config};
 use mmu_hal_port::Watchdog as _;
-use panic_probe as _;
 use static_cell::StaticCell;
 
 use board::{Board, SLOTS, ThisBoard};
@@ -65,8 +92,22 @@ type Watchdog = <ThisBoard as Board>::Watchdog;
 /// The watchdog, once the board's `init` started it.
 static WATCHDOG: Mutex<CriticalSectionRawMutex, RefCell<Option<Watchdog>>> = Mutex::new(RefCell::new(None));
 
+#[cfg(feature = "_cortex_m")]
 #[embassy_executor::main]
 async fn main(spawner: Spawner) {
+    start(spawner);
+}
+
+/// qingke-rt's entry: the spinning executor (see Cargo.toml), in a static.
+#[cfg(feature = "bmcu")]
+#[qingke_rt::entry]
+fn main() -> ! {
+    static EXECUTOR: StaticCell<embassy_executor::Executor> = StaticCell::new();
+    EXECUTOR.init(embassy_executor::Executor::new()).run(start)
+}
+
+/// Stops the motors, starts the board and spawns the tasks.
+fn start(spawner: Spawner) {
     // Before anything else: every bridge off, whatever state a reset left the pins in.
     ThisBoard::emergency_stop();
     info!(
@@ -90,7 +131,9 @@ async fn main(spawner: Spawner) {
         logic
     )));
     spawner.spawn(unwrap!(link_tx(parts.link_tx)));
-    spawner.spawn(unwrap!(button(parts.button)));
+    if ThisBoard::HAS_BUTTON {
+        spawner.spawn(unwrap!(button(parts.button)));
+    }
     spawner.spawn(unwrap!(status_led(parts.led)));
 }
 
@@ -145,8 +188,25 @@ async fn status_led(led: Led) {
 
 /// A fault, or a panic (panic-probe ends in `udf`): every motor off, then a reset at once, so a
 /// fault before the watchdog runs does not leave the unit silent until a power cycle.
+#[cfg(feature = "_cortex_m")]
 #[cortex_m_rt::exception]
 unsafe fn HardFault(_frame: &cortex_m_rt::ExceptionFrame) -> ! {
     ThisBoard::emergency_stop();
     cortex_m::peripheral::SCB::sys_reset()
+}
+
+/// A panic on the BMCU-C: every motor off, then a reset at once (no defmt to say why: the reset
+/// cause after it reads as a software reset).
+#[cfg(feature = "bmcu")]
+#[panic_handler]
+fn panic(_info: &core::panic::PanicInfo) -> ! {
+    ThisBoard::reset()
+}
+
+/// A fault on the BMCU-C (an illegal instruction, a bad load or store): as a panic. qingke-rt's
+/// trap entry calls it for every exception.
+#[cfg(feature = "bmcu")]
+#[unsafe(export_name = "ExceptionHandler")]
+extern "C" fn exception_handler() -> ! {
+    ThisBoard::reset()
 }

@@ -36,7 +36,15 @@ pub const PICO_ERASE_STALL_MS: usize = 400;
 /// The printer UART's DMA receive ring on the Pico, as [`G071_DMA_RING`].
 pub const PICO_DMA_RING: usize = 8192;
 
+/// The longest a store page erase stalls the BMCU-C's CH32V203, ms: four 256-byte fast erases.
+/// WCH's datasheet gives no erase time that was found; this is the G071's bound, taken as an
+/// assumption until a board measures it.
+pub const BMCU_ERASE_STALL_MS: usize = G071_ERASE_STALL_MS;
+/// The printer UART's DMA receive ring on the BMCU-C, as [`G071_DMA_RING`].
+pub const BMCU_DMA_RING: usize = 512;
+
 const _: () = assert!(G071_DMA_RING >= rx_ring_needed(G071_ERASE_STALL_MS));
+const _: () = assert!(BMCU_DMA_RING >= rx_ring_needed(BMCU_ERASE_STALL_MS));
 const _: () = assert!(PICO_DMA_RING >= rx_ring_needed(PICO_ERASE_STALL_MS));
 
 /// What a receive error of the printer link counts as.
@@ -46,6 +54,38 @@ pub enum LineError {
     Overrun,
     /// A frame with a framing, noise or parity error (or a break).
     Garbled,
+}
+
+/// The bytes a circular DMA channel has written into an `N`-byte ring, from its transfer counter
+/// that counts down from `N` and reloads at 0 (the STM32's and the CH32's DMA, NDTR/CNDTR).
+/// Fewer than `N` bytes may arrive between two looks: a move of the counter is never a whole
+/// lap.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct CountdownRing<const N: usize> {
+    /// Bytes written since the start, wrapping, as of the last look.
+    written: u32,
+    /// The ring's offset the DMA writes next, as of the last look.
+    position: u32,
+}
+
+impl<const N: usize> CountdownRing<N> {
+    /// No byte written yet.
+    pub const fn new() -> Self {
+        CountdownRing {
+            written: 0,
+            position: 0,
+        }
+    }
+
+    /// Bytes written since the start, wrapping, with the counter now at `remaining`.
+    pub fn written(&mut self, remaining: u32) -> u32 {
+        let mask = N as u32 - 1;
+        let position = (N as u32).wrapping_sub(remaining) & mask;
+        let moved = position.wrapping_sub(self.position) & mask;
+        self.position = position;
+        self.written = self.written.wrapping_add(moved);
+        self.written
+    }
 }
 
 /// A receive ring a DMA channel fills: what the board's hardware (or the simulator's model of
@@ -257,6 +297,25 @@ mod tests {
     //! bytes only when it runs (not while a flash erase stalls it).
 
     use super::*;
+
+    /// A count-down counter read as bytes written: across its reload, and a whole ring's worth
+    /// in steps.
+    #[test]
+    fn a_count_down_counter_reads_as_bytes_written() {
+        let mut counter = CountdownRing::<512>::new();
+        assert_eq!(counter.written(512), 0);
+        assert_eq!(counter.written(500), 12);
+        // Past the reload: 500 -> 0 -> 512 -> 20 is 500 - 20 = 480 more.
+        assert_eq!(counter.written(20), 492);
+        assert_eq!(counter.written(512), 512);
+        for lap in 1..=3u32 {
+            for remaining in (1..512).rev().step_by(100) {
+                counter.written(remaining);
+            }
+            assert_eq!(counter.written(512), 512 * (lap + 1));
+        }
+    }
+
     use crate::control::LINE_BYTES_PER_S;
 
     extern crate std;

@@ -344,6 +344,8 @@ pub fn reset_cause() -> ResetCause {
 /// code or data is ever linked there, and `probe-rs` (which only erases the pages it programs)
 /// leaves it alone when the firmware is flashed again.
 pub const STORE_RANGE: Range<u32> = 0x1_8000..0x2_0000;
+/// The board has a button.
+pub const HAS_BUTTON: bool = true;
 
 /// The STM32G0's CRC unit computing the store's CRC-32/ISO-HDLC (`persist::iso_hdlc`, RM0444
 /// "Cyclic redundancy check calculation unit"): polynomial 0x04C11DB7 on 32 bits, initial value

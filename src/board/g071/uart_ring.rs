@@ -24,7 +24,7 @@ use embassy_stm32::peripherals::{DMA1_CH2, PB7, USART1};
 use embassy_stm32::usart;
 use embassy_stm32::{Peri, pac};
 use mmu_firmware::uart::G071_DMA_RING;
-use mmu_firmware::uart::{LineError, ReceiveRing, RingSource};
+use mmu_firmware::uart::{CountdownRing, LineError, ReceiveRing, RingSource};
 use static_cell::StaticCell;
 
 use super::Irqs;
@@ -37,20 +37,13 @@ unsafe impl Sync for Ring {}
 
 static RING: Ring = Ring(UnsafeCell::new([0; G071_DMA_RING]));
 
-/// The ring's offset of CNDTR's count `remaining` (`G071_DMA_RING` down to 1, reloaded at 0).
-fn position(remaining: u32) -> u32 {
-    (G071_DMA_RING as u32).wrapping_sub(remaining) & (G071_DMA_RING as u32 - 1)
-}
-
 /// The printer UART's receive ring: USART1's RX DMA channel and what it has written.
 pub struct G071Ring {
     transfer: Transfer<'static>,
     /// Keeps PB7 in its USART1_RX function (never read through).
     _rx: Flex<'static>,
-    /// Bytes written since the start, wrapping, as of the last look.
-    written: u32,
-    /// The ring's offset the DMA writes next, as of the last look.
-    position: u32,
+    /// What CNDTR's count down says was written.
+    counter: CountdownRing<G071_DMA_RING>,
 }
 
 impl G071Ring {
@@ -86,19 +79,14 @@ impl G071Ring {
         ReceiveRing::new(G071Ring {
             transfer,
             _rx: pin,
-            written: 0,
-            position: 0,
+            counter: CountdownRing::new(),
         })
     }
 }
 
 impl RingSource<G071_DMA_RING> for G071Ring {
     fn written(&mut self) -> u32 {
-        let position = position(self.transfer.get_remaining_transfers());
-        let moved = position.wrapping_sub(self.position) & (G071_DMA_RING as u32 - 1);
-        self.position = position;
-        self.written = self.written.wrapping_add(moved);
-        self.written
+        self.counter.written(self.transfer.get_remaining_transfers())
     }
 
     /// USART1's receive errors since the last look (ISR PE, FE, NE, ORE; cleared through ICR).

@@ -59,6 +59,8 @@ const FLASH_SIZE: usize = 2 * 1024 * 1024;
 /// The persisted state's region, as offsets from the flash base (0x1000_0000): the last 16
 /// sectors (4 KiB each), 0x1F_0000..0x20_0000. src/board/pico/memory.x ends FLASH before it.
 pub const STORE_RANGE: Range<u32> = 0x1F_0000..0x20_0000;
+/// The board has a button.
+pub const HAS_BUTTON: bool = true;
 /// Watchdog timeout. Longer than on the G071: a 4 KiB sector erase runs with interrupts off for
 /// up to 400 ms (W25Q16JV), and nothing can feed the watchdog meanwhile.
 pub const WATCHDOG_TIMEOUT: Duration = Duration::from_millis(600);
