@@ -346,6 +346,7 @@ const COMMANDS: &[(&str, Check)] = &[
     ("npm ci --prefix fil/pico", Check::InCi),
     ("bash scripts/build-firmware.sh g071 dist", Check::InCi),
     ("bash scripts/build-firmware.sh pico dist", Check::InCi),
+    ("bash scripts/build-firmware.sh bmcu dist", Check::InCi),
     ("python3 -m pip install -r fil/g071/requirements.txt", Check::InCi),
     ("mmu fil", Check::InCi),
     ("FIL_WORN_STORE=1 mmu fil --only T1", Check::InCi),
@@ -412,6 +413,24 @@ const COMMANDS: &[(&str, Check)] = &[
     (
         "mmu calibrate --port /dev/ttyUSB0 --merge-mm 8",
         Check::NeedsHardware("a person presses Enter when the filament reaches the printer's sensor"),
+    ),
+    // A BMCU-C kit onto a Prusa printer.
+    (
+        "mmu printer --sim --hardware bmcu-c --slots 4 tool 3",
+        Check::Exits(0),
+    ),
+    (
+        "mmu printer --sim --hardware bmcu-c --slots 4 tool 4",
+        Check::Exits(1),
+    ),
+    ("mmu console --port /dev/ttyUSB0", Check::OnPtyExits(0)),
+    (
+        "cargo install --locked wchisp --version 0.3.0",
+        Check::NotRun("installs a tool from crates.io: the network"),
+    ),
+    (
+        "wchisp --serial --port /dev/ttyUSB0 flash dist/mmu-firmware-bmcu.elf",
+        Check::NotRun("needs a BMCU-C in its ROM bootloader"),
     ),
     // The simulator.
     (
