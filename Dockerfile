@@ -9,8 +9,10 @@
 #   docker run --rm -it --privileged -v /dev/bus/usb:/dev/bus/usb mmu-firmware \
 #           --chip RP2040 /firmware/mmu-firmware-pico.elf
 #       the same for a Pico behind a debug probe (a second Pico running debugprobe, on SWD)
-#   docker build --target firmware --output dist .
+#   DOCKER_BUILDKIT=1 docker build --target firmware --output dist .
 #       only the firmware: writes dist/mmu-firmware-g071.elf and dist/mmu-firmware-pico.elf
+#       (`--output` needs BuildKit: the default since Docker Engine 23.0, DOCKER_BUILDKIT=1
+#       before it; or `docker buildx build ...` with the buildx plugin)
 #
 # The build steps are not written here but in scripts/build-firmware.sh, which CI (.ci/run) runs
 # too: what this image builds is what CI checks.

@@ -148,6 +148,18 @@ pub(crate) fn parse_u16(text: &str) -> Result<u16, String> {
     parse_number(text, u16::MAX)
 }
 
+/// A button of the printer's screens, `0`, `1` or `2` (the protocol's `B0` to `B2`, Prusa's
+/// `ButtonCode`): `mmu printer button N` and the console's `button N`.
+pub(crate) fn parse_button(text: &str) -> Result<u8, String> {
+    let button = parse_u8(text).map_err(|error| format!("button {text}: {error}"))?;
+    if mmu_protocol::ButtonCode(button).name().is_none() {
+        return Err(format!(
+            "button {button}: the printer's buttons are 0 (right), 1 (middle: Retry, Continue) and 2 (left)"
+        ));
+    }
+    Ok(button)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -28,13 +28,13 @@ use mmu_sim::{
 };
 use serde_json::{Map, Value, json};
 
-use crate::codec_cli::{parse_u8, parse_u16};
+use crate::codec_cli::{parse_button, parse_u8, parse_u16};
 use crate::explain::{
     error_meaning, parse_register, register_name, request_label, request_meaning, response_label,
     response_meaning,
 };
 use crate::sim_cli::parse_slots;
-use crate::usage::usage;
+use crate::usage::{Running, stop_on_ctrl_c, usage};
 use console::{Console, JsonLine, Target, result_name, state_text};
 pub use failure::Failure;
 pub(crate) use failure::printer_failure;
@@ -177,8 +177,8 @@ pub enum Action {
     },
     /// Press a button: `B<N>` (0 Right, 1 Middle = Retry/Continue, 2 Left).
     Button {
-        /// The button.
-        #[arg(value_parser = parse_u8)]
+        /// The button: 0, 1 or 2.
+        #[arg(value_parser = parse_button)]
         button: u8,
     },
     /// Per-slot figures the unit keeps: tool changes, errors, metres fed, and where each slot's
@@ -251,6 +251,8 @@ pub struct Session<L: Target> {
     console: Console,
     /// The unit version the printer supports, for the mismatch message.
     expected_version: (u8, u8, u8),
+    /// The command the unit runs, for Ctrl-C to name.
+    running: Running,
 }
 
 impl<L: Target> Session<L> {
@@ -260,6 +262,7 @@ impl<L: Target> Session<L> {
             printer: Printer::new(link, options),
             console,
             expected_version: options.version,
+            running: Running::default(),
         }
     }
 
@@ -299,11 +302,11 @@ impl<L: Target> Session<L> {
 
     /// Run a command (`T L U E K H`) to its end.
     pub fn command(&mut self, request: Request) -> Result<Details, Failure> {
-        let outcome = self
-            .printer
-            .command(&mut self.console, request)
-            .map_err(|error| self.failure(error))?;
         let label = request_label(&request);
+        self.running.set(Some(label.clone()));
+        let outcome = self.printer.command(&mut self.console, request);
+        self.running.set(None);
+        let outcome = outcome.map_err(|error| self.failure(error))?;
         match outcome {
             Outcome::Finished(result) => {
                 let mut details = Details::new();
@@ -422,7 +425,12 @@ impl<L: Target> Session<L> {
         }
         if answer.param != ParamCode::Accepted {
             let said = response_meaning(&answer);
-            return Err(Failure::new(format!("{label} ({what}): {said} by the unit")));
+            let mut message = format!("{label} ({what}): {said} by the unit");
+            if request.code == RequestCode::Write {
+                let why = self.why_refused(request.value, request.value2)?;
+                message.push_str(&format!(": {why}"));
+            }
+            return Err(Failure::new(message));
         }
         let meaning = match answer.param_value {
             Some(_) => response_meaning(&answer),
@@ -470,7 +478,11 @@ pub fn run(args: &PrinterArgs) -> Result<(), Box<dyn Error>> {
     match (&args.port, args.sim) {
         (Some(port), false) => {
             let link = SerialLink::open(port, fsensor_source(args))?;
-            run_session(Session::new(link, options, console), &args.action)
+            let session = Session::new(link, options, console);
+            // A real unit goes on without the tool; the simulator ends with it.
+            let look = format!("`mmu printer --port {port} status` shows its state");
+            stop_on_ctrl_c(&session.running, look, None);
+            run_session(session, &args.action)
         }
         (None, true) => {
             let link = sim_link(&args.sim_options, personality(args))?;

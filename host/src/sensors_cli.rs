@@ -27,9 +27,10 @@ use mmu_firmware::registers::{
 };
 use mmu_firmware::unit::SensorId;
 use mmu_protocol::{ErrorCode, ParamCode, Request, RequestCode};
-use mmu_sim::{Decision, Link, Operator, Personality, Printer, PrinterEvent, PrinterOptions};
+use mmu_sim::{Decision, Operator, Personality, Printer, PrinterEvent, PrinterOptions};
 
-use crate::printer_cli::serial::{FsensorSource, SerialLink};
+use crate::printer_cli::console::Target;
+use crate::printer_cli::serial::{FsensorSource, NoAnswerHint, SerialLink};
 use crate::printer_cli::{CHOOSE_THE_UNIT, SimTargetArgs, ctrl_c_flag, parse_version, sim_link};
 use crate::usage::{Interrupted, usage};
 
@@ -180,11 +181,19 @@ fn state(
     (word.to_string(), Some(on))
 }
 
-/// The person at the printer for a read-only session: sees nothing, never has to decide.
-struct Silent;
+/// The person at the printer for a read-only session: sees nothing, never has to decide; only
+/// a port that gives no answer is worth a word (on stderr: stdout may be CSV).
+#[derive(Default)]
+struct Silent {
+    no_answer: NoAnswerHint,
+}
 
-impl<L> Operator<L> for Silent {
-    fn event(&mut self, _link: &mut L, _event: &PrinterEvent) {}
+impl<L: Target> Operator<L> for Silent {
+    fn event(&mut self, link: &mut L, event: &PrinterEvent) {
+        if let Some(hint) = self.no_answer.on_event(link, event) {
+            eprintln!("mmu: {hint}");
+        }
+    }
 
     fn decide(&mut self, _link: &mut L, _request: Request, _error: ErrorCode) -> Decision {
         Decision::GiveUp
@@ -192,15 +201,17 @@ impl<L> Operator<L> for Silent {
 }
 
 /// Reads the sensors of a unit over a read-only printer connection.
-struct Sampler<L: Link> {
+struct Sampler<L: Target> {
     printer: Printer<L>,
+    /// The person at the printer.
+    silent: Silent,
     /// The sensors the unit's hardware has, by number.
     sensors: Vec<(u8, SensorId)>,
     /// The sensors read.
     selected: Vec<(u8, SensorId)>,
 }
 
-impl<L: Link> Sampler<L> {
+impl<L: Target> Sampler<L> {
     fn connect(link: L, version: (u8, u8, u8)) -> Result<Self, Box<dyn Error>> {
         let options = PrinterOptions {
             version,
@@ -208,11 +219,13 @@ impl<L: Link> Sampler<L> {
             ..PrinterOptions::default()
         };
         let mut printer = Printer::new(link, options);
+        let mut silent = Silent::default();
         printer
-            .connect(&mut Silent)
+            .connect(&mut silent)
             .map_err(|error| crate::printer_cli::printer_failure(error, version))?;
         let mut sampler = Sampler {
             printer,
+            silent,
             sensors: Vec::new(),
             selected: Vec::new(),
         };
@@ -236,7 +249,7 @@ impl<L: Link> Sampler<L> {
     fn read(&mut self, address: u8) -> Result<Option<u16>, Box<dyn Error>> {
         let answer = self
             .printer
-            .request(&mut Silent, Request::new(RequestCode::Read, address))
+            .request(&mut self.silent, Request::new(RequestCode::Read, address))
             .map_err(|error| error.to_string())?;
         Ok((answer.param == ParamCode::Accepted)
             .then_some(answer.param_value)
@@ -321,7 +334,7 @@ pub fn run(args: &SensorsArgs) -> Result<(), Box<dyn Error>> {
 }
 
 /// Sample until --seconds or Ctrl-C, showing each sample as asked.
-fn watch<L: Link>(mut sampler: Sampler<L>, args: &SensorsArgs) -> Result<(), Box<dyn Error>> {
+fn watch<L: Target>(mut sampler: Sampler<L>, args: &SensorsArgs) -> Result<(), Box<dyn Error>> {
     sampler.selected = select_sensors(&args.sensors, &sampler.sensors).map_err(usage)?;
     if let Some(file) = &args.plot {
         check_plot_file(file)?;

@@ -6,6 +6,7 @@
 use std::error::Error;
 use std::fmt;
 use std::process::ExitCode;
+use std::sync::{Arc, Mutex};
 
 /// A usage mistake found after clap's parsing: exits 2.
 #[derive(Debug)]
@@ -46,4 +47,47 @@ pub fn exit_code(error: &(dyn Error + 'static)) -> ExitCode {
     } else {
         ExitCode::FAILURE
     }
+}
+
+/// The command the unit runs for the tool (`T1`), for Ctrl-C to name; shared with the handler's
+/// thread.
+#[derive(Debug, Clone, Default)]
+pub struct Running(Arc<Mutex<Option<String>>>);
+
+impl Running {
+    /// The unit runs `what` from now on (`None`: nothing).
+    pub fn set(&self, what: Option<String>) {
+        if let Ok(mut running) = self.0.lock() {
+            *running = what;
+        }
+    }
+
+    fn get(&self) -> Option<String> {
+        self.0.lock().ok().and_then(|running| running.clone())
+    }
+}
+
+/// On Ctrl-C, say what the unit was left doing (`running`) and how to see where it ends (`look`,
+/// then `extra` if any), and end with status 130: the tool cannot stop a command the unit runs
+/// (the printer protocol has no abort), and must not leave the person believing it did.
+pub fn stop_on_ctrl_c(running: &Running, look: String, extra: Option<&'static str>) {
+    let running = running.clone();
+    let result = ctrlc::set_handler(move || {
+        let mut text = match running.get() {
+            Some(command) => format!(
+                "\nmmu: stopped by Ctrl-C while the unit runs {command}: the command keeps running on the unit, \
+                 which finishes or fails it by itself (the printer protocol has no abort; every motion is \
+                 bounded); {look}"
+            ),
+            None => "\nmmu: stopped by Ctrl-C".to_string(),
+        };
+        if let Some(extra) = extra {
+            text.push_str("; ");
+            text.push_str(extra);
+        }
+        eprintln!("{text}");
+        std::process::exit(130);
+    });
+    // Without a handler Ctrl-C still ends the process, only without the words.
+    let _ = result;
 }

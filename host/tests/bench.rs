@@ -13,7 +13,7 @@ use serde_json::Value;
 
 mod common;
 
-use common::{mmu, spawn_mmu, text};
+use common::{interrupt_when_ready, mmu, spawn_mmu, text};
 
 /// Longest wait for the simulator to say something.
 const WAIT: Duration = Duration::from_secs(20);
@@ -42,9 +42,14 @@ struct PtySim {
 
 impl PtySim {
     fn spawn(name: &str, extra: &[&str]) -> PtySim {
+        PtySim::spawn_at(name, "5", extra)
+    }
+
+    /// The simulator at `time_scale` × real time.
+    fn spawn_at(name: &str, time_scale: &str, extra: &[&str]) -> PtySim {
         let events = temp(&format!("{name}-events.jsonl"));
         let mut child = Command::new(env!("CARGO_BIN_EXE_mmu"))
-            .args(["sim", "--pty", "--time-scale", "5", "--events"])
+            .args(["sim", "--pty", "--time-scale", time_scale, "--events"])
             .arg(&events)
             .args(extra)
             .stdin(Stdio::null())
@@ -449,4 +454,135 @@ fn the_simulator_log_reports_an_unfinished_frame_after_a_silence() {
     let log = String::from_utf8_lossy(&output.stderr);
     assert!(log.contains("> frame ignored: T1 unfinished"), "{log}");
     assert!(log.contains("> S0*c6  version major"), "{log}");
+}
+
+/// A serial port with nothing behind it that speaks the protocol: a pseudo-terminal whose other
+/// end the test holds, silent, or sending `noise` again and again (a device at another baud rate,
+/// a line picking up interference) until dropped.
+struct FakePort {
+    path: String,
+    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
+    writer: Option<thread::JoinHandle<()>>,
+    _ends: (serialport::TTYPort, serialport::TTYPort),
+}
+
+impl FakePort {
+    fn new(noise: Option<&'static [u8]>) -> FakePort {
+        use serialport::SerialPort;
+        use std::sync::atomic::{AtomicBool, Ordering};
+
+        let (master, slave) = serialport::TTYPort::pair().expect("a pseudo-terminal");
+        let path = slave.name().expect("the pseudo-terminal has a path");
+        let stop = std::sync::Arc::new(AtomicBool::new(false));
+        let writer = noise.map(|noise| {
+            let mut master = master.try_clone_native().expect("a second handle");
+            let stop = std::sync::Arc::clone(&stop);
+            thread::spawn(move || {
+                while !stop.load(Ordering::Relaxed) {
+                    let _ = master.write_all(noise);
+                    thread::sleep(Duration::from_millis(20));
+                }
+            })
+        });
+        FakePort {
+            path,
+            stop,
+            writer,
+            _ends: (master, slave),
+        }
+    }
+}
+
+impl FakePort {
+    /// `mmu printer --port PORT status`, which must fail (exit 1); all it printed. On buddy-6.5,
+    /// whose link timeout is 200 ms, the ten attempts take about 2 s.
+    fn status_fails(&self) -> String {
+        let output = mmu(&[
+            "printer",
+            "--printer",
+            "buddy-6.5",
+            "--port",
+            &self.path,
+            "status",
+        ]);
+        let all = text(&output);
+        assert_eq!(output.status.code(), Some(1), "{all}");
+        all
+    }
+}
+
+impl Drop for FakePort {
+    fn drop(&mut self) {
+        self.stop.store(true, std::sync::atomic::Ordering::Relaxed);
+        if let Some(writer) = self.writer.take() {
+            let _ = writer.join();
+        }
+    }
+}
+
+/// Before: a port with nothing behind it gave ten "link lost" lines (20 s on the default
+/// printer) and MMU_NOT_RESPONDING, with no word of what to check. Now the first failed handshake
+/// says it once: the port, TX and RX crossed, GND, 115200, a powered and flashed unit.
+#[test]
+fn a_silent_port_says_once_what_to_check() {
+    let port = FakePort::new(None);
+    let all = port.status_fails();
+    assert_eq!(
+        all.matches("not one byte came back").count(),
+        1,
+        "said once:\n{all}"
+    );
+    for what in [
+        port.path.as_str(),
+        "TX",
+        "RX",
+        "GND",
+        "115200",
+        "powered",
+        "flashed",
+    ] {
+        assert!(all.contains(what), "{what} missing:\n{all}");
+    }
+    assert!(!all.contains("baud rate"), "{all}");
+
+    // The other tools that open a port say it too (on the default printer, after its first 2 s
+    // attempt): the console, and `mmu sensors`, which shows no link events at all.
+    for tool in ["console", "sensors"] {
+        let mut command = Command::new(env!("CARGO_BIN_EXE_mmu"));
+        command.args([tool, "--port", &port.path]);
+        let run = interrupt_when_ready(command, None, "not one byte came back", None, 0);
+        let all = format!("{}{}", run.stdout, run.stderr);
+        assert!(all.contains("not one byte came back"), "{tool}:\n{all}");
+    }
+}
+
+/// Before: bytes that never make a frame (a wrong baud rate, noise) looked the same as silence.
+/// Now the first failed handshake says bytes came but none decoded, and what that means.
+#[test]
+fn a_port_with_noise_says_what_bytes_without_frames_mean() {
+    let port = FakePort::new(Some(b"\x00\xfe\x80~x\xf0\r\n"));
+    let all = port.status_fails();
+    assert_eq!(all.matches("none decoded").count(), 1, "said once:\n{all}");
+    assert!(all.contains("baud rate") && all.contains("115200"), "{all}");
+    assert!(all.contains("noise"), "{all}");
+    assert!(!all.contains("not one byte"), "{all}");
+}
+
+/// Before: Ctrl-C during `mmu printer ... tool N` ended the tool silently, the unit mid-change.
+/// Now it says the command keeps running on the unit (the protocol has no abort) and how to see
+/// its state, and exits 130.
+#[test]
+fn ctrl_c_during_a_printer_command_says_the_unit_goes_on() {
+    // At real time the tool change takes seconds: Ctrl-C comes in its middle.
+    let sim = PtySim::spawn_at("ctrl-c", "1", &["--quiet"]);
+    let mut printer = Command::new(env!("CARGO_BIN_EXE_mmu"));
+    printer.args(["printer", "--port", &sim.path, "tool", "1"]);
+    let run = interrupt_when_ready(printer, None, "T1: ", None, 500);
+    let all = format!("{}{}", run.stdout, run.stderr);
+    assert_eq!(run.code, Some(130), "{all}");
+    assert!(all.contains("while the unit runs T1"), "{all}");
+    assert!(all.contains("keeps running on the unit"), "{all}");
+    assert!(all.contains("no abort"), "{all}");
+    let status = format!("mmu printer --port {} status", sim.path);
+    assert!(all.contains(&status), "{all}");
 }

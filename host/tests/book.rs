@@ -383,6 +383,26 @@ const COMMANDS: &[(&str, Check)] = &[
     ("sudo udevadm trigger", Check::NotRun("root, udev")),
     ("docker build -t mmu-firmware .", Check::NotRun("needs Docker")),
     (
+        "cargo install probe-rs-tools --locked",
+        Check::NotRun("installs a tool (a compile of about 9 minutes)"),
+    ),
+    (
+        "cargo fw-run",
+        Check::NotRun("needs a NUCLEO-G071RB and probe-rs"),
+    ),
+    (
+        "cargo fw-pico-run",
+        Check::NotRun("needs a Pico, a debug probe and probe-rs"),
+    ),
+    (
+        "cargo install --locked elf2uf2-rs --version 2.2.0 --no-default-features",
+        Check::InCi,
+    ),
+    (
+        "elf2uf2-rs dist/mmu-firmware-pico.elf dist/mmu-firmware-pico.uf2",
+        Check::InCi,
+    ),
+    (
         "picocom --omap crlf --imap lfcrlf --echo /dev/pts/7",
         Check::NotRun("an interactive terminal program"),
     ),
@@ -395,11 +415,17 @@ const COMMANDS: &[(&str, Check)] = &[
         Check::NotRun("needs Docker and a board"),
     ),
     (
-        "docker build --target firmware --output dist .",
+        "DOCKER_BUILDKIT=1 docker build --target firmware --output dist .",
         Check::NotRun("needs Docker"),
     ),
     // Bring-up on the bench.
     ("mmu printer --port /dev/ttyUSB0 status", Check::OnPtyExits(0)),
+    // Getting help.
+    (
+        "mmu printer --port /dev/ttyUSB0 settings save unit.txt",
+        Check::OnPtyExits(0),
+    ),
+    ("mmu printer --port /dev/ttyUSB0 stats", Check::OnPtyExits(0)),
     ("mmu sensors --port /dev/ttyUSB0", Check::OnPtyInterrupted(500)),
     (
         "mmu sensors --port /dev/ttyUSB0 --plot hub.png --seconds 10",

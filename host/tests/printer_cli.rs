@@ -417,3 +417,42 @@ fn registers_by_name_with_their_values_explained() {
     let text = printer_fails(&["read", "elbow"]);
     assert!(text.contains("is no register"), "{text}");
 }
+
+/// Before: `write` and `settings load` said only "rejected" or "refused by the unit" where the
+/// console says the register's range or the rule the value breaks. Now they say the same.
+#[test]
+fn a_refused_write_says_the_range_and_the_rule_as_the_console_does() {
+    let text = printer_fails(&["write", "bowden_mm", "5"]);
+    assert!(text.contains("5 is out of its range, 50 to 2000"), "{text}");
+    let text = printer_fails(&["write", "park_mm", "1"]);
+    assert!(
+        text.contains(
+            "rule 6 (park_clears_merge), the park distance must reach two revolutions past the merge"
+        ),
+        "{text}"
+    );
+    let text = printer_fails(&["write", "slots", "4"]);
+    assert!(text.contains("it is read only"), "{text}");
+
+    let file = std::env::temp_dir().join(format!("mmu-refused-{}.txt", std::process::id()));
+    std::fs::write(&file, "0x22 5  # bowden_mm\n").expect("the settings file is written");
+    let text = printer_fails(&["settings", "load", file.to_str().expect("UTF-8 path")]);
+    assert!(text.contains("0x22 bowden_mm"), "{text}");
+    assert!(text.contains("5 is out of its range, 50 to 2000"), "{text}");
+    let _ = std::fs::remove_file(file);
+}
+
+/// Before: `mmu printer button 9` was sent to the unit; the protocol has three buttons, B0 to
+/// B2. Now clap refuses any other at parse time (exit 2) and names the three.
+#[test]
+fn only_the_protocol_s_three_buttons_are_accepted() {
+    let output = mmu(&["printer", "--sim", "button", "9"]);
+    assert_eq!(output.status.code(), Some(2), "{}", stderr(&output));
+    assert!(
+        stderr(&output).contains("button 9: the printer's buttons are 0 (right), 1 (middle"),
+        "{}",
+        stderr(&output)
+    );
+    // B1 with nothing waiting: the unit takes it.
+    printer_ok(&["button", "1"]);
+}

@@ -2,7 +2,7 @@
 //! decimal or `0x` hex, registers by name or address. [`parse`] turns a line into a [`Command`];
 //! [`HELP`] is what `help` prints and [`WORDS`] what tab completion offers.
 
-use crate::codec_cli::{parse_u8, parse_u16};
+use crate::codec_cli::{parse_button, parse_u8, parse_u16};
 
 use super::calibrate::Step;
 use super::link::FsensorMode;
@@ -141,15 +141,10 @@ pub fn parse(line: &str) -> Result<Option<Command>, String> {
             _ => return Err("usage: set REGISTER VALUE".into()),
         },
         "retry" | "continue" => Command::Retry,
-        "button" | "b" => {
-            let button = slot("button")?;
-            if button > 2 {
-                return Err(format!(
-                    "button {button}: the printer's buttons are 0 (right), 1 (middle: Retry, Continue) and 2 (left)"
-                ));
-            }
-            Command::Button(button)
-        }
+        "button" | "b" => match args {
+            [button] => Command::Button(parse_button(button)?),
+            _ => return Err("usage: button N (0 right, 1 middle = Retry, 2 left)".into()),
+        },
         "motor" => Command::Motor(slot("motor")?),
         "slots" => Command::Slots,
         "slot" => match args {

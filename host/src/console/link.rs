@@ -113,6 +113,13 @@ impl Target for BenchLink {
             Wire::Serial(link) => link.notes(),
         }
     }
+
+    fn no_answer_hint(&self) -> Option<String> {
+        match &self.wire {
+            Wire::Sim(_) => None,
+            Wire::Serial(link) => link.no_answer_hint(),
+        }
+    }
 }
 
 /// Inject the simulator fault `spec`; what happened, in words.

@@ -21,11 +21,11 @@ pub mod motor;
 mod names;
 pub mod pc_files;
 mod person;
+pub(crate) mod refused;
 mod words;
 
 use std::error::Error;
 use std::path::PathBuf;
-use std::sync::{Arc, Mutex};
 
 use mmu_protocol::{ButtonCode, ErrorCode, Family, ParamCode, Request, RequestCode, Response, ResultCode};
 use mmu_sim::{Link, Outcome, Personality, Printer, PrinterOptions};
@@ -34,6 +34,7 @@ use crate::explain::{error_meaning, request_label, request_meaning, response_mea
 use crate::printer_cli::console::{Console, state_text};
 use crate::printer_cli::serial::{EventsTail, FsensorSource, SerialLink};
 use crate::printer_cli::{SimTargetArgs, parse_version, sim_link};
+use crate::usage::{Running, stop_on_ctrl_c};
 use calibrate::{CalibrateOptions, Step};
 use commands::{Command, HELP, parse};
 use input::Input;
@@ -152,7 +153,7 @@ pub struct Bench {
     /// The printer's filament sensor follows a `mmu sim --events` file.
     fsensor_events: bool,
     /// The command the unit runs for the console, for Ctrl-C to name.
-    running: Arc<Mutex<Option<String>>>,
+    running: Running,
     /// The statistics: kept in their file for a real unit, for the session with the simulator.
     stats: Stats,
     /// The person was told how the printer's sensor works on the bench.
@@ -207,7 +208,7 @@ impl Bench {
             },
             slots: 0,
             fsensor_events: false,
-            running: Arc::new(Mutex::new(None)),
+            running: Running::default(),
             stats: Stats::default(),
             told_about_the_bench: false,
         }
@@ -272,56 +273,8 @@ impl Bench {
             return Ok(());
         }
         let register = self.register_text(address);
-        let range =
-            mmu_firmware::registers::describe(address, usize::from(self.slots)).and_then(|r| r.row.range());
-        let why = match range {
-            None => "it is read only".to_string(),
-            Some((low, high)) if value < low || value > high => {
-                format!("{value} is out of its range, {low} to {high}")
-            }
-            Some(_) => self.broken_rule(address),
-        };
+        let why = refused::why_refused(address, value, self.slots, &mut |address| self.read(address).ok());
         Err(format!("the unit refused {register} = {value}: {why}"))
-    }
-
-    /// Why the unit refused an in-range write to `address`: the guards' rule it names in register
-    /// 0x8f (`mmu_firmware::guards`), with the other threshold of a pair where that helps.
-    fn broken_rule(&mut self, address: u8) -> String {
-        use mmu_firmware::guards::Rule;
-        let rule = self
-            .read(mmu_firmware::registers::REFUSED_RULE)
-            .ok()
-            .and_then(Rule::from_code);
-        let Some(rule) = rule else {
-            return "the unit does not take that value here".to_string();
-        };
-        let text = match (rule, address) {
-            (Rule::ThresholdsOrdered, 0x90..=0x9f) => format!(
-                "a sensor's \"on\" threshold must stay above its \"off\" one ({}): set \"off\" lower first",
-                self.partner_threshold(address + 0x10)
-            ),
-            (Rule::ThresholdsOrdered, 0xa0..=0xaf) => format!(
-                "a sensor's \"off\" threshold must stay below its \"on\" one ({}): set \"on\" higher first",
-                self.partner_threshold(address - 0x10)
-            ),
-            (Rule::HysteresisAboveNoise, 0x90..=0x9f) => {
-                format!("{} ({})", rule.meaning(), self.partner_threshold(address + 0x10))
-            }
-            (Rule::HysteresisAboveNoise, 0xa0..=0xaf) => {
-                format!("{} ({})", rule.meaning(), self.partner_threshold(address - 0x10))
-            }
-            _ => rule.meaning().to_string(),
-        };
-        format!("rule {} ({}), {text}", rule.code(), rule.name())
-    }
-
-    /// The other threshold of a pair, as text (`off is 2400`), for a refused write.
-    fn partner_threshold(&mut self, address: u8) -> String {
-        let name = names::name(address, self.slots).unwrap_or_else(|| format!("0x{address:02x}"));
-        match self.read(address) {
-            Ok(value) => format!("{name} is {value}"),
-            Err(_) => format!("{name} could not be read"),
-        }
     }
 
     /// Refuse to send `request` while the unit waits on an error: it would accept the command
@@ -373,9 +326,7 @@ impl Bench {
 
     /// What Ctrl-C names as running.
     fn set_running(&self, what: Option<String>) {
-        if let Ok(mut running) = self.running.lock() {
-            *running = what;
-        }
+        self.running.set(what);
     }
 
     /// Count a tool change to `slot` that took `ms` (kept in the statistics' file for a real unit).
@@ -778,31 +729,12 @@ impl Bench {
     }
 }
 
-/// On Ctrl-C, say what the unit was left doing (`running`), and end with status 130: the console
-/// cannot stop a command the unit runs, and must not leave the person believing it did.
-fn stop_on_ctrl_c(running: &Arc<Mutex<Option<String>>>, calibrating: bool) {
-    let running = Arc::clone(running);
-    let result = ctrlc::set_handler(move || {
-        let what = running.lock().ok().and_then(|running| running.clone());
-        let mut text = match what {
-            Some(command) => format!(
-                "\nmmu: stopped by Ctrl-C while the unit runs {command}: the unit goes on by itself (every \
-                 motion is bounded); `mmu console` again and `status` tell where it ended"
-            ),
-            None => "\nmmu: stopped by Ctrl-C".to_string(),
-        };
-        if calibrating {
-            text.push_str(
-                "; a Bowden measurement stopped half-way leaves bowden_mm (0x22), the printer-sensor search \
-                 (0x48) and the slow-down distance (0x4a) at its own values: set them back (`set`) or calibrate again",
-            );
-        }
-        eprintln!("{text}");
-        std::process::exit(130);
-    });
-    // Without a handler Ctrl-C still ends the process, only without the words.
-    let _ = result;
-}
+/// How to see where a command stopped by Ctrl-C ends, for [`stop_on_ctrl_c`].
+const LOOK_AGAIN: &str = "`mmu console` again and `status` tell where it ended";
+
+/// What a Bowden measurement stopped by Ctrl-C leaves behind.
+const CALIBRATION_LEFT: &str = "a Bowden measurement stopped half-way leaves bowden_mm (0x22), the printer-sensor \
+     search (0x48) and the slow-down distance (0x4a) at its own values: set them back (`set`) or calibrate again";
 
 /// `--merge-mm`: the park distance it makes (the join plus a margin) must be a distance the unit
 /// takes (register 0x41) and leave the parked tip in front of the slot sensor, or the slot would
@@ -839,7 +771,7 @@ pub fn run_calibrate(args: &CalibrateArgs) -> Result<(), Box<dyn Error>> {
             bench.slots().saturating_sub(1)
         )));
     }
-    stop_on_ctrl_c(&bench.running, true);
+    stop_on_ctrl_c(&bench.running, LOOK_AGAIN.into(), Some(CALIBRATION_LEFT));
     let options = CalibrateOptions {
         slot: args.slot,
         slot_to_hub_mm: args.slot_to_hub_mm,
@@ -868,7 +800,7 @@ pub fn run_motor(args: &MotorArgs) -> Result<(), Box<dyn Error>> {
             bench.slots().saturating_sub(1)
         )));
     }
-    stop_on_ctrl_c(&bench.running, false);
+    stop_on_ctrl_c(&bench.running, LOOK_AGAIN.into(), None);
     bench.set_running(Some(format!("the motor test of slot {} (a preload)", args.slot)));
     let result = bench.run(Command::Motor(args.slot));
     bench.person.display.close();
@@ -926,7 +858,7 @@ pub fn run(args: &ConsoleArgs) -> Result<(), Box<dyn Error>> {
     let scripted = input.is_script();
     let mut bench = Bench::open(&args.target, input)?;
     bench.connect()?;
-    stop_on_ctrl_c(&bench.running, false);
+    stop_on_ctrl_c(&bench.running, LOOK_AGAIN.into(), None);
     if !scripted {
         bench.say("type help for the commands, quit to leave");
     }

@@ -20,6 +20,7 @@ use serde_json::json;
 use super::console::Target;
 use super::{Details, Failure, Session};
 use crate::codec_cli::{parse_u8, parse_u16};
+use crate::console::refused::why_refused;
 use crate::explain::{lane_state, register_name};
 
 use mmu_firmware::registers::{Access, FAILURES as ERRORS, FED_METRES, LANE, LEFT, SLOT_COUNT, TOOL_CHANGES};
@@ -46,6 +47,23 @@ impl<L: Target> Session<L> {
             .ok()
             .filter(|&slots| slots <= 8)
             .ok_or_else(|| Failure::new(format!("the unit claims {slots} slots (register 0x40)")))
+    }
+
+    /// Why the unit refused `value` for register `address`, as the console says it.
+    pub(crate) fn why_refused(&mut self, address: u8, value: u16) -> Result<String, Failure> {
+        // A unit that does not tell its slot count: name the registers of the most a unit has.
+        let slots = self.slots().unwrap_or(mmu_firmware::MAX_SLOTS as u8);
+        let mut link_failure = None;
+        let why = why_refused(address, value, slots, &mut |address| {
+            self.read_quietly(address)
+                .map_err(|failure| link_failure.get_or_insert(failure))
+                .ok()
+                .flatten()
+        });
+        match link_failure {
+            Some(failure) => Err(failure),
+            None => Ok(why),
+        }
     }
 
     /// `stats`: per slot, the tool changes, errors and metres fed the unit keeps across restarts,
@@ -163,20 +181,18 @@ impl<L: Target> Session<L> {
                     .say(&format!("0x{address:02x} {name} = {value}: written"));
                 written.push(address);
             } else {
-                self.console
-                    .say(&format!("0x{address:02x} {name} = {value}: refused by the unit"));
-                refused.push(address);
+                let why = self.why_refused(address, value)?;
+                self.console.say(&format!(
+                    "0x{address:02x} {name} = {value}: refused by the unit: {why}"
+                ));
+                refused.push(format!("0x{address:02x} = {value} ({why})"));
             }
         }
         if written.is_empty() && refused.is_empty() {
             self.console.say("every setting already had its value");
         }
         if !refused.is_empty() {
-            let list: Vec<String> = refused.iter().map(|a| format!("0x{a:02x}")).collect();
-            return Err(Failure::new(format!(
-                "the unit refused {} (out of range, or a register it does not have)",
-                list.join(", ")
-            )));
+            return Err(Failure::new(format!("the unit refused {}", refused.join("; "))));
         }
         let mut details = Details::new();
         details.insert("written".into(), written.into());

@@ -17,6 +17,7 @@ use mmu_sim::{Decision, Link, Operator, PrinterEvent, SimLink};
 use serde::Serialize;
 use serde_json::Value;
 
+use super::serial::NoAnswerHint;
 use crate::explain::{error_meaning, request_label, request_meaning, response_label, response_meaning};
 
 /// How often the eject dialog is answered for one command before the user gives up (the unit
@@ -33,6 +34,12 @@ pub trait Target: Link {
     /// What happened inside the unit since the last call that a person would notice (a fault
     /// injected or cleared, a power loss): when (the printer's clock, ms) and what, one line each.
     fn notes(&mut self) -> Vec<(u64, String)>;
+
+    /// What to check when the unit gave no answer yet: a serial port's words
+    /// ([`super::serial::NoAnswerHint`]); `None` for the simulator.
+    fn no_answer_hint(&self) -> Option<String> {
+        None
+    }
 }
 
 impl Target for SimLink {
@@ -262,6 +269,8 @@ pub struct Console {
     version: Option<((u8, u8, u8), u16)>,
     finished: Vec<FinishedCommand>,
     dialogs: u8,
+    /// What to check when a port gives no answer, said once.
+    no_answer: NoAnswerHint,
 }
 
 impl Console {
@@ -276,6 +285,7 @@ impl Console {
             version: None,
             finished: Vec::new(),
             dialogs: 0,
+            no_answer: NoAnswerHint::default(),
         }
     }
 
@@ -564,7 +574,10 @@ impl<L: Target> Operator<L> for Console {
         let t_ms = link.now_ms();
         match event {
             PrinterEvent::Sent(request) => self.sent(t_ms, request),
-            PrinterEvent::Received(response) => self.received(t_ms, response),
+            PrinterEvent::Received(response) => {
+                self.no_answer.on_event(link, event);
+                self.received(t_ms, response);
+            }
             PrinterEvent::Connected { version, build } => {
                 self.version = Some((*version, *build));
                 let (major, minor, revision) = *version;
@@ -585,6 +598,9 @@ impl<L: Target> Operator<L> for Console {
                 let why = fault.as_str();
                 let text = format!("link lost ({why}): the printer connects again");
                 self.show(t_ms, &text, || JsonLine::LinkLost { t_ms, why });
+                if let Some(hint) = self.no_answer.on_event(link, event) {
+                    self.note(t_ms, &hint);
+                }
             }
             PrinterEvent::Interrupted(request) => {
                 let label = request_label(request);

@@ -10,7 +10,7 @@ use std::io::{self, Read, Seek, SeekFrom, Write};
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
-use mmu_sim::Link;
+use mmu_sim::{Link, PrinterEvent};
 use serde::Deserialize;
 use serialport::{DataBits, FlowControl, Parity, SerialPort, StopBits};
 
@@ -123,10 +123,14 @@ fn fsensor_state(line: &[u8]) -> Option<u8> {
 /// A unit on a serial port. See the [module documentation](self).
 pub struct SerialLink {
     port: Box<dyn SerialPort>,
+    /// The port's path, as the person named it.
+    path: String,
     started: Instant,
     /// The port's read timeout now, ms (set only when it changes).
     timeout_ms: u64,
     fsensor: FsensorSource,
+    /// Bytes read from the port since it was opened.
+    received: u64,
 }
 
 impl SerialLink {
@@ -145,10 +149,36 @@ impl SerialLink {
             .map_err(|error| format!("cannot flush serial port {path}: {error}"))?;
         Ok(SerialLink {
             port,
+            path: path.to_string(),
             started: Instant::now(),
             timeout_ms,
             fsensor,
+            received: 0,
         })
+    }
+}
+
+/// Says once what to check when a serial port gives no answer: at the first link loss before
+/// any answer decoded (a serial port's [`Target::no_answer_hint`]). Nothing for the simulator.
+#[derive(Debug, Default)]
+pub struct NoAnswerHint {
+    answered: bool,
+    told: bool,
+}
+
+impl NoAnswerHint {
+    /// Follow `event` on `link`; the hint, once, when it is due.
+    pub fn on_event<L: Target>(&mut self, link: &L, event: &PrinterEvent) -> Option<String> {
+        match event {
+            PrinterEvent::Received(_) => self.answered = true,
+            PrinterEvent::LinkLost(_) if !self.answered && !self.told => {
+                let hint = link.no_answer_hint()?;
+                self.told = true;
+                return Some(hint);
+            }
+            _ => {}
+        }
+        None
     }
 }
 
@@ -166,7 +196,10 @@ impl Link for SerialLink {
         }
         let mut buffer = [0u8; 256];
         match self.port.read(&mut buffer) {
-            Ok(read) => into.extend_from_slice(buffer.get(..read).unwrap_or(&[])),
+            Ok(read) => {
+                into.extend_from_slice(buffer.get(..read).unwrap_or(&[]));
+                self.received += read as u64;
+            }
             Err(error)
                 if matches!(
                     error.kind(),
@@ -193,6 +226,28 @@ impl Target for SerialLink {
 
     fn notes(&mut self) -> Vec<(u64, String)> {
         Vec::new()
+    }
+
+    /// What to check when the handshake got no answer: nothing came back at all (the wrong
+    /// port, the wires, the unit), or bytes that never made a frame (the speed, noise).
+    fn no_answer_hint(&self) -> Option<String> {
+        let path = &self.path;
+        Some(if self.received == 0 {
+            format!(
+                "no answer from {path} yet, not one byte came back. If it stays silent, check: that {path} is the \
+                 USB-serial adapter wired to the unit (`ls -l /dev/serial/by-id/`; not the NUCLEO's ST-LINK port, \
+                 /dev/ttyACM0); that TX and RX are crossed (the adapter's TX to the unit's RX, its RX to the unit's \
+                 TX: swap them if unsure); that GND is wired to the unit's GND; that the unit is powered and flashed \
+                 with this firmware. The line runs at {BAUD} 8N1."
+            )
+        } else {
+            format!(
+                "{} bytes came back from {path}, but none decoded as an answer: the line is not at {BAUD} 8N1 \
+                 (a wrong baud rate: an adapter or unit set to another speed), or noise garbles it (a loose GND, \
+                 long wires beside the motors), or another device answers on this port.",
+                self.received
+            )
+        })
     }
 }
 
