@@ -8,13 +8,21 @@ use common::*;
 use mmu_firmware::profile::BMCU_C;
 use mmu_firmware::unit::Lane;
 use mmu_firmware::{App, Config};
-use mmu_model::{Fault, ModelConfig, MotionSensor};
-use mmu_protocol::{ParamCode, Request, RequestCode};
+use mmu_model::{Fault, ModelConfig, MotionSensor, Rail, SensorId};
+use mmu_protocol::{ErrorCode, ParamCode, Request, RequestCode};
 
 /// Where the model's hub sensor would be, seen from a lane's presence sensor, mm.
 const SENSOR_TO_HUB_MM: f32 = 95.0;
 
 fn bmcu_rig() -> Rig<4> {
+    let mut rig = bmcu_unit();
+    rig.boot();
+    rig.handshake();
+    rig
+}
+
+/// A BMCU-C unit before its start-up check: four angle-sensor lanes with tension sliders.
+fn bmcu_unit() -> Rig<4> {
     let mut rig = Rig::<4>::new();
     rig.app = App::with_profile(&BMCU_C, Config::for_profile(&BMCU_C)).expect("4 lanes");
     rig.model = mmu_model::Model::new(
@@ -27,8 +35,6 @@ fn bmcu_rig() -> Rig<4> {
         4,
         7,
     );
-    rig.boot();
-    rig.handshake();
     rig
 }
 
@@ -37,6 +43,20 @@ fn estimate_error(rig: &Rig<4>, slot: usize) -> Option<f32> {
     let estimate = rig.app.unit().tip_centi(slot)? as f32 / 100.0;
     let truth = rig.model.tip_mm(slot)? + SENSOR_TO_HUB_MM;
     Some(estimate - truth)
+}
+
+/// A lane whose angle sensor does not answer (a BMCU370x lane module, whose pins carry other
+/// signals; a lane board unplugged; no magnet) stops the start-up check before anything moves,
+/// with the error of a lane's sensor; Retry once it answers starts the unit.
+#[test]
+fn a_lane_whose_angle_sensor_does_not_answer_stops_the_start_up_check() {
+    let mut rig = bmcu_unit();
+    rig.disconnect(SensorId::MotorHall(3), Rail::Low);
+    let x0 = Request::new(RequestCode::Reset, 0);
+    assert_eq!(rig.boot(), error(x0, ErrorCode::MOVE_PULLEY_FAILED));
+    assert!(rig.nothing_moved_since(0));
+    rig.retry_fails_until_fixed(x0, ErrorCode::MOVE_PULLEY_FAILED, |rig| rig.model.clear_all());
+    assert!(rig.nothing_moved_since(0));
 }
 
 #[test]
