@@ -21,15 +21,33 @@ use mmu_protocol::{ButtonCode, RequestCode};
 
 use crate::flash::{FlashWear, G0_ERASE_STALL_US, G0_PAGE, G0_PROGRAM_STALL_US, MemFlash, MotionWatch};
 
-/// The simulated unit's flash for persisted state: 16 pages of the STM32G0 (32 KiB).
-pub type UnitFlash = MemFlash<G0_PAGE>;
-/// Pages of [`UnitFlash`].
-pub const STORE_PAGES: usize = 16;
-
-/// An empty (erased) unit flash.
-pub fn blank_flash() -> UnitFlash {
-    MemFlash::new(STORE_PAGES)
+/// The store's flash of the board a simulated unit stands for: its page size and count.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum StoreFlash {
+    /// The NUCLEO-G071RB's: 16 pages of 2 KiB (32 KiB); the Pico's holds as much.
+    G071,
+    /// The BMCU-C's: 4 pages of 1 KiB (four 256-byte fast erases each), the last 4 KB of the
+    /// CH32V203's rated 64 KB.
+    Bmcu,
 }
+
+impl StoreFlash {
+    /// The board a hardware `profile` runs on: the BMCU-C's lanes on its own board, every other
+    /// profile on the NUCLEO-G071RB.
+    pub fn of_profile(profile: &Profile) -> StoreFlash {
+        if profile.name == mmu_firmware::profile::BMCU_C.name {
+            StoreFlash::Bmcu
+        } else {
+            StoreFlash::G071
+        }
+    }
+}
+
+/// The BMCU-C's store page: four fast-erase pages.
+const BMCU_PAGE: usize = 1024;
+/// Pages of each board's store.
+const G071_PAGES: usize = 16;
+const BMCU_PAGES: usize = 4;
 
 /// One App of any slot count, stepped against the model.
 pub trait UnitLogic: Send {
@@ -85,9 +103,11 @@ pub const WATCHDOG_MS: u32 = 100;
 
 /// An App in the firmware's control loop, with its store kept by the firmware's own policy
 /// ([`Keeper`]).
-struct PersistentApp<const N: usize> {
+struct PersistentApp<const N: usize, const PAGE: usize> {
     control: ControlLoop<N>,
-    keeper: Keeper<UnitFlash, N>,
+    keeper: Keeper<MemFlash<PAGE>, N>,
+    /// Pages of the store.
+    pages: usize,
     motors: [MotorCommand; N],
     received: ReceiveRing<MemoryRing<G071_DMA_RING>, G071_DMA_RING>,
     /// Since the loop hung, ms; `None` while it runs.
@@ -98,16 +118,17 @@ struct PersistentApp<const N: usize> {
     motion: MotionWatch,
 }
 
-impl<const N: usize> PersistentApp<N> {
-    /// Boot on `flash`: what it holds is restored before the first step.
-    fn boot(profile: &'static Profile, config: Config, flash: UnitFlash) -> Option<Self> {
-        let range = 0..(STORE_PAGES * G0_PAGE) as u32;
+impl<const N: usize, const PAGE: usize> PersistentApp<N, PAGE> {
+    /// Boot on `flash` of `pages` pages: what it holds is restored before the first step.
+    fn boot(profile: &'static Profile, config: Config, flash: MemFlash<PAGE>, pages: usize) -> Option<Self> {
+        let range = 0..(pages * PAGE) as u32;
         let store = Store::new(flash, range).unwrap_or_else(|_| unreachable!("a valid region"));
         let mut app = App::with_profile(profile, config.clone())?;
         let (keeper, _) = Keeper::boot(store, &mut app);
         Some(PersistentApp {
             control: ControlLoop::new(app, Instant::ZERO),
             keeper,
+            pages,
             motors: mmu_firmware::drive::stopped(),
             received: ReceiveRing::new(MemoryRing::new()),
             hung_ms: None,
@@ -118,15 +139,16 @@ impl<const N: usize> PersistentApp<N> {
 
     /// The flash goes to a fresh App booted on it; this one is left with a blank store.
     fn reboot(&mut self, config: Config) {
-        let flash = std::mem::replace(self.keeper.store().flash(), blank_flash());
+        let flash = std::mem::replace(self.keeper.store().flash(), MemFlash::new(0));
         let motion = self.motion;
         let profile = self.control.app().profile();
-        *self = PersistentApp::boot(profile, config, flash).unwrap_or_else(|| unreachable!("booted once"));
+        *self = PersistentApp::boot(profile, config, flash, self.pages)
+            .unwrap_or_else(|| unreachable!("booted once"));
         self.motion = motion;
     }
 }
 
-impl<const N: usize> UnitLogic for PersistentApp<N> {
+impl<const N: usize, const PAGE: usize> UnitLogic for PersistentApp<N, PAGE> {
     fn step(
         &mut self,
         now: Instant,
@@ -213,28 +235,39 @@ impl<const N: usize> UnitLogic for PersistentApp<N> {
     }
 }
 
-/// A unit logic with `slots` slots on the hardware `profile` booted on `flash`, or `None` when
-/// the count is not 1 to what the profile has.
+/// A unit logic with `slots` slots on the hardware `profile` booted on a blank `store`, or
+/// `None` when the count is not 1 to what the profile has.
 pub fn new_logic(
     slots: usize,
     profile: &'static Profile,
     config: Config,
-    flash: UnitFlash,
+    store: StoreFlash,
 ) -> Option<Box<dyn UnitLogic>> {
     const _: () = assert!(MAX_SLOTS == 5, "new_logic lists every slot count");
     fn boxed<const N: usize>(
         profile: &'static Profile,
         config: Config,
-        flash: UnitFlash,
+        store: StoreFlash,
     ) -> Option<Box<dyn UnitLogic>> {
-        PersistentApp::<N>::boot(profile, config, flash).map(|app| Box::new(app) as Box<dyn UnitLogic>)
+        fn on<const N: usize, const PAGE: usize>(
+            profile: &'static Profile,
+            config: Config,
+            pages: usize,
+        ) -> Option<Box<dyn UnitLogic>> {
+            PersistentApp::<N, PAGE>::boot(profile, config, MemFlash::new(pages), pages)
+                .map(|app| Box::new(app) as Box<dyn UnitLogic>)
+        }
+        match store {
+            StoreFlash::G071 => on::<N, G0_PAGE>(profile, config, G071_PAGES),
+            StoreFlash::Bmcu => on::<N, BMCU_PAGE>(profile, config, BMCU_PAGES),
+        }
     }
     match slots {
-        1 => boxed::<1>(profile, config, flash),
-        2 => boxed::<2>(profile, config, flash),
-        3 => boxed::<3>(profile, config, flash),
-        4 => boxed::<4>(profile, config, flash),
-        5 => boxed::<5>(profile, config, flash),
+        1 => boxed::<1>(profile, config, store),
+        2 => boxed::<2>(profile, config, store),
+        3 => boxed::<3>(profile, config, store),
+        4 => boxed::<4>(profile, config, store),
+        5 => boxed::<5>(profile, config, store),
         _ => None,
     }
 }
@@ -251,7 +284,7 @@ mod tests {
                 slots,
                 &mmu_firmware::profile::THESIS,
                 Config::default(),
-                blank_flash(),
+                StoreFlash::G071,
             )
             .expect("supported count");
             let mut model = Model::new(ModelConfig::default(), slots, 1);
@@ -266,7 +299,7 @@ mod tests {
                 0,
                 &mmu_firmware::profile::THESIS,
                 Config::default(),
-                blank_flash()
+                StoreFlash::G071
             )
             .is_none()
         );
@@ -275,10 +308,30 @@ mod tests {
                 MAX_SLOTS + 1,
                 &mmu_firmware::profile::THESIS,
                 Config::default(),
-                blank_flash()
+                StoreFlash::G071
             )
             .is_none()
         );
+    }
+
+    /// The BMCU-C's lanes run on its board's 4 KB store (four 1 KiB pages: the store's entries
+    /// must fit a quarter page), and a unit boots on it.
+    #[test]
+    fn the_bmcu_profile_keeps_its_state_in_the_bmcu_store() {
+        let profile = &mmu_firmware::profile::BMCU_C;
+        assert_eq!(StoreFlash::of_profile(profile), StoreFlash::Bmcu);
+        assert_eq!(
+            StoreFlash::of_profile(&mmu_firmware::profile::THESIS),
+            StoreFlash::G071
+        );
+        let mut logic =
+            new_logic(4, profile, Config::for_profile(profile), StoreFlash::Bmcu).expect("4 lanes");
+        let mut model = Model::new(crate::sim::model_for(profile, &ModelConfig::default()), 4, 1);
+        let mut tx = Vec::new();
+        for ms in 0..300 {
+            logic.step(Instant::from_millis(ms), 1, &mut model, &[], &mut tx);
+        }
+        assert_eq!(logic.command(), ((RequestCode::Reset, 0), Status::Finished));
     }
 
     #[test]
@@ -287,7 +340,7 @@ mod tests {
             3,
             &mmu_firmware::profile::THESIS,
             Config::default(),
-            blank_flash(),
+            StoreFlash::G071,
         )
         .expect("3 slots");
         let mut model = Model::new(ModelConfig::default(), 3, 1);

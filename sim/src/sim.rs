@@ -17,7 +17,7 @@ use mmu_protocol::RequestCode;
 
 use crate::event::{Event, EventKind, FaultAction};
 use crate::fault::{ScheduledFault, SimFault, SimFaultKind};
-use crate::logic::{UnitLogic, blank_flash, new_logic};
+use crate::logic::{StoreFlash, UnitLogic, new_logic};
 use crate::mechanics::Mechanics;
 pub use crate::mechanics::{
     COFEED_MM, LOAD_TO_NOZZLE_MM, LOAD_TO_NOZZLE_MM_S, PRINTER_UNLOAD_MM, PRINTER_UNLOAD_MM_S, UNLOAD_HELP_MM,
@@ -186,13 +186,18 @@ impl Sim {
     /// A unit just powered on, with every slot's filament parked and nothing loaded.
     pub fn new(options: SimOptions) -> Result<Sim, BadOptions> {
         let hardware = options.hardware;
-        let logic =
-            new_logic(options.slots, hardware, options.unit.clone(), blank_flash()).ok_or_else(|| {
-                BadOptions(format!(
-                    "the {} hardware has 1 to {} slots, not {}",
-                    hardware.name, hardware.max_slots, options.slots
-                ))
-            })?;
+        let logic = new_logic(
+            options.slots,
+            hardware,
+            options.unit.clone(),
+            StoreFlash::of_profile(hardware),
+        )
+        .ok_or_else(|| {
+            BadOptions(format!(
+                "the {} hardware has 1 to {} slots, not {}",
+                hardware.name, hardware.max_slots, options.slots
+            ))
+        })?;
         Ok(Sim::with_unit(options, logic))
     }
 
