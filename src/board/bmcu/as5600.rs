@@ -12,6 +12,7 @@ use ch32_metapac as pac;
 use mmu_hal_port::ANGLE_FAULT;
 use pac::gpio::vals::{Cnf, Mode};
 
+use super::clock::systick_counts;
 use super::{SLOTS, gpio_mode, time_driver};
 
 /// The AS5600's fixed address, shifted for the R/W bit.
@@ -22,8 +23,8 @@ const STATUS: u8 = 0x0B;
 const MD: u8 = 1 << 5;
 const ML: u8 = 1 << 4;
 const MH: u8 = 1 << 3;
-/// Half an SCL period at 400 kHz, in SysTick counts (18 MHz): 1.28 µs.
-const HALF_PERIOD: u64 = 23;
+/// Half an SCL period at 400 kHz (fast mode), in SysTick counts.
+const HALF_PERIOD: u64 = systick_counts(1_250);
 
 /// Each lane's SCL pin on GPIOB.
 const SCL: [usize; SLOTS] = [15, 14, 13, 12];

@@ -6,9 +6,10 @@
 //! largest entries (864 bytes), so a store page here is four fast erases, and entries are
 //! programmed a half-word at a time (CTLR.PG).
 //!
-//! An erased word of this flash reads 0xE339E339, not all ones, until it is programmed
-//! (reported for the CH32V203: armink/EasyFlash#178, azhel12/Zhele#45): [`StoreFlash`] reads
-//! that word as 0xFFFFFFFF, which the store takes for erased. A programmed word equal to
+//! An erased word of this flash reads 0xE339E339, not all ones, until it is programmed (WCH's
+//! flash example, openwch/ch32v20x `EVT/EXAM/FLASH/FLASH_Program/User/main.c`, note a: a word
+//! 0xE339E339, a half-word 0xE339; also armink/EasyFlash#178): [`StoreFlash`] reads that word as
+//! 0xFFFFFFFF, which the store takes for erased. A programmed word equal to
 //! 0xE339E339 would read as erased too; the store's entries carry a CRC, so such an entry (one
 //! word in 2³²) is found damaged and the one before it kept.
 

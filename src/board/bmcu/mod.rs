@@ -1,5 +1,5 @@
 //! The third board, the one a maker can buy as a kit: the BMCU-C ("BMCU 370C Hall"), a WCH
-//! CH32V203C8T6 (RISC-V QingKe V4B, 144 MHz from the HSI, 64 KB flash, 20 KB RAM) driving four
+//! CH32V203C8T6 (RISC-V QingKe V4B, run at 120 MHz from the HSI, 64 KB flash, 20 KB RAM) driving four
 //! AT8236 H-bridges, with an AS5600 angle sensor on each lane's drive gear, an opto for presence
 //! and a Hall slider for tension per lane, WS2812 LEDs, and the printer on USART3 (header H1).
 //!
@@ -202,7 +202,7 @@ impl mmu_hal_port::Watchdog for Watchdog {
     }
 }
 
-/// Clocks at 144 MHz, the time driver, the watchdog, then every driver.
+/// Clocks at 120 MHz, the time driver, the watchdog, then every driver.
 pub fn init() -> super::Parts<Bmcu> {
     clock::init();
     time_driver::init();

@@ -16,8 +16,8 @@ use pac::timer::vals::Ocm;
 use super::clock::TIMER_HZ;
 use super::{SLOTS, gpio_mode};
 
-/// PWM: 144 MHz / 7200 = 20 kHz, above hearing.
-const PERIOD: u16 = 7_200;
+/// PWM: 120 MHz / 6000 = 20 kHz, above hearing.
+const PERIOD: u16 = 6_000;
 const _: () = assert!(TIMER_HZ / PERIOD as u32 == 20_000);
 
 /// A bridge input: its timer and channel (0-3), its port and pin.

@@ -1,7 +1,7 @@
-//! embassy-time's driver on the QingKe core's SysTick: a 64-bit counter of HCLK / 8 (18 MHz)
-//! that counts up from start-up and never wraps in practice (32 000 years), and one compare
+//! embassy-time's driver on the QingKe core's SysTick: a 64-bit counter of HCLK / 8 (15 MHz)
+//! that counts up from start-up and never wraps in practice (39 000 years), and one compare
 //! register whose match raises the SysTick interrupt (core interrupt 12) for the next alarm.
-//! Ticks are 1 µs (`tick-hz-1_000_000`): 18 counts each.
+//! Ticks are 1 µs (`tick-hz-1_000_000`): 15 counts each.
 //!
 //! Registers (QingKe V4 processor manual, SysTick: STK_CTLR, STK_SR, STK_CNTL/H, STK_CMPLR/HR).
 //! The 64-bit count is read as high, low, high again, so a carry between the halves is never
@@ -17,11 +17,11 @@ use embassy_time_driver::Driver;
 use embassy_time_queue_utils::Queue;
 use pac::systick::vals::{Mode, Stclk};
 
-use super::clock::HCLK_HZ;
+use super::clock::SYSTICK_HZ;
 
 /// SysTick counts per embassy-time tick.
-const COUNTS_PER_TICK: u64 = (HCLK_HZ / 8) as u64 / embassy_time_driver::TICK_HZ;
-const _: () = assert!(COUNTS_PER_TICK * embassy_time_driver::TICK_HZ == (HCLK_HZ / 8) as u64);
+const COUNTS_PER_TICK: u64 = SYSTICK_HZ as u64 / embassy_time_driver::TICK_HZ;
+const _: () = assert!(COUNTS_PER_TICK * embassy_time_driver::TICK_HZ == SYSTICK_HZ as u64);
 /// The SysTick's number among the core interrupts (qingke-rt's `CoreInterrupt::SysTick`).
 const SYSTICK_IRQ: u8 = 12;
 

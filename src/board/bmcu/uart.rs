@@ -1,5 +1,5 @@
 //! The printer's UART on header H1: USART3 (PB10 TX, PB11 RX, 3.3 V), 115 200 Bd 8N1 from
-//! PCLK1 (72 MHz: USARTDIV 39 + 1/16, BRR 625, 0.0 % off).
+//! PCLK1 (60 MHz: USARTDIV 32 + 9/16, BRR 521, 0.03 % fast).
 //!
 //! Receiving: DMA1 channel 3 (USART3_RX in the CH32V20x's DMA1 request map) copies every byte
 //! into a 512-byte ring, circularly, whatever the CPU does (a flash erase included); the control
@@ -18,9 +18,9 @@ use pac::gpio::vals::{Cnf, Mode};
 
 use super::gpio_mode;
 
-/// USART3's BRR for 115 200 Bd from 72 MHz: 625 = 39 × 16 + 1.
-const BRR: u32 = 625;
-const _: () = assert!(super::clock::PCLK1_HZ / BRR == 115_200);
+/// USART3's BRR for 115 200 Bd from 60 MHz: 521 = 32 × 16 + 9 (60 MHz / 521 = 115 163 Bd).
+const BRR: u32 = 521;
+const _: () = assert!(super::clock::PCLK1_HZ.abs_diff(BRR * 115_200) < BRR * 115_200 / 1000);
 /// DMA1's channel for USART3's receiver (channel 3).
 const DMA_CHANNEL: usize = 2;
 

@@ -2,7 +2,7 @@
 //!
 //! A WS2812B takes 24 bits (green, red, blue, most significant first), each a 1.25 µs period
 //! whose high time says the bit (0.4 µs a 0, 0.8 µs a 1, ±0.15 µs; WS2812B datasheet), then a
-//! low pause latches them. The bits are timed on the SysTick count (18 MHz: 56 ns a count) with
+//! low pause latches them. The bits are timed on the SysTick count (15 MHz: 67 ns a count) with
 //! interrupts off for the 30 µs they take, so no interrupt stretches a high time into another
 //! bit. Not the `smart-leds` traits: one LED at two colours needs no colour type or buffer, and
 //! the lanes' LEDs are not driven yet.
@@ -12,14 +12,15 @@ use core::convert::Infallible;
 use ch32_metapac as pac;
 use pac::gpio::vals::{Cnf, Mode};
 
+use super::clock::systick_counts;
 use super::{gpio_mode, time_driver};
 
 /// The LED's data pin: PD1.
 const PIN: usize = 1;
 /// High time of a 0 and of a 1, and a bit's period, in SysTick counts.
-const HIGH_0: u64 = 7;
-const HIGH_1: u64 = 14;
-const PERIOD: u64 = 23;
+const HIGH_0: u64 = systick_counts(400);
+const HIGH_1: u64 = systick_counts(800);
+const PERIOD: u64 = systick_counts(1_250);
 /// The colour when lit: a dim green (G, R, B).
 const LIT: u32 = 0x20_00_00;
 
