@@ -56,14 +56,14 @@ impl StoreFlash {
     }
 }
 
-/// Unlocks standard programming and fast mode.
-fn unlock() {
+/// Unlocks standard programming, and with `fast` the fast mode's 256-byte erase too.
+fn unlock(fast: bool) {
     let flash = pac::FLASH;
     if flash.ctlr().read().lock() {
         KEYS.iter()
             .for_each(|&key| flash.keyr().write(|w| w.set_keyr(key)));
     }
-    if flash.ctlr().read().flock() {
+    if fast && flash.ctlr().read().flock() {
         KEYS.iter()
             .for_each(|&key| flash.modekeyr().write(|w| w.set_modekeyr(key)));
     }
@@ -146,7 +146,7 @@ impl NorFlash for StoreFlash {
         }
         in_range(from, (to - from) as usize)?;
         let flash = pac::FLASH;
-        unlock();
+        unlock(true);
         let mut result = Ok(());
         for page in (from..to).step_by(FAST_PAGE as usize) {
             flash.ctlr().modify(|w| w.set_page_er(true));
@@ -168,7 +168,7 @@ impl NorFlash for StoreFlash {
         }
         in_range(offset, bytes.len())?;
         let flash = pac::FLASH;
-        unlock();
+        unlock(false);
         flash.ctlr().modify(|w| w.set_pg(true));
         let mut result = Ok(());
         for (i, half) in bytes.chunks_exact(2).enumerate() {

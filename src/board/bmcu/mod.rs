@@ -215,10 +215,17 @@ pub fn init() -> super::Parts<Bmcu> {
         w.set_iopcen(true);
         w.set_iopden(true);
     });
-    // PA15 and PB3 are JTAG pins after reset on an STM32F1; on the CH32V203 the debug port is
-    // SWIO/SWCLK (PA13/PA14) and needs no release. PD0 and PD1 are OSC_IN/OSC_OUT: remapped to
-    // GPIO (no crystal on the BMCU-C).
-    pac::AFIO.pcfr1().modify(|w| w.set_pd01_rm(true));
+    // One write of every remap, never modified after: on early CH32V203 dies PCFR1's bits from
+    // 13 up read back one place too high (WCH's `GPIO_PinRemapConfig` shifts them back), so a
+    // read-modify-write would clear PD01_RM. PD0 and PD1 are OSC_IN/OSC_OUT: remapped to GPIO
+    // (no crystal on the BMCU-C). TIM2 full remap (CH1 PA15, CH2 PB3; its CH3/CH4 would be on
+    // USART3's PB10/PB11, but stay disabled), TIM3 partial remap (CH1 PB4, CH2 PB5), TIM4 not
+    // remapped (PB6-PB9). The debug port is PA13/PA14 only: PA15, PB3 and PB4 need no release.
+    pac::AFIO.pcfr1().write(|w| {
+        w.set_pd01_rm(true);
+        w.set_tim2_rm(0b11);
+        w.set_tim3_rm(0b10);
+    });
     hold_rs485_quiet();
     super::Parts {
         sampler: Sampler::new(),

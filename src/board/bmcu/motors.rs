@@ -58,23 +58,48 @@ const fn input(timer: pac::timer::Gptm, channel: usize, port: pac::gpio::Gpio, p
 }
 
 /// Every bridge input low as a plain GPIO output, by raw register writes (no timer needed):
-/// every motor coasts.
+/// every motor coasts. The inputs are PB3-PB9 and PA15 ([`INPUTS`]): their output latches
+/// cleared, then each pin's 4-bit configuration set to 0b0010 (a push-pull output, 2 MHz)
+/// in one write a register, whatever the timers were doing with them.
 pub fn stop_all() {
     // The ports' clocks first: at boot they are off, and a write to an unclocked port is lost.
     pac::RCC.apb2pcenr().modify(|w| {
         w.set_iopaen(true);
         w.set_iopben(true);
     });
-    for input in INPUTS.iter().flatten() {
-        input.port.bcr().write(|w| w.set_br(input.pin, true));
-        gpio_mode(
-            input.port,
-            input.pin,
-            Mode::OUTPUT_2MHZ,
-            Cnf::ANALOG_IN__PUSH_PULL_OUT,
-        );
-    }
+    pac::GPIOB.bshr().write_value(pac::gpio::regs::Bshr(0x3F8 << 16));
+    pac::GPIOA
+        .bshr()
+        .write_value(pac::gpio::regs::Bshr(1 << (15 + 16)));
+    pac::GPIOB
+        .cfglr()
+        .modify(|w| w.0 = (w.0 & 0x0000_0FFF) | 0x2222_2000);
+    pac::GPIOB.cfghr().modify(|w| w.0 = (w.0 & !0xFF) | 0x22);
+    pac::GPIOA
+        .cfghr()
+        .modify(|w| w.0 = (w.0 & 0x0FFF_FFFF) | 0x2000_0000);
 }
+
+const _: () = {
+    // [`stop_all`]'s masks cover exactly the pins of [`INPUTS`].
+    let mut b = 0u32;
+    let mut a = 0u32;
+    let mut lane = 0;
+    while lane < SLOTS {
+        let mut i = 0;
+        while i < 2 {
+            let pin = INPUTS[lane][i].pin;
+            if pin == 15 {
+                a |= 1 << pin;
+            } else {
+                b |= 1 << pin;
+            }
+            i += 1;
+        }
+        lane += 1;
+    }
+    assert!(b == 0x3F8 && a == 1 << 15);
+};
 
 /// The four bridges on their timers.
 pub struct Motors;
@@ -86,13 +111,6 @@ impl Motors {
             w.set_tim2en(true);
             w.set_tim3en(true);
             w.set_tim4en(true);
-        });
-        // TIM2 full remap (CH1 PA15, CH2 PB3), TIM3 partial remap (CH1 PB4, CH2 PB5), TIM4 not
-        // remapped (PB6-PB9).
-        pac::AFIO.pcfr1().modify(|w| {
-            w.set_tim2_rm(0b11);
-            w.set_tim3_rm(0b10);
-            w.set_tim4_rm(false);
         });
         for timer in [pac::TIM2, pac::TIM3, pac::TIM4] {
             timer.psc().write_value(0);

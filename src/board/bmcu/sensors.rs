@@ -1,10 +1,13 @@
 //! The sensor scan: the lanes' presence optos and tension sliders on ADC1, and their angle
-//! sensors ([`super::as5600`]).
+//! sensors ([`super::as5600`], a byte of their transaction each scan).
 //!
-//! ADC1 scans its eight inputs (PA0-PA7) without pause, 239.5 sampling cycles each at 12 MHz
-//! (21 µs a conversion, 168 µs a round), and DMA1 channel 1 copies each result into
+//! ADC1 scans its eight inputs (PA0-PA7) without pause, 239.5 sampling cycles each at 10 MHz
+//! (25 µs a conversion, 202 µs a round), and DMA1 channel 1 copies each result into
 //! [`CONVERSIONS`], circularly: the control step reads the newest conversion of every input
-//! there, at most one round old. The scan order is lane by lane, presence then tension.
+//! there, at most one round old. The scan order is lane by lane, presence then tension. The
+//! ADC's DMA request is enabled only after its calibration, whose result lands in the data
+//! register (WCH's `Get_CalibrationValue`), so that it never takes a slot of the ring. No offset
+//! correction is applied to the conversions (the BMCU-C's own firmware applies none either).
 
 use core::cell::UnsafeCell;
 use core::convert::Infallible;
@@ -54,7 +57,6 @@ impl Sampler {
         adc.ctlr2().modify(|w| {
             w.set_adon(true);
             w.set_cont(true);
-            w.set_dma(true);
             w.set_extsel(Extsel::SWSTART);
             w.set_exttrig(true);
         });
@@ -72,6 +74,8 @@ impl Sampler {
         while adc.ctlr2().read().rstcal() {}
         adc.ctlr2().modify(|w| w.set_cal(true));
         while adc.ctlr2().read().cal() {}
+        let _calibration = adc.rdatar().read();
+        adc.ctlr2().modify(|w| w.set_dma(true));
 
         let dma = pac::DMA1.ch(DMA_CHANNEL);
         dma.par().write_value(adc.rdatar().as_ptr() as u32);
@@ -104,7 +108,8 @@ impl SensorScan<SLOTS> for Sampler {
     type Error = Infallible;
 
     async fn scan(&mut self) -> Result<Samples<SLOTS>, Infallible> {
-        let angles = self.angles.read();
+        self.angles.advance();
+        let angles = self.angles.latest();
         Ok(Samples {
             slots: core::array::from_fn(|lane| SlotSamples {
                 motion: angles[lane],

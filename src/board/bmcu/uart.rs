@@ -1,5 +1,5 @@
 //! The printer's UART on header H1: USART3 (PB10 TX, PB11 RX, 3.3 V), 115 200 Bd 8N1 from
-//! PCLK1 (60 MHz: USARTDIV 32 + 9/16, BRR 521, 0.03 % fast).
+//! PCLK1 (60 MHz: USARTDIV 32 + 9/16, BRR 521, 0.03 % slow).
 //!
 //! Receiving: DMA1 channel 3 (USART3_RX in the CH32V20x's DMA1 request map) copies every byte
 //! into a 512-byte ring, circularly, whatever the CPU does (a flash erase included); the control

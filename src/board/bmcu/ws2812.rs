@@ -2,10 +2,11 @@
 //!
 //! A WS2812B takes 24 bits (green, red, blue, most significant first), each a 1.25 µs period
 //! whose high time says the bit (0.4 µs a 0, 0.8 µs a 1, ±0.15 µs; WS2812B datasheet), then a
-//! low pause latches them. The bits are timed on the SysTick count (15 MHz: 67 ns a count) with
-//! interrupts off for the 30 µs they take, so no interrupt stretches a high time into another
-//! bit. Not the `smart-leds` traits: one LED at two colours needs no colour type or buffer, and
-//! the lanes' LEDs are not driven yet.
+//! low pause latches them. The bits are timed on the SysTick count (15 MHz: 67 ns a count),
+//! interrupts left on: the SysTick's handler (the only one, about a microsecond) may stretch a
+//! bit's high time into a 1 and show a wrong colour until the next update, at most 100 ms
+//! later; a critical section's code did not fit the flash. Not the `smart-leds` traits: one LED
+//! at two colours needs no colour type or buffer, and the lanes' LEDs are not driven (flash).
 
 use core::convert::Infallible;
 
@@ -40,16 +41,14 @@ impl Led {
     /// Sends one LED's 24 bits.
     fn send(&mut self, grb: u32) {
         let gpiod = pac::GPIOD;
-        critical_section::with(|_| {
-            for bit in (0..24).rev() {
-                let high = if grb & (1 << bit) != 0 { HIGH_1 } else { HIGH_0 };
-                let start = time_driver::counts();
-                gpiod.bshr().write(|w| w.set_bs(PIN, true));
-                while time_driver::counts() < start + high {}
-                gpiod.bcr().write(|w| w.set_br(PIN, true));
-                while time_driver::counts() < start + PERIOD {}
-            }
-        });
+        for bit in (0..24).rev() {
+            let high = if grb & (1 << bit) != 0 { HIGH_1 } else { HIGH_0 };
+            let start = time_driver::counts();
+            gpiod.bshr().write(|w| w.set_bs(PIN, true));
+            while time_driver::counts() < start + high {}
+            gpiod.bcr().write(|w| w.set_br(PIN, true));
+            while time_driver::counts() < start + PERIOD {}
+        }
     }
 }
 
