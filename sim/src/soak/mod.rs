@@ -17,7 +17,9 @@
 //! 2. then the simulated user fixes the unit (clears the fault; puts a filament back if a runout
 //!    left the slot empty) and presses Retry, up to [`USER_RETRIES`] times; on an error without a
 //!    fault to fix the user just presses Retry that often;
-//! 3. if the change still does not finish, the user gives up: the change is *unrecovered*.
+//! 3. if the change still does not finish, the user gives up: the change is *unrecovered*. A
+//!    change that finishes only after the unit asked for an unload by hand (`8008`, UNLOAD
+//!    MANUALLY) is unrecovered too: an unattended print would have stopped there.
 //!
 //! Faults that raise no error (noise the filters absorb, a tolerated slip, a few lost bytes) are
 //! cleared once the change is over. A change whose printer gives up on the link or whose command
@@ -1010,6 +1012,19 @@ pub fn run_until(
 
         // How the change ended, and for a failure where the unit and the filaments were.
         let (verdict, failure_detail): (String, Option<String>) = match end {
+            Ok(ChangeEnd::Done) if user.errors.contains(&ErrorCode::FINDA_VS_EEPROM_DISREPANCY) => {
+                // UNLOAD MANUALLY: the change went on only after a person took the filament out
+                // by hand, which stops an unattended print: a failure of the unit, whatever the
+                // fault. The rig goes on as the user left it.
+                report.unrecovered += 1;
+                match &kind {
+                    Some(kind) => report.tally(kind.clone()).unrecovered += 1,
+                    None => report.failed_without_fault += 1,
+                }
+                let verdict = "unrecovered: completed only after UNLOAD MANUALLY (8008) by hand".to_string();
+                report.notes.push(format!("{} -> {verdict}", context()));
+                (verdict, None)
+            }
             Ok(ChangeEnd::Done) => {
                 if let Some(kind) = &kind {
                     report.recovered += 1;
