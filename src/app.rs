@@ -142,7 +142,7 @@ impl<const N: usize> App<N> {
 
     /// What senses each lane.
     pub fn profile(&self) -> &'static Profile {
-        self.unit.profile
+        self.unit.profile()
     }
 
     /// The settings in force.
@@ -417,7 +417,7 @@ impl<const N: usize> App<N> {
     /// The value of register `address`, or `None` when the unit has no such register.
     pub fn read_register(&self, address: u8) -> Option<u16> {
         let view = registers::View {
-            profile: self.unit.profile,
+            profile: self.unit.profile(),
             config: &self.config,
             hub: &self.unit.hub,
             finda: self.arbiter.finda(&self.unit),
@@ -455,7 +455,7 @@ impl<const N: usize> App<N> {
     pub fn write_register(&mut self, address: u8, value: u16) -> bool {
         let filament_readings = self.filament_readings();
         let mut target = registers::Target {
-            profile: self.unit.profile,
+            profile: self.unit.profile(),
             slots: N,
             config: &mut self.config,
             fsensor: &mut self.unit.fsensor,
@@ -514,9 +514,9 @@ impl<const N: usize> App<N> {
         let mut settings = Vec::new();
         // MAX_SETTINGS holds every setting of a 5-slot unit.
         registers::changed_settings(
-            self.unit.profile,
+            self.unit.profile(),
             &self.config,
-            &Config::for_profile(self.unit.profile),
+            &Config::for_profile(self.unit.profile()),
             &self.unit.hub,
             N,
             &mut settings,
@@ -556,7 +556,7 @@ impl<const N: usize> App<N> {
         self.tally.restore(snapshot);
         let mut stored = self.config.clone();
         for &(address, value) in &snapshot.settings {
-            registers::apply_setting(self.unit.profile, &mut stored, N, address, value);
+            registers::apply_setting(self.unit.profile(), &mut stored, N, address, value);
         }
         match guards::check(&stored, &guards::NO_FILAMENT_READINGS) {
             Ok(()) => self.config = stored,
@@ -567,7 +567,7 @@ impl<const N: usize> App<N> {
                     .iter()
                     .filter(|(address, _)| IDENTITY_REGISTERS.contains(address));
                 for &(address, value) in identity {
-                    registers::apply_setting(self.unit.profile, &mut self.config, N, address, value);
+                    registers::apply_setting(self.unit.profile(), &mut self.config, N, address, value);
                 }
             }
         }

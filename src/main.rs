@@ -137,6 +137,11 @@ fn start(spawner: Spawner) {
     spawner.spawn(unwrap!(status_led(parts.led)));
 }
 
+/// The board's hardware profile, fixed at build time for the logic (feature `fixed-profile`,
+/// `mmu_firmware::unit::Unit::profile`): the compiler drops every other profile's code.
+#[unsafe(export_name = "mmu_fixed_profile")]
+static FIXED_PROFILE: mmu_firmware::profile::Profile = *ThisBoard::PROFILE;
+
 /// The unit logic, in a static. Out of line: `App::new` builds it on the stack first, and this
 /// frame is gone before the tasks run, whereas in `main`'s task it would stay in the frame the
 /// executor polls.

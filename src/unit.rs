@@ -169,11 +169,21 @@ pub struct Hub {
     pub cutter: AnalogSensor,
 }
 
+/// The link name of the hardware profile a firmware binary fixes at build time (feature
+/// `fixed-profile`): an immutable `Profile` it defines, the one it builds its App with.
+pub const FIXED_PROFILE_SYMBOL: &str = "mmu_fixed_profile";
+
+#[cfg(feature = "fixed-profile")]
+unsafe extern "Rust" {
+    #[link_name = "mmu_fixed_profile"]
+    static FIXED_PROFILE: Profile;
+}
+
 /// Everything the logic knows about the hardware.
 #[derive(Debug, Clone)]
 pub struct Unit<const N: usize> {
-    /// What senses each lane.
-    pub profile: &'static Profile,
+    /// What senses each lane (read through [`Unit::profile`]).
+    pub(crate) profile: &'static Profile,
     /// Per slot feeding systems' sensors.
     pub feeders: [Feeder; N],
     /// Per slot motors: the only way to move one ([`crate::drive`]).
@@ -244,7 +254,7 @@ impl<const N: usize> Unit<N> {
 impl<const N: usize> Unit<N> {
     /// Take a round of raw samples at `now`, read as the profile says.
     pub fn sense(&mut self, samples: &Samples<N>, now: Instant, config: &Config) {
-        let profile = self.profile;
+        let profile = self.profile();
         self.tips.place_hub(config.lane_to_hub_mm);
         for (slot, ((feeder, sample), drive)) in self
             .feeders
@@ -288,16 +298,16 @@ impl<const N: usize> Unit<N> {
     }
 
     /// The filament's motion between two marks of a lane ([`crate::odometer`]), 1/100 mm.
-    pub const fn mark_centi(&self, config: &Config) -> u16 {
-        match self.profile.motion {
+    pub fn mark_centi(&self, config: &Config) -> u16 {
+        match self.profile().motion {
             MotionSensor::HallWave => config.mm_per_rev_centi,
             _ => crate::odometer::MARK_CENTI,
         }
     }
 
     /// The tension sensor that reads `slot`'s filament: the hub's, or the lane's own.
-    pub const fn tension_id(&self, slot: usize) -> SensorId {
-        match self.profile.tension {
+    pub fn tension_id(&self, slot: usize) -> SensorId {
+        match self.profile().tension {
             TensionAt::Hub => SensorId::HubTension,
             TensionAt::Lane => SensorId::LaneTension(slot),
         }
@@ -318,7 +328,7 @@ impl<const N: usize> Unit<N> {
     /// in the hub whose tip has not been seen since start (the record is the only word on it
     /// until its presence sensor's edge homes it: see [`crate::commands::fit_to_profile`]).
     pub fn hub_present(&self) -> Option<bool> {
-        if self.profile.hub_sensor {
+        if self.profile().hub_sensor {
             return self.hub.filament.present();
         }
         let present = |slot: usize| self.feeders.get(slot).and_then(|f| f.filament.present());
@@ -383,9 +393,23 @@ impl<const N: usize> Unit<N> {
         }
     }
 
+    /// What senses each lane: the profile the unit was built with, or with the feature
+    /// `fixed-profile` the one the firmware's binary fixes at build time
+    /// ([`FIXED_PROFILE_SYMBOL`]), which lets the compiler drop every other profile's code.
+    pub fn profile(&self) -> &'static Profile {
+        #[cfg(feature = "fixed-profile")]
+        {
+            // SAFETY: the binary defines the symbol as an immutable `Profile` (the firmware's
+            // `main`), the one it also builds the App with.
+            unsafe { &FIXED_PROFILE }
+        }
+        #[cfg(not(feature = "fixed-profile"))]
+        self.profile
+    }
+
     /// One sensor, if the profile has it.
     pub fn sensor(&self, id: SensorId) -> Option<&AnalogSensor> {
-        sensor_in(self.profile, &self.hub, &self.feeders, id)
+        sensor_in(self.profile(), &self.hub, &self.feeders, id)
     }
 
     /// Every sensor the unit may have, in diagnostic order.

@@ -250,7 +250,7 @@ impl Command {
 /// the fed lane and every other lane with filament whose tip the unit has not seen since start
 /// (one may rest in the merge). With a hub sensor, `plan` as it is.
 pub(crate) fn fit_to_profile<const N: usize>(plan: &mut Plan, unit: &Unit<N>) {
-    if unit.profile.hub_sensor {
+    if unit.profile().hub_sensor {
         return;
     }
     let mut fitted = Plan::new();
