@@ -122,9 +122,13 @@ impl Default for Session {
 /// The version handshake as the unit sees it. Prusa's printer sends the same `S2` again after a
 /// wrong answer, and `S3` only once `S2` matched (`protocol_logic.cpp` `ProcessVersionResponse`):
 /// each repeated `S2` gets the next revision of the cycle ([`offered_revision`]), and the one
-/// answered last before `S3` is the one the printer accepted.
+/// answered last before `S3` is the one the printer accepted. A printer whose answer came late
+/// may run two handshakes interleaved (`S1 S1 S2 S2`): each `S1` opens a handshake whose first
+/// `S2` is a first ask, answered with the first revision of the cycle, not a refusal.
 #[derive(Debug, Clone, Copy, Default)]
 struct Negotiation {
+    /// `S1` requests since the last `S0` whose handshake has not asked `S2` yet.
+    first_asks_due: u8,
     /// `S2` requests answered in a row (in different steps), none other between.
     repeats: u8,
     /// The revision the last `S2` was answered with, while nothing but `S2` and `S3` followed.
@@ -138,6 +142,11 @@ struct Negotiation {
 impl Negotiation {
     /// The answer to an `S2`, the cycle starting from `accepted`.
     fn offer(&mut self, accepted: u8) -> u8 {
+        let first_ask = self.first_asks_due > 0;
+        self.first_asks_due = self.first_asks_due.saturating_sub(1);
+        if first_ask {
+            self.repeats = 0;
+        }
         let revision = match self.answered_this_step {
             Some(revision) => revision,
             None => {
@@ -151,10 +160,16 @@ impl Negotiation {
         revision
     }
 
-    /// Any request but `S2` ends a run of them; any but `S3` forgets the last offer.
+    /// Any request but `S2` ends a run of them; any but `S3` forgets the last offer; `S1`
+    /// opens a handshake, `S0` starts them all again.
     fn other_request(&mut self, request: &Request) {
         self.repeats = 0;
         self.answered_this_step = None;
+        match (request.code, request.value) {
+            (RequestCode::Version, 0) => self.first_asks_due = 0,
+            (RequestCode::Version, 1) => self.first_asks_due = self.first_asks_due.saturating_add(1),
+            _ => {}
+        }
         if !(request.code == RequestCode::Version && request.value == 3) {
             self.offered = None;
         }

@@ -98,6 +98,29 @@ fn s2_requests_queued_in_one_step_get_one_answer() {
     assert_eq!(rig.send(version(2)).and_then(|a| a.param_value), Some(3));
 }
 
+/// A printer whose answer to `S1` came late runs two handshakes interleaved (Buddy 6.5.3 with an
+/// answer 350 ms late: `S1 S1 S2 S2`): the second `S2` is the second handshake's first ask, not
+/// the printer refusing the first answer, and gets the same revision. The unit used to answer it
+/// with the next one (3) and lock a 3.0.4 printer to the 3.0.3 contract.
+#[test]
+fn two_interleaved_handshakes_each_get_the_first_offer() {
+    let mut rig = started::<3>();
+    for part in [0, 0, 1, 1] {
+        assert!(rig.send(version(part)).is_some());
+    }
+    assert_eq!(rig.send(version(2)).and_then(|a| a.param_value), Some(4));
+    assert_eq!(rig.send(version(2)).and_then(|a| a.param_value), Some(4));
+    rig.send(version(3));
+    assert_eq!(rig.app.config().version.revision, 4);
+    assert_eq!(rig.app.config().version.contract(), Contract::AwaitRelease);
+    // A real refusal after them still moves the cycle on.
+    for part in [0, 1] {
+        rig.send(version(part));
+    }
+    assert_eq!(rig.send(version(2)).and_then(|a| a.param_value), Some(4));
+    assert_eq!(rig.send(version(2)).and_then(|a| a.param_value), Some(3));
+}
+
 #[test]
 fn each_printer_gets_the_contract_of_the_revision_it_accepted() {
     let m0 = Request::new(RequestCode::Mode, 0);
