@@ -501,6 +501,12 @@ impl Model {
                 let follow = d_f + s.buffer - s.buffer * p.relax_factor;
                 let (want, d_m_free) = if gripped && s.dead {
                     (0.0, None)
+                } else if gripped && driven && s.slip < 1.0 && d_f < 0.0 && follow < free_speed * DT * s.slip
+                {
+                    // A drive gear that slips under its own motor slips under the extruder's
+                    // retract too: the filament follows the extruder back, the motor turns as
+                    // driven.
+                    (follow, Some(free_speed * DT))
                 } else if gripped && driven {
                     let d_m = free_speed * DT;
                     (d_m * s.slip, Some(d_m))

@@ -364,6 +364,33 @@ fn extruder_pulls_a_gripped_filament_and_back_drives_a_coasting_motor() {
     assert_eq!(m.extruder_position_mm(), 20.0);
 }
 
+/// A drive gear that slips cannot hold the filament against the extruder: the printer's retract
+/// pulls it back through the braked, slipping lane (a gear that slips under the unit's own motor
+/// slips under the extruder's pull too). The slipping gear used to hold like a sound one, and
+/// left the tip in the printer's gears once the fault cleared.
+#[test]
+fn a_slipping_drive_gives_way_to_the_extruder() {
+    let c = ModelConfig::default();
+    let start = c.extruder_gears_mm + 30.0;
+    let mut m = model();
+    assert!(m.insert_filament(0, start));
+    assert!(m.inject(Fault::Slip { slot: 0, ratio: 0.5 }));
+    m.extruder_move(-20.0, 10.0);
+    m.step(2500, &only_slot0(MotorCommand::Brake));
+    assert!(!m.extruder_busy());
+    assert!((tip(&m, 0) - (start - 20.0)).abs() < 0.5, "tip {}", tip(&m, 0));
+    // Sound again, the braked lane holds: the extruder's gears slip instead.
+    assert!(m.clear(Fault::Slip { slot: 0, ratio: 0.5 }));
+    let held = tip(&m, 0);
+    m.extruder_move(-20.0, 10.0);
+    m.step(2500, &only_slot0(MotorCommand::Brake));
+    assert!(
+        held - tip(&m, 0) <= c.buffer_limit_mm + 0.01,
+        "tip {}",
+        tip(&m, 0)
+    );
+}
+
 #[test]
 fn extruder_on_a_tip_before_its_gears_turns_on_air() {
     let c = ModelConfig::default();

@@ -19,10 +19,12 @@
 //!   `OnMMUProgressMsgSame`). Buddy 6.5.3 then finishes the tool change early, as it does on
 //!   `P2` after `P1c` (aborting its moves): it loads on to the nozzle without waiting for `F`.
 //!   The others load to the nozzle on `T<n> F`.
-//! - **Helping an unload.** During `P3` of a recovery the printer retracts 20 mm; so it does
-//!   with every button it sends on `FSENSOR_DIDNT_SWITCH_OFF` or `FSENSOR_TOO_EARLY`
-//!   (`MMU2::CheckUserInput` → `HelpUnloadToFinda`, BFW v6.5.3 `mmu2_mk4.cpp`, PFW v3.13.3
-//!   `Firmware/mmu2.cpp`).
+//! - **Helping an unload.** When `P3` begins for a command the printer did not send as `U0` or
+//!   `T` (a recovery, FIL. ALREADY LOADED's Unload) it retracts 20 mm whatever its sensor reads,
+//!   and again at each `P3` after while nothing moves and its sensor still reads filament
+//!   (`MMU2::OnMMUProgressMsgChanged` and `OnMMUProgressMsgSame`); so it does with every button it
+//!   sends on `FSENSOR_DIDNT_SWITCH_OFF` or `FSENSOR_TOO_EARLY` (`MMU2::CheckUserInput` →
+//!   `HelpUnloadToFinda`, BFW v6.5.3 `mmu2_mk4.cpp`, PFW v3.13.3 `Firmware/mmu2.cpp`).
 //!
 //! Where the simulator departs from the firmware, knowingly: Buddy 6.4.1 retracts 40 mm at
 //! 20 mm/s after the slicer's ramming before it sends `T` (2 s, its whole timeout); the
@@ -130,6 +132,9 @@ pub struct Mechanics {
     seen_progress: Option<ProgressCode>,
     /// The printer's `loadFilamentStarted`: set when it sees `P1c` begin, cleared by its push.
     load_started: bool,
+    /// The printer's `unloadFilamentStarted`: set when it sees `P3` begin for a command it did
+    /// not send as `U0` or `T`, cleared once its sensor reads no filament at a later `P3`.
+    unload_help_started: bool,
     /// Buddy 6.5.3 left the tool change early and loads to the nozzle on its own.
     finished_early: bool,
     /// Moves planned after the one in progress (the printer's planner queue).
@@ -157,6 +162,7 @@ impl Mechanics {
             slow_mm_s,
             command: None,
             seen_progress: None,
+            unload_help_started: false,
             load_started: false,
             finished_early: false,
             planned: VecDeque::new(),
@@ -362,16 +368,32 @@ impl Mechanics {
                     }
                     self.seen_progress = Some(progress);
                 }
-                let helps_unload = progress == ProgressCode::UNLOADING_TO_FINDA
-                    && !matches!(response.code, RequestCode::Unload | RequestCode::Tool);
-                if helps_unload && model.fsensor_state() != 0 && !model.extruder_busy() {
+                // BFW `mmu2_mk4.cpp`: `OnMMUProgressMsgChanged` helps at once, after the moves
+                // under way, whatever its sensor reads (`HelpUnloadToFinda`, 20 mm at 20 mm/s),
+                // unless the printer sent the command as `U0` or `T` (its ramming has released
+                // the filament); `OnMMUProgressMsgSame` helps again while nothing moves and its
+                // sensor still reads filament, and stops helping once it does not.
+                let unloading = progress == ProgressCode::UNLOADING_TO_FINDA;
+                if unloading && changed && !matches!(response.code, RequestCode::Unload | RequestCode::Tool) {
+                    self.unload_help_started = true;
                     self.plan(model, events, "unload-help", -UNLOAD_HELP_MM, UNLOAD_HELP_MM);
+                } else if unloading
+                    && self.unload_help_started
+                    && !model.extruder_busy()
+                    && self.planned.is_empty()
+                {
+                    if model.fsensor_state() != 0 {
+                        self.plan(model, events, "unload-help", -UNLOAD_HELP_MM, UNLOAD_HELP_MM);
+                    } else {
+                        self.unload_help_started = false;
+                    }
                 }
             }
             ParamCode::Finished if self.command == Some(echo) => {
                 self.command = None;
                 self.seen_progress = None;
                 self.load_started = false;
+                self.unload_help_started = false;
                 if response.code == RequestCode::Tool {
                     let rate = self.print_mm_s;
                     model.set_printing((rate > 0.0).then_some(rate));

@@ -3,7 +3,8 @@
 //! as they come.
 
 use mmu_protocol::{
-    ErrorCode, ParamCode, ProgressCode, Request, RequestCode, Response, ResponseDecoder, ResultCode,
+    ButtonCode, ErrorCode, ParamCode, ProgressCode, Request, RequestCode, Response, ResponseDecoder,
+    ResultCode,
 };
 use mmu_sim::{
     Decision, EventKind, Link, Operator, Outcome, Personality, Printer, PrinterEvent, PrinterOptions, Sim,
@@ -591,4 +592,82 @@ fn buddy_6_5_retract_alone_clears_its_sensor_when_the_unit_lets_the_filament_go(
     assert!((650..=800).contains(&off_ms), "{off_ms} ms");
     let released_ms = released_ms.expect("the gears let go");
     assert!((1100..=1300).contains(&released_ms), "{released_ms} ms");
+}
+
+/// Presses a button on `FILAMENT_ALREADY_LOADED` (`button`), Retry on any other error, up to
+/// `retries` times; records every error.
+struct AlreadyLoaded {
+    button: ButtonCode,
+    retries: u8,
+    errors: Vec<ErrorCode>,
+}
+
+impl Operator<SimLink> for AlreadyLoaded {
+    fn event(&mut self, _link: &mut SimLink, _event: &PrinterEvent) {}
+
+    fn decide(&mut self, _link: &mut SimLink, _request: Request, error: ErrorCode) -> Decision {
+        self.errors.push(error);
+        match error {
+            ErrorCode::FILAMENT_ALREADY_LOADED => Decision::Press(self.button),
+            _ if self.retries > 0 => {
+                self.retries -= 1;
+                Decision::Press(ButtonCode::MIDDLE)
+            }
+            _ => Decision::GiveUp,
+        }
+    }
+}
+
+/// Buddy's help on `P3` of a command it did not send as `U0` or `T` is a 20 mm retract at 20 mm/s
+/// whatever its sensor reads (`MMU2::OnMMUProgressMsgChanged` → `HelpUnloadToFinda`, BFW
+/// `lib/Marlin/Marlin/src/feature/prusa/MMU2/mmu2_mk4.cpp`, lines 1438-1468 at `818d812`;
+/// `MMU2_RETRY_UNLOAD_TO_FINDA_LENGTH` and `_FEED_RATE` in `mmu2_config.h`). On Buddy 6.5.3 the
+/// gears sit 10 mm before the sensor: a tip left between them is gripped with the sensor off, and
+/// only that help frees it. The simulator played the help only while the sensor read filament, so
+/// FIL. ALREADY LOADED's Unload pulled against the gears and every Retry ended in `8047`.
+#[test]
+fn buddy_s_unload_help_retracts_whatever_its_sensor_reads() {
+    let (mut printer, _) = loaded(Personality::Buddy65);
+    // The tip between the gears and the sensor: gripped, the sensor off.
+    let geometry = printer.link().sim().model().config();
+    let between = (geometry.extruder_gears_mm + geometry.bowden_length_mm) / 2.0;
+    let back = printer.link().sim().model().tip_mm(0).unwrap() - between;
+    printer
+        .link_mut()
+        .sim_mut()
+        .model_mut()
+        .extruder_move(-back, 40.0);
+    printer.print(&mut Watcher::default(), 3000).unwrap();
+    assert_eq!(
+        printer.link().sim().model().fsensor_state(),
+        0,
+        "the sensor is off"
+    );
+    extruder_moves(printer.link_mut());
+    let mut op = AlreadyLoaded {
+        button: ButtonCode::RIGHT,
+        retries: 3,
+        errors: Vec::new(),
+    };
+    let outcome = printer
+        .command(&mut op, Request::new(RequestCode::Load, 0))
+        .unwrap();
+    let moves = extruder_moves(printer.link_mut());
+    assert!(
+        moves
+            .iter()
+            .any(|(_, action, mm)| *action == "unload-help" && *mm < 0.0),
+        "the printer helped: {moves:?}"
+    );
+    assert_eq!(
+        outcome,
+        Outcome::Finished(ResultCode::OK),
+        "errors {:?}",
+        op.errors
+    );
+    assert!(
+        !op.errors.contains(&ErrorCode::STALLED_PULLEY),
+        "errors {:?}",
+        op.errors
+    );
 }
