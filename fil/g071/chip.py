@@ -28,38 +28,18 @@ from iwdg import Iwdg
 from nvic import Scs
 from rcc import CSR_FLAGS, Pwr, Rcc
 from regs import Block
+from scheduler import Memory, Scheduler
 from timers import Timer
 from usart import Usart
-
-SLICE_US = 200
 
 # (base, size) of the MMIO windows Unicorn maps to the models.
 WINDOWS = ((0x4000_0000, 0x1_6000), (0x4002_0000, 0x6400), (0x5000_0000, 0x1800),
            (0xE000_E000, 0x1000))
 
 
-class Memory:
-    """Flash and SRAM as the DMA and the flash controller see them (not through the MMIO)."""
+class Chip(Scheduler):
+    clock = clock.CLOCK
 
-    def __init__(self, uc):
-        self.uc = uc
-
-    def _check(self, address, n):
-        ok = (RAM_BASE <= address and address + n <= RAM_BASE + RAM_SIZE) or \
-             (FLASH_BASE <= address and address + n <= FLASH_BASE + FLASH_SIZE)
-        if not ok:
-            raise MemoryError(hex(address))
-
-    def read(self, address, n):
-        self._check(address, n)
-        return bytes(self.uc.mem_read(address, n))
-
-    def write(self, address, data):
-        self._check(address, len(data))
-        self.uc.mem_write(address, bytes(data))
-
-
-class Chip:
     def __init__(self, segments):
         image = bytearray(b"\xff" * FLASH_SIZE)
         for address, data in segments:
@@ -68,7 +48,7 @@ class Chip:
         self.cpu = Cpu(self, bytes(image), segments)
         self.uc = self.cpu.uc
         self.uc.mem_write(FLASH_BASE, bytes(image))
-        self.memory = Memory(self.uc)
+        self.memory = Memory(self.uc, ((FLASH_BASE, FLASH_SIZE), (RAM_BASE, RAM_SIZE)))
         for base, size in WINDOWS:
             self.uc.mmio_map(base, size, self._mmio_read, base, self._mmio_write, base)
         self.time = 0
@@ -139,54 +119,15 @@ class Chip:
             return self.scs, address - 0xE000_E000
         if 0x4001_2400 <= address < 0x4001_2800:  # the ADC's common registers at +0x300
             return self.adc, address - 0x4001_2400
-        base = address & ~0x3FF
-        block = self.blocks.get(base)
-        if block is None:
-            block = self.others.get(base)
-            if block is None:
-                block = self.others[base] = Block(self)
+        block, base = self.block_at(address & ~0x3FF)
         return block, address - base
 
-    def _route(self, address):
-        """(block, offset, what to bring up to date) for an MMIO address, cached per address.
-        For the DMA that is the peripherals that feed it (its counters and the memory it wrote
-        must be current), for the others the block itself."""
-        route = self.routes.get(address)
-        if route is None:
-            block, off = self._block_at(address)
-            if block is self.dma or block is self.dmamux:
-                bring = (self.usart1.advance, self.adc.advance)
-            elif type(block).advance is Block.advance:
-                bring = ()
-            else:
-                bring = (block.advance,)
-            route = self.routes[address] = (block, off, bring)
-        return route
-
-    def _mmio_read(self, uc, offset, size, base):
-        block, off, bring = self.routes.get(base + offset) or self._route(base + offset)
-        if bring:
-            now = self.time + (self.cpu.native.count() - self.cpu.count_base) * clock.CPI_NUM // clock.CPI_DEN
-            for advance in bring:
-                advance(now)
-        if size == 4:
-            return block.read_reg(off)
-        return block.read(off, size)
-
-    def _mmio_write(self, uc, offset, size, value, base):
-        block, off, bring = self.routes.get(base + offset) or self._route(base + offset)
-        if bring:
-            now = self.time + (self.cpu.native.count() - self.cpu.count_base) * clock.CPI_NUM // clock.CPI_DEN
-            for advance in bring:
-                advance(now)
-        block.write(off, size, value)
+    def dma_feeders(self, block):
+        if block is self.dma or block is self.dmamux:
+            return (self.usart1.advance, self.adc.advance)
+        return None
 
     # ---- time --------------------------------------------------------------------------------
-    def now(self):
-        if self.in_slice:
-            return self.time + clock.instructions_to_cycles(self.cpu.executed())
-        return self.time
-
     def reschedule(self, model=None):
         """Called by a model whose state may have changed the interrupts or the next event:
         ends the slice (at the next block) if an interrupt is now ready to be taken or the
@@ -219,24 +160,6 @@ class Chip:
                 self.cpu.stop_soon()
                 return
 
-    def stall(self, until):
-        self.stall_until = until
-        if self.in_slice:
-            self.cpu.stop_soon()
-
-    def request_reset(self, cause):
-        self.reset_request = cause
-        if self.in_slice:
-            self.cpu.stop_soon()
-
-    def next_event(self):
-        times = [t for t in (m.next_event() for m in self.timed) if t is not None]
-        return min(times) if times else None
-
-    def advance_models(self, now):
-        for m in self.timed:
-            m.advance(now)
-
     def update_irqs(self):
         scs = self.scs
         active = set(v - 16 for v in self.cpu.active)
@@ -266,49 +189,3 @@ class Chip:
         self.powered = True
         self.hung = False
         self.cpu.reset()
-
-    def erases(self):
-        return self.erases_before + self.flash.erases
-
-    def programs(self):
-        return self.programs_before + self.flash.programs
-
-    # ---- running -----------------------------------------------------------------------------
-    def run_until(self, end):
-        cpu = self.cpu
-        while self.time < end:
-            self.advance_models(self.time)
-            if self.reset_request:
-                cause, self.reset_request = self.reset_request, None
-                self.system_reset(cause)
-                continue
-            if not self.powered:
-                self.time = end
-                break
-            self.update_irqs()
-            nxt = self.next_event()
-            limit = end if nxt is None else min(end, max(nxt, self.time + 1))
-            if self.stall_until is not None:
-                if self.stall_until > self.time:
-                    self.time = min(limit, self.stall_until)
-                    continue
-                self.stall_until = None
-            if self.hung:
-                self.time = limit
-                continue
-            if cpu.sleeping:
-                if not cpu.wakes():
-                    self.time = limit
-                    continue
-                cpu.sleeping = False
-            irq = cpu.ready_interrupt()
-            if irq is not None:
-                cpu.take_interrupt(irq)
-            limit = min(limit, self.time + clock.us(SLICE_US))
-            self.slice_end = limit
-            self.in_slice = True
-            try:
-                executed = cpu.run(clock.cycles_to_instructions(limit - self.time))
-            finally:
-                self.in_slice = False
-            self.time += clock.instructions_to_cycles(executed)

@@ -1,0 +1,200 @@
+"""What the Unicorn benches' chips share, whatever the core (fil/g071/chip.py, fil/bmcu/chip.py):
+the scheduler that runs the CPU in slices between the peripherals' events in virtual time, the
+stall of a flash operation, the requested reset, the flash operations' counts, and the core's
+capture of CPU stores into the flash (`FlashStores`).
+
+A chip (`Scheduler`) maps its MMIO windows to `_mmio_read`/`_mmio_write`, gives `_block_at(address)
+-> (block, offset)` and `dma_feeders(block)` (for a DMA block, the `advance` of the peripherals
+that feed it, else None), and sets `routes` ({}), `cpu` (with `native.count()`, `executed()`, `stop_soon()`,
+`ready_interrupt()`, `take_interrupt(n)`, `sleeping`, `wakes()`, `run(instructions)`), `clock`
+(a linebench.Clock), `timed` (models with `next_event()` and `advance(now)`), `flash`, `time`,
+`in_slice`, `slice_end`, `stall_until`, `reset_request`, `powered`, `hung`, `erases_before`,
+`programs_before`, and gives `system_reset(cause)` and `update_irqs()`. It may override
+`before_slice()` and `after_slice()`.
+"""
+
+from regs import Block
+
+SLICE_US = 200
+
+
+class Memory:
+    """Flash and SRAM as the DMA and the flash controller see them (not through the MMIO):
+    `regions` is ((base, size), ...); an access outside them raises MemoryError."""
+
+    def __init__(self, uc, regions):
+        self.uc = uc
+        self.regions = regions
+
+    def _check(self, address, n):
+        if not any(base <= address and address + n <= base + size for base, size in self.regions):
+            raise MemoryError(hex(address))
+
+    def read(self, address, n):
+        self._check(address, n)
+        return bytes(self.uc.mem_read(address, n))
+
+    def write(self, address, data):
+        self._check(address, len(data))
+        self.uc.mem_write(address, bytes(data))
+
+
+class Scheduler:
+    # ---- MMIO ----------------------------------------------------------------------------------
+    def block_at(self, base):
+        """The block at `base` (a 1 KiB boundary): a model, or plain storage made on first use
+        (unknown peripherals read back what was written)."""
+        block = self.blocks.get(base)
+        if block is None:
+            block = self.others.get(base)
+            if block is None:
+                block = self.others[base] = Block(self)
+        return block, base
+
+    def _route(self, address):
+        """(block, offset, what to bring up to date) for an MMIO address, cached per address.
+        For a DMA block that is the peripherals that feed it (its counters and the memory it
+        wrote must be current), for the others the block itself if it has events."""
+        route = self.routes.get(address)
+        if route is None:
+            block, off = self._block_at(address)
+            bring = self.dma_feeders(block)
+            if bring is None:
+                bring = (block.advance,) if type(block).advance is not Block.advance else ()
+            route = self.routes[address] = (block, off, bring)
+        return route
+
+    def _mmio_read(self, uc, offset, size, base):
+        block, off, bring = self.routes.get(base + offset) or self._route(base + offset)
+        if bring:
+            now = self.now()
+            for advance in bring:
+                advance(now)
+        if size == 4:
+            return block.read_reg(off)
+        return block.read(off, size)
+
+    def _mmio_write(self, uc, offset, size, value, base):
+        block, off, bring = self.routes.get(base + offset) or self._route(base + offset)
+        if bring:
+            now = self.now()
+            for advance in bring:
+                advance(now)
+        block.write(off, size, value)
+
+    # ---- time ----------------------------------------------------------------------------------
+    def now(self):
+        if self.in_slice:
+            return self.time + self.clock.instructions_to_cycles(self.cpu.executed())
+        return self.time
+
+    def stall(self, until):
+        """A flash operation stalls the CPU until `until` (the models go on)."""
+        self.stall_until = until
+        if self.in_slice:
+            self.cpu.stop_soon()
+
+    def request_reset(self, cause):
+        self.reset_request = cause
+        if self.in_slice:
+            self.cpu.stop_soon()
+
+    def next_event(self):
+        times = [t for t in (m.next_event() for m in self.timed) if t is not None]
+        return min(times) if times else None
+
+    def advance_models(self, now):
+        for m in self.timed:
+            m.advance(now)
+
+    def erases(self):
+        return self.erases_before + self.flash.erases
+
+    def programs(self):
+        return self.programs_before + self.flash.programs
+
+    def before_slice(self):
+        """Called as each round of the loop starts, at `time`."""
+
+    def after_slice(self):
+        """Called after each slice the CPU ran."""
+
+    def run_until(self, end):
+        """Runs the chip to `end` (cycles): the models at their events, the CPU in slices (a
+        stalled, hung or sleeping CPU executes nothing: time jumps to the next event), the
+        interrupts taken between slices, a requested reset carried out."""
+        cpu = self.cpu
+        clock = self.clock
+        while self.time < end:
+            self.before_slice()
+            self.advance_models(self.time)
+            if self.reset_request:
+                cause, self.reset_request = self.reset_request, None
+                self.system_reset(cause)
+                continue
+            if not self.powered:
+                self.time = end
+                break
+            self.update_irqs()
+            nxt = self.next_event()
+            limit = end if nxt is None else min(end, max(nxt, self.time + 1))
+            if self.stall_until is not None:
+                if self.stall_until > self.time:
+                    self.time = min(limit, self.stall_until)
+                    continue
+                self.stall_until = None
+            if self.hung:
+                self.time = limit
+                continue
+            if cpu.sleeping:
+                if not cpu.wakes():
+                    self.time = limit
+                    continue
+                cpu.sleeping = False
+            irq = cpu.ready_interrupt()
+            if irq is not None:
+                cpu.take_interrupt(irq)
+            limit = min(limit, self.time + clock.us(SLICE_US))
+            self.slice_end = limit
+            self.in_slice = True
+            try:
+                executed = cpu.run(clock.cycles_to_instructions(limit - self.time))
+            finally:
+                self.in_slice = False
+            self.time += clock.instructions_to_cycles(executed)
+            self.after_slice()
+
+
+class FlashStores:
+    """A core's running (`_emulate`, `executed`, `stop_soon`) and its CPU stores into its flash: they go to the flash controller's model (`chip.flash
+    .store`), and the memory Unicorn wrote at once gets its old bytes back when the slice ends
+    (the controller changes the array when its operation completes, after the stall). The core
+    sets `chip`, `uc` and `native`, hooks `_on_flash_write` on its flash's range and calls
+    `_apply_flash_writes` after each `emu_start`."""
+
+    def _on_flash_write(self, uc, access, address, size, value, _):
+        self.flash_writes.append((address, bytes(uc.mem_read(address, size))))
+        self.chip.flash.store(address, size, value & ((1 << (8 * size)) - 1))
+        self.stop_soon()
+
+    def _apply_flash_writes(self):
+        writes, self.flash_writes = self.flash_writes, []
+        for address, old in reversed(writes):
+            self.uc.mem_write(address, old)
+
+    def executed(self):
+        return self.native.count() - self.count_base
+
+    def _emulate(self, instructions, begin, until, irq_ready):
+        """Runs Unicorn from `begin` for up to `instructions` (block granular: the native
+        counter stops it), telling the native hooks whether an interrupt is ready."""
+        nat = self.native
+        self.count_base = nat.count()
+        nat.set_irq_ready(1 if irq_ready else 0)
+        nat.set_limit(self.count_base + instructions)
+        self.uc.emu_start(begin, until)
+
+    def stop_soon(self):
+        """Ends the slice at the next block boundary. (uc.emu_stop from an MMIO or memory
+        callback leaves PC on the accessing instruction, which would then run twice.)"""
+        self.native.set_limit(self.native.count())
