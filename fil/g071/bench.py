@@ -17,6 +17,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import clock  # noqa: E402
 import elf  # noqa: E402
 import linebench  # noqa: E402
+import scheduler  # noqa: E402
 import profile as profiling  # noqa: E402
 from chip import Chip  # noqa: E402
 from cpu import EmulationError  # noqa: E402
@@ -96,7 +97,7 @@ class Bench(linebench.LineBench):
         if os.environ.get(WORN_STORE_ENV, "0") not in ("", "0"):
             address, size = STORE
             segments = list(segments) + [(address, b"\x00" * size)]
-        self.chip = Chip(segments)
+        self.chip = Chip(segments, scheduler.stack_region(self.symbols))
         self.build = build_of(self.symbols)
         self.rtt = open(rtt, "ab") if rtt else None
         self.rtt_block = self.symbols.get("_SEGGER_RTT")
@@ -110,11 +111,6 @@ class Bench(linebench.LineBench):
         self.profile_keep = int(os.environ.get(PROFILE_ENV, "0") or 0)
         self.profile = profiling.FunctionCounts(image, self.chip) if self.profile_keep else None
         self.busiest = profiling.Busiest(self.profile_keep, PROFILE_TOP)
-
-    @property
-    def uart(self):
-        """The printer's UART (a reset builds the chip's models anew)."""
-        return self.chip.usart1
 
     # ---- outputs -----------------------------------------------------------------------------
     def level(self, pin):
@@ -191,7 +187,7 @@ class Bench(linebench.LineBench):
 
     def report(self):
         """The lines logged at `quit`."""
-        lines = [self.load_summary()]
+        lines = [self.load_summary(), self.stack_line()]
         if self.profile:
             lines.append(self.busiest.report())
         return lines

@@ -9,6 +9,9 @@ current time, the interrupt lines are sampled into the NVIC, and a pending inter
 A sleeping core (WFE/WFI), a stalled one (flash busy) or a hung one (`hang`) executes nothing:
 time jumps to the next event.
 
+The stack's high-water mark: the chip paints the RAM between `__sheap` and `_stack_start` at
+each boot (fil/g071/scheduler.py StackPaint) when the bench names the region.
+
 Resets (RM0444 §5.1): a system reset (watchdog, SYSRESETREQ) restarts the core and every
 peripheral, keeps the SRAM and the flash, and sets the reset flags in RCC_CSR (plus PINRSTF, the
 internal reset drives NRST); a power-on reset also clears the SRAM (here: to zero) and sets
@@ -28,7 +31,7 @@ from iwdg import Iwdg
 from nvic import Scs
 from rcc import CSR_FLAGS, Pwr, Rcc
 from regs import Block
-from scheduler import Memory, Scheduler
+from scheduler import Memory, Scheduler, StackPaint
 from timers import Timer
 from usart import Usart
 
@@ -37,10 +40,10 @@ WINDOWS = ((0x4000_0000, 0x1_6000), (0x4002_0000, 0x6400), (0x5000_0000, 0x1800)
            (0xE000_E000, 0x1000))
 
 
-class Chip(Scheduler):
+class Chip(Scheduler, StackPaint):
     clock = clock.CLOCK
 
-    def __init__(self, segments):
+    def __init__(self, segments, paint=None):
         image = bytearray(b"\xff" * FLASH_SIZE)
         for address, data in segments:
             if FLASH_BASE <= address < FLASH_BASE + FLASH_SIZE:
@@ -62,8 +65,10 @@ class Chip(Scheduler):
         self.sensor = {}           # ADC channel -> level, kept across resets
         self.encoder = {}          # encoder timer's name -> the lane's count, kept across resets
         self.flash = None
-        self._build(csr_flags=(1 << CSR_FLAGS["power"]) | (1 << CSR_FLAGS["pin"]))
-        self.cpu.reset()
+        self.paint = paint         # the stack's region, painted at each boot (StackPaint)
+        self.ram = (RAM_BASE, RAM_SIZE)
+        self._build(self.reset_flags("power"))
+        self.boot()
 
     # ---- the peripherals ---------------------------------------------------------------------
     def _build(self, csr_flags):
@@ -169,23 +174,12 @@ class Chip(Scheduler):
                     scs.pending |= 1 << irq
 
     # ---- resets ------------------------------------------------------------------------------
-    def system_reset(self, cause):
-        flags = self.rcc.reset_flags() | (1 << CSR_FLAGS[cause]) | (1 << CSR_FLAGS["pin"])
-        sent = self.usart1.sent  # what left the pin before the reset is still the step's TX
-        self._build(flags)
-        self.usart1.sent = sent
-        self.resets += 1
-        self.hung = False
-        self.cpu.reset()
+    def reset_flags(self, cause):
+        """RCC_CSR's flags after a reset by `cause`: a system reset's keep the last ones, and
+        every reset sets PINRSTF (RM0444 §5.1.2)."""
+        kept = 0 if cause == "power" else self.rcc.reset_flags()
+        return kept | (1 << CSR_FLAGS[cause]) | (1 << CSR_FLAGS["pin"])
 
-    def power_off(self):
-        self.flash.power_loss()
-        self.powered = False
-
-    def power_on(self):
-        self.uc.mem_write(RAM_BASE, bytes(RAM_SIZE))
-        self._build((1 << CSR_FLAGS["power"]) | (1 << CSR_FLAGS["pin"]))
-        self.resets += 1
-        self.powered = True
-        self.hung = False
-        self.cpu.reset()
+    @property
+    def uart(self):
+        return self.usart1

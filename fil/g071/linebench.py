@@ -131,7 +131,7 @@ class Load:
 
 class LineBench:
     """A bench's requests but `step`'s sensor values, and the accounting of each step's
-    milliseconds. A subclass sets `chip`, `uart` (its printer UART's model: `deliver`,
+    milliseconds. A subclass sets `chip` (whose `uart` is its printer UART's model: `deliver`,
     `take_sent`, `incoming`), `clock` (a Clock), `line`, `timer`, `load`, `control_steps` (the
     image's MMU_CONTROL_STEPS or None), `profile` and `busiest` (fil/g071/profile.py, or None
     and anything), and gives `step_request(words) -> answer` and `extra_request(words) ->
@@ -162,6 +162,11 @@ class LineBench:
 
     def extra_request(self, words):
         return None
+
+    @property
+    def uart(self):
+        """The printer's UART model (the chip's: a reset builds the models anew)."""
+        return self.chip.uart
 
     def deliver(self, start, rx):
         """The step's bytes into the UART at the line's pace, from `start`."""
@@ -208,6 +213,15 @@ class LineBench:
 
     def virtual_ms(self):
         return self.chip.time / self.clock.us(1000)
+
+    def stack_line(self):
+        """The stack's high-water mark for the log (scheduler.StackPaint)."""
+        if not self.chip.paint:
+            return "stack: not measured (the image names no stack region)"
+        start, top = self.chip.paint
+        deepest = self.chip.measure_stack()
+        return (f"stack: deepest {deepest} bytes below the top 0x{top:08x}, of {top - start} painted "
+                f"from 0x{start:08x} ({top - start - deepest} never touched)")
 
 
 class Timer:

@@ -32,7 +32,7 @@ def functions(image):
     found = []
     for line in out.splitlines():
         parts = line.split(None, 3)
-        if len(parts) == 4 and parts[2] in "tTwW":
+        if len(parts) == 4 and parts[2] in "tTwW" and not parts[3].startswith(".L"):  # local labels
             found.append((int(parts[0], 16) & ~1, int(parts[1], 16), parts[3]))
     return sorted(found)
 

@@ -9,13 +9,60 @@ that feed it, else None), and sets `routes` ({}), `cpu` (with `native.count()`, 
 `ready_interrupt()`, `take_interrupt(n)`, `sleeping`, `wakes()`, `run(instructions)`), `clock`
 (a linebench.Clock), `timed` (models with `next_event()` and `advance(now)`), `flash`, `time`,
 `in_slice`, `slice_end`, `stall_until`, `reset_request`, `powered`, `hung`, `erases_before`,
-`programs_before`, and gives `system_reset(cause)` and `update_irqs()`. It may override
+`programs_before`, `ram` ((base, size)), `uart` (the printer UART's model), and gives `_build(flags)`,
+`reset_flags(cause)` and `update_irqs()`. It may override
 `before_slice()` and `after_slice()`.
 """
 
 from regs import Block
 
 SLICE_US = 200
+# What the RAM between the static data and the stack's top holds at each boot (StackPaint).
+PAINT = 0xDEAD_BEEF
+
+
+def stack_region(symbols):
+    """(start, top) of the RAM the stack can grow into, from the image's symbols: from the end of
+    the static data (`__sheap` for cortex-m-rt, `_ebss` for qingke-rt) to the stack's top
+    (`_stack_start`, both put the stack at the top of RAM with nothing below it), or None."""
+    start = next((symbols[n] for n in ("__sheap", "_ebss", "__ebss") if n in symbols), None)
+    top = symbols.get("_stack_start")
+    return (start, top) if start is not None and top is not None and start < top else None
+
+
+class StackPaint:
+    """The stack's high-water mark: at each boot the chip paints `paint` ((start, top) or None)
+    with PAINT, and the lowest word no longer PAINT before the next boot or when asked is the
+    deepest the stack has reached, over every boot (`deepest`, bytes below the top). The chip sets
+    `paint`, `uc` and `powered`, calls `paint_stack()` at each boot before the core starts and
+    `forget_stack()` when the power goes."""
+
+    deepest = 0
+    painted = False
+
+    def paint_stack(self):
+        self.measure_stack()
+        if self.paint:
+            start, top = self.paint
+            self.uc.mem_write(start, PAINT.to_bytes(4, "little") * ((top - start) // 4))
+            self.painted = True
+
+    def forget_stack(self):
+        self.measure_stack()
+        self.painted = False
+
+    def measure_stack(self):
+        """The deepest the stack has reached below its top, bytes, over every boot so far."""
+        if not self.paint or not self.powered or not self.painted:
+            return self.deepest
+        start, top = self.paint
+        data = bytes(self.uc.mem_read(start, top - start))
+        pattern = PAINT.to_bytes(4, "little")
+        for i in range(0, len(data), 4):
+            if data[i:i + 4] != pattern:
+                self.deepest = max(self.deepest, top - (start + i))
+                break
+        return self.deepest
 
 
 class Memory:
@@ -112,6 +159,39 @@ class Scheduler:
 
     def programs(self):
         return self.programs_before + self.flash.programs
+
+    # ---- resets ------------------------------------------------------------------------------
+    def system_reset(self, cause):
+        """A system reset (the watchdog, a software reset): every model anew with the reset flags
+        of `cause` (`reset_flags(cause)`), SRAM and flash kept; what left the UART's pin before
+        it is still the step's TX."""
+        sent = self.uart.sent
+        self._build(self.reset_flags(cause))
+        self.uart.sent = sent
+        self.resets += 1
+        self.hung = False
+        self.boot()
+
+    def power_off(self):
+        self.forget_stack()
+        self.flash.power_loss()
+        self.powered = False
+
+    def power_on(self):
+        """A power-on reset: the SRAM cleared (`ram`: (base, size)), the power-on flags
+        (`reset_flags("power")`)."""
+        base, size = self.ram
+        self.uc.mem_write(base, bytes(size))
+        self._build(self.reset_flags("power"))
+        self.resets += 1
+        self.powered = True
+        self.hung = False
+        self.boot()
+
+    def boot(self):
+        """The core starts from its reset vector, the stack's region freshly painted."""
+        self.paint_stack()
+        self.cpu.reset()
 
     def before_slice(self):
         """Called as each round of the loop starts, at `time`."""
