@@ -142,7 +142,8 @@ class AngleBuses:
             gpio[port].watchers.append(self.update)
 
     def update(self):
-        b, c, d = (self.gpio[p].low() for p in "BCD")
+        gpio = self.gpio
+        b, c, d = gpio["B"].pulled_low, gpio["C"].pulled_low, gpio["D"].pulled_low
         key = (b & 0xF000, c & 0xE000, d & 1)
         if key == self.levels:
             return

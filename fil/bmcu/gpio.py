@@ -32,6 +32,7 @@ class Gpio(Block):
         self.ext_known = 0   # pins something outside drives (the AS5600 buses' SDA)
         self.ext_level = 0   # and the level it drives them to (an open-drain release: 1)
         self.watchers = []   # called after a change of the pins' configuration or outputs
+        self.pulled_low = 0  # low(), kept current by every write (and AFIO's, `refresh`)
         self._plan()
 
     # ---- the pins' configuration, as masks -----------------------------------------------------
@@ -72,6 +73,13 @@ class Gpio(Block):
     def low(self):
         """The pins the chip pulls low (GPIO outputs at 0), as a mask."""
         return self.gpio_out & ~self.outdr() & ~self._cut() & 0xFFFF
+
+    def refresh(self):
+        """Something the pins depend on changed (a write, AFIO's remap): `pulled_low` anew, and
+        the watchers told."""
+        self.pulled_low = self.low()
+        for watch in self.watchers:
+            watch()
 
     def drive(self, pin):
         """What the chip drives on `pin`: 0 or 1, or None (an input, a released open drain, an
@@ -125,5 +133,4 @@ class Gpio(Block):
             super().write_reg(offset, value, mask)
             if offset in (CFGLR, CFGHR):
                 self._plan()
-        for watch in self.watchers:
-            watch()
+        self.refresh()

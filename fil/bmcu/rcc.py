@@ -90,8 +90,14 @@ class Rcc(Block):
 
 
 class Afio(Block):
-    """AFIO: the remaps, stored (PCFR1 at 0x04)."""
+    """AFIO: the remaps, stored (PCFR1 at 0x04); a write tells GPIOD (PD01_RM connects PD0/PD1)."""
     name = "AFIO"
 
     def pcfr1(self):
         return self.regs.get(0x04, 0)
+
+    def write_reg(self, offset, value, mask):
+        super().write_reg(offset, value, mask)
+        gpio = getattr(self.chip, "gpio", None)
+        if gpio:
+            gpio["D"].refresh()

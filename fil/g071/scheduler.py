@@ -127,7 +127,10 @@ class Scheduler:
             now = self.now()
             for advance in bring:
                 advance(now)
-        block.write(off, size, value)
+        if size == 4:
+            block.write_reg(off, value, 0xFFFF_FFFF)
+        else:
+            block.write(off, size, value)
 
     # ---- time ----------------------------------------------------------------------------------
     def now(self):

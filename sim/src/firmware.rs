@@ -518,6 +518,22 @@ mod tests {
     }
 
     #[test]
+    fn version_3_steps_carry_each_lanes_tension_and_version_2_does_not() {
+        let model = || Model::new(mmu_model::ModelConfig::default(), 4, 1);
+        let v2 = sensor_levels(&mut model(), 3, 2);
+        let v3 = sensor_levels(&mut model(), 4, 3);
+        assert_eq!((v2.len(), v3.len()), (2 * 3 + 3, 3 * 4 + 3));
+        // The same model sampled in the same order (its sensors' noise is seeded).
+        let mut same = model();
+        for slot in 0..4 {
+            let s = same.sample_slot(slot).expect("a slot");
+            assert_eq!(&v3[3 * slot..3 * slot + 3], &[s.motion, s.filament, s.tension]);
+        }
+        let hub = same.sample_hub();
+        assert_eq!(&v3[12..], &[hub.filament, hub.tension, hub.cutter]);
+    }
+
+    #[test]
     fn hex_goes_both_ways_and_refuses_what_is_not_hex() {
         assert_eq!(to_hex(b"S0*c6\n"), "53302a63360a");
         assert_eq!(from_hex("53302a63360a").as_deref(), Some(&b"S0*c6\n"[..]));
