@@ -11,12 +11,13 @@ Diagnostics go to stderr. See fil/g071/README.md.
 import argparse
 import os
 import sys
-import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 import clock  # noqa: E402
 import elf  # noqa: E402
+import linebench  # noqa: E402
+import scheduler  # noqa: E402
 import profile as profiling  # noqa: E402
 from chip import Chip  # noqa: E402
 from cpu import EmulationError  # noqa: E402
@@ -90,28 +91,26 @@ STORE = (0x0801_8000, 0x8000)
 # Functions listed for each profiled millisecond.
 PROFILE_TOP = 25
 
-class Bench:
+class Bench(linebench.LineBench):
     def __init__(self, image, rtt=None):
         segments, self.symbols = elf.load(image)
         if os.environ.get(WORN_STORE_ENV, "0") not in ("", "0"):
             address, size = STORE
             segments = list(segments) + [(address, b"\x00" * size)]
-        self.chip = Chip(segments)
+        self.chip = Chip(segments, scheduler.stack_region(self.symbols))
         self.build = build_of(self.symbols)
         self.rtt = open(rtt, "ab") if rtt else None
         self.rtt_block = self.symbols.get("_SEGGER_RTT")
-        self.line_origin = 0    # cycle the current run of back-to-back characters started
-        self.line_count = 0     # characters in that run so far
-        self.wall = 0.0
-        self.cpu = 0.0
-        # (instructions, bytes received, ms, wrote) of each millisecond with a control step (see
-        # load_summary).
-        self.load = []
+        self.clock = clock.CLOCK
+        self.line = linebench.Line(clock.char_time)
+        self.timer = linebench.Timer()
+        # The instructions of each millisecond with a control step (see load_summary).
+        self.load = linebench.Load()
         self.control_steps = self.symbols.get(CONTROL_STEPS)
         # (instructions, ms, functions) of the busiest milliseconds measured, with PROFILE_ENV.
         self.profile_keep = int(os.environ.get(PROFILE_ENV, "0") or 0)
         self.profile = profiling.FunctionCounts(image, self.chip) if self.profile_keep else None
-        self.busiest = []
+        self.busiest = profiling.Busiest(self.profile_keep, PROFILE_TOP)
 
     # ---- outputs -----------------------------------------------------------------------------
     def level(self, pin):
@@ -174,113 +173,34 @@ class Bench:
                 chip.sensor[where] = value
             else:
                 chip.set_encoder(where, value)
-        if chip.powered:
-            if self.line_origin + clock.char_time(self.line_count) <= start:
-                self.line_origin, self.line_count = start, 0
-            for byte in rx:
-                self.line_count += 1
-                chip.usart1.deliver(self.line_origin + clock.char_time(self.line_count), byte)
-        t0, c0 = time.perf_counter(), time.process_time()
-        resets, executed = chip.resets, chip.cpu.native.count()
-        flash_ops = chip.erases() + chip.programs()
-        functions = self.profile.snapshot() if self.profile else None
-        steps = self.steps_taken()
-        chip.run_until(end)
-        # A millisecond of the control loop: it stepped, and had stepped before the millisecond
-        # began (the first step's millisecond also holds the end of the boot). Forward only: a
-        # reset keeps the RAM, so a boot's millisecond starts from the last run's count and
-        # clears it.
-        after = self.steps_taken()
-        stepped = steps is not None and after is not None and 0 < steps < after
-        if chip.resets == resets and chip.powered and us == 1000 and stepped:
-            wrote = chip.erases() + chip.programs() != flash_ops
-            n, ms = chip.cpu.native.count() - executed, round(end / clock.us(1000))
-            self.load.append((n, len(rx), ms, wrote))
-            if functions is not None:
-                self.keep_profile(n, ms, wrote, self.profile.counts - functions)
-        self.wall += time.perf_counter() - t0
-        self.cpu += time.process_time() - c0
-        sent = bytes(b for _, b in chip.usart1.take_sent()) if chip.powered else b""
+        self.deliver(start, rx)
+        sent = self.run_measured(us, end, len(rx))
         self.pump_rtt()
-        tx = sent.hex() if sent else "-"
-        return f"ok {' '.join(self.motors())} {tx} {chip.resets} {chip.erases()} {chip.programs()}"
-
-    def steps_taken(self):
-        """The firmware's count of control steps, or None (no such symbol, or no power)."""
-        if self.control_steps is None or not self.chip.powered:
-            return None
-        return int.from_bytes(self.chip.memory.read(self.control_steps, 4), "little")
-
-    def keep_profile(self, instructions, ms, wrote, functions):
-        """Keeps this millisecond's profile if it is among the busiest `profile_keep`."""
-        self.busiest.append((instructions, ms, wrote, functions))
-        self.busiest.sort(key=lambda m: m[0], reverse=True)
-        del self.busiest[self.profile_keep:]
-
-    def profile_report(self):
-        """The busiest milliseconds' profiles (PROFILE_ENV), for the log."""
-        lines = []
-        for instructions, ms, wrote, functions in self.busiest:
-            with_write = ", with a flash write" if wrote else ""
-            lines.append(f"profile: {instructions} instructions at {ms} ms{with_write}")
-            lines += [f"profile: {n:7}  {name}" for name, n in functions.most_common(PROFILE_TOP)]
-        return "\n".join(lines)
+        return self.answer(self.motors(), sent)
 
     def load_summary(self):
         """The CPU's load in each 1 ms step in which the control task stepped, after its first
-        step (CONTROL_STEPS moved; the boot and the store's restore are not the control loop):
-        instructions executed
-        in the milliseconds without a flash write (median, 99th and 99.9th percentile, busiest) and the busiest with
-        one, with 2.2 cycles an instruction (the flash's wait states, pessimistically) for the
+        step (CONTROL_STEPS moved; the boot and the store's restore are not the control loop),
+        with 2.2 cycles an instruction (the flash's wait states, pessimistically) for the
         percentage. One line, for the log."""
-        plain = sorted(m for m in self.load if not m[3])
-        writing = [m for m in self.load if m[3]]
-        if not plain:
-            if self.control_steps is None:
-                return f"load: no millisecond measured (the image has no {CONTROL_STEPS})"
-            return "load: no millisecond measured"
+        return self.load.summary(self.control_steps, clock.us(1000), 2.2, "64 MHz")
 
-        def pct(n):
-            return f"{100 * n * 2.2 / clock.us(1000):.1f} %"
+    def report(self):
+        """The lines logged at `quit`."""
+        lines = [self.load_summary(), self.stack_line()]
+        if self.profile:
+            lines.append(self.busiest.report())
+        return lines
 
-        def at(q):
-            n = plain[min(len(plain) - 1, int(q * len(plain)))][0]
-            return f"{n} ({pct(n)})"
-        worst = plain[-1]
-        line = (f"load: {len(plain)} ms without a flash write, instructions a millisecond: median "
-                f"{at(0.5)}, 99 % {at(0.99)}, 99.9 % {at(0.999)}, busiest {worst[0]} ({pct(worst[0])} "
-                f"of 1 ms at 64 MHz, 2.2 cycles an instruction) at {worst[2]} ms, {worst[1]} bytes received")
-        if writing:
-            busiest = max(writing)
-            line += f"; {len(writing)} ms with one, busiest {busiest[0]} ({pct(busiest[0])}) at {busiest[2]} ms"
-        return line
-
-    def handle(self, line):
-        words = line.split()
-        if not words:
-            raise ValueError("empty request")
-        if words[0] == "step":
-            if len(words) != 12:
-                raise ValueError(f"step takes 11 arguments, got {len(words) - 1}")
-            us = int(words[1])
-            levels = [int(w) for w in words[2:11]]
-            if us < 0 or any(not 0 <= v <= self.build.sensor_max(i) for i, v in enumerate(levels)):
-                raise ValueError("step: a value out of range")
-            rx = b"" if words[11] == "-" else bytes.fromhex(words[11])
-            return self.step(us, levels, rx)
-        if words == ["power", "off"]:
-            self.chip.power_off()
-            self.line_origin, self.line_count = self.chip.time, 0
-            self.chip.usart1.incoming.clear()
-            return "ok"
-        if words == ["power", "on"]:
-            if not self.chip.powered:
-                self.chip.power_on()
-            return "ok"
-        if words == ["hang"]:
-            self.chip.hung = True
-            return "ok"
-        raise ValueError(f"unknown request: {line.strip()}")
+    def step_request(self, words):
+        if len(words) != 12:
+            raise ValueError(f"step takes 11 arguments, got {len(words) - 1}")
+        us = int(words[1])
+        levels = [int(w) for w in words[2:11]]
+        if us < 0 or any(not 0 <= v <= self.build.sensor_max(i) for i, v in enumerate(levels)):
+            raise ValueError("step: a value out of range")
+        rx = b"" if words[11] == "-" else bytes.fromhex(words[11])
+        return self.step(us, levels, rx)
 
 
 def main():
@@ -288,37 +208,11 @@ def main():
     parser.add_argument("image")
     parser.add_argument("--rtt", metavar="FILE")
     args = parser.parse_args()
-    out = sys.stdout
-    try:
+
+    def make():
         bench = Bench(args.image, args.rtt)
-    except (OSError, ValueError, EmulationError) as e:
-        print(f"error {e}", flush=True)
-        return 1
-    print(f"ready {BOARD} {SLOT_COUNT} {bench.build.profile}", file=out, flush=True)
-    for line in sys.stdin:
-        if line.strip() == "quit":
-            print(bench.load_summary(), file=sys.stderr, flush=True)
-            if bench.profile:
-                print(bench.profile_report(), file=sys.stderr, flush=True)
-            break
-        try:
-            answer = bench.handle(line)
-        except EmulationError as e:
-            print(f"error {e}", file=out, flush=True)
-            return 1
-        except ValueError as e:
-            print(f"error {e}", file=out, flush=True)
-            return 1
-        except Exception as e:  # a fault of the bench itself: say so rather than hang the simulator
-            print(f"error internal: {type(e).__name__}: {e}", file=out, flush=True)
-            raise
-        print(answer, file=out, flush=True)
-    virtual_ms = bench.chip.time / (clock.CYCLES_PER_US * 1000)
-    if bench.wall:
-        print(f"bench: {virtual_ms:.0f} virtual ms in {bench.wall:.1f} s wall, {bench.cpu:.1f} s CPU "
-              f"of emulation: {virtual_ms / bench.wall:.0f} virtual ms per wall second, "
-              f"{virtual_ms / max(bench.cpu, 1e-9):.0f} per CPU second", file=sys.stderr)
-    return 0
+        return bench, f"ready {BOARD} {SLOT_COUNT} {bench.build.profile}"
+    return linebench.serve(make, EmulationError)
 
 
 if __name__ == "__main__":

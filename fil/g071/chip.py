@@ -9,6 +9,9 @@ current time, the interrupt lines are sampled into the NVIC, and a pending inter
 A sleeping core (WFE/WFI), a stalled one (flash busy) or a hung one (`hang`) executes nothing:
 time jumps to the next event.
 
+The stack's high-water mark: the chip paints the RAM between `__sheap` and `_stack_start` at
+each boot (fil/g071/scheduler.py StackPaint) when the bench names the region.
+
 Resets (RM0444 §5.1): a system reset (watchdog, SYSRESETREQ) restarts the core and every
 peripheral, keeps the SRAM and the flash, and sets the reset flags in RCC_CSR (plus PINRSTF, the
 internal reset drives NRST); a power-on reset also clears the SRAM (here: to zero) and sets
@@ -28,39 +31,19 @@ from iwdg import Iwdg
 from nvic import Scs
 from rcc import CSR_FLAGS, Pwr, Rcc
 from regs import Block
+from scheduler import Memory, Scheduler, StackPaint
 from timers import Timer
 from usart import Usart
-
-SLICE_US = 200
 
 # (base, size) of the MMIO windows Unicorn maps to the models.
 WINDOWS = ((0x4000_0000, 0x1_6000), (0x4002_0000, 0x6400), (0x5000_0000, 0x1800),
            (0xE000_E000, 0x1000))
 
 
-class Memory:
-    """Flash and SRAM as the DMA and the flash controller see them (not through the MMIO)."""
+class Chip(Scheduler, StackPaint):
+    clock = clock.CLOCK
 
-    def __init__(self, uc):
-        self.uc = uc
-
-    def _check(self, address, n):
-        ok = (RAM_BASE <= address and address + n <= RAM_BASE + RAM_SIZE) or \
-             (FLASH_BASE <= address and address + n <= FLASH_BASE + FLASH_SIZE)
-        if not ok:
-            raise MemoryError(hex(address))
-
-    def read(self, address, n):
-        self._check(address, n)
-        return bytes(self.uc.mem_read(address, n))
-
-    def write(self, address, data):
-        self._check(address, len(data))
-        self.uc.mem_write(address, bytes(data))
-
-
-class Chip:
-    def __init__(self, segments):
+    def __init__(self, segments, paint=None):
         image = bytearray(b"\xff" * FLASH_SIZE)
         for address, data in segments:
             if FLASH_BASE <= address < FLASH_BASE + FLASH_SIZE:
@@ -68,7 +51,7 @@ class Chip:
         self.cpu = Cpu(self, bytes(image), segments)
         self.uc = self.cpu.uc
         self.uc.mem_write(FLASH_BASE, bytes(image))
-        self.memory = Memory(self.uc)
+        self.memory = Memory(self.uc, ((FLASH_BASE, FLASH_SIZE), (RAM_BASE, RAM_SIZE)))
         for base, size in WINDOWS:
             self.uc.mmio_map(base, size, self._mmio_read, base, self._mmio_write, base)
         self.time = 0
@@ -82,8 +65,10 @@ class Chip:
         self.sensor = {}           # ADC channel -> level, kept across resets
         self.encoder = {}          # encoder timer's name -> the lane's count, kept across resets
         self.flash = None
-        self._build(csr_flags=(1 << CSR_FLAGS["power"]) | (1 << CSR_FLAGS["pin"]))
-        self.cpu.reset()
+        self.paint = paint         # the stack's region, painted at each boot (StackPaint)
+        self.ram = (RAM_BASE, RAM_SIZE)
+        self._build(self.reset_flags("power"))
+        self.boot()
 
     # ---- the peripherals ---------------------------------------------------------------------
     def _build(self, csr_flags):
@@ -139,54 +124,15 @@ class Chip:
             return self.scs, address - 0xE000_E000
         if 0x4001_2400 <= address < 0x4001_2800:  # the ADC's common registers at +0x300
             return self.adc, address - 0x4001_2400
-        base = address & ~0x3FF
-        block = self.blocks.get(base)
-        if block is None:
-            block = self.others.get(base)
-            if block is None:
-                block = self.others[base] = Block(self)
+        block, base = self.block_at(address & ~0x3FF)
         return block, address - base
 
-    def _route(self, address):
-        """(block, offset, what to bring up to date) for an MMIO address, cached per address.
-        For the DMA that is the peripherals that feed it (its counters and the memory it wrote
-        must be current), for the others the block itself."""
-        route = self.routes.get(address)
-        if route is None:
-            block, off = self._block_at(address)
-            if block is self.dma or block is self.dmamux:
-                bring = (self.usart1.advance, self.adc.advance)
-            elif type(block).advance is Block.advance:
-                bring = ()
-            else:
-                bring = (block.advance,)
-            route = self.routes[address] = (block, off, bring)
-        return route
-
-    def _mmio_read(self, uc, offset, size, base):
-        block, off, bring = self.routes.get(base + offset) or self._route(base + offset)
-        if bring:
-            now = self.time + (self.cpu.native.count() - self.cpu.count_base) * clock.CPI_NUM // clock.CPI_DEN
-            for advance in bring:
-                advance(now)
-        if size == 4:
-            return block.read_reg(off)
-        return block.read(off, size)
-
-    def _mmio_write(self, uc, offset, size, value, base):
-        block, off, bring = self.routes.get(base + offset) or self._route(base + offset)
-        if bring:
-            now = self.time + (self.cpu.native.count() - self.cpu.count_base) * clock.CPI_NUM // clock.CPI_DEN
-            for advance in bring:
-                advance(now)
-        block.write(off, size, value)
+    def dma_feeders(self, block):
+        if block is self.dma or block is self.dmamux:
+            return (self.usart1.advance, self.adc.advance)
+        return None
 
     # ---- time --------------------------------------------------------------------------------
-    def now(self):
-        if self.in_slice:
-            return self.time + clock.instructions_to_cycles(self.cpu.executed())
-        return self.time
-
     def reschedule(self, model=None):
         """Called by a model whose state may have changed the interrupts or the next event:
         ends the slice (at the next block) if an interrupt is now ready to be taken or the
@@ -219,24 +165,6 @@ class Chip:
                 self.cpu.stop_soon()
                 return
 
-    def stall(self, until):
-        self.stall_until = until
-        if self.in_slice:
-            self.cpu.stop_soon()
-
-    def request_reset(self, cause):
-        self.reset_request = cause
-        if self.in_slice:
-            self.cpu.stop_soon()
-
-    def next_event(self):
-        times = [t for t in (m.next_event() for m in self.timed) if t is not None]
-        return min(times) if times else None
-
-    def advance_models(self, now):
-        for m in self.timed:
-            m.advance(now)
-
     def update_irqs(self):
         scs = self.scs
         active = set(v - 16 for v in self.cpu.active)
@@ -246,69 +174,12 @@ class Chip:
                     scs.pending |= 1 << irq
 
     # ---- resets ------------------------------------------------------------------------------
-    def system_reset(self, cause):
-        flags = self.rcc.reset_flags() | (1 << CSR_FLAGS[cause]) | (1 << CSR_FLAGS["pin"])
-        sent = self.usart1.sent  # what left the pin before the reset is still the step's TX
-        self._build(flags)
-        self.usart1.sent = sent
-        self.resets += 1
-        self.hung = False
-        self.cpu.reset()
+    def reset_flags(self, cause):
+        """RCC_CSR's flags after a reset by `cause`: a system reset's keep the last ones, and
+        every reset sets PINRSTF (RM0444 §5.1.2)."""
+        kept = 0 if cause == "power" else self.rcc.reset_flags()
+        return kept | (1 << CSR_FLAGS[cause]) | (1 << CSR_FLAGS["pin"])
 
-    def power_off(self):
-        self.flash.power_loss()
-        self.powered = False
-
-    def power_on(self):
-        self.uc.mem_write(RAM_BASE, bytes(RAM_SIZE))
-        self._build((1 << CSR_FLAGS["power"]) | (1 << CSR_FLAGS["pin"]))
-        self.resets += 1
-        self.powered = True
-        self.hung = False
-        self.cpu.reset()
-
-    def erases(self):
-        return self.erases_before + self.flash.erases
-
-    def programs(self):
-        return self.programs_before + self.flash.programs
-
-    # ---- running -----------------------------------------------------------------------------
-    def run_until(self, end):
-        cpu = self.cpu
-        while self.time < end:
-            self.advance_models(self.time)
-            if self.reset_request:
-                cause, self.reset_request = self.reset_request, None
-                self.system_reset(cause)
-                continue
-            if not self.powered:
-                self.time = end
-                break
-            self.update_irqs()
-            nxt = self.next_event()
-            limit = end if nxt is None else min(end, max(nxt, self.time + 1))
-            if self.stall_until is not None:
-                if self.stall_until > self.time:
-                    self.time = min(limit, self.stall_until)
-                    continue
-                self.stall_until = None
-            if self.hung:
-                self.time = limit
-                continue
-            if cpu.sleeping:
-                if not cpu.wakes():
-                    self.time = limit
-                    continue
-                cpu.sleeping = False
-            irq = cpu.ready_interrupt()
-            if irq is not None:
-                cpu.take_interrupt(irq)
-            limit = min(limit, self.time + clock.us(SLICE_US))
-            self.slice_end = limit
-            self.in_slice = True
-            try:
-                executed = cpu.run(clock.cycles_to_instructions(limit - self.time))
-            finally:
-                self.in_slice = False
-            self.time += clock.instructions_to_cycles(executed)
+    @property
+    def uart(self):
+        return self.usart1

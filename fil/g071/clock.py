@@ -7,31 +7,16 @@ taken here as 5/2 cycles per instruction. Sleep (WFE/WFI), a flash erase's stall
 it to the next peripheral event without executing anything.
 """
 
+import linebench
+
 HZ = 64_000_000
 CYCLES_PER_US = 64
 # Cycles per instruction as a fraction (5/2 = 2.5).
 CPI_NUM, CPI_DEN = 5, 2
-
-
-def us(n):
-    """Cycles in n microseconds."""
-    return int(n * CYCLES_PER_US)
-
-
-def instructions_to_cycles(n):
-    return n * CPI_NUM // CPI_DEN
-
-
-def cycles_to_instructions(c):
-    return max(1, c * CPI_DEN // CPI_NUM)
-
-
 # 115200 baud, 8N1: 10 bits per character. Fractional cycles kept exact by computing arrival
 # times from a character index (see usart.py).
 BAUD = 115_200
 BITS_PER_CHAR = 10
-
-
-def char_time(k):
-    """Cycles from a line's start to the end of its k-th character (k counts from 1)."""
-    return k * BITS_PER_CHAR * HZ // BAUD
+CLOCK = linebench.Clock(HZ, CPI_NUM, CPI_DEN, BAUD, BITS_PER_CHAR)
+us, instructions_to_cycles, cycles_to_instructions, char_time = (
+    CLOCK.us, CLOCK.instructions_to_cycles, CLOCK.cycles_to_instructions, CLOCK.char_time)

@@ -17,6 +17,7 @@ from unicorn import arm_const as arm
 
 import clock
 import native
+from scheduler import FlashStores
 
 FLASH_BASE, FLASH_SIZE = 0x0800_0000, 128 * 1024
 RAM_BASE, RAM_SIZE = 0x2000_0000, 36 * 1024
@@ -33,7 +34,7 @@ class EmulationError(Exception):
     """The bench cannot go on (PROTOCOL.md: answered `error ...`)."""
 
 
-class Cpu:
+class Cpu(FlashStores):
     def __init__(self, chip, image, segments):
         self.chip = chip
         uc = unicorn.Uc(unicorn.UC_ARCH_ARM, unicorn.UC_MODE_THUMB | unicorn.UC_MODE_MCLASS)
@@ -67,24 +68,6 @@ class Cpu:
         self.active = []
         self.sleeping = False
         self.native.set_event(0)
-
-    # ---- flash stores ------------------------------------------------------------------------
-    def _on_flash_write(self, uc, access, address, size, value, _):
-        # Unicorn writes the memory after this hook: the old bytes are put back when the slice
-        # ends (the controller changes the array when its operation completes, after the stall).
-        self.flash_writes.append((address, bytes(uc.mem_read(address, size))))
-        self.chip.flash.store(address, size, value & ((1 << (8 * size)) - 1))
-        self.stop_soon()
-
-    def _apply_flash_writes(self):
-        writes, self.flash_writes = self.flash_writes, []
-        for address, old in reversed(writes):
-            self.uc.mem_write(address, old)
-
-    def stop_soon(self):
-        """Ends the slice at the next block boundary. (uc.emu_stop from an MMIO or memory
-        callback leaves PC on the accessing instruction, which would then run twice.)"""
-        self.native.set_limit(self.native.count())
 
     # ---- exceptions --------------------------------------------------------------------------
     def active_vector(self):
@@ -158,19 +141,14 @@ class Cpu:
         self.chip.update_irqs()
 
     # ---- running -----------------------------------------------------------------------------
-    def executed(self):
-        return self.native.count() - self.count_base
-
     def run(self, instructions):
         """Runs up to `instructions` (block granular); returns the number executed."""
         uc = self.uc
         nat = self.native
-        self.count_base = nat.count()
-        nat.set_irq_ready(1 if self.ready_interrupt(ignore_primask=True) is not None else 0)
-        nat.set_limit(self.count_base + instructions)
         pc = uc.reg_read(arm.UC_ARM_REG_PC)
         try:
-            uc.emu_start(pc | 1, 0xFFFF_FFFF)
+            self._emulate(instructions, pc | 1, 0xFFFF_FFFF,
+                          self.ready_interrupt(ignore_primask=True) is not None)
         except unicorn.UcError as e:
             pc = uc.reg_read(arm.UC_ARM_REG_PC)
             if pc >= 0xFFFF_FFF0 or (e.errno == unicorn.UC_ERR_FETCH_UNMAPPED and pc >= 0xFFFF_FF00):

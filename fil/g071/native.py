@@ -22,11 +22,8 @@ accesses and between slices.
 
 import ctypes
 import functools
-import hashlib
-import os
-import shutil
-import subprocess
-import tempfile
+
+import cbuild
 
 SOURCE = r"""
 #include <stdint.h>
@@ -91,20 +88,7 @@ void nat_cpsie(void *uc, uint64_t address, uint32_t size, void *user) {
 
 
 def _library():
-    compiler = shutil.which(os.environ.get("CC", "cc"))
-    if not compiler:
-        raise RuntimeError("no C compiler (cc) found: the bench needs one for its instruction counter")
-    digest = hashlib.sha256(SOURCE.encode()).hexdigest()[:12]
-    path = os.path.join(tempfile.gettempdir(), f"fil-g071-native-{digest}-{os.getuid()}.so")
-    if not os.path.exists(path):
-        source = path[:-3] + f".{os.getpid()}.c"
-        with open(source, "w") as f:
-            f.write(SOURCE)
-        tmp = f"{path}.{os.getpid()}.tmp"
-        subprocess.run([compiler, "-O2", "-shared", "-fPIC", "-o", tmp, source], check=True)
-        os.replace(tmp, path)
-        os.unlink(source)
-    lib = ctypes.CDLL(path)
+    lib = cbuild.load(SOURCE, "fil-g071-native")
     p = ctypes.c_void_p
     lib.nat_new.restype = p
     lib.nat_new.argtypes = [p, ctypes.c_uint64, ctypes.c_uint64]

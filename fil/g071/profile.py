@@ -32,7 +32,7 @@ def functions(image):
     found = []
     for line in out.splitlines():
         parts = line.split(None, 3)
-        if len(parts) == 4 and parts[2] in "tTwW":
+        if len(parts) == 4 and parts[2] in "tTwW" and not parts[3].startswith(".L"):  # local labels
             found.append((int(parts[0], 16) & ~1, int(parts[1], 16), parts[3]))
     return sorted(found)
 
@@ -41,10 +41,11 @@ class FunctionCounts:
     """Instructions executed in flash by function, counted from the moment it is attached to
     `chip` (`counts`: name -> instructions; a function's own, not its callees')."""
 
-    def __init__(self, image, chip):
+    def __init__(self, image, chip, bytes_per_instruction=2):
         self.named = functions(image)
         self.starts = [start for start, _, _ in self.named]
         self.counts = collections.Counter()
+        self.width = bytes_per_instruction
         chip.uc.hook_add(unicorn.UC_HOOK_BLOCK, self._on_block, begin=0x0800_0000, end=0x0801_FFFF)
         chip.uc.ctl_flush_tb()  # blocks translated before the hook would not call it
 
@@ -52,12 +53,37 @@ class FunctionCounts:
         i = bisect.bisect_right(self.starts, address) - 1
         named = self.named
         inside = i >= 0 and address < named[i][0] + max(named[i][1], 2)
-        # Thumb: two bytes an instruction but for the few 32-bit ones (BL): close enough here.
-        self.counts[named[i][2] if inside else hex(address)] += max(1, size // 2)
+        # Thumb: two bytes an instruction but for the few 32-bit ones (BL): close enough here
+        # (a RISC-V image mixes 2- and 4-byte ones: its bench passes their mean).
+        self.counts[named[i][2] if inside else hex(address)] += max(1, round(size / self.width))
 
     def snapshot(self):
         """A copy of the counts so far (subtract two snapshots for what ran between)."""
         return collections.Counter(self.counts)
+
+
+class Busiest:
+    """The `keep` busiest milliseconds' profiles: (instructions, ms, whether it wrote the flash,
+    functions -> instructions), busiest first."""
+
+    def __init__(self, keep, top):
+        self.keep, self.top = keep, top
+        self.ms = []
+
+    def take(self, instructions, ms, wrote, functions):
+        """Keeps this millisecond's profile if it is among the busiest."""
+        self.ms.append((instructions, ms, wrote, functions))
+        self.ms.sort(key=lambda m: m[0], reverse=True)
+        del self.ms[self.keep:]
+
+    def report(self):
+        """`profile:` lines for the log."""
+        lines = []
+        for instructions, ms, wrote, functions in self.ms:
+            with_write = ", with a flash write" if wrote else ""
+            lines.append(f"profile: {instructions} instructions at {ms} ms{with_write}")
+            lines += [f"profile: {n:7}  {name}" for name, n in functions.most_common(self.top)]
+        return "\n".join(lines)
 
 
 def main():

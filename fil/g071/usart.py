@@ -26,13 +26,14 @@ from collections import deque
 
 import clock
 from dma import REQ_USART1_RX, REQ_USART1_TX
+from linebench import UartLine
 from regs import Block
 
 CR1, CR2, CR3, BRR, RQR, ISR, ICR, RDR, TDR = 0x00, 0x04, 0x08, 0x0C, 0x18, 0x1C, 0x20, 0x24, 0x28
 IRQ = 27
 
 
-class Usart(Block):
+class Usart(Block, UartLine):
     name = "USART1"
 
     def __init__(self, chip=None):
@@ -62,14 +63,6 @@ class Usart(Block):
         return self.cr1() & 1 and self.cr1() >> bit & 1
 
     # ---- the line ----------------------------------------------------------------------------
-    def deliver(self, at, byte):
-        """A character the printer sends, complete at cycle `at`."""
-        self.incoming.append((at, byte))
-
-    def take_sent(self):
-        sent, self.sent = self.sent, []
-        return sent
-
     def _receive(self, at, byte):
         if not self.enabled(2):  # RE
             return

@@ -114,7 +114,8 @@ pub struct SimArgs {
     /// of the host-built logic: the binary you are about to flash, on the same wire.
     #[arg(long, value_name = "ELF", requires = "board")]
     pub firmware: Option<PathBuf>,
-    /// The board of --firmware: g071 (NUCLEO-G071RB) or pico (Raspberry Pi Pico).
+    /// The board of --firmware: g071 (NUCLEO-G071RB), pico (Raspberry Pi Pico) or bmcu (the
+    /// BMCU-C's CH32V203: with --slots 4 --hardware bmcu-c).
     #[arg(long, value_name = "BOARD", value_parser = crate::fil_cli::parse_board, requires = "firmware")]
     pub board: Option<mmu_sim::firmware::Board>,
     /// Print nothing on stderr but errors (no log of requests, answers and events).

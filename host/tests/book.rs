@@ -348,8 +348,27 @@ const COMMANDS: &[(&str, Check)] = &[
     ("bash scripts/build-firmware.sh pico dist", Check::InCi),
     ("bash scripts/build-firmware.sh bmcu dist", Check::InCi),
     ("python3 -m pip install -r fil/g071/requirements.txt", Check::InCi),
-    ("mmu fil", Check::InCi),
-    ("FIL_WORN_STORE=1 mmu fil --only T1", Check::InCi),
+    (
+        "mmu fil",
+        Check::NotRun(
+            "all three boards, about 35 minutes; CI runs the G071 and the Pico in full and the BMCU-C's T1",
+        ),
+    ),
+    ("mmu fil --board g071 --board pico", Check::InCi),
+    (
+        "FIL_WORN_STORE=1 mmu fil --board g071 --board pico --only T1",
+        Check::InCi,
+    ),
+    ("bash scripts/build-firmware.sh bmcu dist", Check::InCi),
+    ("python3 -m unittest discover -s fil/bmcu/tests", Check::InCi),
+    (
+        "mmu fil --board bmcu",
+        Check::NotRun("about half an hour, and its image breaks the contract; CI runs its T1"),
+    ),
+    (
+        "FIL_WORN_STORE=1 mmu fil --board bmcu --only T1 --contract report",
+        Check::InCi,
+    ),
     (
         "mmu sim --pty --firmware dist/mmu-firmware-pico.elf --board pico",
         Check::NotRun("serves until killed; host/tests/fil.rs serves both images with --stdio in CI"),

@@ -36,7 +36,11 @@ fn missing(board: &str) -> Option<String> {
 #[test]
 fn each_image_served_by_mmu_sim_answers_the_printers_first_request() {
     let required = std::env::var_os("MMU_FIL_REQUIRED").is_some();
-    for board in ["g071", "pico"] {
+    for (board, shape) in [
+        ("g071", &[][..]),
+        ("pico", &[][..]),
+        ("bmcu", &["--slots", "4", "--hardware", "bmcu-c"][..]),
+    ] {
         if let Some(why) = missing(board) {
             assert!(!required, "MMU_FIL_REQUIRED is set but {why}");
             eprintln!("skipped {board}: {why}");
@@ -46,7 +50,9 @@ fn each_image_served_by_mmu_sim_answers_the_printers_first_request() {
         let log_path = std::env::temp_dir().join(format!("mmu-fil-test-{board}-{}.log", std::process::id()));
         let log = std::fs::File::create(&log_path).expect("a log file");
         let mut child = Command::new(env!("CARGO_BIN_EXE_mmu"))
-            .args(["sim", "--stdio", "-q", "--board", board, "--firmware"])
+            .args(["sim", "--stdio", "-q", "--board", board])
+            .args(shape)
+            .arg("--firmware")
             .arg(&image)
             .stdin(Stdio::piped())
             .stdout(Stdio::piped())
@@ -109,7 +115,7 @@ fn a_missing_image_or_board_is_refused_clearly() {
     assert!(stderr.contains("no firmware image at /no/such.elf"), "{stderr}");
     let (code, stderr) = run(&["fil", "--board", "stm32f4"]);
     assert_eq!(code, Some(2), "{stderr}");
-    assert!(stderr.contains("g071 or pico"), "{stderr}");
+    assert!(stderr.contains("g071, pico or bmcu"), "{stderr}");
     // A bench that cannot run fails its scenarios, with the bench's own words under them.
     let no_benches = std::env::temp_dir().join(format!("mmu-fil-no-benches-{}", std::process::id()));
     std::fs::create_dir_all(&no_benches).expect("a directory");

@@ -2,9 +2,12 @@
 //! the loop.
 //!
 //! A [`FirmwareUnit`] starts a bench (`fil/`: rp2040js for the Pico, Unicorn with register
-//! models for the NUCLEO-G071RB) on the image and steps it in lockstep with the physical model
-//! over the bench line protocol (`fil/PROTOCOL.md`): each millisecond the model's sensor levels
-//! and the printer's bytes go in, the bridges' input pins and the UART's bytes come out. Nothing
+//! models for the NUCLEO-G071RB and the BMCU-C's CH32V203) on the image and steps it in lockstep
+//! with the physical model over the bench line protocol (`fil/PROTOCOL.md`): each millisecond
+//! the model's sensor levels and the printer's bytes go in, the bridges' input pins and the
+//! UART's bytes come out. The simulator speaks the protocol's version the bench's `ready` line
+//! names: the second (each slot's motion and filament, then the hub's three sensors) unless the
+//! line ends in `v3` (each lane's motion, filament and tension, then the hub's). Nothing
 //! of the unit logic runs on the host: what the unit is doing ([`UnitLogic::command`]) is read
 //! off its answers on the wire, as the printer reads it.
 
@@ -20,7 +23,10 @@ use mmu_firmware::{BoardAction, Config, Direction, Duty, Instant, MotorCommand};
 use mmu_model::Model;
 use mmu_protocol::{ButtonCode, ErrorCode, ParamCode, ProgressCode, RequestCode, ResponseDecoder};
 
-use crate::flash::{FlashWear, G0_ERASE_STALL_US, G0_PROGRAM_STALL_US, MotionWatch};
+use crate::flash::{
+    BMCU_ERASE_STALL_US, BMCU_PROGRAM_STALL_US, FlashWear, G0_ERASE_STALL_US, G0_PROGRAM_STALL_US,
+    MotionWatch,
+};
 use crate::logic::UnitLogic;
 
 /// A board whose firmware image a bench can run.
@@ -30,17 +36,21 @@ pub enum Board {
     G071,
     /// The Raspberry Pi Pico: `node fil/pico/bench.mjs`.
     Pico,
+    /// The BMCU-C kit's WCH CH32V203 (RISC-V): `python3 fil/bmcu/bench.py`.
+    Bmcu,
 }
 
 impl Board {
     /// Every board.
-    pub const ALL: [Board; 2] = [Board::G071, Board::Pico];
+    pub const ALL: [Board; 3] = [Board::G071, Board::Pico, Board::Bmcu];
 
-    /// The name `cargo fw` / `cargo fw-pico` and the bench use: `g071` or `pico`.
+    /// The name `cargo fw` / `cargo fw-pico` / `cargo fw-bmcu` and the bench use: `g071`,
+    /// `pico` or `bmcu`.
     pub const fn name(self) -> &'static str {
         match self {
             Board::G071 => "g071",
             Board::Pico => "pico",
+            Board::Bmcu => "bmcu",
         }
     }
 
@@ -49,21 +59,25 @@ impl Board {
         Board::ALL.into_iter().find(|board| board.name() == name)
     }
 
-    /// Bytes one flash program operation of the board writes (a G0 double word, an RP2040 page).
+    /// Bytes one flash program operation of the board writes (a G0 double word, an RP2040 page,
+    /// a CH32V203 half-word).
     const fn program_bytes(self) -> u64 {
         match self {
             Board::G071 => 8,
             Board::Pico => 256,
+            Board::Bmcu => 2,
         }
     }
 
     /// The longest the board's flash stalls its CPU for one erase and for one program, µs: the
     /// G071's page erase and double-word program, the Pico's W25Q16JV sector erase and page
-    /// program (datasheet maxima: 400 ms, and 3 ms plus embassy-rp's driver with interrupts off).
+    /// program (datasheet maxima: 400 ms, and 3 ms plus embassy-rp's driver with interrupts off),
+    /// the CH32V203's 256-byte fast erase and half-word program (assumptions: none found).
     pub const fn stall_us(self) -> (u64, u64) {
         match self {
             Board::G071 => (G0_ERASE_STALL_US, G0_PROGRAM_STALL_US),
             Board::Pico => (400_000, 3_400),
+            Board::Bmcu => (BMCU_ERASE_STALL_US, BMCU_PROGRAM_STALL_US),
         }
     }
 
@@ -78,6 +92,11 @@ impl Board {
             Board::Pico => {
                 let mut c = Command::new("node");
                 c.arg(fil_dir.join("pico/bench.mjs"));
+                c
+            }
+            Board::Bmcu => {
+                let mut c = Command::new("python3");
+                c.arg(fil_dir.join("bmcu/bench.py"));
                 c
             }
         };
@@ -101,6 +120,8 @@ pub struct FirmwareUnit {
     slots: usize,
     /// What senses each lane on the image's build, as its bench's `ready` line names it.
     profile: &'static Profile,
+    /// The protocol's version the bench speaks: 2, or 3 when its `ready` line ends in `v3`.
+    version: u8,
     config: Config,
     motors: Vec<MotorCommand>,
     wire: WireWatch,
@@ -145,6 +166,7 @@ impl FirmwareUnit {
             from_bench: BufReader::new(from_bench),
             slots: 0,
             profile: &profile::THESIS,
+            version: 2,
             config,
             motors: Vec::new(),
             wire: WireWatch::default(),
@@ -157,14 +179,16 @@ impl FirmwareUnit {
             line: String::new(),
         };
         let ready = unit.read_line()?;
-        match ready.split_whitespace().collect::<Vec<_>>()[..] {
-            ["ready", name, slots, hardware] if name == board.name() => {
-                unit.slots = slots.parse().map_err(|_| format!("bench says {ready:?}"))?;
-                unit.profile = profile::by_name(hardware)
-                    .ok_or_else(|| format!("the {} bench names no known profile: {ready:?}", board.name()))?;
-            }
+        let words: Vec<&str> = ready.split_whitespace().collect();
+        let (slots, hardware, version) = match words[..] {
+            ["ready", name, slots, hardware] if name == board.name() => (slots, hardware, 2),
+            ["ready", name, slots, hardware, "v3"] if name == board.name() => (slots, hardware, 3),
             _ => return Err(format!("the {} bench says {ready:?}, not `ready`", board.name())),
-        }
+        };
+        unit.slots = slots.parse().map_err(|_| format!("bench says {ready:?}"))?;
+        unit.profile = profile::by_name(hardware)
+            .ok_or_else(|| format!("the {} bench names no known profile: {ready:?}", board.name()))?;
+        unit.version = version;
         unit.config.mm_per_rev_centi = unit.profile.mm_per_rev_centi;
         unit.motors = vec![MotorCommand::Coast; unit.slots];
         Ok(unit)
@@ -290,7 +314,7 @@ impl UnitLogic for FirmwareUnit {
         tx: &mut Vec<u8>,
     ) -> Option<BoardAction> {
         let mut request = format!("step {}", dt_ms * 1000);
-        for level in sensor_levels(model, self.slots) {
+        for level in sensor_levels(model, self.slots, self.version) {
             let _ = write!(request, " {level}");
         }
         let _ = write!(request, " {}", to_hex(rx));
@@ -354,14 +378,18 @@ impl UnitLogic for FirmwareUnit {
     }
 }
 
-/// The nine sensor values of a step in the protocol's order (`mmu_hal_port::Samples`: each
-/// slot's motion sample and filament sensor, then the hub's filament, tension and cutter sensor).
-/// A lane's motion sample is what its profile's sensor reads: a Hall level, or an encoder count.
-fn sensor_levels(model: &mut Model, slots: usize) -> Vec<u16> {
-    let mut levels = Vec::with_capacity(2 * slots + 3);
+/// The sensor values of a step in the protocol's order (`mmu_hal_port::Samples`): each slot's
+/// motion sample and filament sensor (version 2), or each lane's motion, filament and tension
+/// (version 3), then the hub's filament, tension and cutter sensor. A lane's motion sample is
+/// what its profile's sensor reads: a Hall level, an encoder count, an angle (or its fault).
+fn sensor_levels(model: &mut Model, slots: usize, version: u8) -> Vec<u16> {
+    let mut levels = Vec::with_capacity(3 * slots + 3);
     for slot in 0..slots {
         let s = model.sample_slot(slot).unwrap_or_default();
         levels.extend([s.motion, s.filament]);
+        if version >= 3 {
+            levels.push(s.tension);
+        }
     }
     let hub = model.sample_hub();
     levels.extend([hub.filament, hub.tension, hub.cutter]);
@@ -371,7 +399,9 @@ fn sensor_levels(model: &mut Model, slots: usize) -> Vec<u16> {
 /// A TB6612FNG bridge's inputs `<STBY><IN1><IN2>:<duty per mille>` as the command they carry
 /// out, by the datasheet's truth table (see `mmu_hal_port::tb6612`): standby or IN1 = IN2 = L
 /// leaves the outputs open, IN1 = IN2 = H short-brakes, and a driven direction with the PWM
-/// input low short-brakes too.
+/// input low short-brakes too. The BMCU-C's AT8236 reports in the same form (STBY 1, the driven
+/// input and its duty, both inputs full for its brake: fil/PROTOCOL.md), and the model takes a
+/// drive at a duty alike whether the PWM's off-time brakes (TB6612) or coasts (AT8236).
 fn bridge_command(pins: &str) -> Option<MotorCommand> {
     let (levels, duty) = pins.split_once(':')?;
     let duty: u16 = duty.parse().ok().filter(|&d| d <= 1000)?;
@@ -485,6 +515,22 @@ mod tests {
         for bad in ["11:5", "1101:5", "110", "110:1001", "1x0:5", "110:-1"] {
             assert_eq!(bridge_command(bad), None, "{bad}");
         }
+    }
+
+    #[test]
+    fn version_3_steps_carry_each_lanes_tension_and_version_2_does_not() {
+        let model = || Model::new(mmu_model::ModelConfig::default(), 4, 1);
+        let v2 = sensor_levels(&mut model(), 3, 2);
+        let v3 = sensor_levels(&mut model(), 4, 3);
+        assert_eq!((v2.len(), v3.len()), (2 * 3 + 3, 3 * 4 + 3));
+        // The same model sampled in the same order (its sensors' noise is seeded).
+        let mut same = model();
+        for slot in 0..4 {
+            let s = same.sample_slot(slot).expect("a slot");
+            assert_eq!(&v3[3 * slot..3 * slot + 3], &[s.motion, s.filament, s.tension]);
+        }
+        let hub = same.sample_hub();
+        assert_eq!(&v3[12..], &[hub.filament, hub.tension, hub.cutter]);
     }
 
     #[test]

@@ -22,6 +22,13 @@ pub const G0_PAGE: usize = 2048;
 pub const G0_ERASE_STALL_US: u64 = 40_000;
 /// The longest a double-word program stalls it, µs (datasheet: 125 µs at most).
 pub const G0_PROGRAM_STALL_US: u64 = 125;
+/// The longest a 256-byte fast page erase stalls the BMCU-C's CH32V203, µs: no erase time of
+/// the chip was found in its datasheet; a store page's four erases are taken at the 40 ms the
+/// firmware assumes (`mmu_firmware::uart::BMCU_ERASE_STALL_MS`), as fil/bmcu's bench does.
+pub const BMCU_ERASE_STALL_US: u64 = 10_000;
+/// The longest a half-word program stalls it, µs: not found either; the G071's double-word
+/// bound as a stand-in (fil/bmcu/flash.py).
+pub const BMCU_PROGRAM_STALL_US: u64 = 125;
 
 /// What a unit's flash operations could do to its filament, step by step: the figures of
 /// [`FlashWear`] that only the unit, which sees its motors, can count.

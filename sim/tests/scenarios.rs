@@ -6,8 +6,16 @@ use mmu_sim::scenarios::run_all;
 use mmu_sim::{Sim, SimOptions};
 
 fn every_scenario_passes_on(hardware: &'static Profile) {
-    let mut new_unit =
-        |options: SimOptions| Sim::new(options.on_hardware(hardware)).map_err(|e| e.to_string());
+    every_scenario_passes_on_lanes(hardware, None);
+}
+
+/// As the scenarios run on `hardware` with `slots` lanes (the scenario's own count when None):
+/// `mmu fil` gives a unit all the lanes of its image.
+fn every_scenario_passes_on_lanes(hardware: &'static Profile, slots: Option<usize>) {
+    let mut new_unit = |options: SimOptions| {
+        let slots = slots.unwrap_or(options.slots);
+        Sim::new(SimOptions { slots, ..options }.on_hardware(hardware)).map_err(|e| e.to_string())
+    };
     let verdicts = run_all(&mut new_unit, None, &mut |_| {});
     let failed: Vec<_> = verdicts.iter().filter(|v| v.result.is_err()).collect();
     assert!(failed.is_empty(), "{}: {failed:#?}", hardware.name);
@@ -27,6 +35,12 @@ fn every_scenario_passes_on_lanes_of_n20_encoder_motors() {
 #[test]
 fn every_scenario_passes_on_the_bmcu_c_without_a_hub_sensor() {
     every_scenario_passes_on(&profile::BMCU_C);
+}
+
+/// The BMCU-C image has four lanes: `mmu fil --board bmcu` runs every scenario on all four.
+#[test]
+fn every_scenario_passes_on_the_bmcu_c_with_its_four_lanes() {
+    every_scenario_passes_on_lanes(&profile::BMCU_C, Some(4));
 }
 
 /// Lanes of N20 motors with one encoder channel wired: pulses that cannot tell the direction,
