@@ -60,7 +60,7 @@ class Adc(Block):
         half_cycles = SAMPLE_HALF_CYCLES[self.regs.get(reg, 0) >> shift & 7] + 25
         chip = self.chip
         adc_hz = chip.rcc.adc_clock() if chip is not None and hasattr(chip, "rcc") else 12_000_000
-        hz = chip.hz if chip is not None and hasattr(chip, "hz") else 144_000_000
+        hz = chip.hz if chip is not None and hasattr(chip, "hz") else 120_000_000
         return half_cycles * hz // (2 * max(adc_hz, 1))
 
     def _convert(self, at):

@@ -121,9 +121,9 @@ class Bench(linebench.LineBench):
     def report(self):
         """The lines logged at `quit`."""
         hz = getattr(self.chip, "clock_hz", None)
-        clock_line = (f"clock: the image runs its core at {hz / 1e6:g} MHz (the bench counts 144 MHz)"
+        clock_line = (f"clock: the image runs its core at {hz / 1e6:g} MHz (the bench counts 120 MHz)"
                       if hz else "clock: the image never switched to the PLL")
-        lines = [self.load.summary(self.control_steps, clock.us(1000), clock.CONTRACT_CPI, "144 MHz",
+        lines = [self.load.summary(self.control_steps, clock.us(1000), clock.CONTRACT_CPI, "120 MHz",
                                    quiet=True),
                  self.stack_line(), clock_line]
         if self.profile:

@@ -1,8 +1,9 @@
-"""Virtual time of the emulated CH32V203: one integer count of 144 MHz HCLK cycles since the
+"""Virtual time of the emulated CH32V203: one integer count of 120 MHz HCLK cycles since the
 bench started, from which everything derives deterministically (never from the wall clock).
 
-The image runs at 144 MHz (src/board/bmcu/clock.rs: HSI x 18 through the PLL); the bench counts
-at 144 MHz from the start, also before the PLL is on (the RCC model computes the clock the image
+The image runs at 120 MHz (src/board/bmcu/clock.rs: HSI x 15 through the PLL; not the chip's 144
+MHz, where WCH's flash example wants HCLK halved around every flash write); the bench counts
+at 120 MHz from the start, also before the PLL is on (the RCC model computes the clock the image
 chose and the bench logs it, rcc.py). An instruction advances time by 3/2 cycles: an
 assumption. The QingKe V4B is a 3-stage pipeline with static branch prediction, single-cycle
 multiplication and zero-wait flash at 144 MHz (CH32V203 datasheet V2.6, overview); what it
@@ -16,7 +17,7 @@ to the next event without executing anything.
 
 import linebench  # fil/g071/linebench.py
 
-HZ = 144_000_000
+HZ = 120_000_000
 CYCLES_PER_US = HZ // 1_000_000
 # Cycles per instruction as a fraction (3/2), and the contract's figure.
 CPI_NUM, CPI_DEN = 3, 2

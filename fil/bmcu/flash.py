@@ -40,6 +40,7 @@ option bytes, write protection (WPR), the EOP/error interrupt, a power loss insi
 from regs import Block
 
 KEYR, STATR, CTLR, ADDR, MODEKEYR = 0x04, 0x0C, 0x10, 0x14, 0x24
+DIE_WORD, LATER_DIE = 0x30, 0x0100_0000
 KEY1, KEY2 = 0x4567_0123, 0xCDEF_89AB
 BASE, SIZE, PAGE, SECTOR = 0x0800_0000, 64 * 1024, 256, 4096
 ERASED = 0xE339_E339
@@ -68,6 +69,9 @@ class Flash(Block):
         self.programs = 0
 
     # ---- registers ---------------------------------------------------------------------------
+    # The word at 0x40022030 that WCH's GPIO driver reads to tell an early CH32V203 die (bits
+    # 27:24 zero: PC13-PC15 at GPIOC bits 0-2, `ch32v20x_gpio.c` `GPIO_Init`) from a later one;
+    # the bench is a later die. Its real value on either was not found.
     def read_reg(self, offset):
         if offset == STATR:
             return self.statr | (BSY if self.busy_until is not None else 0)
@@ -75,6 +79,8 @@ class Flash(Block):
             return self.ctlr
         if offset in (KEYR, MODEKEYR):
             return 0
+        if offset == DIE_WORD:
+            return LATER_DIE
         return super().read_reg(offset)
 
     def _key(self, offset, value):
@@ -113,7 +119,7 @@ class Flash(Block):
     # ---- operations --------------------------------------------------------------------------
     def _begin(self, us, op):
         now = self.chip.now() if self.chip else 0
-        self.busy_until = now + us * (self.chip.cycles_per_us if self.chip else 144)
+        self.busy_until = now + us * (self.chip.cycles_per_us if self.chip else 120)
         self.pending = op
         if self.chip:
             self.chip.stall(self.busy_until)

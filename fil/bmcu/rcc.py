@@ -18,7 +18,7 @@ the CH32V20x; the CH32FV2x_V3xRM reference manual itself was not found in the se
   image's clock.rs: "the HSI undivided into the PLL").
 - AFIO_PCFR1 0x04: TIM2_RM [9:8], TIM3_RM [11:10], TIM4_RM 12, PD01_RM 15 (PD0/PD1 as GPIO
   instead of OSC_IN/OSC_OUT): read by the GPIO model and the bench's pin routing.
-The bench's virtual clock counts 144 MHz whatever these say (clock.py); `hclk()` computes what
+The bench's virtual clock counts 120 MHz whatever these say (clock.py); `hclk()` computes what
 the image chose, which the bench logs once the PLL runs.
 """
 

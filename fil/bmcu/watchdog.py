@@ -17,5 +17,5 @@ class Watchdog(Iwdg):
 
     def timeout_cycles(self):
         divider = 4 << min(self.regs.get(PR, 0) & 7, 6)
-        hz = self.chip.hz if self.chip is not None and hasattr(self.chip, "hz") else 144_000_000
+        hz = self.chip.hz if self.chip is not None and hasattr(self.chip, "hz") else 120_000_000
         return (self.regs.get(RLR, 0xFFF) & 0xFFF) * divider * hz // LSI_HZ

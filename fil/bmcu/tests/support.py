@@ -29,8 +29,8 @@ def image_path():
 class Fake(FakeChip):
     """fil/g071's stand-in chip with what the BMCU-C's models ask too: the clock and the RCC."""
 
-    hz = 144_000_000
-    cycles_per_us = 144
+    hz = 120_000_000
+    cycles_per_us = 120
 
     def __init__(self):
         super().__init__()

@@ -32,7 +32,7 @@ def systick_every_ms(a, nesting=True):
     """SysTick interrupt each millisecond (HCLK/8, auto-reload), HPE (+ nesting), MIE on."""
     a.li(SP, 0x2000_5000)
     a.li(T0, 3 if nesting else 1).csrrw(ZERO, 0x804, T0)
-    a.poke(STK + 0x10, 18_000 - 1).poke(STK + 0x14, 0)
+    a.poke(STK + 0x10, 15_000 - 1).poke(STK + 0x14, 0)   # 1 ms of HCLK/8 at 120 MHz
     a.poke(STK, 1 | 2 | 8 | 0x20)                   # STE STIE STRE INIT
     a.poke(PFIC_IENR, 1 << 12)
     a.li(T0, 0x88).csrrs(ZERO, 0x800, T0)           # MIE and MPIE through gintenr

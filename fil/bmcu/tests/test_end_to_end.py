@@ -37,7 +37,7 @@ class EndToEndTest(unittest.TestCase):
         self.assertEqual(sent, b"S0 A3*22\n")
         self.assertIn("stack: deepest", err)
         self.assertIn("load: ", err)
-        self.assertIn("clock: the image runs its core at 144 MHz", err)
+        self.assertIn("clock: the image runs its core at 120 MHz", err)
 
     def test_hang_watchdog_reset_and_answers_again(self):
         lines = ([IDLE] * 40 + ["hang"] + [IDLE] * 520

@@ -1,4 +1,4 @@
-"""RCC (ready flags, SWS, reset flags and RMVF, the clock tree the image sets: 144 MHz), and the
+"""RCC (ready flags, SWS, reset flags and RMVF, the clock tree the image sets: 120 MHz), and the
 flash controller: unlock and fast-mode unlock, a wrong key, half-word programs (1 -> 0 only),
 the erased state read as 0xE339E339, the 256-byte page and 4 KB sector erases, BSY/EOP, the
 stall's length and the counts."""
@@ -32,16 +32,19 @@ class RccTest(unittest.TestCase):
         w32(rcc, 0x24, 1 << 24)
         self.assertEqual(r32(rcc, 0x24) >> 24, 0)
 
-    def test_the_images_settings_give_144_mhz(self):
+    def test_the_images_settings_give_120_mhz(self):
         chip = Fake()
         from regs import Block
         chip.extend = Block()
         w32(chip.extend, 0x00, 1 << 4)                       # PLL_HSI_PRE: the HSI undivided
         rcc = Rcc(chip)
-        # HPRE /1, PPRE1 /2, PPRE2 /2, ADCPRE /6, PLLSRC HSI, PLLMUL x18, SW PLL (clock.rs)
-        w32(rcc, 0x04, (4 << 8) | (4 << 11) | (2 << 14) | (15 << 18) | 2)
+        # HPRE /1, PPRE1 /2, PPRE2 /2, ADCPRE /6, PLLSRC HSI, PLLMUL x15, SW PLL (clock.rs)
+        w32(rcc, 0x04, (4 << 8) | (4 << 11) | (2 << 14) | (13 << 18) | 2)
         self.assertEqual((rcc.hclk(), rcc.pclk1(), rcc.pclk2(), rcc.adc_clock()),
-                         (144_000_000, 72_000_000, 72_000_000, 12_000_000))
+                         (120_000_000, 60_000_000, 60_000_000, 10_000_000))
+        # PLLMUL's last value is x18 on this chip, not x16.
+        w32(rcc, 0x04, (4 << 8) | (4 << 11) | (2 << 14) | (15 << 18) | 2)
+        self.assertEqual(rcc.hclk(), 144_000_000)
         w32(chip.extend, 0x00, 0)
         self.assertEqual(rcc.hclk(), 72_000_000)
 
@@ -96,7 +99,7 @@ class FlashTest(unittest.TestCase):
         w32(rig.flash, CTLR, PG)
         rig.flash.store(PAGE, 2, 0x1234)
         self.assertEqual(r32(rig.flash, STATR) & 1, 1)                   # BSY
-        self.assertEqual(rig.chip.stalled_until, 125 * 144)              # 125 us
+        self.assertEqual(rig.chip.stalled_until, 125 * 120)              # 125 us
         self.assertEqual(rig.word(PAGE), 0xE339_E339, "applied at the end")
         rig.finish()
         self.assertEqual(rig.word(PAGE), 0xFFFF_1234)
@@ -121,7 +124,7 @@ class FlashTest(unittest.TestCase):
         w32(rig.flash, CTLR, PAGE_ER)
         w32(rig.flash, ADDR, PAGE + 0x10)
         w32(rig.flash, CTLR, PAGE_ER | STRT)
-        self.assertEqual(rig.flash.busy_until, 10_000 * 144)
+        self.assertEqual(rig.flash.busy_until, 10_000 * 120)
         self.assertEqual(r32(rig.flash, CTLR) & STRT, 0)
         rig.finish()
         self.assertEqual(rig.chip.memory.read(PAGE, 256), flash_model.erased_bytes(256))

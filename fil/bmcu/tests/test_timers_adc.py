@@ -90,7 +90,7 @@ class AdcTest(unittest.TestCase):
         chip = Fake()
         chip.extend = Block()
         w32(chip.extend, 0, 1 << 4)
-        w32(chip.rcc, 0x04, (4 << 8) | (4 << 11) | (2 << 14) | (15 << 18) | 2)  # clock.rs's
+        w32(chip.rcc, 0x04, (4 << 8) | (4 << 11) | (2 << 14) | (13 << 18) | 2)  # clock.rs's: x15
         chip.dma = Dma1(chip)
         adc = Adc(chip)
         adc.levels = {c: 100 * c for c in range(8)}
@@ -115,7 +115,7 @@ class AdcTest(unittest.TestCase):
 
     def test_the_scan_in_rsqr_order_into_the_dma_buffer(self):
         chip, adc = self.rig()
-        self.assertEqual(adc.conversion_cycles(7), 3024)          # 252 ADC clocks at 12 MHz: 21 us
+        self.assertEqual(adc.conversion_cycles(7), 3024)          # 252 ADC clocks at 10 MHz: 25 us
         adc.advance(8 * 3024 - 1)
         self.assertEqual(adc.conversions, 7)
         adc.advance(8 * 3024)

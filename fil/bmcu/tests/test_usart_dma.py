@@ -20,7 +20,7 @@ class Rig:
     def __init__(self, dma=True):
         self.chip = Fake()
         w32(self.chip.rcc, 0x04, 4 << 8)         # PPRE1 /2 (the image's); HCLK 8 MHz here,
-        self.chip.rcc.hclk = lambda: 144_000_000  # the bench's clock
+        self.chip.rcc.hclk = lambda: 120_000_000  # the bench's clock
         self.dma = self.chip.dma = Dma1(self.chip)
         self.usart = Usart(self.chip)
         w32(self.usart, BRR, 625)

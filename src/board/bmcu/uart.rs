@@ -4,8 +4,9 @@
 //! Receiving: DMA1 channel 3 (USART3_RX in the CH32V20x's DMA1 request map) copies every byte
 //! into a 512-byte ring, circularly, whatever the CPU does (a flash erase included); the control
 //! step reads it ([`mmu_firmware::uart::ReceiveRing`]), as on the NUCLEO-G071RB. Sending: byte
-//! by byte into DATAR whenever TXE says the register is free, yielding to the other tasks
-//! between bytes.
+//! by byte into DATAR whenever TXE says the register is free, sleeping on embassy-time between
+//! bytes: the spinning executor would otherwise poll this task without pause while an answer
+//! goes out.
 
 use core::cell::UnsafeCell;
 use core::convert::Infallible;
@@ -21,6 +22,8 @@ use super::gpio_mode;
 /// USART3's BRR for 115 200 Bd from 60 MHz: 521 = 32 × 16 + 9 (60 MHz / 521 = 115 163 Bd).
 const BRR: u32 = 521;
 const _: () = assert!(super::clock::PCLK1_HZ.abs_diff(BRR * 115_200) < BRR * 115_200 / 1000);
+/// One character on the line, 10 bits at 115 200 Bd: the wait for DATAR to free up.
+const CHARACTER_TIME: embassy_time::Duration = embassy_time::Duration::from_micros(87);
 /// DMA1's channel for USART3's receiver (channel 3).
 const DMA_CHANNEL: usize = 2;
 
@@ -135,7 +138,7 @@ impl embedded_io_async::Write for LinkTx {
     async fn write(&mut self, bytes: &[u8]) -> Result<usize, Infallible> {
         for &byte in bytes {
             while !pac::USART3.statr().read().txe() {
-                embassy_futures::yield_now().await;
+                embassy_time::Timer::after(CHARACTER_TIME).await;
             }
             pac::USART3.datar().write(|w| w.set_dr(u16::from(byte)));
         }
@@ -145,7 +148,7 @@ impl embedded_io_async::Write for LinkTx {
     /// Until the last byte has left the shift register.
     async fn flush(&mut self) -> Result<(), Infallible> {
         while !pac::USART3.statr().read().tc() {
-            embassy_futures::yield_now().await;
+            embassy_time::Timer::after(CHARACTER_TIME).await;
         }
         Ok(())
     }
