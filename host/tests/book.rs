@@ -363,7 +363,7 @@ const COMMANDS: &[(&str, Check)] = &[
     ("python3 -m unittest discover -s fil/bmcu/tests", Check::InCi),
     (
         "mmu fil --board bmcu",
-        Check::NotRun("several minutes of emulated RISC-V; CI runs its T1"),
+        Check::NotRun("14 minutes of emulated RISC-V; CI runs its T1"),
     ),
     ("FIL_WORN_STORE=1 mmu fil --board bmcu --only T1", Check::InCi),
     (
