@@ -111,22 +111,24 @@ class Scheduler:
             route = self.routes[address] = (block, off, bring)
         return route
 
-    def _mmio_read(self, uc, offset, size, base):
-        block, off, bring = self.routes.get(base + offset) or self._route(base + offset)
+    def _brought(self, address):
+        """The block and offset at `address`, brought up to now first (the DMA feeders of the
+        block, or its own `advance`)."""
+        block, off, bring = self.routes.get(address) or self._route(address)
         if bring:
             now = self.now()
             for advance in bring:
                 advance(now)
+        return block, off
+
+    def _mmio_read(self, uc, offset, size, base):
+        block, off = self._brought(base + offset)
         if size == 4:
             return block.read_reg(off)
         return block.read(off, size)
 
     def _mmio_write(self, uc, offset, size, value, base):
-        block, off, bring = self.routes.get(base + offset) or self._route(base + offset)
-        if bring:
-            now = self.now()
-            for advance in bring:
-                advance(now)
+        block, off = self._brought(base + offset)
         if size == 4:
             block.write_reg(off, value, 0xFFFF_FFFF)
         else:

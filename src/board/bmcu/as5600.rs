@@ -225,6 +225,5 @@ impl AngleSensors {
 
 /// Half an SCL period.
 fn wait() {
-    let until = time_driver::counts() + HALF_PERIOD;
-    while time_driver::counts() < until {}
+    time_driver::spin_until(time_driver::counts() + HALF_PERIOD);
 }

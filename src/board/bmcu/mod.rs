@@ -137,7 +137,8 @@ pub fn reset() -> ! {
 
 /// The CH32V203's CRC unit computes CRC-32/MPEG-2 over whole words (no reflection, no final
 /// XOR), not the store's CRC-32/ISO-HDLC over bytes: the software CRC, bit by bit, without the
-/// table's 1 KiB of flash (about 40 instructions a byte, a few thousand for an entry).
+/// table's 1 KiB of flash, which the image cannot spare; slower, within the real-time contract
+/// (the book's firmware-in-the-loop figures).
 pub type Crc = BitwiseCrc;
 
 /// The BMCU-C has no button: the printer's menu and `mmu` do what the others' button does.
@@ -251,6 +252,32 @@ fn hold_rs485_quiet() {
         pac::gpio::vals::Mode::OUTPUT_2MHZ,
         pac::gpio::vals::Cnf::ANALOG_IN__PUSH_PULL_OUT,
     );
+}
+
+/// Starts DMA1 channel `channel` (0 = channel 1) copying `count` items of `size` from the
+/// peripheral register at `from` into the ring at `into`, circularly, with `priority`: the ADC's
+/// scan and USART3's receive ring.
+fn circular_dma(
+    channel: usize,
+    from: u32,
+    into: u32,
+    count: u16,
+    size: pac::dma::vals::Size,
+    priority: pac::dma::vals::Pl,
+) {
+    let dma = pac::DMA1.ch(channel);
+    dma.par().write_value(from);
+    dma.mar().write_value(into);
+    dma.ndtr().write(|w| w.set_ndt(count));
+    dma.cr().write(|w| {
+        w.set_dir(pac::dma::vals::Dir::FROMPERIPHERAL);
+        w.set_circ(true);
+        w.set_minc(true);
+        w.set_psize(size);
+        w.set_msize(size);
+        w.set_pl(priority);
+        w.set_en(true);
+    });
 }
 
 /// Sets pin `pin` of `port` to `mode` and `cnf` (GPIOx_CFGLR for pins 0-7, CFGHR for 8-15).

@@ -16,12 +16,12 @@ use core::ptr;
 use ch32_metapac as pac;
 use mmu_hal_port::{HubSamples, Samples, SensorScan, SlotSamples};
 use pac::adc::vals::{Extsel, SampleTime};
-use pac::dma::vals::{Dir, Pl, Size};
+use pac::dma::vals::{Pl, Size};
 use pac::gpio::vals::{Cnf, Mode};
 
 use super::SLOTS;
 use super::as5600::AngleSensors;
-use super::gpio_mode;
+use super::{circular_dma, gpio_mode};
 
 /// ADC inputs: a presence and a tension sensor per lane.
 const INPUTS: usize = 2 * SLOTS;
@@ -77,19 +77,14 @@ impl Sampler {
         let _calibration = adc.rdatar().read();
         adc.ctlr2().modify(|w| w.set_dma(true));
 
-        let dma = pac::DMA1.ch(DMA_CHANNEL);
-        dma.par().write_value(adc.rdatar().as_ptr() as u32);
-        dma.mar().write_value(CONVERSIONS.0.get() as u32);
-        dma.ndtr().write(|w| w.set_ndt(INPUTS as u16));
-        dma.cr().write(|w| {
-            w.set_dir(Dir::FROMPERIPHERAL);
-            w.set_circ(true);
-            w.set_minc(true);
-            w.set_psize(Size::BITS16);
-            w.set_msize(Size::BITS16);
-            w.set_pl(Pl::HIGH);
-            w.set_en(true);
-        });
+        circular_dma(
+            DMA_CHANNEL,
+            adc.rdatar().as_ptr() as u32,
+            CONVERSIONS.0.get() as u32,
+            INPUTS as u16,
+            Size::BITS16,
+            Pl::HIGH,
+        );
         adc.ctlr2().modify(|w| w.set_swstart(true));
         Sampler {
             angles: AngleSensors::new(),

@@ -45,6 +45,12 @@ pub fn counts() -> u64 {
     }
 }
 
+/// Busy-waits until the count reaches `until`: the bit timings of the board's bit-banged lines
+/// (the AS5600s' I2C, the WS2812).
+pub fn spin_until(until: u64) {
+    while counts() < until {}
+}
+
 impl SysTickDriver {
     /// Arms the compare for `at` (counts), or says `false` when `at` has passed already (the
     /// match would never come).

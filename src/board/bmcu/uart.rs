@@ -14,10 +14,10 @@ use core::ptr;
 
 use ch32_metapac as pac;
 use mmu_firmware::uart::{BMCU_DMA_RING, CountdownRing, LineError, ReceiveRing, RingSource};
-use pac::dma::vals::{Dir, Pl, Size};
+use pac::dma::vals::{Pl, Size};
 use pac::gpio::vals::{Cnf, Mode};
 
-use super::gpio_mode;
+use super::{circular_dma, gpio_mode};
 
 /// USART3's BRR for 115 200 Bd from 60 MHz: 521 = 32 × 16 + 9 (60 MHz / 521 = 115 163 Bd).
 const BRR: u32 = 521;
@@ -59,19 +59,14 @@ pub fn start_rx() -> LinkRx {
     gpio_mode(pac::GPIOB, 11, Mode::INPUT, Cnf::PULL_IN__AF_PUSH_PULL_OUT);
     let usart = pac::USART3;
     usart.brr().write_value(pac::usart::regs::Brr(BRR));
-    let dma = pac::DMA1.ch(DMA_CHANNEL);
-    dma.par().write_value(usart.datar().as_ptr() as u32);
-    dma.mar().write_value(RING.0.get() as u32);
-    dma.ndtr().write(|w| w.set_ndt(BMCU_DMA_RING as u16));
-    dma.cr().write(|w| {
-        w.set_dir(Dir::FROMPERIPHERAL);
-        w.set_circ(true);
-        w.set_minc(true);
-        w.set_psize(Size::BITS8);
-        w.set_msize(Size::BITS8);
-        w.set_pl(Pl::VERYHIGH);
-        w.set_en(true);
-    });
+    circular_dma(
+        DMA_CHANNEL,
+        usart.datar().as_ptr() as u32,
+        RING.0.get() as u32,
+        BMCU_DMA_RING as u16,
+        Size::BITS8,
+        Pl::VERYHIGH,
+    );
     usart.ctlr3().modify(|w| w.set_dmar(true));
     usart.ctlr1().modify(|w| {
         w.set_te(true);

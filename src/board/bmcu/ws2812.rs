@@ -45,9 +45,9 @@ impl Led {
             let high = if grb & (1 << bit) != 0 { HIGH_1 } else { HIGH_0 };
             let start = time_driver::counts();
             gpiod.bshr().write(|w| w.set_bs(PIN, true));
-            while time_driver::counts() < start + high {}
+            time_driver::spin_until(start + high);
             gpiod.bcr().write(|w| w.set_br(PIN, true));
-            while time_driver::counts() < start + PERIOD {}
+            time_driver::spin_until(start + PERIOD);
         }
     }
 }
