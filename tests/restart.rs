@@ -11,6 +11,7 @@ use common::{FsensorReports, Rig, t};
 use mmu_firmware::persist::Snapshot;
 use mmu_firmware::unit::Lane;
 use mmu_firmware::{App, Config};
+use mmu_hal_port::{Duty, MotorCommand};
 use mmu_protocol::{ErrorCode, ParamCode, Request, RequestCode, Response};
 
 /// Lanes a store can hold for one slot.
@@ -244,6 +245,38 @@ fn filament_at_the_printers_sensor_is_proved_by_a_push_against_its_gears() {
     let parked = -f32::from(rig.app.config().park_mm);
     let tip = rig.model.tip_mm(0).unwrap();
     assert!(tip <= parked + 1.0 && tip > -30.0, "slot 0 parked: {tip} mm");
+}
+
+/// The tip may rest anywhere between the printer's sensor and its gears, and a Hall lane counts
+/// its push in whole revolutions (2 mm): a push that counted its distance may have met the gears
+/// only just. Wherever the tip rests, the push proves slot 0 and it unloads (seed 301 of the
+/// power-loss soak ended in `8008` with the tip 0.34 mm past the sensor).
+#[test]
+fn filament_anywhere_between_the_printers_sensor_and_its_gears_is_proved() {
+    let sensor = mmu_model::ModelConfig::default().bowden_length_mm;
+    for (tenths, turn_ms) in [1, 5, 20, 39]
+        .into_iter()
+        .flat_map(|t| (0..60).step_by(4).map(move |ms| (t, ms)))
+    {
+        let tip = sensor + tenths as f32 / 10.0;
+        let mut rig = Rig::<3>::new();
+        rig.wants_revision = 3;
+        rig.boot();
+        rig.command(t(0));
+        rig.model.extruder_move(-120.0, 60.0);
+        rig.idle(3_000);
+        // Where in its revision slot 0's motor rests: turned on for a moment, on air.
+        rig.model.remove_filament(0);
+        rig.model.step(turn_ms, &[MotorCommand::forward(Duty::MAX)]);
+        rig.model.step(500, &[]);
+        rig.model.insert_filament(0, tip);
+        let answer = restart_then_unload(&mut rig, [Lane::Loaded, Lane::Parked, Lane::Parked]);
+        assert_eq!(
+            answer.param,
+            ParamCode::Finished,
+            "tip at {tip} mm, motor turned {turn_ms} ms: {answer:?}"
+        );
+    }
 }
 
 /// The same with slot 1 really holding the path: the push moves slot 0 freely a few millimetres

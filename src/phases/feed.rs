@@ -22,6 +22,9 @@ const PUSH_PROOF_MM: u16 = 5;
 /// How long the push proof waits for the printer to report its sensor off first, ms: an unload's
 /// wait (MMU 3.0.4 `unload_to_finda.cpp`, 4000 ms).
 const PUSH_PROOF_WAIT_MS: u64 = 4000;
+/// How long the push proof holds the tube braked after its distance for a compression to show,
+/// ms: a few times [`MET_CONFIRM_MS`].
+const PUSH_PROOF_SETTLE_MS: u64 = 5 * MET_CONFIRM_MS;
 
 /// `P5` ([`super::Phase::FeedToHub`]): feed until the hub sensor sees the tip, at most `max_mm`.
 #[derive(Debug, Clone, Copy)]
@@ -190,8 +193,15 @@ fn push_proof<const N: usize>(run: &mut PhaseRun, at: &Sight<'_, N>) -> Result<D
     if compressed_for(run, tension, at.now, at.config) >= MET_CONFIRM_MS {
         return Ok(Goal::Reached.learning(Milestone::OwnerInPath));
     }
-    if at.toward_goal_mm >= i32::from(PUSH_PROOF_MM) {
-        return Err(ErrorCode::FINDA_VS_EEPROM_DISREPANCY);
+    if run.pushed_at.is_none() && at.toward_goal_mm >= i32::from(PUSH_PROOF_MM) {
+        run.pushed_at = Some(at.now);
     }
-    Ok(Goal::Drive.into())
+    match run.pushed_at {
+        None => Ok(Goal::Drive.into()),
+        // The odometry counts whole marks (a revolution of a Hall lane, 2 mm), so the push may
+        // have gone a mark less than counted and only just met the gears: braked, a tube they
+        // compressed stays so.
+        Some(pushed) if at.now.millis_since(pushed) < PUSH_PROOF_SETTLE_MS => Ok(Goal::Hold.into()),
+        Some(_) => Err(ErrorCode::FINDA_VS_EEPROM_DISREPANCY),
+    }
 }

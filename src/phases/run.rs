@@ -18,8 +18,9 @@ pub struct PhaseRun {
     pub(super) compressed_since: Option<Instant>,
     /// Since when the Bowden tube reads taut.
     pub(super) taut_since: Option<Instant>,
-    /// The push into the extruder is over: the tip met something, or went its distance.
-    pub(super) pushed: bool,
+    /// When the push (into the extruder, or of a proof) ended: the tip met something, or went
+    /// its distance.
+    pub(super) pushed_at: Option<Instant>,
     /// The budget of the motion in progress: when and where the drive's lease began, and what
     /// earlier leases of this attempt used (a hold ends a lease; the silence is not counted).
     pub(super) budget_use: PhaseBudgetUse,
@@ -94,7 +95,7 @@ impl PhaseRun {
             mark_centi: None,
             compressed_since: None,
             taut_since: None,
-            pushed: false,
+            pushed_at: None,
             budget_use: PhaseBudgetUse::new(now, odometry_centi),
             held: false,
             printer_saw: None,
