@@ -222,6 +222,10 @@ pub struct Config {
     pub spool_m: [u16; MAX_SLOTS],
     /// What the build is: what the settings are checked against (no register).
     pub hardware: Hardware,
+    /// Unload as MMU 3.0.4 does: wait blind for the printer's sensor, pull at once on 3.0.3 (no
+    /// register; the simulator compares it with the unload that feels, `phases::unload`).
+    #[cfg(feature = "strict-unload")]
+    pub strict_unload: bool,
 }
 
 impl Config {
@@ -261,6 +265,8 @@ impl Config {
         motor_thresholds: [Thresholds { on: 2300, off: 1800 }; MAX_SLOTS],
         spool_m: [crate::lanes::DEFAULT_SPOOL_M; MAX_SLOTS],
         hardware: Hardware::REFERENCE,
+        #[cfg(feature = "strict-unload")]
+        strict_unload: false,
     };
 }
 

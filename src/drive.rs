@@ -17,6 +17,11 @@ use crate::time::Instant;
 /// parked tip does not drift on the motor's momentum.
 const BRAKE_HOLD_MS: u64 = 200;
 
+/// The duty of a feel ([`SlotDrive::feel`]), per mille: above the drag of a spool, a sixth of
+/// the highest duty, below the stall rule's duty (nothing a feel meets counts as a stall). Not
+/// measured against real extruder gears; the simulator records every pull against its gears.
+pub const FEEL_DUTY: Duty = Duty::from_permille(160);
+
 /// Duty added per millimetre the filament lags behind its schedule, per mille.
 const CATCH_UP_GAIN: i32 = 25;
 
@@ -179,6 +184,16 @@ impl SlotDrive {
         }
         self.command = MotorCommand::Coast;
         self.counting = Some(Direction::Forward);
+        self.hard_drive_since = None;
+    }
+
+    /// Pull back at [`FEEL_DUTY`], outside any budget (the phase that feels bounds the time):
+    /// too weak to move a filament the extruder's gears grip, it brings back one they let go.
+    /// Ends the motion in progress.
+    pub fn feel(&mut self) {
+        self.end();
+        self.command = MotorCommand::reverse(FEEL_DUTY);
+        self.counting = Some(Direction::Reverse);
         self.hard_drive_since = None;
     }
 

@@ -14,7 +14,8 @@
 
 mod common;
 
-use common::{Rig, assert_parked, error, finished, press, t};
+use common::{Rig, assert_parked, error, finished, loaded, press, t};
+use mmu_firmware::drive::FEEL_DUTY;
 use mmu_firmware::{Config, Direction, MotorCommand};
 use mmu_model::ModelConfig;
 use mmu_protocol::{ButtonCode, ErrorCode, ParamCode, ProgressCode, Request, RequestCode};
@@ -28,30 +29,16 @@ fn released_by_retract() -> ModelConfig {
     }
 }
 
-/// A unit connected to a printer wanting 3.0.`revision`, slot 0 loaded into the nozzle.
-fn loaded(revision: u8, model: ModelConfig) -> Rig<3> {
-    let mut rig = Rig::<3>::with(Config::default(), model);
-    rig.wants_revision = revision;
-    rig.boot();
-    let run = rig.command(t(0));
-    assert_eq!(run.last, finished(t(0)), "{run:?}");
-    // The printer loads the filament on into its nozzle.
-    let to_nozzle = rig.model.config().nozzle_mm - rig.model.tip_mm(0).unwrap();
-    rig.model.extruder_move(to_nozzle, 20.0);
-    rig.idle(to_nozzle as u64 * 50 + 1000);
-    assert_eq!(rig.model.fsensor_state(), 2, "slot 0 is in the nozzle");
-    rig
-}
-
-/// Whether slot `slot`'s motor was driven in reverse in the steps from `from` on.
+/// Whether slot `slot`'s motor pulled back harder than a feel (which no gripped filament yields
+/// to, `phases::unload`) in the steps from `from` on.
 fn pulled_since(rig: &Rig<3>, slot: usize, from: usize) -> bool {
     rig.motor_log[from..].iter().any(|motors| {
         matches!(
             motors[slot],
             MotorCommand::Drive {
                 direction: Direction::Reverse,
-                ..
-            }
+                duty,
+            } if duty > FEEL_DUTY
         )
     })
 }
@@ -76,9 +63,11 @@ fn a_3_0_4_printer_s_tool_change_pulls_nothing_until_its_sensor_clears() {
     assert!(!run.progress.contains(&ProgressCode::DISENGAGING_IDLER));
 }
 
-/// Once released, the first 20 mm go at the slow speed (register 0x14), then fast.
+/// Once released, the first 20 mm follow the printer's gears, which may still grip the filament
+/// (MMU 3.0.4 pulls them at the slow speed, register 0x14): pulled no harder than a feel. Then
+/// fast.
 #[test]
-fn a_3_0_4_unload_starts_slowly_then_pulls_fast() {
+fn a_3_0_4_unload_starts_with_the_gears_then_pulls_fast() {
     let mut rig = loaded(4, released_by_retract());
     rig.issue(t(1));
     rig.follow_until_model(t(1), |model| model.fsensor_state() == 0, 6_000);
@@ -86,7 +75,13 @@ fn a_3_0_4_unload_starts_slowly_then_pulls_fast() {
     let mut speeds = Vec::new();
     let mut last = from;
     while from - rig.model.tip_mm(0).unwrap() < 60.0 {
+        let step = rig.motor_log.len();
         rig.printer_step(Some(ProgressCode::UNLOADING_TO_FINDA));
+        let pulled = from - rig.model.tip_mm(0).unwrap();
+        assert!(
+            pulled > 18.0 || !pulled_since(&rig, 0, step),
+            "pulled harder than a feel {pulled} mm into the unload"
+        );
         if rig.now.is_multiple_of(100) {
             let tip = rig.model.tip_mm(0).unwrap();
             speeds.push(((from - tip) as i32, ((last - tip) * 10.0) as i32));
@@ -95,12 +90,7 @@ fn a_3_0_4_unload_starts_slowly_then_pulls_fast() {
         }
         assert!(rig.now < 200_000, "the unload never went 60 mm");
     }
-    let slow: Vec<_> = speeds.iter().filter(|(at, _)| (2..18).contains(at)).collect();
     let fast: Vec<_> = speeds.iter().filter(|(at, _)| (30..60).contains(at)).collect();
-    assert!(
-        slow.iter().all(|(_, mm_s)| *mm_s <= 30),
-        "the first 20 mm at about 20 mm/s: {speeds:?}"
-    );
     assert!(
         fast.iter().any(|(_, mm_s)| *mm_s >= 60),
         "then at the unload speed: {speeds:?}"
@@ -118,8 +108,9 @@ fn a_3_0_4_printer_whose_sensor_stays_on_gets_8004_after_4_s_without_a_pull() {
     assert_eq!(rig.send(t(1)).map(|a| a.param), Some(ParamCode::Accepted));
     let run = rig.follow(t(1), 10_000);
     assert_eq!(run.last, error(t(1), ErrorCode::FSENSOR_DIDNT_SWITCH_OFF));
+    // 4 s after the feel took up the tube's give, the filament still.
     let waited = rig.now - accepted_at;
-    assert!((4_000..=4_200).contains(&waited), "8004 after {waited} ms");
+    assert!((4_000..=4_600).contains(&waited), "8004 after {waited} ms");
     assert_eq!(run.progress, [ProgressCode::UNLOADING_TO_FINDA]);
     assert!(!pulled_since(&rig, 0, before), "nothing pulled");
     assert!((rig.model.tip_mm(0).unwrap() - tip).abs() < 1.0);
@@ -149,8 +140,11 @@ fn a_3_0_3_printer_s_tool_change_pulls_at_once() {
     assert_ne!(rig.model.fsensor_state(), 0, "the sensor still sees the tip");
     let before = rig.motor_log.len();
     assert_eq!(rig.send(t(1)).map(|a| a.param), Some(ParamCode::Accepted));
-    rig.idle(50);
-    assert!(pulled_since(&rig, 0, before), "pulled within 50 ms");
+    rig.idle(500);
+    assert!(
+        pulled_since(&rig, 0, before),
+        "pulled within 500 ms, once felt free"
+    );
     let run = rig.follow(t(1), 120_000);
     assert_eq!(run.last, finished(t(1)));
     assert_parked(&rig, 0);

@@ -193,10 +193,10 @@ fn push_proof<const N: usize>(run: &mut PhaseRun, at: &Sight<'_, N>) -> Result<D
     if compressed_for(run, tension, at.now, at.config) >= MET_CONFIRM_MS {
         return Ok(Goal::Reached.learning(Milestone::OwnerInPath));
     }
-    if run.pushed_at.is_none() && at.toward_goal_mm >= i32::from(PUSH_PROOF_MM) {
-        run.pushed_at = Some(at.now);
+    if run.distance_done_at.is_none() && at.toward_goal_mm >= i32::from(PUSH_PROOF_MM) {
+        run.distance_done_at = Some(at.now);
     }
-    match run.pushed_at {
+    match run.distance_done_at {
         None => Ok(Goal::Drive.into()),
         // The odometry counts whole marks (a revolution of a Hall lane, 2 mm), so the push may
         // have gone a mark less than counted and only just met the gears: braked, a tube they

@@ -204,13 +204,13 @@ fn push_into_gears(
     if taut_for(run, tension, now, config) >= GRIP_CONFIRM_MS {
         return Ok(Goal::Reached);
     }
-    if run.pushed_at.is_none() {
+    if run.distance_done_at.is_none() {
         let met = compressed_for(run, tension, now, config) >= MET_CONFIRM_MS;
         let push_mm = config.extra_load_mm.saturating_add(NOZZLE_PUSH_MARGIN_MM);
         if !met && pushed_mm < i32::from(push_mm) {
             return Ok(Goal::Drive);
         }
-        run.pushed_at = Some(now);
+        run.distance_done_at = Some(now);
     }
     // Past the printer's push: `extra_load_mm + 2` mm at the slow speed, plus the margin.
     let push_ms =
@@ -224,7 +224,7 @@ fn push_into_gears(
 
 /// How long the Bowden tube has read taut past the follower's deadband (pulled from the
 /// extruder's side), ms. A reading at the supply rail is a loose wire, not a pull.
-fn taut_for(run: &mut PhaseRun, tension: u16, now: Instant, config: &Config) -> u64 {
+pub(super) fn taut_for(run: &mut PhaseRun, tension: u16, now: Instant, config: &Config) -> u64 {
     let taut = u32::from(tension) > u32::from(config.tension_neutral) + u32::from(config.tension_deadband)
         && tension < crate::sensor::RAIL_HIGH;
     run.taut_since = if taut { run.taut_since.or(Some(now)) } else { None };
@@ -263,7 +263,7 @@ mod tests {
             let started = Instant::from_millis(5_000);
             let mut slot = None;
             let run = PhaseRun::start(&mut slot, started, 0, 0);
-            run.pushed_at = Some(started);
+            run.distance_done_at = Some(started);
             let neutral = config.tension_neutral;
             let push_ms = (u64::from(extra_load_mm) + 2) * 1000 / u64::from(slow_speed.max(1)) + 600;
             let at = |ms: u64| Instant::from_millis(5_000 + ms);

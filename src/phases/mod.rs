@@ -380,6 +380,9 @@ enum Goal {
     Hold,
     /// Let the motor turn freely and wait: something else moves the filament (the lease ends).
     Yield,
+    /// Pull back too weakly to move a gripped filament and wait (the lease ends):
+    /// [`crate::drive::SlotDrive::feel`].
+    Feel,
 }
 
 /// A phase's goal decision: where it stands, and what it learned that the unit must know.
@@ -708,6 +711,11 @@ impl<P: MotionPhase, const N: usize> MotionStep<'_, P, N> {
                 // Let the motor turn freely while the phase waits.
                 run.pause(now, seen.odometry);
                 drive.release(now);
+                Err(Outcome::Continue)
+            }
+            Goal::Feel => {
+                run.pause(now, seen.odometry);
+                drive.feel();
                 Err(Outcome::Continue)
             }
             Goal::Drive | Goal::Hold => {

@@ -18,9 +18,13 @@ pub struct PhaseRun {
     pub(super) compressed_since: Option<Instant>,
     /// Since when the Bowden tube reads taut.
     pub(super) taut_since: Option<Instant>,
-    /// When the push (into the extruder, or of a proof) ended: the tip met something, or went
-    /// its distance.
-    pub(super) pushed_at: Option<Instant>,
+    /// When the push (into the extruder, or of a proof) ended, the tip having met something or
+    /// gone its distance; when an unload's pull went its check distance.
+    pub(super) distance_done_at: Option<Instant>,
+    /// Where an unload's feel began, or last found the filament held.
+    pub(super) felt_from_centi: Option<i32>,
+    /// When a feel last found the tube taut.
+    pub(super) last_taut: Option<Instant>,
     /// The budget of the motion in progress: when and where the drive's lease began, and what
     /// earlier leases of this attempt used (a hold ends a lease; the silence is not counted).
     pub(super) budget_use: PhaseBudgetUse,
@@ -95,7 +99,9 @@ impl PhaseRun {
             mark_centi: None,
             compressed_since: None,
             taut_since: None,
-            pushed_at: None,
+            distance_done_at: None,
+            felt_from_centi: None,
+            last_taut: None,
             budget_use: PhaseBudgetUse::new(now, odometry_centi),
             held: false,
             printer_saw: None,

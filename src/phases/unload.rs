@@ -1,11 +1,15 @@
 //! The pulls back: the unload from the printer to the hub (`P3`) with its wait for the printer to
 //! release the filament, the proof of a stored owner (`P3`), the retract to the park position
 //! (`P19`) and the eject out of the slot (`P18`). MMU 3.0.4 keeps the unload's contract with the
-//! printer in `unload_to_finda.cpp`; here it is [`still_gripped`] and [`pull_out_of_printer`].
+//! printer in `unload_to_finda.cpp`: it waits blind for the printer's sensor. This unit feels
+//! instead ([`feel_for_release`]): it pulls too weakly to move gripped filament and watches the
+//! lane's motion and the tube's tension, so it waits as long as the printer moves the filament
+//! and pulls as soon as nothing holds it, whatever the printer's sensor says.
 
 use mmu_hal_port::Direction;
 use mmu_protocol::{ErrorCode, ProgressCode};
 
+use super::load::{compressed_for, taut_for};
 use super::{Bounds, Decision, Goal, Milestone, MotionPhase, Notes, Outcome, PhaseRun, Sight};
 use crate::config::{Config, Contract};
 use crate::feeder::distance_centi;
@@ -20,6 +24,18 @@ const RELEASE_WAIT_MS: u64 = 4000;
 /// filament, mm, in 3.0.4 mode: MMU 3.0.4's `fsensorToNozzleAvoidGrindUnload`, which helps the
 /// printer relieve the filament.
 const RELEASE_SLOW_MM: u16 = 20;
+
+/// How far a feel must bring the filament back with the tube at rest before nothing holds it,
+/// mm: two revolutions of a Hall lane, counted in whole ones.
+const FREE_MM: i32 = 4;
+/// The longest a feel waits while the filament keeps moving (the printer retracting slowly), ms.
+const FEEL_MAX_MS: u64 = 30_000;
+/// How long a filament that came back freely must keep the tube at rest with the motor braked,
+/// ms: a printer retracting it at 20 mm/s compresses the tube past the deadband within 20 ms.
+const FREE_PROBE_MS: u64 = 150;
+/// How long a pull that went its check distance freely waits for the printer's sensor to report
+/// off, ms: a sensor that users see clear up to 8 s late.
+const LATE_SENSOR_MS: u64 = 10_000;
 
 /// How long a printer that accepted 3.0.3 or older retracts when it helps an unload, ms, from its
 /// first `Q0` that saw `P3`: 20 mm at 20 mm/s (Buddy `mmu2_config.h`
@@ -204,23 +220,34 @@ impl MotionPhase for FromSlot {
     }
 }
 
-/// `P3`: wait for the printer to release the filament (with `await_release`), then pull it out of
-/// the printer back to the hub.
+/// `P3`: wait for the printer to release the filament, then pull it out of the printer back to
+/// the hub. The wait feels ([`feel_for_release`]); in the strict mode it is MMU 3.0.4's (with
+/// `await_release`, [`still_gripped`]).
 fn unload_to_hub<const N: usize>(
     await_release: bool,
     run: &mut PhaseRun,
     at: &Sight<'_, N>,
 ) -> Result<Decision, ErrorCode> {
-    let waiting = await_release && run.mark_centi.is_none();
-    if waiting && at.unit.fsensor_triggered() && still_gripped(run, at.notes, at.now, at.config)? {
-        return Ok(Goal::Yield.into());
+    let strict = strict(at.config);
+    if run.mark_centi.is_none() && at.unit.fsensor_triggered() {
+        if strict {
+            if await_release && still_gripped(run, at.notes, at.now, at.config)? {
+                return Ok(Goal::Yield.into());
+            }
+        } else if at.hub {
+            // With the tip out of the hub already, nothing is felt or pulled (see
+            // `pull_out_of_printer`).
+            if let Some(goal) = feel_for_release(run, at)? {
+                return Ok(goal.into());
+            }
+        }
     }
-    if waiting {
-        // Released: the pull starts here, and so does its check distance, unless an earlier
-        // attempt pulled already (a Retry does not start the count again: a stuck sensor must
-        // not let every Retry pull the check distance anew).
+    if run.mark_centi.is_none() && (await_release || !strict) {
+        // Released: the pull starts here, and so does its check distance. In the strict mode a
+        // Retry does not start the count again, so a stuck sensor cannot let every Retry pull
+        // the check distance anew; a feel proved the filament free, and it is pulled anew.
         run.mark_centi = Some(at.odometry);
-        if !run.retried {
+        if !run.retried || !strict {
             run.goal_from_centi = at.odometry;
         }
     }
@@ -235,6 +262,75 @@ fn unload_to_hub<const N: usize>(
         goal if at.unit.lane(at.slot) == Lane::Loaded => goal.learning(Milestone::Arrived(Lane::InHub)),
         goal => goal.into(),
     })
+}
+
+/// The strict mode: the unload as MMU 3.0.4 does it (a simulator-only comparison).
+fn strict(config: &Config) -> bool {
+    #[cfg(feature = "strict-unload")]
+    return config.strict_unload;
+    #[cfg(not(feature = "strict-unload"))]
+    {
+        let _ = config;
+        false
+    }
+}
+
+/// Before the pull, while the printer's sensor reads the filament: feel ([`Goal::Feel`]) until it
+/// is free (`None`). Free means the feel brought it back [`FREE_MM`] with the tube at rest all
+/// the way, and it stays at rest with the motor braked for [`FREE_PROBE_MS`] (a printer that
+/// retracts it as fast as the feel would compress the tube then): nothing holds it, whatever the
+/// sensor says (the tip between the sensor and the gears, a sensor that clears late). A tube
+/// that reads taut (the gears grip what the feel pulls) or compressed (the printer retracts
+/// faster than the feel) starts the count again. See [`go_on_feeling`] for how long.
+fn feel_for_release<const N: usize>(run: &mut PhaseRun, at: &Sight<'_, N>) -> Result<Option<Goal>, ErrorCode> {
+    // A tension sensor that cannot be read shows nothing free.
+    let held = at.unit.tension_reading(at.slot).is_none_or(|tension| {
+        taut_for(run, tension, at.now, at.config) > 0 || compressed_for(run, tension, at.now, at.config) > 0
+    });
+    if held {
+        run.felt_from_centi = Some(at.odometry);
+        run.distance_done_at = None;
+    }
+    let felt_from = *run.felt_from_centi.get_or_insert(at.odometry);
+    if distance_centi(at.odometry, felt_from) < FREE_MM * 100 {
+        return go_on_feeling(run, at).map(Some);
+    }
+    let stopped = *run.distance_done_at.get_or_insert(at.now);
+    if at.now.millis_since(stopped) < FREE_PROBE_MS {
+        return Ok(Some(Goal::Hold));
+    }
+    run.distance_done_at = None;
+    Ok(None)
+}
+
+/// Feel on while the filament moves (the printer retracting it), at most [`FEEL_MAX_MS`]; still
+/// for [`RELEASE_WAIT_MS`] with the tube taut: `8004`, the filament stuck in the extruder, and
+/// nothing pulled harder than a feel. Still for the stall timeout with the tube not taut, the
+/// feel did not even take up the tube's give: the motor is stalled.
+fn go_on_feeling<const N: usize>(run: &mut PhaseRun, at: &Sight<'_, N>) -> Result<Goal, ErrorCode> {
+    let taut = at
+        .unit
+        .tension_reading(at.slot)
+        .is_none_or(|tension| taut_for(run, tension, at.now, at.config) > 0);
+    if taut {
+        run.last_taut = Some(at.now);
+    }
+    let last_mark = at
+        .unit
+        .feeders
+        .get(at.slot)
+        .map_or(run.started, |f| f.motion.last_mark());
+    let still_ms = at.now.millis_since(last_mark.max(run.started));
+    let moved_or_taut = run.last_taut.map_or(last_mark, |taut| taut.max(last_mark));
+    let stalled =
+        at.now.millis_since(moved_or_taut.max(run.started)) >= u64::from(at.config.stall_timeout_ms);
+    if !taut && stalled {
+        Err(ErrorCode::STALLED_PULLEY)
+    } else if still_ms >= RELEASE_WAIT_MS || at.now.millis_since(run.started) >= FEEL_MAX_MS {
+        Err(ErrorCode::FSENSOR_DIDNT_SWITCH_OFF)
+    } else {
+        Ok(Goal::Feel)
+    }
 }
 
 /// While an unload waits for the printer to release the filament and its sensor still reads it:
@@ -272,17 +368,31 @@ fn still_gripped(
 /// start the count again unless it waited for the printer), and never after the tip has left
 /// the hub: pulling on would drag the filament out of its drive gear (MMU 3.0.3 checks too). A
 /// printer that accepted 3.0.4 gets the first [`RELEASE_SLOW_MM`] at the slow speed.
-fn pull_out_of_printer<const N: usize>(run: &PhaseRun, at: &Sight<'_, N>) -> Result<Goal, ErrorCode> {
+fn pull_out_of_printer<const N: usize>(run: &mut PhaseRun, at: &Sight<'_, N>) -> Result<Goal, ErrorCode> {
     let config = at.config;
     let pulled_mm = distance_centi(at.odometry, run.goal_from_centi) / 100;
     let stuck = pulled_mm >= i32::from(config.unload_check_mm) || !at.hub;
     Ok(match (at.unit.fsensor_triggered(), at.hub) {
+        // Pulled freely its check distance: the sensor may clear late. Held there, no further.
+        (true, _) if stuck && !strict(config) => {
+            let since = *run.distance_done_at.get_or_insert(at.now);
+            if at.now.millis_since(since) >= LATE_SENSOR_MS {
+                return Err(ErrorCode::FSENSOR_DIDNT_SWITCH_OFF);
+            }
+            Goal::Hold
+        }
         (true, _) if stuck => return Err(ErrorCode::FSENSOR_DIDNT_SWITCH_OFF),
         (false, false) => Goal::Reached,
         _ if config.version.contract() == Contract::AwaitRelease
             && pulled_mm < i32::from(RELEASE_SLOW_MM) =>
         {
-            Goal::DriveAt(config.slow_speed)
+            // With the gears still gripping, as the printer's retract goes on: a feel follows
+            // them with no more force than it has.
+            if strict(config) {
+                Goal::DriveAt(config.slow_speed)
+            } else {
+                go_on_feeling(run, at)?
+            }
         }
         _ => Goal::Drive,
     })

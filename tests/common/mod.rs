@@ -13,6 +13,21 @@ use mmu_protocol::{
     ResultCode,
 };
 
+/// A unit connected to a printer wanting 3.0.`revision`, slot 0 loaded into the nozzle.
+pub fn loaded(revision: u8, model: ModelConfig) -> Rig<3> {
+    let mut rig = Rig::<3>::with(Config::default(), model);
+    rig.wants_revision = revision;
+    rig.boot();
+    let run = rig.command(t(0));
+    assert_eq!(run.last, finished(t(0)), "{run:?}");
+    // The printer loads the filament on into its nozzle.
+    let to_nozzle = rig.model.config().nozzle_mm - rig.model.tip_mm(0).unwrap();
+    rig.model.extruder_move(to_nozzle, 20.0);
+    rig.idle(to_nozzle as u64 * 50 + 1000);
+    assert_eq!(rig.model.fsensor_state(), 2, "slot 0 is in the nozzle");
+    rig
+}
+
 /// One step of the rig, ms.
 pub const STEP_MS: u64 = 1;
 /// The printer's heartbeat while a command runs, ms.
