@@ -23,8 +23,8 @@ use clap::Subcommand;
 use mmu_firmware::profile::Profile;
 use mmu_protocol::{ErrorCode, ParamCode, Request, RequestCode, Response};
 use mmu_sim::{
-    FAULT_HELP, Outcome, Personality, Printer, PrinterError, PrinterOptions, ScheduledFault, Sim, SimLink,
-    SimOptions,
+    ExtruderGeometry, FAULT_HELP, Outcome, Personality, Printer, PrinterError, PrinterOptions,
+    ScheduledFault, Sim, SimLink, SimOptions,
 };
 use serde_json::{Map, Value, json};
 
@@ -109,6 +109,11 @@ pub struct SimTargetArgs {
     /// `mmu sim --help`).
     #[arg(long, value_name = "NAME", default_value = "thesis", conflicts_with = "port", value_parser = crate::sim_cli::parse_hardware)]
     pub hardware: &'static Profile,
+    /// Where the simulated printer's extruder gears sit against its filament sensor:
+    /// sensor-first, gears-first, or the gears' distance past the sensor in mm (see `mmu sim
+    /// --help`). Default: the --printer's.
+    #[arg(long, value_name = "GEOMETRY", conflicts_with = "port", value_parser = crate::sim_cli::parse_extruder)]
+    pub extruder: Option<ExtruderGeometry>,
     /// Inject a fault, e.g. `jam:1` or `uart-drop:0.05@2000-9000` (repeatable; the list is
     /// at the end of --help).
     #[arg(long = "fault", value_name = "SPEC", conflicts_with = "port")]
@@ -559,6 +564,7 @@ pub fn sim_link(args: &SimTargetArgs, printer: Personality) -> Result<SimLink, B
         slots: args.slots,
         seed: args.seed,
         printer,
+        extruder: args.extruder,
         ..SimOptions::for_hardware(args.hardware)
     })?;
     for fault in &args.faults {

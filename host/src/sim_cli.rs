@@ -37,7 +37,7 @@ use mmu_protocol::{
 };
 use mmu_sim::event::FaultAction;
 use mmu_sim::firmware::{FirmwareUnit, default_fil_dir};
-use mmu_sim::{Event, EventKind, FAULT_HELP, Personality, ScheduledFault, Sim, SimOptions};
+use mmu_sim::{Event, EventKind, ExtruderGeometry, FAULT_HELP, Personality, ScheduledFault, Sim, SimOptions};
 
 use crate::explain::{request_meaning, response_meaning};
 use crate::usage::usage;
@@ -110,6 +110,13 @@ pub struct SimArgs {
     /// buddy-6.4, mk3s (T once the filament is out of the gears).
     #[arg(long, value_name = "PRINTER", default_value = "buddy-6.4", value_parser = crate::printer_cli::parse_personality)]
     pub printer: Personality,
+    /// Where the printer's extruder gears sit against its filament sensor: sensor-first (MK3S,
+    /// MK3.5: the sensor 4 mm before the gears), gears-first (the Nextruder of the MK4, MK3.9
+    /// and Core One: the gears 10 mm before the sensor), or the gears' distance past the sensor
+    /// in mm (negative: gears first). Default: the --printer's (buddy-6.5 gears-first,
+    /// buddy-6.4 and mk3s sensor-first).
+    #[arg(long, value_name = "GEOMETRY", value_parser = parse_extruder)]
+    pub extruder: Option<ExtruderGeometry>,
     /// Run this firmware image (ELF) on its board's emulated chip (the bench of `fil/`) instead
     /// of the host-built logic: the binary you are about to flash, on the same wire.
     #[arg(long, value_name = "ELF", requires = "board")]
@@ -139,6 +146,7 @@ pub fn run(args: &SimArgs) -> Result<(), Box<dyn Error>> {
         seed: args.seed,
         print_mm_s: args.print_rate,
         printer: args.printer,
+        extruder: args.extruder,
         ..SimOptions::for_hardware(args.hardware)
     };
     let mut sim = match (&args.firmware, args.board) {
@@ -654,6 +662,10 @@ fn start_line(args: &SimArgs) -> String {
     } else {
         format!(", printer {}", args.printer)
     };
+    let extruder = match args.extruder {
+        Some(geometry) if geometry != args.printer.extruder() => format!(", extruder {geometry}"),
+        _ => String::new(),
+    };
     let faults = if args.faults.is_empty() {
         String::from("none")
     } else {
@@ -666,7 +678,7 @@ fn start_line(args: &SimArgs) -> String {
         _ => String::new(),
     };
     format!(
-        "{} slots, seed {}, time scale {}x, print rate {} mm/s, faults: {faults}{printer}{unit}",
+        "{} slots, seed {}, time scale {}x, print rate {} mm/s, faults: {faults}{printer}{extruder}{unit}",
         args.slots, args.seed, args.time_scale, args.print_rate
     )
 }
@@ -730,6 +742,13 @@ pub(crate) fn parse_hardware(text: &str) -> Result<&'static Profile, String> {
         let names: Vec<&str> = profile::ALL.iter().map(|p| p.name).collect();
         format!("the hardware is one of {}", names.join(", "))
     })
+}
+
+/// `sensor-first`, `gears-first` or the gears' distance past the sensor in mm (also for
+/// `mmu printer --sim --extruder`).
+pub(crate) fn parse_extruder(text: &str) -> Result<ExtruderGeometry, String> {
+    text.parse::<ExtruderGeometry>()
+        .map_err(|error| error.to_string())
 }
 
 fn parse_time_scale(text: &str) -> Result<f64, String> {

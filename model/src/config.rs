@@ -117,6 +117,19 @@ impl Default for ModelConfig {
 }
 
 impl ModelConfig {
+    /// This configuration with a Bowden tube of `mm` to the printer's filament sensor (a unit
+    /// outside an enclosure: 1 to 5 m): the extruder's gears and nozzle move with the sensor,
+    /// keeping their distances to it.
+    pub fn with_bowden_length(&self, mm: f32) -> ModelConfig {
+        let shift = mm - self.bowden_length_mm;
+        ModelConfig {
+            bowden_length_mm: mm,
+            extruder_gears_mm: self.extruder_gears_mm + shift,
+            nozzle_mm: self.nozzle_mm + shift,
+            ..self.clone()
+        }
+    }
+
     /// This configuration with every non-finite value (and every negative time, speed, length
     /// or level) replaced by its default, so the physics stays finite.
     pub(crate) fn sanitized(&self) -> ModelConfig {

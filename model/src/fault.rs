@@ -109,6 +109,34 @@ pub enum Fault {
         /// The slot.
         slot: usize,
     },
+    /// The printer's filament sensor clears late: it reads filament `delay_ms` after the
+    /// filament has left it (a sticky lever or a badly calibrated threshold; users report
+    /// "fsensor still on" 0.5 to 8 s into an unload, Prusa-Firmware-Buddy #5158, #5344).
+    FsensorLate {
+        /// How long the sensor goes on reading filament, ms.
+        delay_ms: u32,
+    },
+    /// A deformed or stringy tip on `slot`'s filament: the extruder's gears keep gripping it
+    /// until its tip is `mm` behind them (a string or a flattened, widened end still between
+    /// the gears). While they hold it, it moves only with the extruder, and a motor pulling
+    /// back pulls against the gears (which win). Prusa's maintainers describe it so: "filament
+    /// is still held by the drive gear, fsensor doesn't turn off" (Prusa-Firmware-Buddy #5158),
+    /// "the drive gear can hold even thin long strings" (Prusa-Firmware-MMU #271). Injected
+    /// while the tip is in the gears it applies at once; otherwise from the next time the tip
+    /// enters them. `mm` is clamped to 0..=[`MAX_TIP_CATCH_MM`](crate::MAX_TIP_CATCH_MM).
+    TipCatch {
+        /// The slot.
+        slot: usize,
+        /// How far behind the gears the tip must be for them to let go, mm.
+        mm: f32,
+    },
+    /// The printer retracts more slowly than it commands: every extruder move back runs at
+    /// `factor` × its speed (clamped to [`MIN_RETRACT_FACTOR`](crate::MIN_RETRACT_FACTOR)..=1;
+    /// e.g. 0.5 or 0.25: a worn or hot extruder, a stiff filament path).
+    SlowRetract {
+        /// Fraction of the commanded retract speed.
+        factor: f32,
+    },
 }
 
 /// Which fault, without its parameters: the key for [`Model::clear`](crate::Model::clear).
@@ -130,6 +158,12 @@ pub enum FaultKind {
     SpoolRunout(usize),
     /// [`Fault::SpoolFastened`] of a slot.
     SpoolFastened(usize),
+    /// [`Fault::FsensorLate`].
+    FsensorLate,
+    /// [`Fault::TipCatch`] of a slot.
+    TipCatch(usize),
+    /// [`Fault::SlowRetract`].
+    SlowRetract,
 }
 
 impl FaultKind {
@@ -140,9 +174,13 @@ impl FaultKind {
             | FaultKind::Slip(slot)
             | FaultKind::MotorDead(slot)
             | FaultKind::SpoolRunout(slot)
-            | FaultKind::SpoolFastened(slot) => Some(slot),
+            | FaultKind::SpoolFastened(slot)
+            | FaultKind::TipCatch(slot) => Some(slot),
             FaultKind::SensorDisconnected(sensor) => sensor.slot(),
-            FaultKind::BowdenJam | FaultKind::SensorNoise => None,
+            FaultKind::BowdenJam
+            | FaultKind::SensorNoise
+            | FaultKind::FsensorLate
+            | FaultKind::SlowRetract => None,
         }
     }
 }
@@ -159,6 +197,9 @@ impl Fault {
             Fault::SensorDisconnected { sensor, .. } => FaultKind::SensorDisconnected(sensor),
             Fault::SpoolRunout { slot } => FaultKind::SpoolRunout(slot),
             Fault::SpoolFastened { slot } => FaultKind::SpoolFastened(slot),
+            Fault::FsensorLate { .. } => FaultKind::FsensorLate,
+            Fault::TipCatch { slot, .. } => FaultKind::TipCatch(slot),
+            Fault::SlowRetract { .. } => FaultKind::SlowRetract,
         }
     }
 }

@@ -84,6 +84,10 @@ const DT: f64 = SUBSTEP_MS as f64 / 1000.0;
 const EPS: f64 = 1e-6;
 /// How far past the slot sensor a runout leaves the filament's tail, mm.
 const RUNOUT_MARGIN_MM: f64 = 0.1;
+/// The longest [`Fault::TipCatch`], mm.
+pub const MAX_TIP_CATCH_MM: f32 = 100.0;
+/// The slowest [`Fault::SlowRetract`], as a fraction of the commanded speed.
+pub const MIN_RETRACT_FACTOR: f32 = 0.01;
 /// Within this distance of the nozzle the tip counts as "in the nozzle", mm.
 const NOZZLE_TOLERANCE_MM: f64 = 1e-3;
 
@@ -181,6 +185,14 @@ struct Slot {
     dead: bool,
     /// `Fault::SpoolRunout`.
     runout: bool,
+    /// `Fault::TipCatch`: how far behind the extruder's gears the tip must be before they let
+    /// the filament go, mm (0: at the gears).
+    catch_mm: f64,
+    /// The gears hold this filament by its caught tip (it has been in them since the fault).
+    caught: bool,
+    /// How long this slot's motor has been pulling against the gripping gears without a break,
+    /// ms.
+    grip_pull_ms: u64,
 }
 
 impl Slot {
@@ -247,13 +259,20 @@ struct Extruder {
     printing: Option<f64>,
     /// Commanded extruder position (E axis), mm.
     position: f64,
+    /// `Fault::SlowRetract`: retracts run at this fraction of their commanded speed.
+    retract_factor: Option<f64>,
 }
 
 impl Extruder {
     /// Advance one sub-step; the extruder's commanded motion, mm.
     fn substep(&mut self) -> f64 {
         let d = if self.remaining != 0.0 {
-            let step = (self.speed * DT)
+            let factor = if self.remaining < 0.0 {
+                self.retract_factor.unwrap_or(1.0)
+            } else {
+                1.0
+            };
+            let step = (self.speed * factor * DT)
                 .min(self.remaining.abs())
                 .copysign(self.remaining);
             self.remaining -= step;
@@ -285,6 +304,37 @@ pub struct Model {
     noise_override: Option<f64>,
     rng: Rng,
     time_ms: u64,
+    /// `Fault::FsensorLate`: the printer's sensor reads filament this long after it left, ms.
+    fsensor_late_ms: Option<u64>,
+    /// The last time the printer's sensor had filament under it, ms.
+    fsensor_seen_ms: Option<u64>,
+    /// The hardest and longest pulls against gripping gears so far.
+    grip_pull: PullAgainstGrip,
+}
+
+/// The pulls of lane motors against the extruder's gears while they grip the filament (its tip,
+/// or a [`Fault::TipCatch`]'s caught tip, inside them) and the extruder is not turning it back
+/// faster than the motor would pull it: the force the unit puts on a filament the extruder
+/// holds. See [`Model::max_pull_against_grip`].
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct PullAgainstGrip {
+    /// The highest reverse duty, per mille (0: no such pull).
+    pub max_duty_permille: u16,
+    /// The longest such pull without a break, ms.
+    pub longest_ms: u64,
+    /// Every such millisecond added up, ms.
+    pub total_ms: u64,
+}
+
+impl PullAgainstGrip {
+    /// The harder and longer of both, and their milliseconds added (two runs' figures).
+    pub fn merged(self, other: PullAgainstGrip) -> PullAgainstGrip {
+        PullAgainstGrip {
+            max_duty_permille: self.max_duty_permille.max(other.max_duty_permille),
+            longest_ms: self.longest_ms.max(other.longest_ms),
+            total_ms: self.total_ms.saturating_add(other.total_ms),
+        }
+    }
 }
 
 impl Model {
@@ -312,6 +362,9 @@ impl Model {
                 slip: 1.0,
                 dead: false,
                 runout: false,
+                catch_mm: 0.0,
+                caught: false,
+                grip_pull_ms: 0,
             })
             .collect();
         Model {
@@ -324,6 +377,9 @@ impl Model {
             noise_override: None,
             rng,
             time_ms: 0,
+            fsensor_late_ms: None,
+            fsensor_seen_ms: None,
+            grip_pull: PullAgainstGrip::default(),
         }
     }
 
@@ -346,9 +402,53 @@ impl Model {
     /// doing `motors[slot]` throughout. Slots without an entry coast; extra entries are ignored.
     pub fn step(&mut self, dt_ms: u32, motors: &[MotorCommand]) {
         for _ in 0..dt_ms / SUBSTEP_MS {
+            self.measure_grip_pull(motors);
             self.substep(motors);
             self.time_ms = self.time_ms.saturating_add(u64::from(SUBSTEP_MS));
+            if self.raw_fsensor_state() != 0 {
+                self.fsensor_seen_ms = Some(self.time_ms);
+            }
         }
+    }
+
+    /// Record, for one sub-step about to run with `motors`, each lane motor that pulls back its
+    /// filament while the extruder's gears grip it and do not turn it back faster.
+    fn measure_grip_pull(&mut self, motors: &[MotorCommand]) {
+        let p = self.p;
+        let extruder_back = if self.extruder.remaining < 0.0 {
+            self.extruder.speed * self.extruder.retract_factor.unwrap_or(1.0)
+        } else {
+            0.0
+        };
+        for (i, s) in self.slots.iter_mut().enumerate() {
+            let in_gears = s.present && s.tail <= p.gears && (s.tip > p.gears + EPS || s.caught);
+            let pull = match motors.get(i).copied().unwrap_or_default() {
+                MotorCommand::Drive {
+                    direction: Direction::Reverse,
+                    duty,
+                } if duty.permille() >= p.dead_band => Some(duty.permille()),
+                _ => None,
+            };
+            match pull.filter(|&permille| {
+                in_gears && !s.dead && extruder_back < f64::from(permille) / 1000.0 * p.max_speed
+            }) {
+                Some(permille) => {
+                    s.grip_pull_ms += u64::from(SUBSTEP_MS);
+                    let g = &mut self.grip_pull;
+                    g.max_duty_permille = g.max_duty_permille.max(permille);
+                    g.longest_ms = g.longest_ms.max(s.grip_pull_ms);
+                    g.total_ms += u64::from(SUBSTEP_MS);
+                }
+                None => s.grip_pull_ms = 0,
+            }
+        }
+    }
+
+    /// The hardest reverse duty any lane motor had while the extruder's gears gripped its
+    /// filament (the tip inside them, the extruder not turning it back faster than the motor),
+    /// and for how long, since the model was built.
+    pub fn max_pull_against_grip(&self) -> PullAgainstGrip {
+        self.grip_pull
     }
 
     fn substep(&mut self, motors: &[MotorCommand]) {
@@ -384,7 +484,7 @@ impl Model {
             };
         }
         if s.tail <= p.gears {
-            if s.tip > p.gears + EPS || (s.tip >= p.gears - EPS && d_e > 0.0) {
+            if s.tip > p.gears + EPS || s.caught || (s.tip >= p.gears - EPS && d_e > 0.0) {
                 return Front::Held {
                     d_f: d_e,
                     can_pull: true,
@@ -576,6 +676,11 @@ impl Model {
             s.present = false;
             s.buffer = 0.0;
         }
+        // A caught tip stays in the gears until it is `catch_mm` behind them.
+        s.caught = s.catch_mm > 0.0
+            && s.present
+            && s.tail <= p.gears
+            && (s.tip > p.gears + EPS || (s.caught && s.tip > p.gears - s.catch_mm));
         self.slots[i] = s;
     }
 
@@ -694,6 +799,18 @@ impl Model {
     /// The printer's filament sensor as the printer reports it with `f`: 0 = no filament (tip
     /// before the fsensor), 1 = filament at the fsensor, 2 = tip in the nozzle.
     pub fn fsensor_state(&self) -> u8 {
+        let raw = self.raw_fsensor_state();
+        let late = match (self.fsensor_late_ms, self.fsensor_seen_ms) {
+            // Seen at the end of the sub-step `seen`: the filament left during the next one.
+            (Some(delay), Some(seen)) => self.time_ms < seen.saturating_add(u64::from(SUBSTEP_MS) + delay),
+            _ => false,
+        };
+        if raw == 0 && late { 1 } else { raw }
+    }
+
+    /// The printer's filament sensor as the filament is under it, without a
+    /// [`Fault::FsensorLate`].
+    fn raw_fsensor_state(&self) -> u8 {
         let p = &self.p;
         self.slots
             .iter()
@@ -876,6 +993,28 @@ impl Model {
                 s.apply_runout(&p);
                 fault
             }
+            Fault::FsensorLate { delay_ms } => {
+                self.fsensor_late_ms = Some(u64::from(delay_ms));
+                fault
+            }
+            Fault::TipCatch { slot, mm } => {
+                if !mm.is_finite() {
+                    return false;
+                }
+                let mm = mm.clamp(0.0, MAX_TIP_CATCH_MM);
+                let s = &mut self.slots[slot];
+                s.catch_mm = mm.into();
+                s.caught = s.present && s.tail <= p.gears && s.tip > p.gears + EPS;
+                Fault::TipCatch { slot, mm }
+            }
+            Fault::SlowRetract { factor } => {
+                if !factor.is_finite() {
+                    return false;
+                }
+                let factor = factor.clamp(MIN_RETRACT_FACTOR, 1.0);
+                self.extruder.retract_factor = Some(factor.into());
+                Fault::SlowRetract { factor }
+            }
         };
         let kind = fault.kind();
         self.faults.retain(|f| f.kind() != kind);
@@ -912,6 +1051,14 @@ impl Model {
             }
             FaultKind::SensorNoise => self.noise_override = None,
             FaultKind::SensorDisconnected(_) => {}
+            FaultKind::FsensorLate => self.fsensor_late_ms = None,
+            FaultKind::TipCatch(slot) => {
+                if let Some(s) = self.slots.get_mut(slot) {
+                    s.catch_mm = 0.0;
+                    s.caught = false;
+                }
+            }
+            FaultKind::SlowRetract => self.extruder.retract_factor = None,
             FaultKind::SpoolRunout(slot) => {
                 if let Some(s) = self.slots.get_mut(slot) {
                     s.runout = false;

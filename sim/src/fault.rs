@@ -25,6 +25,10 @@ fastened-end:SLOT            the slot's spool ends, its end fastened to the core
 uart-corrupt:P               each UART byte (both directions) has one bit flipped with probability P
 uart-drop:P                  each UART byte (both directions) is lost with probability P
 power-loss[:OFF_MS]          the unit loses power for OFF_MS (default 500) and restarts
+fsensor-late:MS              the printer's filament sensor reads filament MS after it left
+tip-catch:SLOT:MM            the slot's tip (deformed, stringy) stays in the extruder's gears
+                             until it is MM behind them
+slow-retract:FACTOR          the printer's retracts run at FACTOR x their speed (e.g. 0.5)
 Append @START_MS or @START_MS-END_MS to inject at a virtual time and clear later.";
 
 /// A fault of the simulated unit.
@@ -187,6 +191,23 @@ impl FromStr for SimFault {
                 })
             }
             "runout" => SimFault::Model(Fault::SpoolRunout { slot: slot()? }),
+            "fsensor-late" => SimFault::Model(Fault::FsensorLate {
+                delay_ms: number(spec, a, "delay")?,
+            }),
+            "tip-catch" => {
+                let mm: f32 = number(spec, b, "length")?;
+                if !(0.0..=mmu_model::MAX_TIP_CATCH_MM).contains(&mm) {
+                    return Err(bad(spec, "the length must be within 0..=100 mm"));
+                }
+                SimFault::Model(Fault::TipCatch { slot: slot()?, mm })
+            }
+            "slow-retract" => {
+                let factor: f32 = number(spec, a, "factor")?;
+                if !(mmu_model::MIN_RETRACT_FACTOR..=1.0).contains(&factor) {
+                    return Err(bad(spec, "the factor must be within 0.01..=1"));
+                }
+                SimFault::Model(Fault::SlowRetract { factor })
+            }
             "fastened-end" => SimFault::Model(Fault::SpoolFastened { slot: slot()? }),
             "uart-corrupt" => SimFault::UartCorrupt {
                 probability: probability(spec, a)?,
@@ -202,7 +223,7 @@ impl FromStr for SimFault {
         let args = usize::from(a.is_some()) + usize::from(b.is_some());
         let expected = match fault {
             SimFault::Model(Fault::BowdenJam) => 0..=0,
-            SimFault::Model(Fault::Slip { .. }) => 2..=2,
+            SimFault::Model(Fault::Slip { .. } | Fault::TipCatch { .. }) => 2..=2,
             SimFault::Model(Fault::SensorDisconnected { .. }) => 1..=2,
             SimFault::PowerLoss { .. } => 0..=1,
             _ => 1..=1,
@@ -223,7 +244,8 @@ impl SimFault {
                 | Fault::Slip { slot, .. }
                 | Fault::MotorDead { slot }
                 | Fault::SpoolRunout { slot }
-                | Fault::SpoolFastened { slot },
+                | Fault::SpoolFastened { slot }
+                | Fault::TipCatch { slot, .. },
             ) => Some(slot),
             SimFault::Model(Fault::SensorDisconnected {
                 sensor: SensorId::SlotFilament(slot) | SensorId::MotorHall(slot),
@@ -259,6 +281,9 @@ impl fmt::Display for SimFault {
             }
             SimFault::Model(Fault::SpoolRunout { slot }) => write!(f, "runout:{slot}"),
             SimFault::Model(Fault::SpoolFastened { slot }) => write!(f, "fastened-end:{slot}"),
+            SimFault::Model(Fault::FsensorLate { delay_ms }) => write!(f, "fsensor-late:{delay_ms}"),
+            SimFault::Model(Fault::TipCatch { slot, mm }) => write!(f, "tip-catch:{slot}:{mm}"),
+            SimFault::Model(Fault::SlowRetract { factor }) => write!(f, "slow-retract:{factor}"),
             SimFault::UartCorrupt { probability } => write!(f, "uart-corrupt:{probability}"),
             SimFault::UartDrop { probability } => write!(f, "uart-drop:{probability}"),
             SimFault::PowerLoss { off_ms } => write!(f, "power-loss:{off_ms}"),

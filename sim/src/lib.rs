@@ -5,7 +5,8 @@
 //!   Bytes in, bytes out, one millisecond per step: `mmu sim` serves it on stdio or a pty.
 //! - [`printer`]: the printer's side of the protocol over any [`Link`]; [`SimLink`] is the
 //!   in-process one (`mmu printer --sim`).
-//! - [`Personality`]: which printer firmware both play (Buddy 6.5.3, Buddy 6.4, MK3S), and
+//! - [`Personality`]: which printer firmware both play (Buddy 6.5.3, Buddy 6.4, MK3S), with
+//!   [`ExtruderGeometry`]: where its gears sit against its filament sensor; and
 //!   [`mechanics`]: the printer's extruder as the simulator moves it around a tool change;
 //!   [`scenario`]: Prusa's expected Buddy 6.5.3 exchange, replayed against the unit.
 //! - [`soak`]: long runs of tool changes with random faults, and the figures they give;
@@ -16,6 +17,7 @@ pub mod event;
 pub mod fault;
 pub mod firmware;
 pub mod flash;
+pub mod geometry;
 pub mod link;
 pub mod logic;
 pub mod mechanics;
@@ -29,6 +31,7 @@ pub mod timing;
 
 pub use event::{Event, EventKind};
 pub use fault::{FAULT_HELP, ScheduledFault, SimFault, SimFaultKind};
+pub use geometry::ExtruderGeometry;
 pub use link::SimLink;
 pub use personality::Personality;
 pub use printer::{

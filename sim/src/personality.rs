@@ -25,6 +25,8 @@
 use std::fmt;
 use std::str::FromStr;
 
+use crate::geometry::ExtruderGeometry;
+
 /// A Prusa printer firmware line, as the simulator plays it. See the [module
 /// documentation](self) for what differs and where each value comes from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
@@ -116,17 +118,25 @@ impl Personality {
         matches!(self, Personality::Buddy65)
     }
 
-    /// Where the printer's extruder gears sit before its filament sensor, mm, if they do. On
-    /// Buddy 6.5.3 the sensor goes off while the gears still pull the filament back: its
-    /// finishing retract expects the sensor off 14 mm into it (`nominalEMotorFSOff`, BFW v6.5.3
-    /// `mmu2_mk4.h`), and MMU 3.0.4 pulls its first 20 mm at the retract's own speed, with the
-    /// gears. The default model has the MK3S's order (the sensor 4 mm before the gears), where
-    /// no retract can clear the sensor: the reason the MK3S is left out of 3.0.4.
-    pub const fn gears_before_sensor_mm(self) -> Option<f32> {
+    /// The extruder geometry played by default ([`ExtruderGeometry`] says what the sources
+    /// show): Buddy's MK4, MK3.9 and Core One carry the Nextruder, whose sensor reads the
+    /// filament until it leaves the drive gear ([`ExtruderGeometry::GEARS_FIRST`], Buddy 6.5's
+    /// default); the MK3S and the MK3.5 (on Buddy firmware) have the sensor above the gears
+    /// ([`ExtruderGeometry::SENSOR_FIRST`]). Buddy 6.4 runs on both; it keeps the sensor-first
+    /// default for now, because with its gears first the unit still fails issue #34's item 3
+    /// (a Bowden length set too long is never learned: `8003` on every change), which the unit
+    /// must fix first; `--extruder gears-first` plays it.
+    pub const fn extruder(self) -> ExtruderGeometry {
         match self {
-            Personality::Buddy65 => Some(10.0),
-            Personality::Buddy64 | Personality::Mk3s => None,
+            Personality::Buddy65 => ExtruderGeometry::GEARS_FIRST,
+            Personality::Buddy64 | Personality::Mk3s => ExtruderGeometry::SENSOR_FIRST,
         }
+    }
+
+    /// Where the printer's extruder gears sit before its filament sensor by default, mm, if they
+    /// do ([`Personality::extruder`]).
+    pub fn gears_before_sensor_mm(self) -> Option<f32> {
+        self.extruder().gears_before_sensor_mm()
     }
 
     /// The longest the simulator may hold the printer's bytes back while it plays a printer move

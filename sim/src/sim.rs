@@ -17,6 +17,7 @@ use mmu_protocol::RequestCode;
 
 use crate::event::{Event, EventKind, FaultAction};
 use crate::fault::{ScheduledFault, SimFault, SimFaultKind};
+use crate::geometry::ExtruderGeometry;
 use crate::logic::{StoreFlash, UnitLogic, new_logic};
 use crate::mechanics::Mechanics;
 pub use crate::mechanics::{
@@ -53,10 +54,12 @@ pub struct SimOptions {
     pub print_mm_s: f32,
     /// How long the unit takes to boot after a reset or power-up, ms.
     pub boot_ms: u32,
-    /// The printer whose mechanics (its extruder around a tool change) are played. On Buddy
-    /// 6.5.3 the extruder gears sit before the filament sensor
-    /// ([`Personality::gears_before_sensor_mm`]), whatever [`SimOptions::model`] says.
+    /// The printer whose mechanics (its extruder around a tool change) are played.
     pub printer: Personality,
+    /// Where the printer's extruder gears sit against its filament sensor; `None`: the
+    /// printer's own ([`Personality::extruder`]). Whatever [`SimOptions::model`] says, its gears
+    /// are placed this way against its sensor.
+    pub extruder: Option<ExtruderGeometry>,
     /// What senses each lane: the unit runs on this profile and the model's sensors read as it
     /// says ([`SimOptions::for_hardware`] also takes its default settings).
     pub hardware: &'static Profile,
@@ -67,6 +70,11 @@ impl SimOptions {
     /// its sensors and its distance per turn of the sensed shaft.
     pub fn for_hardware(profile: &'static Profile) -> SimOptions {
         SimOptions::default().on_hardware(profile)
+    }
+
+    /// The extruder geometry played: [`SimOptions::extruder`], else the printer's own.
+    pub fn extruder(&self) -> ExtruderGeometry {
+        self.extruder.unwrap_or(self.printer.extruder())
     }
 
     /// These options on the hardware `profile`: the unit's settings keep theirs but those that
@@ -105,6 +113,7 @@ impl Default for SimOptions {
             print_mm_s: 1.0,
             boot_ms: 50,
             printer: Personality::default(),
+            extruder: None,
             hardware: &THESIS,
         }
     }
@@ -204,10 +213,9 @@ impl Sim {
     /// The unit `logic` (the host-built logic of [`Sim::new`], or a firmware image on an emulated
     /// chip: [`crate::firmware::FirmwareUnit`]) just powered on, with `options.slots` slots.
     pub fn with_unit(options: SimOptions, logic: Box<dyn UnitLogic>) -> Sim {
-        let mut geometry = model_for(options.hardware, &options.model);
-        if let Some(before) = options.printer.gears_before_sensor_mm() {
-            geometry.extruder_gears_mm = geometry.bowden_length_mm - before;
-        }
+        let geometry = options
+            .extruder()
+            .apply(&model_for(options.hardware, &options.model));
         let model = Model::new(geometry, options.slots, options.seed);
         let printer = Mechanics::new(
             options.printer,

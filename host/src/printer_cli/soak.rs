@@ -66,6 +66,7 @@ pub(super) fn run_soak(
         sim: SimOptions {
             slots: args.sim_options.slots,
             seed,
+            extruder: args.sim_options.extruder,
             ..SimOptions::for_hardware(args.sim_options.hardware)
         },
         printer: printer_options(args),

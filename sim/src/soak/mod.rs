@@ -160,6 +160,9 @@ impl ToolChangeTimes {
 pub struct SoakReport {
     /// Tool changes run.
     pub changes: u32,
+    /// The hardest and longest pulls of a lane motor against the extruder's gears while they
+    /// gripped its filament, over every rig of the run ([`mmu_model::Model::max_pull_against_grip`]).
+    pub pull_against_grip: mmu_model::PullAgainstGrip,
     /// Faults injected.
     pub faults_injected: u32,
     /// Faults after which the tool change completed.
@@ -399,6 +402,9 @@ fn kind_name(fault: &SimFault) -> String {
         },
         SimFault::Model(Fault::SpoolRunout { .. }) => "runout",
         SimFault::Model(Fault::SpoolFastened { .. }) => "fastened-end",
+        SimFault::Model(Fault::FsensorLate { .. }) => "fsensor-late",
+        SimFault::Model(Fault::TipCatch { .. }) => "tip-catch",
+        SimFault::Model(Fault::SlowRetract { .. }) => "slow-retract",
         SimFault::UartCorrupt { .. } => "uart-corrupt",
         SimFault::UartDrop { .. } => "uart-drop",
         SimFault::PowerLoss { .. } => "power-loss",
@@ -1092,6 +1098,9 @@ pub fn run_until(
             rig = Some(current);
         } else {
             simulated_ms += current.sim().now_ms();
+            report.pull_against_grip = report
+                .pull_against_grip
+                .merged(current.sim().model().max_pull_against_grip());
             report.flash = report
                 .flash
                 .combined(current.printer.link_mut().sim_mut().flash_wear());
@@ -1105,6 +1114,9 @@ pub fn run_until(
 
     if let Some(current) = &mut rig {
         simulated_ms += current.sim().now_ms();
+        report.pull_against_grip = report
+            .pull_against_grip
+            .merged(current.sim().model().max_pull_against_grip());
         report.flash = report
             .flash
             .combined(current.printer.link_mut().sim_mut().flash_wear());

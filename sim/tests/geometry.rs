@@ -1,0 +1,98 @@
+//! Each simulated printer in both extruder geometries (`--extruder sensor-first|gears-first`):
+//! tool changes and an unload finish, the filament ends where they put it, and the geometry is
+//! the one asked for.
+
+use mmu_protocol::{ErrorCode, Request, RequestCode, ResultCode};
+use mmu_sim::{
+    Decision, ExtruderGeometry, Operator, Outcome, Personality, Printer, PrinterEvent, PrinterOptions, Sim,
+    SimLink, SimOptions,
+};
+
+/// Gives up on any error, so that an error fails the test.
+struct GiveUp;
+
+impl Operator<SimLink> for GiveUp {
+    fn event(&mut self, _link: &mut SimLink, _event: &PrinterEvent) {}
+
+    fn decide(&mut self, _link: &mut SimLink, _request: Request, _error: ErrorCode) -> Decision {
+        Decision::GiveUp
+    }
+}
+
+fn connected(personality: Personality, extruder: ExtruderGeometry) -> Printer<SimLink> {
+    let sim = Sim::new(SimOptions {
+        printer: personality,
+        extruder: Some(extruder),
+        ..SimOptions::default()
+    })
+    .unwrap();
+    let mut printer = Printer::new(SimLink::new(sim), PrinterOptions::of(personality));
+    printer.connect(&mut GiveUp).expect("connects");
+    printer
+}
+
+#[test]
+fn every_printer_changes_tools_and_unloads_in_both_geometries() {
+    for personality in Personality::ALL {
+        for extruder in [ExtruderGeometry::SENSOR_FIRST, ExtruderGeometry::GEARS_FIRST] {
+            if personality == Personality::Buddy65 && extruder.sensor_first() {
+                // An MK3.5 on Buddy 6.5.3: its retract cannot clear a sensor before its gears,
+                // and the unit's 3.0.4 contract waits for the sensor: `T1` ends in `8004`
+                // (FSENSOR_DIDNT_SWITCH_OFF). A unit fix (issue #34 item 3), not played here.
+                continue;
+            }
+            let case = format!("{personality} {extruder}");
+            let mut printer = connected(personality, extruder);
+            let config = printer.link().sim().model().config().clone();
+            assert_eq!(
+                config.extruder_gears_mm - config.bowden_length_mm,
+                extruder.gears_past_sensor_mm(),
+                "{case}"
+            );
+            for slot in [0u8, 1] {
+                let outcome = printer
+                    .command(&mut GiveUp, Request::new(RequestCode::Tool, slot))
+                    .unwrap();
+                assert_eq!(outcome, Outcome::Finished(ResultCode::OK), "{case}: T{slot}");
+                printer.print(&mut GiveUp, 6000).unwrap();
+                let model = printer.link().sim().model();
+                assert_eq!(model.loaded_slot(), Some(usize::from(slot)), "{case}: T{slot}");
+                assert_eq!(model.fsensor_state(), 2, "{case}: T{slot} reaches the nozzle");
+            }
+            let outcome = printer
+                .command(&mut GiveUp, Request::new(RequestCode::Unload, 0))
+                .unwrap();
+            assert_eq!(outcome, Outcome::Finished(ResultCode::OK), "{case}: U0");
+            let model = printer.link().sim().model();
+            assert_eq!(model.fsensor_state(), 0, "{case}: U0 clears the sensor");
+            assert!(
+                model.tip_mm(1).unwrap() < 0.0,
+                "{case}: parked {:?}",
+                model.tip_mm(1)
+            );
+        }
+    }
+}
+
+#[test]
+fn each_printer_defaults_to_its_own_geometry_and_an_option_overrides_it() {
+    let gears = |personality: Personality, extruder: Option<ExtruderGeometry>| {
+        let sim = Sim::new(SimOptions {
+            printer: personality,
+            extruder,
+            ..SimOptions::default()
+        })
+        .unwrap();
+        let config = sim.model().config();
+        config.extruder_gears_mm - config.bowden_length_mm
+    };
+    assert_eq!(gears(Personality::Buddy65, None), -10.0);
+    assert_eq!(gears(Personality::Buddy64, None), 4.0);
+    assert_eq!(gears(Personality::Mk3s, None), 4.0);
+    let at_sensor = ExtruderGeometry::gears_past_sensor(0.0);
+    assert_eq!(gears(Personality::Mk3s, at_sensor), 0.0);
+    assert_eq!(
+        gears(Personality::Buddy65, Some(ExtruderGeometry::SENSOR_FIRST)),
+        4.0
+    );
+}
