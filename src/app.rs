@@ -227,6 +227,12 @@ impl<const N: usize> App<N> {
         let before = self.operation.status();
         self.operation
             .step(&mut self.unit, now, &self.config, self.session.printer);
+        if let Some(Learned::BowdenMm(mm)) = self.operation.take_learned() {
+            // Measured by the load itself: kept as a setting, shown in register 0x53.
+            self.config.bowden_mm = mm;
+            self.bowden_learned_mm = mm;
+            self.settings_revision = self.settings_revision.wrapping_add(1);
+        }
         self.command_changed(before);
         out.phase_began = self.operation.phase_began_at(now);
         self.started_up |= !matches!(self.operation.status(), Status::Running(_));

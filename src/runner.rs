@@ -153,6 +153,11 @@ impl Runner {
         }
     }
 
+    /// A setting the command's phases measured on the way (a Bowden length), once.
+    pub fn take_learned(&mut self) -> Option<Learned> {
+        self.notes.bowden_measured_mm.take().map(Learned::BowdenMm)
+    }
+
     /// The printer (or the unit's own button) pressed `button`: in an error state, what the
     /// recovery table says; otherwise nothing. A command that failed before any phase ran is
     /// planned again from the sensors on Retry (it fails again with the cause then present, or

@@ -160,6 +160,38 @@ fn retry_after_8009_learns_the_bowden_length_and_finishes() {
     }
 }
 
+/// The same Bowden length too long (500 mm on a 360 mm tube) on a printer whose extruder gears
+/// come before its sensor (the Nextruder's order, Buddy 6.5.3): the fast feed meets the idle
+/// gears, 10 mm short of the sensor, which never triggers. That stop ends the fast feed; the slow
+/// feed with the printer's co-feed takes the tip through its gears to its sensor, and the length
+/// measured from the hub sensor is kept: no error, the next change as well (issue 34 finding 3:
+/// `8003` on every change, 0x22 stayed 500).
+#[test]
+fn a_fast_feed_that_meets_the_gears_first_learns_the_bowden_length_without_an_error() {
+    let config = mmu_firmware::Config {
+        bowden_mm: 500,
+        ..mmu_firmware::Config::default()
+    };
+    let model = mmu_model::ModelConfig {
+        extruder_gears_mm: 350.0,
+        ..mmu_model::ModelConfig::default()
+    };
+    let mut rig = Rig::<3>::with(config, model);
+    rig.wants_revision = 4;
+    rig.boot();
+    let run = rig.command(t(0));
+    assert_eq!(run.last, finished(t(0)), "{:?}", run.progress);
+    let learned = rig.read(0x22).unwrap();
+    assert!(
+        (355..=368).contains(&learned),
+        "0x22 learned {learned} mm on a 360 mm tube"
+    );
+    assert_eq!(rig.read(0x53), Some(learned));
+    let run = rig.command(t(1));
+    assert_eq!(run.last, finished(t(1)), "{:?}", run.progress);
+    assert_eq!(rig.model.loaded_slot(), Some(1));
+}
+
 /// The length is never learned longer than the old value, nor from a sensor that reads filament
 /// where no tube could end (stuck on at the hub): then `8009` stays, as above.
 #[test]

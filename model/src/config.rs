@@ -60,6 +60,11 @@ pub struct ModelConfig {
     /// Each lane has its own tension sensor (read from that lane's buffer). Default false.
     pub lane_tension: bool,
 
+    /// A motor pulling back at this duty or less loses to extruder gears that grip the filament
+    /// (per mille): at the taut limit it is dragged along with them, where a harder pull makes
+    /// the gears slip. Default 300 (an assumption, not a measurement: extruder gears hold
+    /// kilograms, a small gear motor at a third of its duty pulls a fraction of that).
+    pub extruder_grip_duty_permille: u16,
     /// Travel of the hub's tension buffer each way from its rest, mm. Default 6.
     pub buffer_limit_mm: f32,
     /// Time constant with which a coasting (back-driven) motor lets the buffer relax while
@@ -103,6 +108,7 @@ impl Default for ModelConfig {
             mm_per_rev: 2.0,
             motion_sensor: MotionSensor::HallWave,
             lane_tension: false,
+            extruder_grip_duty_permille: 300,
             buffer_limit_mm: 6.0,
             buffer_relax_ms: 100.0,
             rest_level: 2048,
@@ -155,6 +161,7 @@ impl ModelConfig {
             mm_per_rev: positive(self.mm_per_rev, d.mm_per_rev),
             motion_sensor: self.motion_sensor,
             lane_tension: self.lane_tension,
+            extruder_grip_duty_permille: self.extruder_grip_duty_permille,
             buffer_limit_mm: non_neg(self.buffer_limit_mm, d.buffer_limit_mm),
             buffer_relax_ms: non_neg(self.buffer_relax_ms, d.buffer_relax_ms),
             rest_level: self.rest_level,

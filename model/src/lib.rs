@@ -33,7 +33,8 @@
 //!   `buffer += extruder motion − motor-side motion`, limited to ±`buffer_limit_mm`
 //!   (positive = taut). At the compressed limit a motor pushing further stalls (and an extruder
 //!   retracting harder slips); at the taut limit an extruder pulling harder slips, and a motor
-//!   pulling back against it stalls. A stop cannot pull, so the buffer at a stop is never taut.
+//!   pulling back against it stalls, unless its pull is weak (`extruder_grip_duty_permille`):
+//!   then the gears win and drag it along. A stop cannot pull, so the buffer at a stop is never taut.
 //!   A coasting motor is back-driven: it follows the extruder and lets the buffer relax
 //!   (time constant `buffer_relax_ms`). A free tip has no buffer.
 //! - **Extruder.** [`Model::extruder_move`] and [`Model::set_printing`] turn the extruder; it
@@ -108,6 +109,7 @@ struct Params {
     alpha_coast: f64,
     relax_factor: f64,
     dead_band: u16,
+    grip_duty: u16,
     mm_per_rev: f64,
     buffer_limit: f64,
     rest: f64,
@@ -143,6 +145,7 @@ impl Params {
             alpha_coast: lag_alpha(c.coast_tau_ms),
             relax_factor: if relax > 0.0 { (-DT / relax).exp() } else { 0.0 },
             dead_band: c.dead_band_permille,
+            grip_duty: c.extruder_grip_duty_permille,
             mm_per_rev: c.mm_per_rev.into(),
             buffer_limit: c.buffer_limit_mm.into(),
             rest: c.rest_level.into(),
@@ -622,7 +625,14 @@ impl Model {
                     d_f -= buffer;
                     buffer = 0.0;
                 }
-                if buffer > limit {
+                let weak_pull = matches!(
+                    command,
+                    MotorCommand::Drive { direction: Direction::Reverse, duty } if duty.permille() <= p.grip_duty
+                );
+                if buffer > limit && weak_pull {
+                    // Taut under a pull the gripping gears win against: the motor is dragged.
+                    d_r += buffer - limit;
+                } else if buffer > limit {
                     // Taut: the extruder's gears slip, then a motor pulling back stalls.
                     let mut excess = buffer - limit;
                     if d_f > 0.0 {

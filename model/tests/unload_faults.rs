@@ -189,3 +189,22 @@ fn pulls_against_gripping_gears_are_recorded_with_their_duty_and_length() {
         (900, 700, 601)
     );
 }
+
+/// The extruder pushes (ramming) while the motor pulls back: a pull at no more than
+/// `extruder_grip_duty_permille` loses, the motor dragged along and the push unslowed; a full
+/// pull makes the gears slip and holds the tip back.
+#[test]
+fn a_weak_pull_loses_to_the_gripping_gears_and_a_full_one_makes_them_slip() {
+    let grip = ModelConfig::default().extruder_grip_duty_permille;
+    let pushed = |permille: u16| {
+        let mut m = loaded(ModelConfig::default(), 5.0);
+        let from = tip(&m);
+        m.extruder_move(30.0, 10.0);
+        m.step(3000, &slot0(reverse(permille)));
+        tip(&m) - from
+    };
+    let weak = pushed(grip);
+    assert!((weak - 30.0).abs() < 0.5, "the push went {weak} of 30 mm");
+    let full = pushed(1000);
+    assert!(full < 25.0, "a full pull held the push to {full} mm");
+}

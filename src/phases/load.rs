@@ -6,8 +6,10 @@
 use mmu_hal_port::Direction;
 use mmu_protocol::{ErrorCode, ProgressCode};
 
-use super::{Bounds, Decision, Goal, MotionPhase, Outcome, PhaseRun, Sight, sensor_fault_error};
+use super::{Bounds, Decision, Goal, Milestone, MotionPhase, Outcome, PhaseRun, Sight, sensor_fault_error};
+use crate::commands::load_to_nozzle::learned_bowden_mm;
 use crate::config::Config;
+use crate::feeder::distance_centi;
 use crate::sensor::AnalogSensor;
 use crate::time::Instant;
 use crate::unit::{Lane, Unit};
@@ -65,9 +67,19 @@ impl MotionPhase for ThroughBowden {
         )
     }
 
-    fn goal<const N: usize>(self, _run: &mut PhaseRun, at: &Sight<'_, N>) -> Result<Decision, ErrorCode> {
+    /// Ends at its distance, or where the tube reads compressed: the tip met a stop, the
+    /// printer's idle gears where they come before its sensor (a jam stops the slow feed too).
+    fn goal<const N: usize>(self, run: &mut PhaseRun, at: &Sight<'_, N>) -> Result<Decision, ErrorCode> {
+        let met = at
+            .unit
+            .tension_reading(at.slot)
+            .is_some_and(|tension| compressed_for(run, tension, at.now, at.config) >= MET_CONFIRM_MS);
         if at.unit.fsensor_triggered() {
             Err(ErrorCode::FSENSOR_TOO_EARLY)
+        } else if met {
+            Ok(Goal::Reached.learning(Milestone::StopBeforeFsensor {
+                from_hub_centi: run.goal_from_centi,
+            }))
         } else if at.toward_goal_mm >= i32::from(at.bounds.max_mm) {
             Ok(Goal::Reached.into())
         } else {
@@ -119,16 +131,23 @@ impl MotionPhase for ToFsensor {
     /// The slow feed ends at the printer's sensor, once the printer's `Q0` has seen this phase.
     fn goal<const N: usize>(self, run: &mut PhaseRun, at: &Sight<'_, N>) -> Result<Decision, ErrorCode> {
         Ok(if !at.unit.fsensor_triggered() {
-            Goal::Drive
+            Goal::Drive.into()
         } else if at.notes.printer.polled > run.started {
-            Goal::Reached
+            // After a stop before the sensor, where it triggered is the Bowden length.
+            let measured = at
+                .notes
+                .stop_before_fsensor
+                .and_then(|from| learned_bowden_mm(distance_centi(from, at.odometry) / 100, at.config));
+            match measured {
+                Some(mm) => Goal::Reached.learning(Milestone::BowdenMeasured(mm)),
+                None => Goal::Reached.into(),
+            }
         } else {
             // The printer pushes its extruder for the load only once it has seen `P1c` with its
             // sensor triggered (`OnMMUProgressMsgSame`, printer-truth §8): until its next `Q0`
             // has seen this phase, the tip waits at the sensor.
-            Goal::Hold
-        }
-        .into())
+            Goal::Hold.into()
+        })
     }
 
     fn arrival(self) -> Option<Lane> {

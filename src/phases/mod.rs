@@ -427,6 +427,11 @@ enum Milestone {
     MergeCleared,
     /// The slot's filament is now here.
     Arrived(Lane),
+    /// The fast feed met a stop short of its distance with the printer's sensor off (the gears
+    /// before the sensor, a Bowden length set too long); it began at the hub sensor here.
+    StopBeforeFsensor { from_hub_centi: i32 },
+    /// The printer's sensor triggered this far from the hub sensor, mm: a Bowden length to keep.
+    BowdenMeasured(u16),
 }
 
 /// Write what the phase on `slot` learned into the unit and the command's notes: the one place
@@ -457,6 +462,8 @@ fn learn<const N: usize>(milestone: Milestone, slot: usize, notes: &mut Notes, u
         // Parked from where the hub cleared unseen: behind the park position, nobody knows where.
         Milestone::Arrived(Lane::Parked) if notes.park_unsure => unit.set_lane(slot, Lane::Unknown),
         Milestone::Arrived(lane) => unit.set_lane(slot, lane),
+        Milestone::StopBeforeFsensor { from_hub_centi } => notes.stop_before_fsensor = Some(from_hub_centi),
+        Milestone::BowdenMeasured(mm) => notes.bowden_measured_mm = Some(mm),
     }
 }
 
@@ -483,6 +490,10 @@ pub struct Notes {
     pub park_unsure: bool,
     /// What the unit knows of the link to the printer.
     pub printer: PrinterLink,
+    /// The fast feed met a stop before the printer's sensor: the odometry where it left the hub.
+    pub stop_before_fsensor: Option<i32>,
+    /// A Bowden length measured on the way, mm, for the configuration to take.
+    pub bowden_measured_mm: Option<u16>,
 }
 
 /// What the unit knows of the link to the printer, for the phases that depend on it.

@@ -282,7 +282,10 @@ fn strict(config: &Config) -> bool {
 /// sensor says (the tip between the sensor and the gears, a sensor that clears late). A tube
 /// that reads taut (the gears grip what the feel pulls) or compressed (the printer retracts
 /// faster than the feel) starts the count again. See [`go_on_feeling`] for how long.
-fn feel_for_release<const N: usize>(run: &mut PhaseRun, at: &Sight<'_, N>) -> Result<Option<Goal>, ErrorCode> {
+fn feel_for_release<const N: usize>(
+    run: &mut PhaseRun,
+    at: &Sight<'_, N>,
+) -> Result<Option<Goal>, ErrorCode> {
     // A tension sensor that cannot be read shows nothing free.
     let held = at.unit.tension_reading(at.slot).is_none_or(|tension| {
         taut_for(run, tension, at.now, at.config) > 0 || compressed_for(run, tension, at.now, at.config) > 0
