@@ -34,7 +34,8 @@
 //!   (positive = taut). At the compressed limit a motor pushing further stalls (and an extruder
 //!   retracting harder slips); at the taut limit an extruder pulling harder slips, and a motor
 //!   pulling back against it stalls, unless its pull is weak (`extruder_grip_duty_permille`):
-//!   then the gears win and drag it along. A stop cannot pull, so the buffer at a stop is never taut.
+//!   then the gears win and drag it along (and an extruder retracting faster than it drives it
+//!   back faster, where it would slip against a harder drive). A stop cannot pull, so the buffer at a stop is never taut.
 //!   A coasting motor is back-driven: it follows the extruder and lets the buffer relax
 //!   (time constant `buffer_relax_ms`). A free tip has no buffer.
 //! - **Extruder.** [`Model::extruder_move`] and [`Model::set_printing`] turn the extruder; it
@@ -75,6 +76,10 @@ use mmu_hal_port::ADC_MAX;
 
 /// Most slots a model has; [`Model::new`] clamps larger counts to this.
 pub const MAX_SLOTS: usize = 32;
+
+/// How taut the tube must be for a lane motor's pull to reach gripping extruder gears, mm
+/// ([`Model::max_pull_against_grip`]): a slack tube passes no force on.
+pub const GRIP_PULL_TAUT_MM: f64 = 1.0;
 
 /// Length of one internal physics sub-step, ms.
 pub const SUBSTEP_MS: u32 = 1;
@@ -432,8 +437,10 @@ impl Model {
                 } if duty.permille() >= p.dead_band => Some(duty.permille()),
                 _ => None,
             };
+            // Against the gears: the tube between them taut, so the pull reaches them.
+            let taut = s.buffer > GRIP_PULL_TAUT_MM;
             match pull.filter(|&permille| {
-                in_gears && !s.dead && extruder_back < f64::from(permille) / 1000.0 * p.max_speed
+                in_gears && taut && !s.dead && extruder_back < f64::from(permille) / 1000.0 * p.max_speed
             }) {
                 Some(permille) => {
                     s.grip_pull_ms += u64::from(SUBSTEP_MS);
@@ -643,6 +650,10 @@ impl Model {
                     if excess > 0.0 && d_r < 0.0 {
                         d_r += excess.min(-d_r);
                     }
+                } else if buffer < -limit && weak_pull {
+                    // Compressed by an extruder retracting faster than a weak pull: it drives the
+                    // motor back faster.
+                    d_r -= -limit - buffer;
                 } else if buffer < -limit {
                     // Compressed: a motor pushing stalls, then an extruder retracting slips.
                     let mut deficit = -limit - buffer;

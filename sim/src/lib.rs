@@ -10,7 +10,8 @@
 //!   [`mechanics`]: the printer's extruder as the simulator moves it around a tool change;
 //!   [`scenario`]: Prusa's expected Buddy 6.5.3 exchange, replayed against the unit.
 //! - [`soak`]: long runs of tool changes with random faults, and the figures they give;
-//!   [`timing`]: the physical minimum a tool change is measured against.
+//!   [`timing`]: the physical minimum a tool change is measured against; [`unload_faults`]: the
+//!   unload faults users report, on this unit and on MMU 3.0.4's strict unload.
 
 pub mod cut;
 pub mod event;
@@ -28,6 +29,7 @@ pub mod scenarios;
 pub mod sim;
 pub mod soak;
 pub mod timing;
+pub mod unload_faults;
 
 pub use event::{Event, EventKind};
 pub use fault::{FAULT_HELP, ScheduledFault, SimFault, SimFaultKind};

@@ -366,7 +366,8 @@ fn still_gripped(
     }
 }
 
-/// `P3` once the pull has begun: on until the printer's sensor and then the hub sensor clear. The
+/// `P3` once the pull has begun: on until the printer's sensor and then the hub sensor clear. A
+/// tube that reads taut on the way is felt, not pulled ([`go_on_feeling`]). The
 /// printer's sensor must clear within the check distance of where the pull began (Retry does not
 /// start the count again unless it waited for the printer), and never after the tip has left
 /// the hub: pulling on would drag the filament out of its drive gear (MMU 3.0.3 checks too). A
@@ -396,6 +397,15 @@ fn pull_out_of_printer<const N: usize>(run: &mut PhaseRun, at: &Sight<'_, N>) ->
             } else {
                 go_on_feeling(run, at)?
             }
+        }
+        // Held again on the way (a stringy tip the gears still grip): only felt, until let go.
+        _ if !strict(config)
+            && at
+                .unit
+                .tension_reading(at.slot)
+                .is_some_and(|t| taut_for(run, t, at.now, config) > 0) =>
+        {
+            go_on_feeling(run, at)?
         }
         _ => Goal::Drive,
     })

@@ -1,0 +1,35 @@
+//! The unload fault table's claims, on a few seeds (the book's table runs 200:
+//! `cargo run --release -p mmu-sim --example unload_faults -- 200`).
+
+use mmu_firmware::drive::FEEL_DUTY;
+use mmu_sim::Personality;
+use mmu_sim::unload_faults::{TrialSetup, UnloadFault, play};
+
+fn setup(strict: bool) -> TrialSetup {
+    TrialSetup {
+        printer: Personality::Buddy65,
+        extruder: None,
+        strict,
+    }
+}
+
+/// A printer sensor that clears late: MMU 3.0.4's blind 4 s wait reports `8004` where the delay
+/// outlasts it; this unit, which feels the filament come back, reports nothing and strands nothing.
+#[test]
+fn a_late_sensor_costs_3_0_4_an_error_and_this_unit_none() {
+    let strict = play(UnloadFault::LateSensor, setup(true), 0..4);
+    let feel = play(UnloadFault::LateSensor, setup(false), 0..4);
+    assert!(strict.errors > 0, "{strict:?}");
+    assert_eq!((feel.errors, feel.stranded), (0, 0), "{feel:?}");
+}
+
+/// A stringy tip the gears keep gripping: the strict unload pulls at full duty against them; this
+/// unit never pulls harder than a feel, and strands nothing.
+#[test]
+fn a_stringy_tip_is_never_pulled_harder_than_a_feel() {
+    let strict = play(UnloadFault::StringyTip, setup(true), 0..2);
+    let feel = play(UnloadFault::StringyTip, setup(false), 0..2);
+    assert!(strict.hardest_pull_permille > FEEL_DUTY.permille(), "{strict:?}");
+    assert!(feel.hardest_pull_permille <= FEEL_DUTY.permille(), "{feel:?}");
+    assert_eq!(feel.stranded, 0, "{feel:?}");
+}
