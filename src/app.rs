@@ -23,6 +23,7 @@ use crate::runner::{Learned, Runner, Status};
 use crate::session::Session;
 use crate::tally::Tally;
 use crate::time::Instant;
+use crate::time::div_rem_u64;
 use crate::unit::{Lane, Unit};
 
 /// Room for the bytes one step may send: the answers to every request the at most
@@ -34,7 +35,7 @@ pub const TX_CAPACITY: usize = 48;
 const ERASE_AND_RESET: u8 = 42;
 
 /// Blink period of the status LED in an error state, ms.
-const ERROR_BLINK_MS: u64 = 250;
+const ERROR_BLINK_MS: u16 = 250;
 
 /// Something only the board can do.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -249,7 +250,7 @@ impl<const N: usize> App<N> {
         );
         out.status_led = match self.operation.status() {
             Status::Running(_) => true,
-            Status::Failed(_) => (now.as_millis() / ERROR_BLINK_MS).is_multiple_of(2),
+            Status::Failed(_) => div_rem_u64(now.as_millis(), ERROR_BLINK_MS).0.is_multiple_of(2),
             Status::Finished => false,
         };
         out

@@ -18,7 +18,7 @@ use mmu_hal_port::Samples;
 use mmu_protocol::{ButtonCode, MAX_FRAME_LEN};
 
 use crate::app::{App, BoardAction, Outputs, TX_CAPACITY};
-use crate::time::Instant;
+use crate::time::{Instant, div_rem_u64};
 use crate::uart::Received;
 
 /// A step that starts later than this after its tick does not feed the watchdog, µs.
@@ -63,14 +63,14 @@ const _: () = {
 #[derive(Debug, Clone, Copy)]
 pub struct TickSchedule {
     next_us: u64,
-    period_us: u64,
+    period_us: u16,
 }
 
 impl TickSchedule {
     /// The first step a period after `now_us`.
-    pub const fn new(now_us: u64, period_us: u64) -> Self {
+    pub const fn new(now_us: u64, period_us: u16) -> Self {
         TickSchedule {
-            next_us: now_us + period_us,
+            next_us: now_us + period_us as u64,
             period_us,
         }
     }
@@ -84,7 +84,7 @@ impl TickSchedule {
     /// after this one's deadline.
     pub fn start(&mut self, now_us: u64) -> u64 {
         let lateness = now_us.saturating_sub(self.next_us);
-        self.next_us += self.period_us;
+        self.next_us += u64::from(self.period_us);
         lateness
     }
 
@@ -93,8 +93,8 @@ impl TickSchedule {
     /// keep their place in the millisecond (the firmware's `Ticker` is reset to it).
     pub fn skip_missed(&mut self, now_us: u64) {
         if self.next_us <= now_us && self.period_us > 0 {
-            let missed = (now_us - self.next_us) / self.period_us + 1;
-            self.next_us += missed * self.period_us;
+            let missed = div_rem_u64(now_us - self.next_us, self.period_us).0 + 1;
+            self.next_us += missed * u64::from(self.period_us);
         }
     }
 }

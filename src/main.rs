@@ -149,8 +149,11 @@ static FIXED_PROFILE: mmu_firmware::profile::Profile = *ThisBoard::PROFILE;
 fn new_logic() -> &'static mut Logic<SLOTS> {
     static LOGIC: StaticCell<Logic<SLOTS>> = StaticCell::new();
     let profile = ThisBoard::PROFILE;
+    // The board's default settings, worked out at build time: copied from flash whole rather
+    // than built field by field.
+    const CONFIG: Config = Config::for_profile(ThisBoard::PROFILE);
     LOGIC.init_with(|| {
-        let app = unwrap!(App::with_profile(profile, Config::for_profile(profile)));
+        let app = unwrap!(App::with_profile(profile, CONFIG));
         RefCell::new(ControlLoop::new(app, tasks::now()))
     })
 }

@@ -10,7 +10,7 @@ use mmu_hal_port::Direction;
 
 use crate::profile::{ANGLE_COUNTS, ANGLE_FAULT, MotionSensor};
 use crate::sensor::{AnalogSensor, FilterKind, Thresholds};
-use crate::time::Instant;
+use crate::time::{Instant, div_rem_u64};
 
 /// The filament motion between two marks of a counting source, 1/100 mm: the thesis build's
 /// distance per revolution, so the stall rules wait as long on every build.
@@ -95,7 +95,7 @@ impl Odometer {
         if counts == 0 {
             return false;
         }
-        let per_rev = i32::from(source.counts_per_rev().max(1));
+        let per_rev = source.counts_per_rev().max(1);
         let (step, remainder) = scale(counts, mm_per_rev_centi, self.remainder, per_rev);
         self.centi = self.centi.wrapping_add(step);
         self.remainder = remainder;
@@ -183,17 +183,23 @@ impl Odometer {
 /// `counts` of a turn of `per_rev` counts, each turn `mm_per_rev_centi`, with the `remainder`
 /// carried from before: the whole 1/100 mm and the new remainder. In 32 bits as long as it fits
 /// (every sample of a moving lane), else in 64: a count's difference is up to 65 535.
-fn scale(counts: i32, mm_per_rev_centi: u16, remainder: i32, per_rev: i32) -> (i32, i32) {
+fn scale(counts: i32, mm_per_rev_centi: u16, remainder: i32, per_rev: u16) -> (i32, i32) {
     match counts
         .checked_mul(i32::from(mm_per_rev_centi))
         .and_then(|scaled| scaled.checked_add(remainder))
     {
-        Some(scaled) => (scaled / per_rev, scaled % per_rev),
+        Some(scaled) => (scaled / i32::from(per_rev), scaled % i32::from(per_rev)),
         None => {
             let scaled = i64::from(counts) * i64::from(mm_per_rev_centi) + i64::from(remainder);
-            let per_rev = i64::from(per_rev);
-            // The odometry wraps; the remainder is below `per_rev`.
-            ((scaled / per_rev) as i32, (scaled % per_rev) as i32)
+            // Divided by size; the quotient and the remainder take the sign of `scaled`, as `/`
+            // and `%` give them. The odometry wraps; the remainder is below `per_rev`.
+            let (quotient, rest) = div_rem_u64(scaled.unsigned_abs(), per_rev);
+            let (quotient, rest) = (quotient as i32, rest as i32);
+            if scaled < 0 {
+                (quotient.wrapping_neg(), -rest)
+            } else {
+                (quotient, rest)
+            }
         }
     }
 }

@@ -35,6 +35,7 @@ use portable_atomic::{AtomicBool, AtomicU32, Ordering};
 use crate::control::{self, ControlLoop, ResetBoard, Tick, TickSchedule};
 use crate::persist::{Boot, EntryCrc, Keeper, Store};
 use crate::port::{CheckedCrc, SampleClock, WatchedFlash};
+use crate::time::div_rem_u64;
 use crate::uart::{LineErrors, Received};
 use crate::{App, BoardAction, Instant, Samples, drive};
 
@@ -47,8 +48,10 @@ macro_rules! log {
     }};
 }
 
+/// The control period, µs.
+const PERIOD_US: u16 = 1_000;
 /// The control period: 1 ms, exact at embassy-time's 1 MHz tick.
-pub const PERIOD: Duration = Duration::from_micros(1_000);
+pub const PERIOD: Duration = Duration::from_micros(PERIOD_US as u64);
 /// The scan's bound in a step that starts late (the scan is otherwise bounded by the next tick).
 pub const LATE_SCAN: Duration = Duration::from_micros(600);
 /// The longest a reset waits for the last response to leave the UART.
@@ -120,8 +123,7 @@ where
     BOOTED.wait().await;
     let mut ticker = Ticker::every(PERIOD);
     // The first tick on the grid of whole periods: a period before it, the schedule starts.
-    let period_us = PERIOD.as_micros();
-    let mut schedule = TickSchedule::new(next_tick_us(now_us()) - period_us, period_us);
+    let mut schedule = TickSchedule::new(next_tick_us(now_us()) - u64::from(PERIOD_US), PERIOD_US);
     // The Ticker on the schedule's grid to the microsecond: the scan's bound below is the next
     // tick, the same instant, so the time driver has one alarm a period.
     align(&mut ticker, &schedule);
@@ -277,8 +279,8 @@ pub fn bounded<F: Future>(
 
 /// The control task's first tick after `now_us`: the ticks fall on whole periods of the uptime.
 pub fn next_tick_us(now_us: u64) -> u64 {
-    let period_us = PERIOD.as_micros();
-    (now_us / period_us + 1) * period_us
+    let (ticks, _) = div_rem_u64(now_us, PERIOD_US);
+    (ticks + 1) * u64::from(PERIOD_US)
 }
 
 /// Makes `ticker` tick next at `schedule`'s deadline. `Ticker::reset_at(d)` ticks a period

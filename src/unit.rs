@@ -228,27 +228,23 @@ impl Hub {
 }
 
 impl<const N: usize> Default for Unit<N> {
-    fn default() -> Self {
-        Self::NEW
-    }
-}
-
-impl<const N: usize> Unit<N> {
     /// A unit that has seen no sample, every lane unknown.
-    const NEW: Unit<N> = Unit {
-        profile: &THESIS,
-        feeders: [Feeder::NEW; N],
-        drives: [SlotDrive::NEW; N],
-        hub: Hub::NEW,
-        lanes: [Lane::Unknown; N],
-        fsensor: 0,
-        selected: None,
-        proven_owner: None,
-        moved_by_printer: [0; N],
-        coasting_mark_at: [Instant::ZERO; N],
-        clear_of_merge: [false; N],
-        tips: TipEstimates::NEW,
-    };
+    fn default() -> Self {
+        Unit {
+            profile: &THESIS,
+            feeders: [Feeder::NEW; N],
+            drives: [SlotDrive::NEW; N],
+            hub: Hub::NEW,
+            lanes: [Lane::Unknown; N],
+            fsensor: 0,
+            selected: None,
+            proven_owner: None,
+            moved_by_printer: [0; N],
+            coasting_mark_at: [Instant::ZERO; N],
+            clear_of_merge: [false; N],
+            tips: TipEstimates::NEW,
+        }
+    }
 }
 
 impl<const N: usize> Unit<N> {

@@ -16,7 +16,7 @@ mod common;
 
 use common::{Rig, assert_parked, error, finished, loaded, press, t};
 use mmu_firmware::drive::FEEL_DUTY;
-use mmu_firmware::{Config, Direction, MotorCommand};
+use mmu_firmware::{Direction, MotorCommand};
 use mmu_model::ModelConfig;
 use mmu_protocol::{ButtonCode, ErrorCode, ParamCode, ProgressCode, Request, RequestCode};
 

@@ -132,7 +132,7 @@ fn a_printer_that_retracts_slowly_is_waited_for() {
     while rig.model.tip_mm(0).unwrap() >= gears {
         let from = rig.motor_log.len();
         rig.printer_step(None);
-        if rig.now % 100 == 0 {
+        if rig.now.is_multiple_of(100) {
             let _ = rig.query();
         }
         hardest_gripped = hardest_gripped.max(hardest_pull_since(&rig, from));

@@ -15,7 +15,7 @@ use super::crc::{EntryCrc, SoftwareCrc};
 use super::settings::{Defaults, Scan};
 use super::{Damage, Snapshot, Store, StoreError};
 use crate::app::{App, BoardAction};
-use crate::time::Instant;
+use crate::time::{Instant, div_rem_u64};
 use crate::unit::Lane;
 
 /// [`Keeper::update`] compares counters and settings this often; lanes every step, ms.
@@ -303,18 +303,21 @@ impl<F: NorFlash, const N: usize, C: EntryCrc> Keeper<F, N, C> {
 
     /// One erase more every hour / [`ERASES_PER_HOUR`], up to [`ERASE_BURST`].
     fn top_up(&mut self, now: Instant) {
-        const PERIOD_MS: u64 = 3_600_000 / ERASES_PER_HOUR as u64;
+        const PERIOD_MS: u16 = (3_600_000 / ERASES_PER_HOUR) as u16;
+        const { assert!(3_600_000 / ERASES_PER_HOUR <= u16::MAX as u32) };
         let since = *self.refilled_at.get_or_insert(now);
         if self.erase_credit >= ERASE_BURST {
             self.refilled_at = Some(now);
             return;
         }
-        // Divides (a 64-bit library call on the M0+) only once a period has passed.
+        // Divides only once a period has passed.
         let elapsed = now.millis_since(since);
-        if elapsed >= PERIOD_MS {
-            let earned = elapsed / PERIOD_MS;
+        if elapsed >= u64::from(PERIOD_MS) {
+            let (earned, _) = div_rem_u64(elapsed, PERIOD_MS);
             self.erase_credit = (self.erase_credit + earned as u32).min(ERASE_BURST);
-            self.refilled_at = Some(Instant::from_millis(since.as_millis() + earned * PERIOD_MS));
+            self.refilled_at = Some(Instant::from_millis(
+                since.as_millis() + earned * u64::from(PERIOD_MS),
+            ));
         }
     }
 

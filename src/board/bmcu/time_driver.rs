@@ -17,11 +17,13 @@ use embassy_time_driver::Driver;
 use embassy_time_queue_utils::Queue;
 use pac::systick::vals::{Mode, Stclk};
 
+use mmu_firmware::time::div_rem_u64;
+
 use super::clock::SYSTICK_HZ;
 
 /// SysTick counts per embassy-time tick.
-const COUNTS_PER_TICK: u64 = SYSTICK_HZ as u64 / embassy_time_driver::TICK_HZ;
-const _: () = assert!(COUNTS_PER_TICK * embassy_time_driver::TICK_HZ == SYSTICK_HZ as u64);
+const COUNTS_PER_TICK: u16 = (SYSTICK_HZ as u64 / embassy_time_driver::TICK_HZ) as u16;
+const _: () = assert!(COUNTS_PER_TICK as u64 * embassy_time_driver::TICK_HZ == SYSTICK_HZ as u64);
 /// The SysTick's number among the core interrupts (qingke-rt's `CoreInterrupt::SysTick`).
 const SYSTICK_IRQ: u8 = 12;
 
@@ -43,6 +45,11 @@ pub fn counts() -> u64 {
             return (u64::from(high) << 32) | u64::from(low);
         }
     }
+}
+
+/// The count in embassy-time ticks.
+fn ticks() -> u64 {
+    div_rem_u64(counts(), COUNTS_PER_TICK).0
 }
 
 /// Busy-waits until the count reaches `until`: the bit timings of the board's bit-banged lines
@@ -74,9 +81,9 @@ impl SysTickDriver {
     /// Arms the next alarm of the queue, waking what has expired meanwhile.
     fn arm_next(&self, cs: CriticalSection) {
         let mut queue = self.queue.borrow(cs).borrow_mut();
-        let mut next = queue.next_expiration(counts() / COUNTS_PER_TICK);
-        while next != u64::MAX && !self.arm(next.saturating_mul(COUNTS_PER_TICK)) {
-            next = queue.next_expiration(counts() / COUNTS_PER_TICK);
+        let mut next = queue.next_expiration(ticks());
+        while next != u64::MAX && !self.arm(next.saturating_mul(u64::from(COUNTS_PER_TICK))) {
+            next = queue.next_expiration(ticks());
         }
         if next == u64::MAX {
             pac::SYSTICK.ctlr().modify(|w| w.set_stie(false));
@@ -86,7 +93,7 @@ impl SysTickDriver {
 
 impl Driver for SysTickDriver {
     fn now(&self) -> u64 {
-        counts() / COUNTS_PER_TICK
+        ticks()
     }
 
     fn schedule_wake(&self, at: u64, waker: &core::task::Waker) {
