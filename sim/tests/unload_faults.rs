@@ -33,3 +33,14 @@ fn a_stringy_tip_is_never_pulled_harder_than_a_feel() {
     assert!(feel.hardest_pull_permille <= FEEL_DUTY.permille(), "{feel:?}");
     assert_eq!(feel.stranded, 0, "{feel:?}");
 }
+
+/// A printer that retracts slowly: its finishing retract still turns its gears back when the new
+/// filament reaches them (seeds 13 and 18 ended `8003` before the unit held the tip there until
+/// the printer's co-feed turned them forward).
+#[test]
+fn a_new_filament_that_meets_gears_still_retracting_waits_for_them() {
+    for seed in [13, 18] {
+        let feel = play(UnloadFault::SlowRetract, setup(false), seed..seed + 1);
+        assert_eq!((feel.errors, feel.stranded), (0, 0), "seed {seed}: {feel:?}");
+    }
+}

@@ -96,6 +96,10 @@ impl MotionPhase for ThroughBowden {
     }
 }
 
+/// The longest `P1c` holds a tip that met the printer's gears before its sensor, ms: Buddy 6.5.3's
+/// 80 mm finishing retract at a quarter of its 20 mm/s, and a margin.
+const GEARS_WAIT_MS: u64 = 20_000;
+
 /// `P1c` ([`super::Phase::FeedToFsensor`]): slow feed until the printer's sensor triggers; the
 /// printer co-feeds. As a `search` after Retry of `8003` ([`super::Phase::SearchFsensor`]), the
 /// same feed from wherever the tip is past the hub sensor, at most the whole Bowden length plus
@@ -130,8 +134,18 @@ impl MotionPhase for ToFsensor {
 
     /// The slow feed ends at the printer's sensor, once the printer's `Q0` has seen this phase.
     fn goal<const N: usize>(self, run: &mut PhaseRun, at: &Sight<'_, N>) -> Result<Decision, ErrorCode> {
+        let met = at
+            .unit
+            .tension_reading(at.slot)
+            .is_some_and(|tension| compressed_for(run, tension, at.now, at.config) >= MET_CONFIRM_MS);
         Ok(if !at.unit.fsensor_triggered() {
-            Goal::Drive.into()
+            // Met a stop before the sensor: the printer's gears, turning back while its retract
+            // lasts, take the tip once its co-feed turns them forward. Pushing on would stall.
+            if met && at.now.millis_since(run.started) < GEARS_WAIT_MS {
+                Goal::Hold.into()
+            } else {
+                Goal::Drive.into()
+            }
         } else if at.notes.printer.polled > run.started {
             // After a stop before the sensor, where it triggered is the Bowden length.
             let measured = at
