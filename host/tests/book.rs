@@ -373,7 +373,7 @@ const COMMANDS: &[(&str, Check)] = &[
     ("cargo bench -p mmu-sim --bench toolchange", Check::InCi),
     (
         "cargo run --release -p mmu-sim --example unload_faults -- 200",
-        Check::NotRun("about 5 minutes; sim/tests/unload_faults.rs plays a few seeds of it in CI"),
+        Check::InCi,
     ),
     (
         "bash scripts/soak-matrix.sh",

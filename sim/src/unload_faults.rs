@@ -34,15 +34,19 @@ pub enum UnloadFault {
     LongBowden,
     /// The printer retracts at a quarter to a half of its speed.
     SlowRetract,
+    /// No fault, but the printer's sensor sits before its gears (an MK3.5 on Buddy 6.5.3): no
+    /// retract of the printer's can clear it.
+    SensorFirst,
 }
 
 impl UnloadFault {
     /// Every fault, in the table's order.
-    pub const ALL: [UnloadFault; 4] = [
+    pub const ALL: [UnloadFault; 5] = [
         UnloadFault::LateSensor,
         UnloadFault::StringyTip,
         UnloadFault::LongBowden,
         UnloadFault::SlowRetract,
+        UnloadFault::SensorFirst,
     ];
 
     /// The row's name.
@@ -52,6 +56,7 @@ impl UnloadFault {
             UnloadFault::StringyTip => "stringy tip held 2-30 mm",
             UnloadFault::LongBowden => "Bowden tube 1-2 m",
             UnloadFault::SlowRetract => "retract at 0.25-0.5x speed",
+            UnloadFault::SensorFirst => "sensor before the gears (MK3.5)",
         }
     }
 }
@@ -120,6 +125,9 @@ fn trial(fault: UnloadFault, setup: TrialSetup, seed: u64) -> Trial {
         ..SimOptions::default()
     };
     options.unit.strict_unload = setup.strict;
+    if fault == UnloadFault::SensorFirst {
+        options.extruder = Some(ExtruderGeometry::SENSOR_FIRST);
+    }
     if fault == UnloadFault::LongBowden {
         let mm = draw(&mut rng, 1000.0, 2000.0).round();
         options.model = ModelConfig::default().with_bowden_length(mm as f32);
@@ -152,7 +160,7 @@ fn trial(fault: UnloadFault, setup: TrialSetup, seed: u64) -> Trial {
         UnloadFault::SlowRetract => Some(Fault::SlowRetract {
             factor: draw(&mut rng, 0.25, 0.5) as f32,
         }),
-        UnloadFault::LongBowden => None,
+        UnloadFault::LongBowden | UnloadFault::SensorFirst => None,
     };
     if let Some(strike) = strike {
         printer.link_mut().sim_mut().model_mut().inject(strike);

@@ -44,3 +44,13 @@ fn a_new_filament_that_meets_gears_still_retracting_waits_for_them() {
         assert_eq!((feel.errors, feel.stranded), (0, 0), "seed {seed}: {feel:?}");
     }
 }
+
+/// The printer's sensor before its gears (an MK3.5 on Buddy 6.5.3): no retract can clear it, so
+/// MMU 3.0.4's blind wait reports `8004` on every change; this unit feels the filament free.
+#[test]
+fn a_sensor_before_the_gears_costs_3_0_4_an_error_every_change_and_this_unit_none() {
+    let strict = play(UnloadFault::SensorFirst, setup(true), 0..2);
+    let feel = play(UnloadFault::SensorFirst, setup(false), 0..2);
+    assert_eq!(strict.errors, strict.trials, "{strict:?}");
+    assert_eq!((feel.errors, feel.stranded), (0, 0), "{feel:?}");
+}
