@@ -122,10 +122,9 @@ impl Personality {
     /// show): Buddy's MK4, MK3.9 and Core One carry the Nextruder, whose sensor reads the
     /// filament until it leaves the drive gear ([`ExtruderGeometry::GEARS_FIRST`], Buddy 6.5's
     /// default); the MK3S and the MK3.5 (on Buddy firmware) have the sensor above the gears
-    /// ([`ExtruderGeometry::SENSOR_FIRST`]). Buddy 6.4 runs on both; it keeps the sensor-first
-    /// default for now, because with its gears first the unit still fails issue #34's item 3
-    /// (a Bowden length set too long is never learned: `8003` on every change), which the unit
-    /// must fix first; `--extruder gears-first` plays it.
+    /// ([`ExtruderGeometry::SENSOR_FIRST`]). Buddy 6.4 runs on both; it plays the MK3.5's order
+    /// by default, which the session tests and the tool-change figures were written against;
+    /// `--extruder gears-first` plays an MK4 on it.
     pub const fn extruder(self) -> ExtruderGeometry {
         match self {
             Personality::Buddy65 => ExtruderGeometry::GEARS_FIRST,
