@@ -59,11 +59,11 @@ xargs -P "$jobs" -L 1 bash -c 'run_one "$@"' _ <"$out_dir/runs"
 failed=0
 while read -r n hardware printer slots seed; do
   rc=$(cat "$out_dir/$n.rc")
-  summary=$(grep -m1 '^soak:' "$out_dir/$n.out" || echo "no summary")
+  summary=$(grep -m1 '^soak:' "$out_dir/$n.out" || head -n1 "$out_dir/$n.out")
   if [ "$rc" -ne 0 ]; then
     failed=$((failed + 1))
     echo "FAILED $hardware $printer $slots slots seed $seed (exit $rc): $summary"
-    grep -E '^ *change [0-9]+' "$out_dir/$n.out" | head -3 | sed 's/^ */    /'
+    { grep -E '^ *change [0-9]+' "$out_dir/$n.out" || true; } | head -3 | sed 's/^ */    /'
   elif [ "$all" -eq 1 ]; then
     echo "ok $hardware $printer $slots slots seed $seed: $summary"
   fi
