@@ -1,31 +1,72 @@
 #!/usr/bin/env bash
-# The soak matrix of every hardware profile: 3 printers x 1/3/5 slots (1/3/4 on the bmcu-c) x
-# seeds 1-10, CHANGES tool changes each (default 100) with random faults, on the simulator.
-# Prints one line a run and the totals; exits non-zero when any run failed.
+# The soak matrix: every hardware profile x 3 printers x 1/3/5 slots (1/3/4 on the bmcu-c) x
+# seeds 1-SEEDS, CHANGES tool changes each with FAULTS faults, on the simulator. Prints one line
+# per failing run (with the run's first notes: the change, its fault, the errors, how it ended)
+# and a total line; exits non-zero when any run failed.
 #   bash scripts/soak-matrix.sh [CHANGES]
+#   bash scripts/soak-matrix.sh [--changes N] [--seeds N] [--faults random|power-loss|spool-ends]
+#                               [--hardware LIST] [--printers LIST] [--jobs N] [--all]
+# Defaults: 100 changes, seeds 1-10, random faults, every profile, every printer, one job, only
+# the failing runs shown (--all: one line a run). LIST is comma-separated (`--hardware thesis`).
+# The binary is built into $CARGO_TARGET_DIR (or ./target) with `cargo build --release`.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-changes="${1:-100}"
+changes=100 seeds=10 faults=random jobs=1 all=0
+hardware_list=thesis,n20-quadrature,bmcu-c printer_list=buddy-6.5,buddy-6.4,mk3s
+while [ $# -gt 0 ]; do
+  case $1 in
+    --changes) changes=$2; shift 2 ;;
+    --seeds) seeds=$2; shift 2 ;;
+    --faults) faults=$2; shift 2 ;;
+    --hardware) hardware_list=$2; shift 2 ;;
+    --printers) printer_list=$2; shift 2 ;;
+    --jobs) jobs=$2; shift 2 ;;
+    --all) all=1; shift ;;
+    [0-9]*) changes=$1; shift ;;
+    *) echo "soak-matrix: unknown argument $1 (see the head of $0)" >&2; exit 2 ;;
+  esac
+done
 cargo build --release -q -p mmu-host
-mmu=./target/release/mmu
-runs=0 failed=0
-for hardware in thesis n20-quadrature bmcu-c; do
+export MMU="${CARGO_TARGET_DIR:-target}/release/mmu"
+out_dir=$(mktemp -d)
+trap 'rm -rf "$out_dir"' EXIT
+export out_dir changes faults
+
+# One run: its output in $out_dir/<n>.out, its exit status in $out_dir/<n>.rc.
+run_one() {
+  local n=$1 hardware=$2 printer=$3 slots=$4 seed=$5 rc=0
+  "$MMU" printer --sim --hardware "$hardware" --printer "$printer" --slots "$slots" \
+    soak --changes "$changes" --faults "$faults" --seed "$seed" >"$out_dir/$n.out" 2>&1 || rc=$?
+  echo "$rc" >"$out_dir/$n.rc"
+}
+export -f run_one
+
+runs=0
+for hardware in ${hardware_list//,/ }; do
   case $hardware in bmcu-c) most=4 ;; *) most=5 ;; esac
-  for printer in buddy-6.5 buddy-6.4 mk3s; do
+  for printer in ${printer_list//,/ }; do
     for slots in 1 3 $most; do
-      for seed in 1 2 3 4 5 6 7 8 9 10; do
+      for seed in $(seq 1 "$seeds"); do
         runs=$((runs + 1))
-        if out=$($mmu printer --sim --hardware $hardware --printer $printer --slots $slots \
-            soak --changes "$changes" --faults random --seed $seed 2>&1); then
-          echo "$hardware $printer $slots slots seed $seed: $(grep '^soak:' <<<"$out")"
-        else
-          failed=$((failed + 1))
-          echo "$hardware $printer $slots slots seed $seed: FAILED"
-          grep -E '^(soak|change) ' <<<"$out" | head -4
-        fi
+        echo "$runs $hardware $printer $slots $seed"
       done
     done
   done
-done
-echo "soak matrix: $runs runs of $changes changes, $failed failed"
+done >"$out_dir/runs"
+start=$SECONDS
+xargs -P "$jobs" -L 1 bash -c 'run_one "$@"' _ <"$out_dir/runs"
+
+failed=0
+while read -r n hardware printer slots seed; do
+  rc=$(cat "$out_dir/$n.rc")
+  summary=$(grep -m1 '^soak:' "$out_dir/$n.out" || head -n1 "$out_dir/$n.out")
+  if [ "$rc" -ne 0 ]; then
+    failed=$((failed + 1))
+    echo "FAILED $hardware $printer $slots slots seed $seed (exit $rc): $summary"
+    { grep -E '^ *change [0-9]+' "$out_dir/$n.out" || true; } | head -3 | sed 's/^ */    /'
+  elif [ "$all" -eq 1 ]; then
+    echo "ok $hardware $printer $slots slots seed $seed: $summary"
+  fi
+done <"$out_dir/runs"
+echo "soak matrix: $runs runs of $changes changes ($faults faults), $failed failed, $((SECONDS - start)) s"
 [ "$failed" -eq 0 ]

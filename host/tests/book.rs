@@ -380,6 +380,18 @@ const COMMANDS: &[(&str, Check)] = &[
         Check::NotRun("about 20 minutes; sim/tests/soak.rs runs one seed of every combination in CI"),
     ),
     (
+        "bash scripts/soak-matrix.sh --changes 200 --seeds 20 --hardware thesis",
+        Check::NotRun("about 24 minutes; sim/tests/soak.rs runs one seed of every combination in CI"),
+    ),
+    (
+        "bash scripts/soak-matrix.sh --changes 200 --seeds 20 --hardware n20-quadrature,bmcu-c --jobs 2",
+        Check::NotRun("about 20 minutes; sim/tests/soak.rs runs one seed of every combination in CI"),
+    ),
+    (
+        "bash scripts/soak-matrix.sh --changes 200 --seeds 20 --hardware thesis --faults power-loss --jobs 2",
+        Check::NotRun("about 12 minutes; sim/tests/soak.rs cuts the power in every change of a short run"),
+    ),
+    (
         "cargo install cargo-fuzz",
         Check::NotRun("installs a tool; needs a nightly toolchain to use"),
     ),

@@ -25,15 +25,48 @@
 //! slow part ends at the *real* printer sensor of the geometry, so a Bowden length configured
 //! shorter than the real tube shows up as a longer slow feed (a fast part configured past the
 //! real sensor is cut at it).
+//!
+//! ## A printer's floor
+//!
+//! [`tool_change_floor`] adds what the printer's own sequence forces on the unit's time, over the
+//! same span as the time measured: from the unit accepting the `T`
+//! ([`CommandRecord::started_ms`](crate::CommandRecord::started_ms)) to its `F`
+//! ([`CommandRecord::finished_ms`](crate::CommandRecord::finished_ms)).
+//!
+//! - Buddy 6.4 and the MK3S send `T` once their ramming and retract have pulled the tip out of
+//!   their gears ([`crate::mechanics`]): the unit's time starts after it, so the printer adds
+//!   nothing and the floor is the physical minimum.
+//! - Buddy 6.5.3 sends `T` first ([`Personality::sends_tool_before_retract`]); the simulator
+//!   then plays the slicer's ramming down to [`RAMMED_TIP_PAST_SENSOR_MM`] past the printer's
+//!   sensor at [`PRINTER_UNLOAD_MM_S`], and the finishing retract at the printer's copy of
+//!   register 0x14 (the slow speed it wrote: the unit's `slow_speed` in effect). While the tip is
+//!   in the printer's gears ([`ModelConfig::extruder_gears_mm`], 10 mm before its sensor there)
+//!   they hold it: no unit pulls it faster. So the unload splits in three: the ramming, the
+//!   retract from where the ramming left the tip to the gears, and from the gears to the hub
+//!   sensor at the unit's unload speed.
+//!
+//! The end is the same on every printer: the extra load runs at the slow speed, the printer's
+//! own push's pace. Nothing of the unit's own making counts (acceleration, sensor filters, the
+//! wait for a sensor state reported over the wire, the proof that the gears hold the tip).
 
 use mmu_firmware::Config;
 use mmu_model::ModelConfig;
+
+use crate::mechanics::{FINISH_RETRACT_MM, PRINTER_UNLOAD_MM_S, RAMMED_TIP_PAST_SENSOR_MM};
+use crate::personality::Personality;
 
 /// The physical minimum of one tool change, per segment, in seconds. A segment with a positive
 /// distance and a zero speed takes forever ([`f64::INFINITY`]).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct ToolChangeMinimum {
-    /// Unload of the loaded filament from its tip to the hub sensor, at the unload speed.
+    /// The printer's ramming after the unit accepted the `T`, at [`PRINTER_UNLOAD_MM_S`] (only
+    /// in a [floor](tool_change_floor) of a printer that sends `T` before it; else 0).
+    pub ramming_s: f64,
+    /// The printer's retract while its gears hold the tip, at its slow speed (only in a
+    /// [floor](tool_change_floor) of a printer that sends `T` before it; else 0).
+    pub in_gears_s: f64,
+    /// Unload of the loaded filament from its tip (or, in a floor, from the printer's gears) to
+    /// the hub sensor, at the unload speed.
     pub unload_s: f64,
     /// Park of the unloaded filament, `park_mm` back from the hub sensor, at the load speed.
     pub park_s: f64,
@@ -50,7 +83,9 @@ pub struct ToolChangeMinimum {
 impl ToolChangeMinimum {
     /// The whole tool change, s.
     pub fn total_s(&self) -> f64 {
-        self.unload_s
+        self.ramming_s
+            + self.in_gears_s
+            + self.unload_s
             + self.park_s
             + self.feed_to_hub_s
             + self.bowden_s
@@ -61,13 +96,18 @@ impl ToolChangeMinimum {
 
 /// Time to move `distance_mm` at `speed_mm_s`: nothing for no distance, forever at no speed.
 fn segment_s(distance_mm: f64, speed_mm_s: u16) -> f64 {
+    segment_at_s(distance_mm, f64::from(speed_mm_s))
+}
+
+/// [`segment_s`] at a speed that need not be whole.
+fn segment_at_s(distance_mm: f64, speed_mm_s: f64) -> f64 {
     let distance_mm = distance_mm.max(0.0);
     if distance_mm == 0.0 {
         0.0
-    } else if speed_mm_s == 0 {
+    } else if speed_mm_s <= 0.0 {
         f64::INFINITY
     } else {
-        distance_mm / f64::from(speed_mm_s)
+        distance_mm / speed_mm_s
     }
 }
 
@@ -91,6 +131,8 @@ pub fn tool_change_minimum(
     let fsensor_mm = f64::from(geometry.bowden_length_mm).max(0.0);
     let fast_mm = f64::from(config.bowden_mm.saturating_sub(config.bowden_slowdown_mm)).min(fsensor_mm);
     ToolChangeMinimum {
+        ramming_s: 0.0,
+        in_gears_s: 0.0,
         unload_s,
         park_s,
         feed_to_hub_s: segment_s(park_mm, config.load_speed),
@@ -98,6 +140,36 @@ pub fn tool_change_minimum(
         to_fsensor_s: segment_s(fsensor_mm - fast_mm, config.slow_speed),
         extra_load_s: segment_s(f64::from(config.extra_load_mm), config.slow_speed),
     }
+}
+
+/// The floor of a tool change on `printer`: [`tool_change_minimum`] with what the printer's own
+/// sequence forces on the unit's time from accepting the `T` to finishing it (see the [module
+/// documentation](self#a-printers-floor)). `geometry` is the model's as the simulator runs it for
+/// that printer ([`Sim::model`](crate::Sim::model)), with its extruder gears where the printer
+/// has them.
+pub fn tool_change_floor(
+    config: &Config,
+    geometry: &ModelConfig,
+    printer: Personality,
+    start_tip_mm: Option<f32>,
+) -> ToolChangeMinimum {
+    let mut floor = tool_change_minimum(config, geometry, start_tip_mm);
+    let gears_mm = f64::from(geometry.extruder_gears_mm);
+    let Some(tip_mm) = start_tip_mm.map(f64::from).filter(|&tip| tip > gears_mm) else {
+        return floor;
+    };
+    if !printer.sends_tool_before_retract() {
+        return floor;
+    }
+    // The slicer's ramming stops with the tip this far; the retract then runs its 80 mm, and
+    // the gears hold the tip until it leaves them (or the retract ends, as far as it took it).
+    let rammed_mm = f64::from(geometry.bowden_length_mm + RAMMED_TIP_PAST_SENSOR_MM);
+    floor.ramming_s = segment_at_s(tip_mm - rammed_mm, f64::from(PRINTER_UNLOAD_MM_S));
+    let retract_from_mm = tip_mm.min(rammed_mm);
+    let released_mm = gears_mm.max(retract_from_mm - f64::from(FINISH_RETRACT_MM));
+    floor.in_gears_s = segment_s(retract_from_mm - released_mm, config.slow_speed);
+    floor.unload_s = segment_s(released_mm, config.unload_speed);
+    floor
 }
 
 #[cfg(test)]
@@ -189,5 +261,105 @@ mod tests {
         assert_eq!(minimum.unload_s, 0.0);
         assert_eq!(minimum.extra_load_s, f64::INFINITY);
         assert_eq!(minimum.total_s(), f64::INFINITY);
+    }
+
+    /// The model as the simulator runs it for Buddy 6.5.3: its gears 10 mm before its sensor.
+    fn buddy_6_5_geometry() -> ModelConfig {
+        let geometry = ModelConfig::default();
+        let before = Personality::Buddy65.gears_before_sensor_mm().unwrap();
+        ModelConfig {
+            extruder_gears_mm: geometry.bowden_length_mm - before,
+            ..geometry
+        }
+    }
+
+    #[test]
+    fn buddy_6_5_floor_by_hand_ramming_then_the_retract_until_the_gears_let_go() {
+        let geometry = buddy_6_5_geometry();
+        assert_eq!(geometry.extruder_gears_mm, 350.0);
+        let floor = tool_change_floor(&session_config(), &geometry, Personality::Buddy65, Some(420.0));
+        // Ramming 420 -> 374 (360 + 14) at 80 mm/s; the retract 374 -> 350 (the gears) at the
+        // slow speed, 20 mm/s; then 350 mm to the hub sensor at 95 mm/s.
+        assert!(close(floor.ramming_s, 46.0 / 80.0));
+        assert!(close(floor.in_gears_s, 24.0 / 20.0));
+        assert!(close(floor.unload_s, 350.0 / 95.0));
+        let minimum = tool_change_minimum(&session_config(), &geometry, Some(420.0));
+        assert!(close(minimum.unload_s, 420.0 / 95.0));
+        assert_eq!((minimum.ramming_s, minimum.in_gears_s), (0.0, 0.0));
+        // Everything after the unload is the same.
+        assert!(close(
+            floor.total_s() - minimum.total_s(),
+            46.0 / 80.0 + 24.0 / 20.0 + 350.0 / 95.0 - 420.0 / 95.0
+        ));
+        // 0.575 + 1.2 + 350 / 95 + (15 + 15 + 330) / 95 + 1.5 + 0.25 = 10.9987
+        assert!((floor.total_s() - 10.9987).abs() < 1e-4, "{}", floor.total_s());
+    }
+
+    #[test]
+    fn printers_that_retract_before_they_send_t_add_nothing() {
+        for printer in [Personality::Buddy64, Personality::Mk3s] {
+            for tip in [Some(364.0), Some(420.0), None] {
+                let geometry = ModelConfig::default();
+                assert_eq!(
+                    tool_change_floor(&session_config(), &geometry, printer, tip),
+                    tool_change_minimum(&session_config(), &geometry, tip),
+                    "{printer} {tip:?}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn buddy_6_5_adds_nothing_when_the_tip_is_not_in_its_gears() {
+        let geometry = buddy_6_5_geometry();
+        for tip in [None, Some(350.0), Some(200.0)] {
+            assert_eq!(
+                tool_change_floor(&session_config(), &geometry, Personality::Buddy65, tip),
+                tool_change_minimum(&session_config(), &geometry, tip),
+                "{tip:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_tip_short_of_the_rammed_position_is_not_rammed() {
+        let floor = tool_change_floor(
+            &session_config(),
+            &buddy_6_5_geometry(),
+            Personality::Buddy65,
+            Some(370.0),
+        );
+        assert_eq!(floor.ramming_s, 0.0);
+        assert!(close(floor.in_gears_s, 20.0 / 20.0));
+        assert!(close(floor.unload_s, 350.0 / 95.0));
+    }
+
+    #[test]
+    fn gears_the_retract_cannot_clear_hold_the_tip_for_the_whole_retract_only() {
+        // Gears 200 mm back: the 80 mm retract from 374 leaves the tip at 294, still in them as
+        // the model has it; only the retract's own distance is paced by the printer.
+        let geometry = ModelConfig {
+            extruder_gears_mm: 200.0,
+            ..ModelConfig::default()
+        };
+        let config = Config {
+            slow_speed: 40,
+            ..session_config()
+        };
+        let floor = tool_change_floor(&config, &geometry, Personality::Buddy65, Some(374.0));
+        assert_eq!(floor.ramming_s, 0.0);
+        assert!(close(floor.in_gears_s, 80.0 / 40.0));
+        assert!(close(floor.unload_s, 294.0 / 95.0));
+    }
+
+    #[test]
+    fn a_printer_retract_at_no_speed_takes_forever() {
+        let config = Config {
+            slow_speed: 0,
+            ..session_config()
+        };
+        let floor = tool_change_floor(&config, &buddy_6_5_geometry(), Personality::Buddy65, Some(420.0));
+        assert_eq!(floor.in_gears_s, f64::INFINITY);
+        assert!(close(floor.ramming_s, 46.0 / 80.0));
     }
 }

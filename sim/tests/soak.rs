@@ -181,6 +181,31 @@ fn soak_of(
     soak::run(&options, &mut |_| {})
 }
 
+/// Each printer's fault-free changes against its floor: never below it, within the 1.2x the
+/// bench holds them to; only Buddy 6.5.3, which sends `T` before its ramming and retract, adds
+/// to the physical minimum.
+#[test]
+fn every_printer_changes_tools_within_1_2_times_its_floor() {
+    for personality in Personality::ALL {
+        let report = soak_of(personality, 4, false, 3, 3);
+        assert!(report.passed(), "{personality}:\n{report}\n{:#?}", report.notes);
+        let times = report.tool_change_times;
+        assert_eq!(times.changes, 4, "{personality}:\n{report}");
+        let ratio = times.ratio_to_floor().expect("timed changes");
+        assert!((1.0..1.2).contains(&ratio), "{personality}:\n{report}");
+        if personality.sends_tool_before_retract() {
+            // The retract while the gears hold the tip (about a second in each change that
+            // unloads; the first, from nothing loaded, has none).
+            assert!(
+                times.floor_mean_s > times.physical_minimum_mean_s + 0.25,
+                "{personality}:\n{report}"
+            );
+        } else {
+            assert_eq!(times.floor_mean_s, times.physical_minimum_mean_s, "{personality}");
+        }
+    }
+}
+
 #[test]
 fn buddy_6_4_and_the_mk3s_soak_clean_with_1_3_and_5_slots() {
     for personality in [Personality::Buddy64, Personality::Mk3s] {

@@ -31,7 +31,8 @@
 //!
 //! The times of the fault-free changes (the unit's own time from accepting the `T` to finishing
 //! it, as [`Sim::take_finished`] records it) are compared with the physical minimum of
-//! [`crate::timing`].
+//! [`crate::timing`] and with the printer's floor ([`crate::timing::tool_change_floor`]: the
+//! minimum with what the printer's own sequence forces over the same span).
 
 mod restarts;
 mod striking;
@@ -50,7 +51,7 @@ use crate::printer::{
     Decision, Link, Operator, Outcome, Printer, PrinterError, PrinterEvent, PrinterOptions,
 };
 use crate::sim::{CommandRecord, PRINTER_UNLOAD_MM, PRINTER_UNLOAD_MM_S, Sim, SimOptions, status_text};
-use crate::timing::tool_change_minimum;
+use crate::timing::{tool_change_floor, tool_change_minimum};
 
 mod spool_end;
 
@@ -145,6 +146,9 @@ pub struct ToolChangeTimes {
     pub max_s: f64,
     /// Mean physical minimum of the same changes, s ([`crate::timing`]).
     pub physical_minimum_mean_s: f64,
+    /// Mean floor of the same changes on the printer played, s: the physical minimum with what
+    /// the printer's own sequence forces ([`crate::timing::tool_change_floor`]).
+    pub floor_mean_s: f64,
 }
 
 impl ToolChangeTimes {
@@ -152,6 +156,11 @@ impl ToolChangeTimes {
     pub fn ratio_to_minimum(&self) -> Option<f64> {
         (self.changes > 0 && self.physical_minimum_mean_s > 0.0)
             .then(|| self.mean_s / self.physical_minimum_mean_s)
+    }
+
+    /// Mean time over mean floor; `None` without timed changes.
+    pub fn ratio_to_floor(&self) -> Option<f64> {
+        (self.changes > 0 && self.floor_mean_s > 0.0).then(|| self.mean_s / self.floor_mean_s)
     }
 }
 
@@ -261,13 +270,18 @@ impl fmt::Display for SoakReport {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         writeln!(f, "{}", self.summary_line())?;
         let times = &self.tool_change_times;
-        match times.ratio_to_minimum() {
-            Some(ratio) => writeln!(
+        match (times.ratio_to_minimum(), times.ratio_to_floor()) {
+            (Some(ratio), Some(floor_ratio)) => writeln!(
+                f,
+                "tool change: mean {:.2} s, max {:.2} s, physical minimum {:.2} s (mean/minimum {ratio:.2}), printer's floor {:.2} s (mean/floor {floor_ratio:.2}) over {} fault-free changes",
+                times.mean_s, times.max_s, times.physical_minimum_mean_s, times.floor_mean_s, times.changes
+            )?,
+            (Some(ratio), None) => writeln!(
                 f,
                 "tool change: mean {:.2} s, max {:.2} s, physical minimum {:.2} s (mean/minimum {ratio:.2}) over {} fault-free changes",
                 times.mean_s, times.max_s, times.physical_minimum_mean_s, times.changes
             )?,
-            None => writeln!(f, "tool change: no fault-free tool change was timed")?,
+            (None, _) => writeln!(f, "tool change: no fault-free tool change was timed")?,
         }
         write!(
             f,
@@ -839,18 +853,20 @@ struct TimeSums {
     sum_s: f64,
     max_s: f64,
     minimum_sum_s: f64,
+    floor_sum_s: f64,
 }
 
 impl TimeSums {
-    /// Add the tool changes among `records` that finished without an error.
-    fn add(&mut self, sim: &Sim, records: &[CommandRecord]) {
+    /// Add the tool changes among `records` that finished without an error on `printer`.
+    fn add(&mut self, sim: &Sim, printer: Personality, records: &[CommandRecord]) {
         for record in records {
             if record.request.0 != RequestCode::Tool || record.had_error {
                 continue;
             }
-            let minimum =
-                tool_change_minimum(sim.unit_config(), sim.model().config(), record.start_tip_mm).total_s();
-            if !minimum.is_finite() {
+            let (config, geometry) = (sim.unit_config(), sim.model().config());
+            let minimum = tool_change_minimum(config, geometry, record.start_tip_mm).total_s();
+            let floor = tool_change_floor(config, geometry, printer, record.start_tip_mm).total_s();
+            if !minimum.is_finite() || !floor.is_finite() {
                 continue;
             }
             let took_s = record.finished_ms.saturating_sub(record.started_ms) as f64 / 1000.0;
@@ -858,6 +874,7 @@ impl TimeSums {
             self.sum_s += took_s;
             self.max_s = self.max_s.max(took_s);
             self.minimum_sum_s += minimum;
+            self.floor_sum_s += floor;
         }
     }
 
@@ -871,6 +888,7 @@ impl TimeSums {
             mean_s: self.sum_s / n,
             max_s: self.max_s,
             physical_minimum_mean_s: self.minimum_sum_s / n,
+            floor_mean_s: self.floor_sum_s / n,
         }
     }
 }
@@ -1093,7 +1111,7 @@ pub fn run_until(
             let records = sim.take_finished();
             sim.take_events();
             if struck.is_none() {
-                times.add(current.sim(), &records);
+                times.add(current.sim(), options.personality, &records);
             }
             rig = Some(current);
         } else {
