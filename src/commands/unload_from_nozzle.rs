@@ -2,11 +2,10 @@
 //! comes back out of the printer and the hub and is parked.
 //!
 //! `P3` pull back until the printer's sensor (within register `0x0c` mm) and then the hub sensor
-//! clear, `P19` on to the park position. Nothing loaded: done at once. For a printer that
-//! accepted MMU 3.0.4, `P3` first waits, pulling nothing, until the printer reports its sensor
-//! off (at most 4 s, else `8004`), then pulls the first 20 mm slowly. FIL. ALREADY LOADED's
-//! Unload and every Retry of an unload wait for the printer's help with its own extruder, whatever
-//! the printer (`crate::phases::Phase::UnloadToHub`).
+//! clear, `P19` on to the park position. Nothing loaded: done at once. While the printer's sensor
+//! reads filament, `P3` first feels, pulling no harder than the extruder's grip always wins
+//! against, until nothing holds the filament (`crate::phases::unload`); for a printer that
+//! accepted MMU 3.0.4 the first 20 mm after that follow its gears as a feel too.
 
 use mmu_protocol::ErrorCode;
 
@@ -28,9 +27,10 @@ pub const fn phases(slot: usize, await_release: bool) -> [Phase; 2] {
 }
 
 /// Whether `U0`, `T<n>`, `E<n>` and `K<n>` wait for the printer to release the filament before
-/// they pull: for a printer that accepted MMU 3.0.4, which sends `T` while its gears still grip
-/// it. A printer that accepted 3.0.3 or older pulls its filament out of its gears before it
-/// sends them, and the unit pulls at once, as MMU 3.0.3 does (`mmu-3.0.4.md`).
+/// they pull in the strict mode (MMU 3.0.4's unload): for a printer that accepted MMU 3.0.4,
+/// which sends `T` while its gears still grip it. A printer that accepted 3.0.3 or older pulls
+/// its filament out of its gears before it sends them, and MMU 3.0.3 pulls at once
+/// (`mmu-3.0.4.md`). Outside the strict mode every unload feels first.
 pub fn awaits_release(config: &Config) -> bool {
     config.version.contract() == Contract::AwaitRelease
 }

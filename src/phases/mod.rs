@@ -101,10 +101,10 @@ pub enum Phase {
         /// The slot.
         slot: u8,
     },
-    /// `P3` (`unload.rs`): pull back until the printer's sensor and then the hub sensor clear.
-    /// With `await_release`, first wait, the motor free to turn, while the printer's gears may
-    /// still grip the filament: until it reports its sensor off, or (3.0.3 and older) its help
-    /// with its own extruder has had its time.
+    /// `P3` (`unload.rs`): pull back until the printer's sensor and then the hub sensor clear,
+    /// feeling first while the printer's sensor reads filament. In the strict mode (MMU 3.0.4's
+    /// unload, simulator only), with `await_release`, first wait, the motor free to turn: until
+    /// the printer reports its sensor off, or (3.0.3 and older) its help has had its time.
     UnloadToHub {
         /// The slot.
         slot: u8,

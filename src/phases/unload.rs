@@ -60,8 +60,9 @@ const fn printer_to_hub_mm(config: &Config) -> u16 {
 }
 
 /// `P3` ([`super::Phase::UnloadToHub`]): pull back until the printer's sensor and then the hub
-/// sensor clear; with `await_release`, first wait, the motor free to turn, while the printer's
-/// gears may still grip the filament.
+/// sensor clear; first feel while the printer's sensor reads filament ([`feel_for_release`]).
+/// `await_release` matters only in the strict mode: first wait, the motor free to turn, while
+/// the printer's gears may still grip the filament.
 #[derive(Debug, Clone, Copy)]
 pub(super) struct ToHub {
     pub(super) await_release: bool,
