@@ -228,11 +228,10 @@ impl<const N: usize> App<N> {
         let before = self.operation.status();
         self.operation
             .step(&mut self.unit, now, &self.config, self.session.printer);
-        if let Some(Learned::BowdenMm(mm)) = self.operation.take_learned() {
-            // Measured by the load itself: kept as a setting, shown in register 0x53.
-            self.config.bowden_mm = mm;
-            self.bowden_learned_mm = mm;
+        if let Some(learned) = self.operation.take_learned() {
+            // Measured by the load itself: a setting changed.
             self.settings_revision = self.settings_revision.wrapping_add(1);
+            self.keep(learned);
         }
         self.command_changed(before);
         out.phase_began = self.operation.phase_began_at(now);
@@ -276,9 +275,16 @@ impl<const N: usize> App<N> {
     /// where register 0x53 shows it.
     fn act_on_button(&mut self, button: ButtonCode) {
         self.settings_revision = self.settings_revision.wrapping_add(1);
-        if let Some(Learned::BowdenMm(mm)) = self.operation.press(button, &self.unit, &mut self.config) {
-            self.bowden_learned_mm = mm;
+        if let Some(learned) = self.operation.press(button, &self.unit, &mut self.config) {
+            self.keep(learned);
         }
+    }
+
+    /// Keep a setting a command learned: in the configuration, and where register 0x53 shows it.
+    fn keep(&mut self, learned: Learned) {
+        let Learned::BowdenMm(mm) = learned;
+        self.config.bowden_mm = mm;
+        self.bowden_learned_mm = mm;
     }
 
     /// Act on `request` and queue its answer. A request whose answer would not fit this step's

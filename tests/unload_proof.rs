@@ -40,6 +40,22 @@ fn retract_alone(rig: &mut Rig<3>, mm: f32, speed: f32) {
     }
 }
 
+/// Slot 0 loaded on a printer wanting 3.0.`revision` (the rig's default geometry, the sensor
+/// before the gears), then its retract alone leaves the tip `short_mm` short of the gears: free,
+/// the printer's sensor still reading it.
+fn tip_short_of_the_gears(revision: u8, short_mm: f32) -> Rig<3> {
+    let mut rig = loaded(revision, ModelConfig::default());
+    let gears = rig.model.config().extruder_gears_mm;
+    let tip = rig.model.tip_mm(0).unwrap();
+    retract_alone(&mut rig, tip - (gears - short_mm), 40.0);
+    assert_ne!(
+        rig.model.fsensor_state(),
+        0,
+        "the tip rests at the printer's sensor"
+    );
+    rig
+}
+
 /// A 3.0.3 printer (Buddy 6.4.1), its retract leaving the tip free between its sensor and its
 /// gears, slot 0's drive slipping: the pull counts its check distance without moving the
 /// filament, `8004`. The slip cleared, the printer's Retry help (1 mm here, the tip stays at its
@@ -47,15 +63,7 @@ fn retract_alone(rig: &mut Rig<3>, mm: f32, speed: f32) {
 /// used to report `8004` again at once, forever, counting the slipped pull against the check).
 #[test]
 fn a_retry_of_8004_pulls_once_the_slip_is_gone() {
-    let mut rig = loaded(3, ModelConfig::default());
-    let gears = rig.model.config().extruder_gears_mm;
-    let tip = rig.model.tip_mm(0).unwrap();
-    retract_alone(&mut rig, tip - (gears - 2.0), 40.0);
-    assert_ne!(
-        rig.model.fsensor_state(),
-        0,
-        "the tip rests at the printer's sensor"
-    );
+    let mut rig = tip_short_of_the_gears(3, 2.0);
     rig.inject(Fault::Slip { slot: 0, ratio: 0.0 });
     rig.issue(u0());
     let run = rig.follow(u0(), 60_000);
@@ -74,15 +82,7 @@ fn a_retry_of_8004_pulls_once_the_slip_is_gone() {
 /// come back freely and unloads it, never harder than a feel while the gears held it.
 #[test]
 fn a_3_0_4_tip_left_between_the_sensor_and_the_gears_is_felt_free_and_unloaded() {
-    let mut rig = loaded(4, ModelConfig::default());
-    let gears = rig.model.config().extruder_gears_mm;
-    let tip = rig.model.tip_mm(0).unwrap();
-    retract_alone(&mut rig, tip - (gears - 1.0), 40.0);
-    assert_ne!(
-        rig.model.fsensor_state(),
-        0,
-        "the tip rests at the printer's sensor"
-    );
+    let mut rig = tip_short_of_the_gears(4, 1.0);
     let run = rig.command(u0());
     assert_eq!(run.last, finished(u0()), "{run:?}");
     assert_parked(&rig, 0);

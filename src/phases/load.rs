@@ -70,10 +70,7 @@ impl MotionPhase for ThroughBowden {
     /// Ends at its distance, or where the tube reads compressed: the tip met a stop, the
     /// printer's idle gears where they come before its sensor (a jam stops the slow feed too).
     fn goal<const N: usize>(self, run: &mut PhaseRun, at: &Sight<'_, N>) -> Result<Decision, ErrorCode> {
-        let met = at
-            .unit
-            .tension_reading(at.slot)
-            .is_some_and(|tension| compressed_for(run, tension, at.now, at.config) >= MET_CONFIRM_MS);
+        let met = met_a_stop(run, at);
         if at.unit.fsensor_triggered() {
             Err(ErrorCode::FSENSOR_TOO_EARLY)
         } else if met {
@@ -134,10 +131,7 @@ impl MotionPhase for ToFsensor {
 
     /// The slow feed ends at the printer's sensor, once the printer's `Q0` has seen this phase.
     fn goal<const N: usize>(self, run: &mut PhaseRun, at: &Sight<'_, N>) -> Result<Decision, ErrorCode> {
-        let met = at
-            .unit
-            .tension_reading(at.slot)
-            .is_some_and(|tension| compressed_for(run, tension, at.now, at.config) >= MET_CONFIRM_MS);
+        let met = met_a_stop(run, at);
         Ok(if !at.unit.fsensor_triggered() {
             // Met a stop before the sensor: the printer's gears, turning back while its retract
             // lasts, take the tip once its co-feed turns them forward. Pushing on would stall.
@@ -253,6 +247,15 @@ fn push_into_gears(
     } else {
         Ok(Goal::Hold)
     }
+}
+
+/// The Bowden tube has read compressed for [`MET_CONFIRM_MS`]: the tip met something. Inlined:
+/// at opt-level "z" a call from each generic phase takes more flash than the body.
+#[inline(always)]
+fn met_a_stop<const N: usize>(run: &mut PhaseRun, at: &Sight<'_, N>) -> bool {
+    at.unit
+        .tension_reading(at.slot)
+        .is_some_and(|tension| compressed_for(run, tension, at.now, at.config) >= MET_CONFIRM_MS)
 }
 
 /// How long the Bowden tube has read taut past the follower's deadband (pulled from the

@@ -19,7 +19,8 @@ pub struct PhaseRun {
     /// Since when the Bowden tube reads taut.
     pub(super) taut_since: Option<Instant>,
     /// When the push (into the extruder, or of a proof) ended, the tip having met something or
-    /// gone its distance; when an unload's pull went its check distance.
+    /// gone its distance; when an unload's feel found the filament free and braked to make sure;
+    /// when an unload's pull went its check distance.
     pub(super) distance_done_at: Option<Instant>,
     /// Where an unload's feel began, or last found the filament held.
     pub(super) felt_from_centi: Option<i32>,

@@ -287,17 +287,19 @@ fn feel_for_release<const N: usize>(
     run: &mut PhaseRun,
     at: &Sight<'_, N>,
 ) -> Result<Option<Goal>, ErrorCode> {
-    // A tension sensor that cannot be read shows nothing free.
-    let held = at.unit.tension_reading(at.slot).is_none_or(|tension| {
-        taut_for(run, tension, at.now, at.config) > 0 || compressed_for(run, tension, at.now, at.config) > 0
-    });
+    let taut = taut_or_unread(run, at);
+    let held = taut
+        || at
+            .unit
+            .tension_reading(at.slot)
+            .is_some_and(|tension| compressed_for(run, tension, at.now, at.config) > 0);
     if held {
         run.felt_from_centi = Some(at.odometry);
         run.distance_done_at = None;
     }
     let felt_from = *run.felt_from_centi.get_or_insert(at.odometry);
     if distance_centi(at.odometry, felt_from) < FREE_MM * 100 {
-        return go_on_feeling(run, at).map(Some);
+        return go_on_feeling(run, at, taut).map(Some);
     }
     let stopped = *run.distance_done_at.get_or_insert(at.now);
     if at.now.millis_since(stopped) < FREE_PROBE_MS {
@@ -307,15 +309,23 @@ fn feel_for_release<const N: usize>(
     Ok(None)
 }
 
+/// Whether the tube reads taut; a tension sensor that cannot be read counts as taut, since it
+/// shows nothing free.
+fn taut_or_unread<const N: usize>(run: &mut PhaseRun, at: &Sight<'_, N>) -> bool {
+    at.unit
+        .tension_reading(at.slot)
+        .is_none_or(|tension| taut_for(run, tension, at.now, at.config) > 0)
+}
+
 /// Feel on while the filament moves (the printer retracting it), at most [`FEEL_MAX_MS`]; still
 /// for [`RELEASE_WAIT_MS`] with the tube taut: `8004`, the filament stuck in the extruder, and
 /// nothing pulled harder than a feel. Still for the stall timeout with the tube not taut, the
 /// feel did not even take up the tube's give: the motor is stalled.
-fn go_on_feeling<const N: usize>(run: &mut PhaseRun, at: &Sight<'_, N>) -> Result<Goal, ErrorCode> {
-    let taut = at
-        .unit
-        .tension_reading(at.slot)
-        .is_none_or(|tension| taut_for(run, tension, at.now, at.config) > 0);
+fn go_on_feeling<const N: usize>(
+    run: &mut PhaseRun,
+    at: &Sight<'_, N>,
+    taut: bool,
+) -> Result<Goal, ErrorCode> {
     if taut {
         run.last_taut = Some(at.now);
     }
@@ -396,7 +406,8 @@ fn pull_out_of_printer<const N: usize>(run: &mut PhaseRun, at: &Sight<'_, N>) ->
             if strict(config) {
                 Goal::DriveAt(config.slow_speed)
             } else {
-                go_on_feeling(run, at)?
+                let taut = taut_or_unread(run, at);
+                go_on_feeling(run, at, taut)?
             }
         }
         // Held again on the way (a stringy tip the gears still grip): only felt, until let go.
@@ -406,7 +417,7 @@ fn pull_out_of_printer<const N: usize>(run: &mut PhaseRun, at: &Sight<'_, N>) ->
                 .tension_reading(at.slot)
                 .is_some_and(|t| taut_for(run, t, at.now, config) > 0) =>
         {
-            go_on_feeling(run, at)?
+            go_on_feeling(run, at, true)?
         }
         _ => Goal::Drive,
     })
