@@ -7,12 +7,14 @@
 
 mod common;
 
-use common::{FsensorReports, Rig, t};
+use common::{FsensorReports, Rig, assert_parked, loaded, press, t};
+use mmu_firmware::drive::FEEL_DUTY;
 use mmu_firmware::persist::Snapshot;
 use mmu_firmware::unit::Lane;
 use mmu_firmware::{App, Config};
 use mmu_hal_port::{Duty, MotorCommand};
-use mmu_protocol::{ErrorCode, ParamCode, Request, RequestCode, Response};
+use mmu_model::ModelConfig;
+use mmu_protocol::{ButtonCode, ErrorCode, ParamCode, Request, RequestCode, Response};
 
 /// Lanes a store can hold for one slot.
 const STORED: [Lane; 4] = [Lane::Unknown, Lane::Parked, Lane::InHub, Lane::Loaded];
@@ -315,11 +317,54 @@ fn a_wrong_stored_slot_pushed_against_nothing_is_unload_manually() {
     );
 }
 
-/// A printer that accepted 3.0.4 gets no push and no pull while its sensor reads filament (MMU
-/// 3.0.4 pulls nothing before the printer reports it off, and a proof is followed by a pull): with
-/// the tip left at the sensor, the sensors cannot tell whose it is: `8008`, nothing moved.
+/// A printer that accepted 3.0.4 gets the same proof: its sensor still reads the tip after its
+/// report was waited for, so the push meets the gears and proves slot 0. Then the unload feels
+/// (MMU 3.0.4 would pull nothing before the sensor clears): the tip is free between the sensor and
+/// the gears, so it is pulled out and parked. (It used to end `8008` at once: an MK3.5 on Buddy
+/// 6.5.3, `mmu printer --sim --printer buddy-6.5 --extruder sensor-first soak --faults random
+/// --seed 7`, changes 34 and 173.)
 #[test]
-fn filament_at_the_sensor_of_a_printer_on_3_0_4_is_unload_manually() {
-    let (rig, answer, before) = tip_left_at_the_printers_sensor(0, 4);
-    unload_manually_with_nothing_moved(&rig, &answer, &before);
+fn filament_at_the_sensor_of_a_printer_on_3_0_4_is_proved_then_felt_free() {
+    let (rig, answer, _) = tip_left_at_the_printers_sensor(0, 4);
+    assert_eq!(answer.param, ParamCode::Finished, "{answer:?}");
+    assert_parked(&rig, 0);
+}
+
+/// Slot 0 loaded into the nozzle, the extruder's gears gripping it, then a restart with slot 0
+/// stored and a `U0` from a printer that did not pull the filament out of its gears first (its
+/// retract lost). The push proves slot 0, but the pull that follows would meet gripping gears: on
+/// either contract it only feels, `8004` once the filament has been held still. The printer then
+/// pulls the filament out of its gears (the retract it lost, and its Retry help) and the Retry
+/// finishes the unload.
+#[test]
+fn a_proved_slot_still_in_the_gears_is_only_felt_then_8004_then_unloaded() {
+    let unload = Request::new(RequestCode::Unload, 0);
+    for revision in [3, 4] {
+        let mut rig = loaded(revision, ModelConfig::default());
+        rig.app = App::new(Config::default());
+        rig.app.restore(&Snapshot {
+            lanes: [Lane::Loaded, Lane::Parked, Lane::Parked],
+            ..Snapshot::default()
+        });
+        rig.boot();
+        assert_eq!(rig.send(unload).map(|a| a.param), Some(ParamCode::Accepted));
+        let run = rig.follow(unload, 60_000);
+        assert_eq!(
+            run.last.param_value,
+            Some(ErrorCode::FSENSOR_DIDNT_SWITCH_OFF.0),
+            "3.0.{revision}: {run:?}"
+        );
+        let grip = rig.model.max_pull_against_grip();
+        assert!(
+            grip.max_duty_permille <= FEEL_DUTY.permille(),
+            "3.0.{revision}: pulled at {} per mille against gripping gears",
+            grip.max_duty_permille
+        );
+        rig.unload_extruder();
+        rig.help_unload();
+        press(&mut rig, ButtonCode::MIDDLE);
+        let run = rig.follow(unload, 60_000);
+        assert_eq!(run.last.param, ParamCode::Finished, "3.0.{revision}: {run:?}");
+        assert_parked(&rig, 0);
+    }
 }

@@ -7,6 +7,7 @@ use mmu_hal_port::Direction;
 use mmu_protocol::{ErrorCode, ProgressCode};
 
 use super::load::{MET_CONFIRM_MS, compressed_for};
+use super::unload::strict;
 use super::{Bounds, Decision, Goal, Milestone, MotionPhase, Outcome, PhaseRun, Sight, SlotSet};
 use crate::config::{Config, Contract};
 use crate::unit::{Lane, Unit};
@@ -161,11 +162,11 @@ fn merge_suspects<const N: usize>(unit: &Unit<N>, slot: usize) -> SlotSet {
 
 /// [`PushProof`]: nothing to do with the printer's sensor off (the pull back proves the
 /// belief, [`super::Phase::ProveOwner`]). With it on, wait (the motor free) for the printer to
-/// report it off: its retract before `U0` may be on the way. Still on, a printer that accepted
-/// 3.0.3 or older (which pull at once) gets the push: the tube reading compressed proves that the
-/// slot's filament runs to the printer's gears; pushed [`PUSH_PROOF_MM`] without that, `8008`. A
-/// printer that accepted 3.0.4 gets `8008` at once: MMU 3.0.4 pulls nothing before the printer's
-/// sensor is off, and the pull that would follow a proof is one.
+/// report it off: its retract before `U0` may be on the way. Still on, it pushes: the tube reading compressed proves that the
+/// slot's filament runs to the printer's gears; pushed [`PUSH_PROOF_MM`] without that, `8008`. The
+/// unload that follows a proof feels first, on either contract. In the strict mode (MMU 3.0.4,
+/// which pulls nothing before the printer's sensor is off) a printer that accepted 3.0.4 gets
+/// `8008` at once.
 fn push_proof<const N: usize>(run: &mut PhaseRun, at: &Sight<'_, N>) -> Result<Decision, ErrorCode> {
     if !at.unit.fsensor_triggered() || at.unit.proven_owner == Some(at.slot) {
         return Ok(Goal::Reached.into());
@@ -174,7 +175,7 @@ fn push_proof<const N: usize>(run: &mut PhaseRun, at: &Sight<'_, N>) -> Result<D
     if waiting && at.now.millis_since(run.started) < PUSH_PROOF_WAIT_MS {
         return Ok(Goal::Yield.into());
     }
-    if at.config.version.contract() == Contract::AwaitRelease {
+    if strict(at.config) && at.config.version.contract() == Contract::AwaitRelease {
         return Err(ErrorCode::FINDA_VS_EEPROM_DISREPANCY);
     }
     if waiting {

@@ -35,6 +35,8 @@ pub struct PhaseRun {
     pub(super) printer_saw: Option<Instant>,
     /// An attempt after a Retry: its distance goal counts from the first attempt.
     pub(super) retried: bool,
+    /// Whether the slot was proven to hold the hub path when the attempt first looked.
+    pub(super) proven_at_start: Option<bool>,
 }
 
 /// What the drive's leases of one phase attempt used of the phase's budget: a hold or a yield
@@ -107,6 +109,7 @@ impl PhaseRun {
             held: false,
             printer_saw: None,
             retried: false,
+            proven_at_start: None,
         })
     }
 

@@ -124,8 +124,18 @@ impl MotionPhase for ProveOwner {
         )
     }
 
+    /// A slot proven before the pull began (by the push, [`super::Phase::PushProof`], or by an
+    /// attempt before a Retry) is unloaded as any other: felt first while the printer's sensor
+    /// reads its filament, never pulled against gripping gears.
     fn goal<const N: usize>(self, run: &mut PhaseRun, at: &Sight<'_, N>) -> Result<Decision, ErrorCode> {
-        prove_owner(run, at)
+        if *run
+            .proven_at_start
+            .get_or_insert(at.unit.proven_owner == Some(at.slot))
+        {
+            unload_to_hub(false, run, at)
+        } else {
+            prove_owner(run, at)
+        }
     }
 
     fn arrival(self) -> Option<Lane> {
@@ -266,7 +276,7 @@ fn unload_to_hub<const N: usize>(
 }
 
 /// The strict mode: the unload as MMU 3.0.4 does it (a simulator-only comparison).
-fn strict(config: &Config) -> bool {
+pub(super) fn strict(config: &Config) -> bool {
     #[cfg(feature = "strict-unload")]
     return config.strict_unload;
     #[cfg(not(feature = "strict-unload"))]
@@ -436,31 +446,19 @@ fn pull_out_of_printer<const N: usize>(run: &mut PhaseRun, at: &Sight<'_, N>) ->
 /// stay on for more than register `0x0c` mm (`8004`, whose Retry makes the printer help).
 fn prove_owner<const N: usize>(run: &PhaseRun, at: &Sight<'_, N>) -> Result<Decision, ErrorCode> {
     let past_proof_mm = at.toward_goal_mm - i32::from(at.config.preload_max_mm);
-    // Proven before this pull began (the push proof), not by it.
-    let proven_before = at.unit.proven_owner == Some(at.slot) && past_proof_mm <= 0;
     Ok(match (at.hub, at.unit.fsensor_triggered()) {
         (false, false) => Goal::Reached.learning(Milestone::OwnerProven {
             at_centi: at.odometry,
         }),
-        // Proven by the push ([`super::Phase::PushProof`]) with the printer's sensor on: an
-        // unload, whose sensor must clear within the check distance (MMU 3.0.3).
-        (_, true) if proven_before && at.toward_goal_mm > i32::from(at.config.unload_check_mm) => {
-            return Err(ErrorCode::FSENSOR_DIDNT_SWITCH_OFF);
-        }
         // Filament at the printer's sensor before the proof (the push proof waited for it to go
         // off): the unit's sensors read the same whichever slot's it is, and the printer may
-        // still hold it (MMU 3.0.4 pulls nothing before the printer reports its sensor off).
-        // Prusa's recovery retracts it before its `U0`, and its report may come just after the
-        // `U0`: wait for it, the motor free, as an unload waits ([`RELEASE_WAIT_MS`]). Still on
-        // then: `8008`, nothing pulled.
-        (_, true)
-            if !proven_before && past_proof_mm <= 0 && at.now.millis_since(run.started) < RELEASE_WAIT_MS =>
-        {
+        // still hold it. Prusa's recovery retracts it before its `U0`, and its report may come
+        // just after the `U0`: wait for it, the motor free, as an unload waits
+        // ([`RELEASE_WAIT_MS`]). Still on then: `8008`, nothing pulled.
+        (_, true) if past_proof_mm <= 0 && at.now.millis_since(run.started) < RELEASE_WAIT_MS => {
             Goal::Yield.into()
         }
-        (_, true) if !proven_before && past_proof_mm <= 0 => {
-            return Err(ErrorCode::FINDA_VS_EEPROM_DISREPANCY);
-        }
+        (_, true) if past_proof_mm <= 0 => return Err(ErrorCode::FINDA_VS_EEPROM_DISREPANCY),
         (_, true) if past_proof_mm > i32::from(at.config.unload_check_mm) => {
             return Err(ErrorCode::FSENSOR_DIDNT_SWITCH_OFF);
         }
