@@ -451,6 +451,7 @@ impl<const N: usize> App<N> {
             used_centi: self.tally.ledger.used_centi(),
             lanes_drifted: self.tally.ledger.drifted(),
             refused_rule: self.refused_rule,
+            unload_stuck: self.operation.unload_stuck(),
             // Right after an `S2`, the build of the revision it offered: what `S3` would report.
             build: crate::config::build_of(
                 self.session

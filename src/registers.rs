@@ -20,6 +20,7 @@ use crate::config::Config;
 use crate::feeder::Feeder;
 use crate::guards::{self, Rule};
 use crate::lanes::{LaneFigures, left_mm};
+use crate::phases::UnloadStuck;
 use crate::profile::{MotionSensor, Profile};
 use crate::runner::Status;
 use crate::sensor::{AnalogSensor, Thresholds};
@@ -80,6 +81,8 @@ pub struct View<'a> {
     pub lanes_drifted: u8,
     /// The rule the last refusal broke (register 0x8f).
     pub refused_rule: Option<Rule>,
+    /// Why the unload stopped, while its `8004` waits ([`UNLOAD_STUCK`]).
+    pub unload_stuck: Option<UnloadStuck>,
     /// The time of the current step.
     pub now: Instant,
 }
@@ -530,6 +533,10 @@ pub const STALLS: u8 = 0xed;
 pub const SUCCESS: u8 = 0xf2;
 /// Extension: how many tool changes [`SUCCESS`] counts (up to 32).
 pub const SUCCESS_OF: u8 = 0xf7;
+/// Extension: why an unload stopped on FSENSOR DIDNT CLEAR (`8004`), while that error waits:
+/// [`UnloadStuck`] (1: held in the extruder, 2: the filament free but the printer's sensor still
+/// on); 0 otherwise, or when the unit cannot tell (read only).
+pub const UNLOAD_STUCK: u8 = 0xfc;
 /// Extension: raw sample of sensor `i` at `RAW + i` (read only).
 pub const RAW: u8 = 0x60;
 /// Extension: filtered value of sensor `i` at `FILTERED + i` (read only).
@@ -732,6 +739,9 @@ registers! {
         v.used_centi,
         &v.config.spool_m
     ))),
+    UnloadStuck: read_only(UNLOAD_STUCK, "unload_stuck", |v, _, _| Some(
+        v.unload_stuck.map_or(0, |why| why as u16)
+    )),
     RefusedRule: read_only(REFUSED_RULE, "refused_rule", |v, _, _| Some(
         v.refused_rule.map_or(0, |rule| rule.code().into())
     )),
@@ -883,6 +893,7 @@ pub fn settings_view<'a>(profile: &'a Profile, config: &'a Config, hub: &'a Hub,
         used_centi: &[],
         lanes_drifted: 0,
         refused_rule: None,
+        unload_stuck: None,
         build: config.version.build(),
         now: Instant::ZERO,
     }
@@ -1018,6 +1029,19 @@ mod tests {
     use std::string::ToString;
 
     use super::*;
+
+    /// A read walks the table from the top: a row over another's addresses would hide them.
+    #[test]
+    fn no_two_rows_share_an_address() {
+        for address in 0..=u8::MAX {
+            let rows: std::vec::Vec<_> = REGISTERS
+                .iter()
+                .filter(|row| row.index_of(address).is_some())
+                .map(|row| row.address)
+                .collect();
+            assert!(rows.len() <= 1, "0x{address:02x} is in the rows at {rows:02x?}");
+        }
+    }
 
     #[test]
     fn block_registers_are_named_by_their_sensor_or_slot() {

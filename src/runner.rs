@@ -16,7 +16,7 @@ use mmu_protocol::{ButtonCode, ErrorCode, ProgressCode, RequestCode};
 
 use crate::commands::{Action, Command, MAX_PHASES, Plan, Retry, clear_hub, extend, fit_to_profile};
 use crate::config::Config;
-use crate::phases::{self, Notes, Outcome, Phase, PhaseRun, PrinterLink};
+use crate::phases::{self, Notes, Outcome, Phase, PhaseRun, PrinterLink, UnloadStuck};
 use crate::time::Instant;
 use crate::unit::Unit;
 
@@ -64,6 +64,8 @@ pub struct Runner {
     /// The error shown came after the command had finished (the follower's jam while printing):
     /// Retry finishes it again instead of planning it again.
     failed_after_finish: bool,
+    /// Why the failed phase's unload stopped on `8004`, when it could tell.
+    stuck: Option<UnloadStuck>,
 }
 
 impl Runner {
@@ -88,6 +90,7 @@ impl Runner {
             then_plan: false,
             inherited: None,
             failed_after_finish: false,
+            stuck: None,
         }
     }
 
@@ -121,6 +124,7 @@ impl Runner {
     pub fn supersede(waiting: &Runner, request: (RequestCode, u8)) -> Self {
         let mut runner = Self::new(request, &[]);
         runner.status = waiting.status;
+        runner.stuck = waiting.stuck;
         runner.inherited = waiting.inherited.or(waiting.command);
         runner.then_plan = true;
         if waiting.phase() == Some(Phase::CheckSensors) {
@@ -132,6 +136,15 @@ impl Runner {
     /// Where the command stands.
     pub fn status(&self) -> Status {
         self.status
+    }
+
+    /// Why the unload stopped, while its FSENSOR DIDNT CLEAR (`8004`) waits for the user and the
+    /// unit could tell.
+    pub fn unload_stuck(&self) -> Option<UnloadStuck> {
+        match self.status {
+            Status::Failed(ErrorCode::FSENSOR_DIDNT_SWITCH_OFF) => self.stuck,
+            _ => None,
+        }
     }
 
     /// Whether the phase running began (or resumed) at `now`: its motion's budget was worked
@@ -360,6 +373,7 @@ impl Runner {
             unit.brake(slot, now);
         }
         let run = self.run.take();
+        self.stuck = run.and_then(|run| run.stuck());
         self.resume_goal_from = run.map(|run| run.goal_from_centi());
         self.failed_fed_centi = match (run, self.phase().and_then(Phase::slot)) {
             (Some(run), Some(slot)) => unit

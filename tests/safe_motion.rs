@@ -5,6 +5,8 @@ mod common;
 
 use common::{Rig, t};
 use mmu_firmware::persist::Snapshot;
+use mmu_firmware::phases::UnloadStuck;
+use mmu_firmware::registers::UNLOAD_STUCK;
 use mmu_firmware::unit::Lane;
 use mmu_firmware::{App, Config, HubSamples, Instant, Samples, SlotSamples};
 use mmu_model::Fault;
@@ -97,7 +99,7 @@ fn a_slot_restored_as_loaded_does_not_move_while_the_start_up_check_reports_8008
 /// The printer's sensor stuck reporting filament, the filament out of the printer's gears: each
 /// attempt feels it free and pulls it at most the check distance (then waits for a late sensor
 /// and reports `8004`), and however often Retry is pressed, the pull stops where the tip leaves
-/// the hub: the filament never leaves its drive gear.
+/// the hub: the filament never leaves its drive gear. Register 0xfc says the filament was free.
 #[test]
 fn retry_after_a_stuck_printer_sensor_never_pulls_the_filament_out_of_its_drive() {
     let mut rig = Rig::<3>::new();
@@ -119,6 +121,11 @@ fn retry_after_a_stuck_printer_sensor_never_pulls_the_filament_out_of_its_drive(
             run_error(&run),
             Some(ErrorCode::FSENSOR_DIDNT_SWITCH_OFF),
             "attempt {attempt}"
+        );
+        assert_eq!(
+            rig.read(UNLOAD_STUCK),
+            Some(UnloadStuck::SensorStillOn as u16),
+            "attempt {attempt}: the unit says the filament came back free"
         );
         let now = rig.model.tip_mm(0).unwrap();
         assert!(

@@ -9,6 +9,8 @@ mod common;
 
 use common::{Rig, assert_parked, error, finished, loaded, press, t};
 use mmu_firmware::drive::FEEL_DUTY;
+use mmu_firmware::phases::UnloadStuck;
+use mmu_firmware::registers::UNLOAD_STUCK;
 use mmu_firmware::{Direction, MotorCommand};
 use mmu_model::{Fault, ModelConfig};
 use mmu_protocol::{ButtonCode, ErrorCode, Request, RequestCode};
@@ -68,12 +70,15 @@ fn a_retry_of_8004_pulls_once_the_slip_is_gone() {
     rig.issue(u0());
     let run = rig.follow(u0(), 60_000);
     assert_eq!(run.last, error(u0(), ErrorCode::FSENSOR_DIDNT_SWITCH_OFF));
+    // The motor's Hall sensor counted the pull: free as far as the unit can tell.
+    assert_eq!(rig.read(UNLOAD_STUCK), Some(UnloadStuck::SensorStillOn as u16));
     rig.model.clear_all();
     rig.model.extruder_move(-1.0, 20.0);
     press(&mut rig, ButtonCode::MIDDLE);
     let run = rig.follow(u0(), 60_000);
     assert_eq!(run.last, finished(u0()), "{run:?}");
     assert_parked(&rig, 0);
+    assert_eq!(rig.read(UNLOAD_STUCK), Some(0), "nothing to say once resolved");
 }
 
 /// A 3.0.4 printer whose sensor sits before its gears (the MK3S's order, the rig's default
@@ -90,7 +95,8 @@ fn a_3_0_4_tip_left_between_the_sensor_and_the_gears_is_felt_free_and_unloaded()
 
 /// The filament stuck in the extruder (the tip in the nozzle, the printer's sensor on, nothing
 /// retracts it), on either contract: the unit pulls no harder than a feel, and reports `8004`
-/// once the filament has been still for 4 s; the tip moved no more than the tube's give.
+/// once the filament has been still for 4 s, and says in register 0xfc that it is held in the
+/// extruder; the tip moved no more than the tube's give.
 #[test]
 fn a_filament_stuck_in_the_extruder_is_only_felt_then_8004() {
     for revision in [3, 4] {
@@ -104,6 +110,11 @@ fn a_filament_stuck_in_the_extruder_is_only_felt_then_8004() {
             run.last,
             error(u0(), ErrorCode::FSENSOR_DIDNT_SWITCH_OFF),
             "3.0.{revision}"
+        );
+        assert_eq!(
+            rig.read(UNLOAD_STUCK),
+            Some(UnloadStuck::InExtruder as u16),
+            "3.0.{revision}: the unit says which"
         );
         let hardest = hardest_pull_since(&rig, before);
         assert!(

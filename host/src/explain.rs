@@ -68,7 +68,7 @@ fn register_label(address: u8) -> String {
 
 /// A note on a register value where the number alone says little.
 fn register_value_note(address: u8, value: u16) -> Option<String> {
-    use mmu_firmware::registers::{FAILURES, LANE, ODOMETRY, SENSOR_FAULTS, Subject};
+    use mmu_firmware::registers::{FAILURES, LANE, ODOMETRY, SENSOR_FAULTS, Subject, UNLOAD_STUCK};
     match address {
         0x05 => return u8::try_from(value).ok().map(|v| ProgressCode(v).to_string()),
         0x06 => return Some(ErrorCode(value).to_string()),
@@ -77,6 +77,7 @@ fn register_value_note(address: u8, value: u16) -> Option<String> {
         0x0a => return Some(if value == 0 { "normal" } else { "stealth" }.to_string()),
         0x1b | 0x1c => return Some(slot_note(value)),
         SENSOR_FAULTS => return Some(stuck_sensors(value)),
+        UNLOAD_STUCK => return Some(unload_stuck(value).to_string()),
         _ => {}
     }
     let register = mmu_firmware::registers::describe(address, mmu_firmware::MAX_SLOTS)?;
@@ -86,6 +87,20 @@ fn register_value_note(address: u8, value: u16) -> Option<String> {
         (ODOMETRY, Some(Subject::Slot(_))) => Some(format!("{} mm", value as i16)),
         (FAILURES, Some(Subject::Slot(_))) if value > 0 => Some("errors while driving this slot".to_string()),
         _ => None,
+    }
+}
+
+/// Why an unload stopped on `8004`, as register 0xfc says it.
+pub fn unload_stuck(value: u16) -> &'static str {
+    use mmu_firmware::phases::UnloadStuck;
+    match value {
+        v if v == UnloadStuck::InExtruder as u16 => {
+            "the filament is held in the extruder: felt held and still (a blob on its tip, a cold nozzle, gears that still grip it)"
+        }
+        v if v == UnloadStuck::SensorStillOn as u16 => {
+            "the filament came back freely its check distance, but the printer's sensor still reads it: the sensor sticks, a string of the tip is left at it, or the lane's drive slips"
+        }
+        _ => "no unload stopped on 8004, or the unit cannot tell why",
     }
 }
 

@@ -21,6 +21,7 @@ use std::path::PathBuf;
 
 use clap::Subcommand;
 use mmu_firmware::profile::Profile;
+use mmu_firmware::registers::UNLOAD_STUCK;
 use mmu_protocol::{ErrorCode, ParamCode, Request, RequestCode, Response};
 use mmu_sim::{
     ExtruderGeometry, FAULT_HELP, Outcome, Personality, Printer, PrinterError, PrinterOptions,
@@ -31,7 +32,7 @@ use serde_json::{Map, Value, json};
 use crate::codec_cli::{parse_button, parse_u8, parse_u16};
 use crate::explain::{
     error_meaning, parse_register, register_name, request_label, request_meaning, response_label,
-    response_meaning,
+    response_meaning, unload_stuck,
 };
 use crate::sim_cli::parse_slots;
 use crate::usage::{Running, stop_on_ctrl_c, usage};
@@ -333,14 +334,19 @@ impl<L: Target> Session<L> {
                 ),
                 error,
             )),
-            Outcome::GaveUp(error) => Err(Failure::unit(
-                format!(
+            Outcome::GaveUp(error) => {
+                let mut message = format!(
                     "{label} ({}) stopped on error {}",
                     request_meaning(&request),
                     error_meaning(error)
-                ),
-                error,
-            )),
+                );
+                if error == ErrorCode::FSENSOR_DIDNT_SWITCH_OFF
+                    && let Some(why) = self.read_quietly(UNLOAD_STUCK)?.filter(|&why| why != 0)
+                {
+                    message = format!("{message}\n  which (register 0xfc): {}", unload_stuck(why));
+                }
+                Err(Failure::unit(message, error))
+            }
         }
     }
 

@@ -33,6 +33,7 @@ use crate::time::Instant;
 use crate::unit::{Lane, SensorId, Unit};
 
 pub use run::PhaseRun;
+pub use unload::UnloadStuck;
 
 use check::Check;
 

@@ -2,6 +2,7 @@
 //! and how much of its budget the drive's leases have used. Kept apart from the phases so their
 //! goals read as decisions, and the budget arithmetic sits in one place.
 
+use super::UnloadStuck;
 use crate::drive::{Budget, millis_u32};
 use crate::feeder::distance_centi;
 use crate::time::Instant;
@@ -37,6 +38,8 @@ pub struct PhaseRun {
     pub(super) retried: bool,
     /// Whether the slot was proven to hold the hub path when the attempt first looked.
     pub(super) proven_at_start: Option<bool>,
+    /// Why the unload stopped on `8004`, when it can tell.
+    pub(super) stuck: Option<UnloadStuck>,
 }
 
 /// What the drive's leases of one phase attempt used of the phase's budget: a hold or a yield
@@ -110,12 +113,18 @@ impl PhaseRun {
             printer_saw: None,
             retried: false,
             proven_at_start: None,
+            stuck: None,
         })
     }
 
     /// Where the distance goal of this phase counts from (kept for the attempt after Retry).
     pub fn goal_from_centi(&self) -> i32 {
         self.goal_from_centi
+    }
+
+    /// Why the attempt stopped on `8004`, when it can tell.
+    pub fn stuck(&self) -> Option<UnloadStuck> {
+        self.stuck
     }
 
     /// How far the filament moved from the goal start to `odometry_centi`, forward positive

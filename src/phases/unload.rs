@@ -43,6 +43,24 @@ const LATE_SENSOR_MS: u64 = 10_000;
 /// half a second for its planner to start the move.
 const PRINTER_HELP_MS: u64 = 1500;
 
+/// Why an unload stopped on FSENSOR DIDNT CLEAR (`8004`): the printer shows one screen for what
+/// the unit tells apart (register 0xfc, [`crate::registers::UNLOAD_STUCK`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum UnloadStuck {
+    /// Felt held and still: the filament is stuck in the extruder (a blob on its tip, a cold
+    /// nozzle, gears that still grip it).
+    InExtruder = 1,
+    /// Pulled back freely its check distance, the printer's sensor still reading filament: the
+    /// sensor sticks, or a string of the tip is left at it.
+    SensorStillOn = 2,
+}
+
+/// `8004`, with why noted for the register.
+fn stuck_because(run: &mut PhaseRun, why: UnloadStuck) -> ErrorCode {
+    run.stuck = Some(why);
+    ErrorCode::FSENSOR_DIDNT_SWITCH_OFF
+}
+
 /// A pull back at `speed` for at most `max_mm`, failing with `error`.
 const fn reverse(speed: u16, max_mm: u16, error: ErrorCode) -> Bounds {
     Bounds::new(Direction::Reverse, speed, max_mm, error)
@@ -350,7 +368,9 @@ fn go_on_feeling<const N: usize>(
         at.now.millis_since(moved_or_taut.max(run.started)) >= u64::from(at.config.stall_timeout_ms);
     if !taut && stalled {
         Err(ErrorCode::STALLED_PULLEY)
-    } else if still_ms >= RELEASE_WAIT_MS || at.now.millis_since(run.started) >= FEEL_MAX_MS {
+    } else if still_ms >= RELEASE_WAIT_MS {
+        Err(stuck_because(run, UnloadStuck::InExtruder))
+    } else if at.now.millis_since(run.started) >= FEEL_MAX_MS {
         Err(ErrorCode::FSENSOR_DIDNT_SWITCH_OFF)
     } else {
         Ok(Goal::Feel)
@@ -402,7 +422,7 @@ fn pull_out_of_printer<const N: usize>(run: &mut PhaseRun, at: &Sight<'_, N>) ->
         (true, _) if stuck && !strict(config) => {
             let since = *run.distance_done_at.get_or_insert(at.now);
             if at.now.millis_since(since) >= LATE_SENSOR_MS {
-                return Err(ErrorCode::FSENSOR_DIDNT_SWITCH_OFF);
+                return Err(stuck_because(run, UnloadStuck::SensorStillOn));
             }
             Goal::Hold
         }

@@ -35,7 +35,7 @@ pub fn error_help(error: ErrorCode) -> ErrorHelp {
             "the Bowden tube is seated at both ends and nothing blocks it; the filament is not caught at its printer end; the Bowden length (register 0x22) matches the real tube; the printer's filament sensor works and the printer reports it (`f`, or register 0x09)",
         ),
         ErrorCode::FSENSOR_DIDNT_SWITCH_OFF => help(
-            "the printer's filament sensor still triggered after unloading the check distance (register 0x0c)",
+            "the printer's filament sensor still reads filament: the unit felt the filament held still in the extruder for 4 s, or pulled it back freely the check distance (register 0x0c) and the sensor did not clear (register 0xfc says which)",
             "filament stuck in the extruder (a blob on the tip, a cold nozzle); the printer's filament sensor is not stuck on; the check distance is not shorter than the path from the extruder gears to the sensor",
         ),
         ErrorCode::FILAMENT_ALREADY_LOADED => help(
