@@ -384,6 +384,12 @@ const COMMANDS: &[(&str, Check)] = &[
         Check::NotRun("about 24 minutes; sim/tests/soak.rs runs one seed of every combination in CI"),
     ),
     (
+        "bash scripts/soak-matrix.sh --changes 200 --seeds 20 --hardware thesis --extruders sensor-first,gears-first --jobs 2",
+        Check::NotRun(
+            "about 22 minutes; sim/tests/geometry.rs and restart_mid_tool_change.rs run both geometries in CI",
+        ),
+    ),
+    (
         "bash scripts/soak-matrix.sh --changes 200 --seeds 20 --hardware n20-quadrature,bmcu-c --jobs 2",
         Check::NotRun("about 20 minutes; sim/tests/soak.rs runs one seed of every combination in CI"),
     ),
