@@ -619,7 +619,7 @@ registers! {
     IdlerSlot: read_only(0x1c, "idler_slot", |v, _, _| Some(
         v.driving_slot.map_or(5, |slot| slot as u16)
     )),
-    setting(0x22, "bowden_mm", 50..=2000),
+    setting(0x22, "bowden_mm", 50..=5000),
     Slots: read_only(0x40, "slots", |v, _, _| Some(v.feeders.len() as u16)),
     setting(0x41, "park_mm", 1..=200),
     setting(0x42, "mm_per_rev_centi", 10..=5000),

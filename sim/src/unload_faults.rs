@@ -29,8 +29,9 @@ pub enum UnloadFault {
     /// A deformed or stringy tip the gears keep gripping for 2 to 30 mm more of the retract
     /// (Prusa-Firmware-Buddy #5158, Prusa-Firmware-MMU #271).
     StringyTip,
-    /// A Bowden tube of 1 to 2 m (a unit outside an enclosure; 2 m is register 0x22's top),
-    /// set in register 0x22.
+    /// A Bowden tube of 1 to 2 m (a unit outside an enclosure), set in register 0x22. Longer
+    /// tubes, up to 0x22's top of 5 m, take minutes of simulation per seed: a 5 m tube has its own
+    /// test (`sim/tests/geometry.rs`).
     LongBowden,
     /// The printer retracts at a quarter to a half of its speed.
     SlowRetract,

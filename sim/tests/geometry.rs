@@ -1,8 +1,9 @@
 //! Each simulated printer in both extruder geometries (`--extruder sensor-first|gears-first`):
 //! tool changes and an unload finish, the filament ends where they put it, and the geometry is
-//! the one asked for.
+//! the one asked for; and a 5 m Bowden tube on each printer.
 
-use mmu_protocol::{ErrorCode, Request, RequestCode, ResultCode};
+use mmu_model::ModelConfig;
+use mmu_protocol::{ErrorCode, ParamCode, Request, RequestCode, ResultCode};
 use mmu_sim::{
     Decision, ExtruderGeometry, Operator, Outcome, Personality, Printer, PrinterEvent, PrinterOptions, Sim,
     SimLink, SimOptions,
@@ -20,12 +21,16 @@ impl Operator<SimLink> for GiveUp {
 }
 
 fn connected(personality: Personality, extruder: ExtruderGeometry) -> Printer<SimLink> {
-    let sim = Sim::new(SimOptions {
+    connected_with(SimOptions {
         printer: personality,
         extruder: Some(extruder),
         ..SimOptions::default()
     })
-    .unwrap();
+}
+
+fn connected_with(options: SimOptions) -> Printer<SimLink> {
+    let personality = options.printer;
+    let sim = Sim::new(options).unwrap();
     let mut printer = Printer::new(SimLink::new(sim), PrinterOptions::of(personality));
     printer.connect(&mut GiveUp).expect("connects");
     printer
@@ -92,4 +97,43 @@ fn each_printer_defaults_to_its_own_geometry_and_an_option_overrides_it() {
         gears(Personality::Buddy65, Some(ExtruderGeometry::SENSOR_FIRST)),
         4.0
     );
+}
+
+/// A unit outside an enclosure, 5 m of Bowden tube (register 0x22 written 5000, its top): on each
+/// printer in its own geometry the tool changes reach the nozzle and the unload parks the
+/// filament.
+#[test]
+fn a_five_metre_bowden_tube_changes_tools_and_unloads_on_every_printer() {
+    for personality in Personality::ALL {
+        let mut printer = connected_with(SimOptions {
+            printer: personality,
+            model: ModelConfig::default().with_bowden_length(5000.0),
+            ..SimOptions::default()
+        });
+        let answer = printer.request(&mut GiveUp, Request::write(0x22, 5000)).unwrap();
+        assert_eq!(answer.param, ParamCode::Accepted, "{personality}: W22 5000");
+        for slot in [0u8, 1] {
+            let outcome = printer
+                .command(&mut GiveUp, Request::new(RequestCode::Tool, slot))
+                .unwrap();
+            assert_eq!(
+                outcome,
+                Outcome::Finished(ResultCode::OK),
+                "{personality}: T{slot}"
+            );
+            printer.print(&mut GiveUp, 6000).unwrap();
+            let model = printer.link().sim().model();
+            assert_eq!(
+                model.fsensor_state(),
+                2,
+                "{personality}: T{slot} reaches the nozzle"
+            );
+        }
+        let outcome = printer
+            .command(&mut GiveUp, Request::new(RequestCode::Unload, 0))
+            .unwrap();
+        assert_eq!(outcome, Outcome::Finished(ResultCode::OK), "{personality}: U0");
+        let tip = printer.link().sim().model().tip_mm(1).unwrap();
+        assert!(tip < 0.0, "{personality}: parked at {tip} mm");
+    }
 }
