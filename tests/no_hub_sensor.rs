@@ -161,3 +161,24 @@ fn every_lane_not_seen_since_start_is_homed_before_a_load() {
         assert_parked(&rig, lane);
     }
 }
+
+/// A restart with a lane recorded as parked but its tip between the drive gear and the presence
+/// sensor (a pull that stopped at the sensor's edge, then the power went): the start-up check
+/// finds the sensor empty, yet the load homes the lane, finds the filament still in the gear's
+/// grip, and loads it.
+#[test]
+fn a_parked_lane_whose_tip_rests_behind_its_sensor_after_a_restart_still_loads() {
+    let mut rig = bmcu_unit();
+    let gear = rig.model.config().drive_gear_mm;
+    assert!(rig.model.remove_filament(0));
+    assert!(rig.model.insert_filament(0, gear + 1.0));
+    rig.app.restore(&mmu_firmware::persist::Snapshot {
+        lanes: [Lane::Parked; 4],
+        ..mmu_firmware::persist::Snapshot::default()
+    });
+    rig.boot();
+    rig.handshake();
+    let run = rig.command(t(0));
+    assert_eq!(run.last, finished(t(0)), "{:?}", run.progress);
+    assert_eq!(rig.model.loaded_slot(), Some(0));
+}
