@@ -66,7 +66,7 @@ fn a_refused_write_says_the_range_and_the_threshold_rule() {
     let script = "set bowden 5\nset threshold_on.hub.filament 100\nset threshold_off.hub.filament 3000\n\
                   set park 1\nquit\n";
     let all = text(&run(&["console", "--sim"], script, &config));
-    assert!(all.contains("5 is out of its range, 50 to 2000"), "{all}");
+    assert!(all.contains("5 is out of its range, 50 to 5000"), "{all}");
     assert!(
         all.contains(
             "rule 6 (park_clears_merge), the park distance must reach two revolutions past the merge"

@@ -376,6 +376,10 @@ const COMMANDS: &[(&str, Check)] = &[
         Check::InCi,
     ),
     (
+        "cargo run --release -p mmu-sim --example unload_faults -- 200 --longer-bowden",
+        Check::NotRun("about 3 minutes; CI runs the table without the 2-5 m row"),
+    ),
+    (
         "bash scripts/soak-matrix.sh",
         Check::NotRun("about 20 minutes; sim/tests/soak.rs runs one seed of every combination in CI"),
     ),

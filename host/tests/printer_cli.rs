@@ -423,7 +423,7 @@ fn registers_by_name_with_their_values_explained() {
 #[test]
 fn a_refused_write_says_the_range_and_the_rule_as_the_console_does() {
     let text = printer_fails(&["write", "bowden_mm", "5"]);
-    assert!(text.contains("5 is out of its range, 50 to 2000"), "{text}");
+    assert!(text.contains("5 is out of its range, 50 to 5000"), "{text}");
     let text = printer_fails(&["write", "park_mm", "1"]);
     assert!(
         text.contains(
@@ -438,7 +438,7 @@ fn a_refused_write_says_the_range_and_the_rule_as_the_console_does() {
     std::fs::write(&file, "0x22 5  # bowden_mm\n").expect("the settings file is written");
     let text = printer_fails(&["settings", "load", file.to_str().expect("UTF-8 path")]);
     assert!(text.contains("0x22 bowden_mm"), "{text}");
-    assert!(text.contains("5 is out of its range, 50 to 2000"), "{text}");
+    assert!(text.contains("5 is out of its range, 50 to 5000"), "{text}");
     let _ = std::fs::remove_file(file);
 }
 

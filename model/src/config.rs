@@ -70,6 +70,11 @@ pub struct ModelConfig {
     /// Time constant with which a coasting (back-driven) motor lets the buffer relax while
     /// the extruder holds the filament, ms. Default 100.
     pub buffer_relax_ms: f32,
+    /// How taut an extruder pulling the filament through the Bowden tube holds the buffer against
+    /// a coasting lane, per metre of tube, mm: the tube's friction, which the extruder alone must
+    /// overcome (the buffer's deflection stands for the force). Default 0: no friction was
+    /// measured, so none is modelled unless asked.
+    pub bowden_drag_mm_per_m: f32,
 
     /// Rest reading of every Hall sensor (no filament, no tension, cutter idle, motor Hall
     /// centre), counts. Default 2048.
@@ -111,6 +116,7 @@ impl Default for ModelConfig {
             extruder_grip_duty_permille: 300,
             buffer_limit_mm: 6.0,
             buffer_relax_ms: 100.0,
+            bowden_drag_mm_per_m: 0.0,
             rest_level: 2048,
             filament_level: 3000,
             hall_amplitude: 700.0,
@@ -164,6 +170,7 @@ impl ModelConfig {
             extruder_grip_duty_permille: self.extruder_grip_duty_permille,
             buffer_limit_mm: non_neg(self.buffer_limit_mm, d.buffer_limit_mm),
             buffer_relax_ms: non_neg(self.buffer_relax_ms, d.buffer_relax_ms),
+            bowden_drag_mm_per_m: non_neg(self.bowden_drag_mm_per_m, d.bowden_drag_mm_per_m),
             rest_level: self.rest_level,
             filament_level: self.filament_level,
             hall_amplitude: non_neg(self.hall_amplitude, d.hall_amplitude),

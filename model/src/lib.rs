@@ -113,6 +113,8 @@ struct Params {
     alpha_brake: f64,
     alpha_coast: f64,
     relax_factor: f64,
+    /// Where a coasting lane lets the buffer settle while the extruder pulls: the tube's drag.
+    drag: f64,
     dead_band: u16,
     grip_duty: u16,
     mm_per_rev: f64,
@@ -149,6 +151,7 @@ impl Params {
             alpha_brake: lag_alpha(c.brake_tau_ms),
             alpha_coast: lag_alpha(c.coast_tau_ms),
             relax_factor: if relax > 0.0 { (-DT / relax).exp() } else { 0.0 },
+            drag: f64::from(c.bowden_drag_mm_per_m) * f64::from(c.bowden_length_mm.max(0.0)) / 1000.0,
             dead_band: c.dead_band_permille,
             grip_duty: c.extruder_grip_duty_permille,
             mm_per_rev: c.mm_per_rev.into(),
@@ -608,7 +611,10 @@ impl Model {
                 }
             }
             Front::Held { mut d_f, can_pull } => {
-                let follow = d_f + s.buffer - s.buffer * p.relax_factor;
+                // A coasting motor lets the buffer relax, to the tube's drag while the extruder
+                // pulls the filament through it.
+                let rest = if d_f > 0.0 { p.drag } else { 0.0 };
+                let follow = d_f + (s.buffer - rest) * (1.0 - p.relax_factor);
                 let (want, d_m_free) = if gripped && s.dead {
                     (0.0, None)
                 } else if gripped && driven && s.slip < 1.0 && d_f < 0.0 && follow < free_speed * DT * s.slip

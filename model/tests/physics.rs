@@ -364,6 +364,36 @@ fn extruder_pulls_a_gripped_filament_and_back_drives_a_coasting_motor() {
     assert_eq!(m.extruder_position_mm(), 20.0);
 }
 
+/// A Bowden tube with drag (`bowden_drag_mm_per_m`): an extruder pulling the filament through it
+/// holds the buffer taut by the drag against a coasting lane (more for a longer tube); once it
+/// stops, the lane lets the buffer back to rest.
+#[test]
+fn a_tube_s_drag_holds_the_buffer_taut_while_the_extruder_pulls() {
+    let settled = |tube_mm: f32| {
+        let c = ModelConfig {
+            bowden_drag_mm_per_m: 1.0,
+            ..ModelConfig::default()
+        }
+        .with_bowden_length(tube_mm);
+        let mut m = Model::new(c.clone(), SLOTS, 1);
+        assert!(m.insert_filament(0, c.extruder_gears_mm + 16.0));
+        m.set_printing(Some(5.0));
+        m.step(2000, &only_slot0(MotorCommand::Coast));
+        let pulling = m.tension_mm();
+        m.set_printing(None);
+        m.step(2000, &only_slot0(MotorCommand::Coast));
+        (pulling, m.tension_mm())
+    };
+    let (two_m, two_m_after) = settled(2000.0);
+    let (five_m, _) = settled(5000.0);
+    assert!((two_m - 2.0).abs() < 0.05, "2 m of tube: {two_m} mm");
+    assert!((five_m - 5.0).abs() < 0.05, "5 m of tube: {five_m} mm");
+    assert!(
+        two_m_after.abs() < 0.05,
+        "at rest once the extruder stops: {two_m_after} mm"
+    );
+}
+
 /// A drive gear that slips cannot hold the filament against the extruder: the printer's retract
 /// pulls it back through the braked, slipping lane (a gear that slips under the unit's own motor
 /// slips under the extruder's pull too). The slipping gear used to hold like a sound one, and

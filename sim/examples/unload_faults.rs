@@ -1,5 +1,6 @@
-//! The unload fault table: `cargo run --release -p mmu-sim --example unload_faults -- [SEEDS]`
-//! (default 200) prints, per fault users report, how often a tool change on Buddy 6.5.3 stops on
+//! The unload fault table: `cargo run --release -p mmu-sim --example unload_faults -- [SEEDS]
+//! [--longer-bowden]` (default 200 seeds; `--longer-bowden` adds a row for 2-5 m tubes, minutes
+//! more) prints, per fault users report, how often a tool change on Buddy 6.5.3 stops on
 //! an error screen or stays stranded with the unit's strict mode (MMU 3.0.4's unload) and with
 //! this unit, and the hardest pull on gripping gears. Exits non-zero when this unit strands a
 //! change or pulls on gripping gears harder than a feel.
@@ -22,7 +23,9 @@ fn main() -> ExitCode {
     };
     println!("{HEADER}");
     let mut ok = true;
-    for fault in UnloadFault::ALL {
+    let longer = std::env::args().any(|arg| arg == "--longer-bowden");
+    let extra: &[UnloadFault] = if longer { &[UnloadFault::LongerBowden] } else { &[] };
+    for &fault in UnloadFault::ALL.iter().chain(extra) {
         let row = Row {
             fault,
             strict: play(fault, setup(true), 0..seeds),
