@@ -238,8 +238,8 @@ fn tip_left_at_the_printers_sensor(owner: u8, revision: u8) -> (Rig<3>, Response
 /// The stored slot 0 holds the path and its tip rests at the printer's sensor when the `U0` comes.
 /// The unit waits for the printer to report its sensor off, then pushes slot 0 forward a few
 /// millimetres: the tip meets the printer's gears and the Bowden tube reads compressed, which
-/// proves the belief; then it unloads slot 0 as MMU 3.0.3 does (pull at once, the printer's sensor
-/// clearing within `0x0c` mm).
+/// proves the belief; then it unloads slot 0 as every unload: felt free first, then pulled, the
+/// printer's sensor clearing within `0x0c` mm.
 #[test]
 fn filament_at_the_printers_sensor_is_proved_by_a_push_against_its_gears() {
     let (rig, answer, _) = tip_left_at_the_printers_sensor(0, 3);
@@ -281,40 +281,42 @@ fn filament_anywhere_between_the_printers_sensor_and_its_gears_is_proved() {
     }
 }
 
-/// The same with slot 1 really holding the path: the push moves slot 0 freely a few millimetres
-/// forward, short of the merge, and the tube never reads compressed. That slot 0 is not the owner
+/// The same with slot 1 really holding the path, on either contract: the push moves slot 0 freely
+/// a few millimetres forward, short of the merge, and the tube never reads compressed. That slot 0 is not the owner
 /// the sensors show; which slot is, they cannot: `8008`, nothing pulled, slot 1 not moved.
 #[test]
 fn a_wrong_stored_slot_pushed_against_nothing_is_unload_manually() {
-    let (rig, answer, before) = tip_left_at_the_printers_sensor(1, 3);
-    assert_eq!(
-        answer.param_value,
-        Some(ErrorCode::FINDA_VS_EEPROM_DISREPANCY.0),
-        "{answer:?}"
-    );
-    let slot0 = rig.model.tip_mm(0).unwrap();
-    assert!(
-        slot0 >= before[0] - 0.5 && slot0 < rig.model.config().merge_mm,
-        "slot 0 pushed from {} to {slot0} mm, short of the merge",
-        before[0]
-    );
-    assert!((rig.model.tip_mm(1).unwrap() - before[1]).abs() < 0.5);
-    // Retry (the printer presses it three times by itself) pushes no further.
-    let mut rig = rig;
-    let unload = Request::new(RequestCode::Unload, 0);
-    for _ in 0..3 {
-        rig.send(Request::new(RequestCode::Button, 1));
-        let run = rig.follow(unload, 60_000);
+    for revision in [3, 4] {
+        let (mut rig, answer, before) = tip_left_at_the_printers_sensor(1, revision);
         assert_eq!(
-            run.last.param_value,
-            Some(ErrorCode::FINDA_VS_EEPROM_DISREPANCY.0)
+            answer.param_value,
+            Some(ErrorCode::FINDA_VS_EEPROM_DISREPANCY.0),
+            "3.0.{revision}: {answer:?}"
+        );
+        let slot0 = rig.model.tip_mm(0).unwrap();
+        assert!(
+            slot0 >= before[0] - 0.5 && slot0 < rig.model.config().merge_mm,
+            "3.0.{revision}: slot 0 pushed from {} to {slot0} mm, short of the merge",
+            before[0]
+        );
+        assert!((rig.model.tip_mm(1).unwrap() - before[1]).abs() < 0.5);
+        // Retry (the printer presses it three times by itself) pushes no further.
+        let unload = Request::new(RequestCode::Unload, 0);
+        for _ in 0..3 {
+            rig.send(Request::new(RequestCode::Button, 1));
+            let run = rig.follow(unload, 60_000);
+            assert_eq!(
+                run.last.param_value,
+                Some(ErrorCode::FINDA_VS_EEPROM_DISREPANCY.0),
+                "3.0.{revision}"
+            );
+        }
+        let after = rig.model.tip_mm(0).unwrap();
+        assert!(
+            (after - slot0).abs() < 0.5,
+            "3.0.{revision}: Retry pushed slot 0 on from {slot0} to {after} mm"
         );
     }
-    let after = rig.model.tip_mm(0).unwrap();
-    assert!(
-        (after - slot0).abs() < 0.5,
-        "Retry pushed slot 0 on from {slot0} to {after} mm"
-    );
 }
 
 /// A printer that accepted 3.0.4 gets the same proof: its sensor still reads the tip after its

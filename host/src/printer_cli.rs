@@ -341,7 +341,9 @@ impl<L: Target> Session<L> {
                     error_meaning(error)
                 );
                 if error == ErrorCode::FSENSOR_DIDNT_SWITCH_OFF
-                    && let Some(why) = self.read_quietly(UNLOAD_STUCK)?.filter(|&why| why != 0)
+                    // Best effort: a read lost on the link leaves the error as it is.
+                    && let Ok(Some(why)) = self.read_quietly(UNLOAD_STUCK)
+                    && why != 0
                 {
                     message = format!("{message}\n  which (register 0xfc): {}", unload_stuck(why));
                 }

@@ -614,7 +614,7 @@ impl Model {
                 // A coasting motor lets the buffer relax, to the tube's drag while the extruder
                 // pulls the filament through it.
                 let rest = if d_f > 0.0 { p.drag } else { 0.0 };
-                let follow = d_f + (s.buffer - rest) * (1.0 - p.relax_factor);
+                let follow = d_f + (s.buffer - rest) - (s.buffer - rest) * p.relax_factor;
                 let (want, d_m_free) = if gripped && s.dead {
                     (0.0, None)
                 } else if gripped && driven && s.slip < 1.0 && d_f < 0.0 && follow < free_speed * DT * s.slip
