@@ -7,7 +7,7 @@ use mmu_hal_port::Direction;
 use mmu_protocol::{ErrorCode, ProgressCode};
 
 use super::load::{MET_CONFIRM_MS, compressed_for};
-use super::unload::strict;
+use super::release::strict;
 use super::{Bounds, Decision, Goal, Milestone, MotionPhase, Outcome, PhaseRun, Sight, SlotSet};
 use crate::config::{Config, Contract};
 use crate::unit::{Lane, Unit};

@@ -10,8 +10,9 @@
 //! Each motion phase is one type with one block, its goal, bounds, progress code, what it
 //! learns and the error its stop means together ([`MotionPhase`]), as Prusa keeps a
 //! sub-automaton a file; the types sit in their family's module: `feed.rs` (slot to hub),
-//! `unload.rs` (back to the hub, the park position, out of the slot), `load.rs` (through the
-//! Bowden tube into the printer's extruder), and the checks in `check.rs`. This module holds
+//! `unload.rs` (back to the hub, the park position, out of the slot; `release.rs` tells them
+//! when the printer has let go), `load.rs` (through the Bowden tube into the printer's extruder),
+//! `home.rs` (a lane at its presence sensor), and the checks in `check.rs`. This module holds
 //! what they share: the motion step (sensor faults, the guard at the slot sensor, hold and
 //! yield, the drive), the one place a [`Phase`] meets its type (`motion!`), and the one place
 //! where what a phase learned (a `Milestone`) is written into the unit.
@@ -20,6 +21,7 @@ mod check;
 mod feed;
 mod home;
 mod load;
+mod release;
 mod run;
 mod unload;
 
@@ -32,8 +34,8 @@ use crate::feeder::distance_centi;
 use crate::time::Instant;
 use crate::unit::{Lane, SensorId, Unit};
 
+pub use release::UnloadStuck;
 pub use run::PhaseRun;
-pub use unload::UnloadStuck;
 
 use check::Check;
 
