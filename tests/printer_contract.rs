@@ -16,7 +16,6 @@ mod common;
 
 use common::{Rig, assert_parked, error, finished, loaded, press, t};
 use mmu_firmware::drive::FEEL_DUTY;
-use mmu_firmware::{Direction, MotorCommand};
 use mmu_model::ModelConfig;
 use mmu_protocol::{ButtonCode, ErrorCode, ParamCode, ProgressCode, Request, RequestCode};
 
@@ -32,15 +31,7 @@ fn released_by_retract() -> ModelConfig {
 /// Whether slot `slot`'s motor pulled back harder than a feel (which no gripped filament yields
 /// to, `phases::unload`) in the steps from `from` on.
 fn pulled_since(rig: &Rig<3>, slot: usize, from: usize) -> bool {
-    rig.motor_log[from..].iter().any(|motors| {
-        matches!(
-            motors[slot],
-            MotorCommand::Drive {
-                direction: Direction::Reverse,
-                duty,
-            } if duty > FEEL_DUTY
-        )
-    })
+    rig.hardest_pull_since(slot, from) > FEEL_DUTY.permille()
 }
 
 #[test]

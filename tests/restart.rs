@@ -60,12 +60,7 @@ fn a_restart_proves_or_refuses_and_never_moves_the_wrong_slot() {
             rig.model.config().slot_sensor_mm,
             rig.model.config().drive_gear_mm,
         );
-        rig.app = App::new(Config::default());
-        rig.app.restore(&Snapshot {
-            lanes,
-            ..Snapshot::default()
-        });
-        rig.boot();
+        rig.restart_with(lanes);
         let target = owner.map_or(0, |slot| (slot + 1) % 3);
         let answer = rig.send(t(target as u8)).map(|a| a.param);
         let run = match answer {
@@ -108,12 +103,7 @@ fn a_restart_proves_or_refuses_and_never_moves_the_wrong_slot() {
 
 /// The unit restarted with `lanes` stored, on the rig's model as it is, and the printer's `U0`.
 fn restart_then_unload(rig: &mut Rig<3>, lanes: [Lane; 3]) -> Response {
-    rig.app = App::new(Config::default());
-    rig.app.restore(&Snapshot {
-        lanes,
-        ..Snapshot::default()
-    });
-    rig.boot();
+    rig.restart_with(lanes);
     rig.command(Request::new(RequestCode::Unload, 0)).last
 }
 
@@ -343,12 +333,7 @@ fn a_proved_slot_still_in_the_gears_is_only_felt_then_8004_then_unloaded() {
     let unload = Request::new(RequestCode::Unload, 0);
     for revision in [3, 4] {
         let mut rig = loaded(revision, ModelConfig::default());
-        rig.app = App::new(Config::default());
-        rig.app.restore(&Snapshot {
-            lanes: [Lane::Loaded, Lane::Parked, Lane::Parked],
-            ..Snapshot::default()
-        });
-        rig.boot();
+        rig.restart_with([Lane::Loaded, Lane::Parked, Lane::Parked]);
         assert_eq!(rig.send(unload).map(|a| a.param), Some(ParamCode::Accepted));
         let run = rig.follow(unload, 60_000);
         assert_eq!(

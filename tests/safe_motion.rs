@@ -149,23 +149,13 @@ fn run_error(run: &common::Run) -> Option<ErrorCode> {
     run.last.param_value.map(ErrorCode)
 }
 
-/// A unit restarted with `lanes` stored, on the rig's model as it is.
-fn restart_with(rig: &mut Rig<3>, lanes: [Lane; 3]) {
-    rig.app = App::new(Config::default());
-    rig.app.restore(&Snapshot {
-        lanes,
-        ..Snapshot::default()
-    });
-    rig.boot();
-}
-
 #[test]
 fn stale_lanes_never_reverse_the_slot_that_does_not_hold_the_path() {
     let mut rig = Rig::<3>::new();
     rig.boot();
     rig.command(t(1));
     // The store says slot 0 is loaded; slot 1 really is. The hub sensor agrees with either.
-    restart_with(&mut rig, [Lane::Loaded, Lane::Parked, Lane::Parked]);
+    rig.restart_with([Lane::Loaded, Lane::Parked, Lane::Parked]);
     let slot0 = rig.model.tip_mm(0).unwrap();
     rig.model.extruder_move(-100.0, 40.0);
     rig.idle(3_000);
@@ -191,7 +181,7 @@ fn a_right_but_unproven_belief_is_proven_by_the_printers_own_unload() {
     // The printer loads to the nozzle and prints a while.
     rig.model.extruder_move(50.0, 20.0);
     rig.idle(4_000);
-    restart_with(&mut rig, [Lane::Parked, Lane::Loaded, Lane::Parked]);
+    rig.restart_with([Lane::Parked, Lane::Loaded, Lane::Parked]);
     // The printer pulls its filament out of the extruder before the tool change (ramming and a
     // long retract): slot 1's coasting motor turns with it, which proves the stored lane.
     rig.model.extruder_move(-100.0, 40.0);

@@ -11,27 +11,11 @@ use common::{Rig, assert_parked, error, finished, loaded, press, t};
 use mmu_firmware::drive::FEEL_DUTY;
 use mmu_firmware::phases::UnloadStuck;
 use mmu_firmware::registers::UNLOAD_STUCK;
-use mmu_firmware::{Direction, MotorCommand};
 use mmu_model::{Fault, ModelConfig};
 use mmu_protocol::{ButtonCode, ErrorCode, Request, RequestCode};
 
 fn u0() -> Request {
     Request::new(RequestCode::Unload, 0)
-}
-
-/// The hardest reverse duty slot 0's motor got in the steps from `from` on, per mille.
-fn hardest_pull_since(rig: &Rig<3>, from: usize) -> u16 {
-    rig.motor_log[from..]
-        .iter()
-        .filter_map(|motors| match motors[0] {
-            MotorCommand::Drive {
-                direction: Direction::Reverse,
-                duty,
-            } => Some(duty.permille()),
-            _ => None,
-        })
-        .max()
-        .unwrap_or(0)
 }
 
 /// The printer's extruder retracts `mm` at `speed` while the unit runs nothing else.
@@ -116,7 +100,7 @@ fn a_filament_stuck_in_the_extruder_is_only_felt_then_8004() {
             Some(UnloadStuck::InExtruder as u16),
             "3.0.{revision}: the unit says which"
         );
-        let hardest = hardest_pull_since(&rig, before);
+        let hardest = rig.hardest_pull_since(0, before);
         assert!(
             hardest <= FEEL_DUTY.permille(),
             "3.0.{revision}: pulled at {hardest} per mille against the gears"
@@ -146,7 +130,7 @@ fn a_printer_that_retracts_slowly_is_waited_for() {
         if rig.now.is_multiple_of(100) {
             let _ = rig.query();
         }
-        hardest_gripped = hardest_gripped.max(hardest_pull_since(&rig, from));
+        hardest_gripped = hardest_gripped.max(rig.hardest_pull_since(0, from));
         assert!(rig.motor_log.len() - before < 30_000, "the gears never let go");
     }
     assert!(

@@ -6,7 +6,9 @@
 pub mod bounds;
 mod scenarios;
 
-use mmu_firmware::{App, Config, Instant, MotorCommand};
+use mmu_firmware::persist::Snapshot;
+use mmu_firmware::unit::Lane;
+use mmu_firmware::{App, Config, Direction, Instant, MotorCommand};
 use mmu_model::{Fault, Model, ModelConfig};
 use mmu_protocol::{
     ButtonCode, ErrorCode, ParamCode, ProgressCode, Request, RequestCode, Response, ResponseDecoder,
@@ -489,6 +491,33 @@ impl<const N: usize> Rig<N> {
 
     pub fn inject(&mut self, fault: Fault) {
         assert!(self.model.inject(fault));
+    }
+
+    /// The hardest reverse duty slot `slot`'s motor got in the steps from `from` on, per mille
+    /// (0: none).
+    pub fn hardest_pull_since(&self, slot: usize, from: usize) -> u16 {
+        self.motor_log[from..]
+            .iter()
+            .filter_map(|motors| match motors.get(slot) {
+                Some(&MotorCommand::Drive {
+                    direction: Direction::Reverse,
+                    duty,
+                }) => Some(duty.permille()),
+                _ => None,
+            })
+            .max()
+            .unwrap_or(0)
+    }
+
+    /// The unit restarted with `lanes` stored (everything else a fresh store's), on the model as
+    /// it is: its start-up check, then the printer's handshake.
+    pub fn restart_with(&mut self, lanes: [Lane; N]) {
+        self.app = App::new(Config::default());
+        self.app.restore(&Snapshot {
+            lanes,
+            ..Snapshot::default()
+        });
+        self.boot();
     }
 
     /// True when no motor was driven in the last `steps` steps.
