@@ -162,11 +162,11 @@ fn merge_suspects<const N: usize>(unit: &Unit<N>, slot: usize) -> SlotSet {
 
 /// [`PushProof`]: nothing to do with the printer's sensor off (the pull back proves the
 /// belief, [`super::Phase::ProveOwner`]). With it on, wait (the motor free) for the printer to
-/// report it off: its retract before `U0` may be on the way. Still on, it pushes: the tube reading compressed proves that the
-/// slot's filament runs to the printer's gears; pushed [`PUSH_PROOF_MM`] without that, `8008`. The
-/// unload that follows a proof feels first, on either contract. In the strict mode (MMU 3.0.4,
-/// which pulls nothing before the printer's sensor is off) a printer that accepted 3.0.4 gets
-/// `8008` at once.
+/// report it off: its retract before `U0` may be on the way. Still on, it pushes: the tube
+/// reading compressed proves that the slot's filament runs to the printer's gears; pushed
+/// [`PUSH_PROOF_MM`] without that, `8008`. The unload that follows a proof feels first, on
+/// either contract. In the strict mode (MMU 3.0.4, which pulls nothing before the printer's
+/// sensor is off) a printer that accepted 3.0.4 gets `8008` at once.
 fn push_proof<const N: usize>(run: &mut PhaseRun, at: &Sight<'_, N>) -> Result<Decision, ErrorCode> {
     if !at.unit.fsensor_triggered() || at.unit.proven_owner == Some(at.slot) {
         return Ok(Goal::Reached.into());

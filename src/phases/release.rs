@@ -39,7 +39,8 @@ pub enum UnloadStuck {
     /// nozzle, gears that still grip it).
     InExtruder = 1,
     /// Pulled back freely its check distance, the printer's sensor still reading filament: the
-    /// sensor sticks, or a string of the tip is left at it.
+    /// sensor sticks, a string of the tip is left at it, or the lane's drive slips (its motion
+    /// sensor counts the motor, not the filament).
     SensorStillOn = 2,
 }
 
